@@ -1,0 +1,41 @@
+"""habitsim: cross-species animal motion transfer with habits, checked in physics."""
+
+from __future__ import annotations
+
+from .errors import (
+    BVHParseError,
+    DatasetError,
+    GaitError,
+    HabitsimError,
+    IKError,
+    InvalidMotionError,
+    MotionFileError,
+    SkeletonMappingError,
+    SpeciesFileError,
+    UnknownSpeciesError,
+)
+from .skeleton import JOINT_NAMES, Skeleton, get_skeleton
+from .species import Species, all_species, load_species, species_names
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "__version__",
+    "HabitsimError",
+    "UnknownSpeciesError",
+    "SpeciesFileError",
+    "InvalidMotionError",
+    "MotionFileError",
+    "BVHParseError",
+    "SkeletonMappingError",
+    "IKError",
+    "GaitError",
+    "DatasetError",
+    "Species",
+    "load_species",
+    "species_names",
+    "all_species",
+    "Skeleton",
+    "get_skeleton",
+    "JOINT_NAMES",
+]

@@ -1,0 +1,5 @@
+import sys
+
+from habitsim.cli import main
+
+sys.exit(main())

@@ -1,0 +1,69 @@
+"""The ``habitsim`` command line.
+
+Each command group lives in its own module exposing ``register(subparsers)``; the module
+adds its commands, each with ``set_defaults(func=...)`` taking the parsed namespace and
+returning an exit code. Every :class:`~habitsim.errors.HabitsimError` becomes a one-line
+``error: ...`` message on stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from ..errors import HabitsimError
+
+# (group name, help, module names registering into it). Group None = top-level commands.
+_GROUPS: list[tuple[str | None, str, tuple[str, ...]]] = [
+    ("species", "the species catalog", ("species_cmd",)),
+    ("data", "data sets: synthetic gaits, BVH import", ("synth_cmd", "bvh_cmd")),
+    ("motion", "inspect motion files", ("motion_cmd",)),
+    ("bench", "benchmarks that print figures", ("bench_cmd",)),
+    (None, "", ("demo_cmd",)),
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser (also used by the docs and tests)."""
+    import importlib
+
+    from .. import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="habitsim",
+        description="Cross-species animal motion transfer with habits, checked in physics.",
+    )
+    parser.add_argument("--version", action="version", version=f"habitsim {__version__}")
+    top = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for group, help_text, modules in _GROUPS:
+        if group is None:
+            target = top
+        else:
+            gp = top.add_parser(group, help=help_text, description=help_text)
+            target = gp.add_subparsers(dest=f"{group}_command", metavar="SUBCOMMAND")
+            gp.set_defaults(func=lambda ns, gp=gp: (gp.print_help(), 2)[1])
+        for mod in modules:
+            importlib.import_module(f"habitsim.cli.{mod}").register(target)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``habitsim`` console script."""
+    parser = build_parser()
+    ns = parser.parse_args(argv)
+    if not hasattr(ns, "func"):
+        parser.print_help()
+        return 2
+    try:
+        return int(ns.func(ns) or 0)
+    except HabitsimError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,62 @@
+"""Typed exceptions of habitsim, all under one root :class:`HabitsimError`.
+
+Every message names the problem and, where there is a finite set of valid choices,
+lists them, so a user can fix the input without reading the source.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+
+class HabitsimError(Exception):
+    """Root of every error raised on purpose by habitsim."""
+
+
+class UnknownSpeciesError(HabitsimError, KeyError):
+    """A species name that is not in the catalog."""
+
+    def __init__(self, name: str, known: Iterable[str]):
+        self.name = name
+        self.known = sorted(known)
+        super().__init__(f"unknown species {name!r}; known: {', '.join(self.known)}")
+
+    def __str__(self) -> str:  # KeyError would quote the whole message
+        return self.args[0]
+
+
+class SpeciesFileError(HabitsimError, ValueError):
+    """A species TOML file that is missing fields or holds inconsistent numbers."""
+
+
+class InvalidMotionError(HabitsimError, ValueError):
+    """Motion arrays of the wrong shape, non-finite values or inconsistent metadata."""
+
+
+class MotionFileError(HabitsimError, ValueError):
+    """A motion file (.npz) that cannot be read: wrong keys, version or corrupt data."""
+
+
+class BVHParseError(HabitsimError, ValueError):
+    """A BVH file that is truncated, malformed or has inconsistent channel counts."""
+
+
+class SkeletonMappingError(HabitsimError, ValueError):
+    """A source skeleton that cannot be mapped onto the habitsim quadruped topology."""
+
+
+class IKError(HabitsimError, ValueError):
+    """An inverse-kinematics request with invalid input."""
+
+
+class GaitError(HabitsimError, ValueError):
+    """A gait or action that a species does not have, or bad generator parameters."""
+
+
+class DatasetError(HabitsimError, ValueError):
+    """A data set folder that is missing files or has an inconsistent manifest."""
+
+
+def unknown_choice(kind: str, value: object, valid: Iterable[str]) -> str:
+    """Format the standard "unknown X 'v'; valid: a, b, c" message."""
+    return f"unknown {kind} {value!r}; valid: {', '.join(sorted(valid))}"

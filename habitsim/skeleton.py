@@ -1,0 +1,300 @@
+"""The shared quadruped skeleton: one topology for every species, per-species offsets.
+
+Topology (30 joints; names are also the stems of MJCF joint names):
+
+* axial: ``pelvis`` (root, at the sacrum) → ``spine1`` (lumbar) → ``spine2`` (thoracic)
+  → ``spine3`` (withers) → ``neck`` → ``head`` (skull base) → ``snout`` (end point);
+  ``pelvis`` → ``tail1`` → ``tail2`` → ``tail3`` (end point);
+* fore legs (``lf_`` / ``rf_``): ``scapula`` (girdle root, child of ``spine3``) →
+  ``shoulder`` → ``elbow`` → ``wrist`` → ``toe`` (end point);
+* hind legs (``lh_`` / ``rh_``): ``ilium`` (girdle root, child of ``pelvis``) → ``hip``
+  → ``knee`` → ``hock`` → ``toe`` (end point).
+
+A joint's local rotation turns the bones to its children (BVH convention). In the
+canonical pose (all local rotations identity) the legs point straight down (-z), spine,
+neck and head point forward (+x) and the tail points backward (-x); world frame z up,
+x forward, y left, metres. The species' standing posture is a set of local rotations
+about the lateral (+y) axis on top of this canonical pose (see :func:`standing_pose`).
+"""
+
+from __future__ import annotations
+
+import functools
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from .errors import InvalidMotionError
+from .rotations import quat_to_matrix, rot_y, torch_quat_to_matrix
+from .species import Species, load_species
+
+__all__ = [
+    "JOINT_NAMES",
+    "PARENTS",
+    "FOOT_JOINTS",
+    "LEG_PREFIXES",
+    "Skeleton",
+    "get_skeleton",
+    "standing_leg_angles",
+    "fk",
+    "fk_torch",
+]
+
+LEG_PREFIXES = ("lf", "rf", "lh", "rh")  # the order of FEET: LF, RF, LH, RH
+_FORE = ("scapula", "shoulder", "elbow", "wrist", "toe")
+_HIND = ("ilium", "hip", "knee", "hock", "toe")
+
+_TOPOLOGY: list[tuple[str, str | None]] = [
+    ("pelvis", None),
+    ("spine1", "pelvis"),
+    ("spine2", "spine1"),
+    ("spine3", "spine2"),
+    ("neck", "spine3"),
+    ("head", "neck"),
+    ("snout", "head"),
+    ("tail1", "pelvis"),
+    ("tail2", "tail1"),
+    ("tail3", "tail2"),
+]
+for _side in ("l", "r"):
+    _prev = "spine3"
+    for _seg in _FORE:
+        _TOPOLOGY.append((f"{_side}f_{_seg}", _prev))
+        _prev = f"{_side}f_{_seg}"
+for _side in ("l", "r"):
+    _prev = "pelvis"
+    for _seg in _HIND:
+        _TOPOLOGY.append((f"{_side}h_{_seg}", _prev))
+        _prev = f"{_side}h_{_seg}"
+# Order the legs LF, RF, LH, RH (already so: lf, rf fore; lh, rh hind).
+
+JOINT_NAMES: tuple[str, ...] = tuple(n for n, _ in _TOPOLOGY)
+_INDEX = {n: i for i, n in enumerate(JOINT_NAMES)}
+PARENTS: tuple[int, ...] = tuple(-1 if p is None else _INDEX[p] for _, p in _TOPOLOGY)
+FOOT_JOINTS: tuple[str, ...] = ("lf_toe", "rf_toe", "lh_toe", "rh_toe")
+
+#: Which local joint carries which leg-flexion role of the species' joint limits.
+LEG_ROLE_JOINTS: dict[str, tuple[str, ...]] = {
+    "fore_girdle": ("scapula",),
+    "fore_upper": ("shoulder",),
+    "fore_lower": ("elbow",),
+    "fore_foot": ("wrist",),
+    "hind_girdle": ("ilium",),
+    "hind_upper": ("hip",),
+    "hind_lower": ("knee",),
+    "hind_foot": ("hock",),
+}
+
+
+def _offsets(sp: Species) -> np.ndarray:
+    """Canonical-pose bone offsets (J, 3) [m] of a species, each relative to its parent."""
+    s = sp.segments
+    off = np.zeros((len(JOINT_NAMES), 3))
+
+    def put(name: str, v: tuple[float, float, float]) -> None:
+        off[_INDEX[name]] = v
+
+    t = s["trunk"]
+    put("spine1", (t / 3, 0, 0))
+    put("spine2", (t / 3, 0, 0))
+    put("spine3", (t / 3, 0, 0))
+    put("neck", (0.1 * s["neck"], 0, 0))  # base of the neck just ahead of the withers
+    put("head", (0.9 * s["neck"], 0, 0))
+    put("snout", (s["head"], 0, 0))
+    put("tail1", (-0.05 * t, 0, 0))
+    put("tail2", (-0.5 * s["tail"], 0, 0))
+    put("tail3", (-0.5 * s["tail"], 0, 0))
+    for side, sign in (("l", 1.0), ("r", -1.0)):
+        put(f"{side}f_scapula", (0, sign * 0.5 * s["trunk_width_fore"], 0))
+        put(f"{side}f_shoulder", (0, 0, -s["fore_girdle"]))
+        put(f"{side}f_elbow", (0, 0, -s["fore_upper"]))
+        put(f"{side}f_wrist", (0, 0, -s["fore_lower"]))
+        put(f"{side}f_toe", (0, 0, -s["fore_foot"]))
+        put(f"{side}h_ilium", (0, sign * 0.5 * s["trunk_width_hind"], 0))
+        put(f"{side}h_hip", (0, 0, -s["hind_girdle"]))
+        put(f"{side}h_knee", (0, 0, -s["hind_upper"]))
+        put(f"{side}h_hock", (0, 0, -s["hind_lower"]))
+        put(f"{side}h_toe", (0, 0, -s["hind_foot"]))
+    return off
+
+
+def _standing_global_pitch(sp: Species) -> dict[str, float]:
+    """Global rotation angle about +y [rad] of every posed bone in the standing pose."""
+    g = {"trunk": -sp.trunk_pitch}
+    for k, inc in sp.inclinations.items():
+        g[k] = -inc  # +y rotation swings a downward bone backward, inclination is forward
+    g["neck"] = -sp.neck_elevation
+    g["head"] = -sp.head_pitch
+    g["tail"] = sp.tail_carriage  # +y rotation lifts a backward-pointing bone
+    return g
+
+
+def standing_leg_angles(sp: Species) -> dict[str, float]:
+    """Local flexion angles [rad] of the standing pose, keyed by joint-limit role."""
+    g = _standing_global_pitch(sp)
+    out: dict[str, float] = {}
+    for limb in ("fore", "hind"):
+        prev = g["trunk"]
+        for seg in ("girdle", "upper", "lower", "foot"):
+            out[f"{limb}_{seg}_flex"] = g[f"{limb}_{seg}"] - prev
+            prev = g[f"{limb}_{seg}"]
+    out["neck_pitch"] = g["neck"] - g["trunk"]
+    out["head_pitch"] = g["head"] - g["neck"]
+    out["tail_pitch"] = g["tail"] - g["trunk"]
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Skeleton:
+    """The habitsim topology with one species' bone offsets.
+
+    Attributes:
+        species: species name.
+        joint_names: the 30 joint names (same for every species).
+        parents: parent index per joint (-1 for the root).
+        offsets: (J, 3) canonical-pose offset of each joint from its parent [m].
+    """
+
+    species: str
+    joint_names: tuple[str, ...]
+    parents: tuple[int, ...]
+    offsets: np.ndarray
+
+    @property
+    def num_joints(self) -> int:
+        return len(self.joint_names)
+
+    @property
+    def foot_joints(self) -> tuple[str, ...]:
+        """Toe end points in the order LF, RF, LH, RH."""
+        return FOOT_JOINTS
+
+    @property
+    def foot_indices(self) -> np.ndarray:
+        return np.array([_INDEX[n] for n in FOOT_JOINTS])
+
+    def index(self, name: str) -> int:
+        """Index of a joint by name (KeyError lists the valid names)."""
+        try:
+            return _INDEX[name]
+        except KeyError:
+            raise InvalidMotionError(
+                f"unknown joint {name!r}; valid: {', '.join(self.joint_names)}"
+            ) from None
+
+    @property
+    def bone_lengths(self) -> np.ndarray:
+        """(J,) length of the bone from each joint's parent to it (0 for the root)."""
+        return np.linalg.norm(self.offsets, axis=-1)
+
+    @functools.cached_property
+    def _standing(self) -> tuple[np.ndarray, np.ndarray]:
+        sp = load_species(self.species)
+        g = _standing_global_pitch(sp)
+        ang = np.zeros(self.num_joints)
+        ang[_INDEX["pelvis"]] = g["trunk"]
+        loc = standing_leg_angles(sp)
+        for side in ("l", "r"):
+            for limb, segs in (("f", _FORE), ("h", _HIND)):
+                limb_name = "fore" if limb == "f" else "hind"
+                for seg, role in zip(segs[:4], ("girdle", "upper", "lower", "foot"), strict=True):
+                    ang[_INDEX[f"{side}{limb}_{seg}"]] = loc[f"{limb_name}_{role}_flex"]
+        ang[_INDEX["neck"]] = loc["neck_pitch"]
+        ang[_INDEX["head"]] = loc["head_pitch"]
+        ang[_INDEX["tail1"]] = loc["tail_pitch"]
+        quats = rot_y(ang)
+        root = np.zeros(3)
+        pos = fk(self, root[None], quats[None])[0]
+        root[2] = -pos[self.foot_indices[2:], 2].mean()  # hind toes on the ground
+        return root, quats
+
+    def standing_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The species' standing posture: root position (3,) and local quats (J, 4).
+
+        The hind toes touch the ground (z = 0); the trunk is pitched so that the fore toes
+        do too.
+        """
+        root, quats = self._standing
+        return root.copy(), quats.copy()
+
+    def fk(self, root_pos: np.ndarray, quats: np.ndarray) -> np.ndarray:
+        """Global joint positions (…, J, 3) [m], see :func:`fk`."""
+        return fk(self, root_pos, quats)
+
+    def fk_torch(self, root_pos: torch.Tensor, quats: torch.Tensor) -> torch.Tensor:
+        """Global joint positions (…, J, 3), differentiable, see :func:`fk_torch`."""
+        return fk_torch(self, root_pos, quats)
+
+
+@functools.cache
+def get_skeleton(species: str | Species) -> Skeleton:
+    """The skeleton of a catalog species (cached)."""
+    sp = load_species(species)
+    return Skeleton(sp.name, JOINT_NAMES, PARENTS, _offsets(sp))
+
+
+def _check_fk_shapes(root_shape: tuple[int, ...], q_shape: tuple[int, ...], j: int) -> None:
+    if len(q_shape) < 2 or q_shape[-2:] != (j, 4):
+        raise InvalidMotionError(f"quaternions must have shape (..., {j}, 4), got {q_shape}")
+    if root_shape[-1:] != (3,) or root_shape[:-1] != q_shape[:-2]:
+        raise InvalidMotionError(
+            f"root positions must have shape {(*q_shape[:-2], 3)}, got {root_shape}"
+        )
+
+
+def fk(skel: Skeleton, root_pos: np.ndarray, quats: np.ndarray, return_rotations: bool = False):
+    """Batched forward kinematics in numpy.
+
+    Args:
+        skel: the skeleton (offsets and parents).
+        root_pos: (…, 3) root (pelvis) positions [m].
+        quats: (…, J, 4) local rotations, unit quaternions wxyz.
+        return_rotations: also return the global rotation matrices (…, J, 3, 3).
+
+    Returns:
+        (…, J, 3) global joint positions [m] (and the global rotations if asked).
+    """
+    root_pos = np.asarray(root_pos, dtype=np.float64)
+    quats = np.asarray(quats, dtype=np.float64)
+    _check_fk_shapes(root_pos.shape, quats.shape, skel.num_joints)
+    local = quat_to_matrix(quats)  # (…, J, 3, 3)
+    glob = np.empty_like(local)
+    pos = np.empty((*quats.shape[:-1], 3))
+    for j, p in enumerate(skel.parents):
+        if p < 0:
+            glob[..., j, :, :] = local[..., j, :, :]
+            pos[..., j, :] = root_pos
+        else:
+            glob[..., j, :, :] = glob[..., p, :, :] @ local[..., j, :, :]
+            pos[..., j, :] = pos[..., p, :] + glob[..., p, :, :] @ skel.offsets[j]
+    return (pos, glob) if return_rotations else pos
+
+
+def fk_torch(skel: Skeleton, root_pos: torch.Tensor, quats: torch.Tensor) -> torch.Tensor:
+    """Batched, differentiable forward kinematics in torch (same maths as :func:`fk`).
+
+    Args:
+        skel: the skeleton.
+        root_pos: (…, 3) root positions [m].
+        quats: (…, J, 4) local rotations wxyz (normalised inside).
+
+    Returns:
+        (…, J, 3) global joint positions, in ``quats``' dtype and device.
+    """
+    _check_fk_shapes(tuple(root_pos.shape), tuple(quats.shape), skel.num_joints)
+    local = torch_quat_to_matrix(quats)
+    offsets = torch.as_tensor(skel.offsets, dtype=quats.dtype, device=quats.device)
+    glob: list[torch.Tensor] = []
+    pos: list[torch.Tensor] = []
+    for j, p in enumerate(skel.parents):
+        if p < 0:
+            glob.append(local[..., j, :, :])
+            pos.append(root_pos.to(quats.dtype))
+        else:
+            glob.append(glob[p] @ local[..., j, :, :])
+            pos.append(pos[p] + (glob[p] @ offsets[j].unsqueeze(-1)).squeeze(-1))
+    return torch.stack(pos, dim=-2)
+
+

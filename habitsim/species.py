@@ -1,0 +1,453 @@
+"""Species catalog: one TOML file per quadruped species in ``habitsim/catalog/``.
+
+A :class:`Species` holds every number about an animal that habitsim uses (body mass,
+segment lengths and girths, standing posture, joint limits, gait habits, habit text).
+It is the single source of truth: skeleton offsets, the gait generator, the MJCF builder
+and the metrics all read their numbers from here.
+
+Units inside are SI (m, kg, rad). The TOML files write angles in degrees (keys ending in
+``_deg``); they are converted on load.
+
+Angle conventions (world frame z up, x forward, y left):
+
+* leg segment inclinations (``[posture]``) are measured from the downward vertical in the
+  sagittal plane, positive when the distal end of the segment lies ahead (+x) of its
+  proximal end;
+* neck / head / tail carriage are elevations above the horizontal, positive = up
+  (for the tail: the tip above its base);
+* joint limits are ranges of the *local* joint angle of the habitsim skeleton: flexion is a
+  rotation about the joint's local +y axis (positive turns a downward-pointing segment
+  backward), abduction about local +x, yaw about local +z. Local angle 0 is the canonical
+  pose (legs straight down, spine, neck and head along +x, tail along -x).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from .errors import SpeciesFileError, UnknownSpeciesError
+
+__all__ = [
+    "POSTURES",
+    "GAITS",
+    "FEET",
+    "SEGMENT_KEYS",
+    "GIRTH_KEYS",
+    "INCLINATION_KEYS",
+    "LIMIT_KEYS",
+    "GaitHabit",
+    "Habits",
+    "Species",
+    "load_species",
+    "load_species_file",
+    "species_names",
+    "all_species",
+    "training_species",
+    "held_out_species",
+]
+
+POSTURES = ("crouched_digitigrade", "digitigrade", "unguligrade", "plantigrade", "columnar")
+#: Gaits a species may list; footfall phases per foot (LH = 0) live in the species file.
+GAITS = (
+    "walk",
+    "amble",
+    "trot",
+    "pace",
+    "canter",
+    "transverse_gallop",
+    "rotary_gallop",
+    "half_bound",
+    "bound",
+)
+#: Feet in habitsim's fixed order (left fore, right fore, left hind, right hind).
+FEET = ("LF", "RF", "LH", "RH")
+
+SEGMENT_KEYS = (
+    "trunk",  # pelvis (sacrum) to withers along the spine [m]
+    "trunk_width_fore",  # distance between the left and right scapula roots [m]
+    "trunk_width_hind",  # distance between the left and right hip joints [m]
+    "neck",
+    "head",  # skull base to snout tip
+    "tail",
+    "fore_girdle",  # scapula: dorsal border to shoulder joint
+    "fore_upper",  # humerus
+    "fore_lower",  # radius / ulna
+    "fore_foot",  # carpus to toe tip (metacarpus + digits)
+    "hind_girdle",  # sacrum level to hip joint (ilium)
+    "hind_upper",  # femur
+    "hind_lower",  # tibia
+    "hind_foot",  # hock to toe tip (metatarsus + digits)
+)
+GIRTH_KEYS = (
+    "trunk",
+    "neck",
+    "head",
+    "tail",
+    "fore_upper",
+    "fore_lower",
+    "fore_foot",
+    "hind_upper",
+    "hind_lower",
+    "hind_foot",
+)
+INCLINATION_KEYS = (
+    "fore_girdle",
+    "fore_upper",
+    "fore_lower",
+    "fore_foot",
+    "hind_girdle",
+    "hind_upper",
+    "hind_lower",
+    "hind_foot",
+)
+#: Joint-limit roles (local angles, see module docstring).
+LIMIT_KEYS = (
+    "fore_girdle_flex",
+    "fore_upper_flex",
+    "fore_upper_abd",
+    "fore_lower_flex",
+    "fore_foot_flex",
+    "hind_girdle_flex",
+    "hind_upper_flex",
+    "hind_upper_abd",
+    "hind_lower_flex",
+    "hind_foot_flex",
+    "spine_pitch",
+    "spine_yaw",
+    "neck_pitch",
+    "neck_yaw",
+    "head_pitch",
+    "head_yaw",
+    "tail_pitch",
+    "tail_yaw",
+)
+
+
+@dataclass(frozen=True)
+class GaitHabit:
+    """How a species performs one gait.
+
+    Attributes:
+        footfall: touchdown phase of each foot as a fraction of the stride, LH = 0,
+            keys ``LF, RF, LH, RH``.
+        duty_factor: (min, max) stance time / stride time.
+        froude: (min, max) Froude number v²/(g·h) band in which the species uses it.
+    """
+
+    footfall: dict[str, float]
+    duty_factor: tuple[float, float]
+    froude: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Habits:
+    """Species-specific style numbers used by the gait generator.
+
+    Attributes:
+        stride_frequency_coeff_hz: c in f = c·M^-0.14 [Hz] (Heglund et al. 1974 give ≈4.5).
+        spine_flex: amplitude [rad] of sagittal spine flexion at the fastest gait.
+        head_bob: amplitude [rad] of neck pitch oscillation at the walk.
+        tail_sway: amplitude [rad] of lateral tail sway at the walk.
+        swing_height: peak toe lift in swing as a fraction of hind-leg length.
+        trunk_sway: lateral trunk sway gain at slow walks (0 = none, 1 = full shift
+            of the centre of mass toward the support-polygon centroid).
+    """
+
+    stride_frequency_coeff_hz: float
+    spine_flex: float
+    head_bob: float
+    tail_sway: float
+    swing_height: float
+    trunk_sway: float
+
+
+@dataclass(frozen=True)
+class Species:
+    """One quadruped species, loaded from its TOML file. All numbers SI."""
+
+    name: str
+    common_name: str
+    taxonomy: str
+    held_out: bool
+    outlier: bool
+    cousin: str | None
+    posture: str
+    mass_kg: float
+    segments: dict[str, float]
+    girths: dict[str, float]
+    inclinations: dict[str, float]  # [rad], see module docstring
+    neck_elevation: float  # [rad]
+    head_pitch: float  # [rad]
+    tail_carriage: float  # [rad]
+    joint_limits: dict[str, tuple[float, float]]  # [rad]
+    gaits: dict[str, GaitHabit]
+    habits: Habits
+    description: str
+    sources: tuple[str, ...]
+    path: Path | None = field(default=None, compare=False)
+
+    # ---- derived sizes (one source of truth: segment lengths + posture) -------------
+    @property
+    def hind_leg_length(self) -> float:
+        """Hip joint to toe tip along the segments (femur + tibia + hind foot) [m]."""
+        s = self.segments
+        return s["hind_upper"] + s["hind_lower"] + s["hind_foot"]
+
+    @property
+    def fore_leg_length(self) -> float:
+        """Shoulder joint to toe tip along the segments [m]."""
+        s = self.segments
+        return s["fore_upper"] + s["fore_lower"] + s["fore_foot"]
+
+    @property
+    def leg_length(self) -> float:
+        """The normalising length of METRICS.md: the hind-leg length [m]."""
+        return self.hind_leg_length
+
+    def _vertical_extent(self, limb: str, with_girdle: bool) -> float:
+        keys = ("girdle", "upper", "lower", "foot") if with_girdle else ("upper", "lower", "foot")
+        return sum(
+            self.segments[f"{limb}_{k}"] * math.cos(self.inclinations[f"{limb}_{k}"])
+            for k in keys
+        )
+
+    @property
+    def hip_height(self) -> float:
+        """Standing height of the hip joint above the ground [m] (from the posture)."""
+        return self._vertical_extent("hind", with_girdle=False)
+
+    @property
+    def shoulder_height(self) -> float:
+        """Standing height of the shoulder joint above the ground [m]."""
+        return self._vertical_extent("fore", with_girdle=False)
+
+    @property
+    def trunk_pitch(self) -> float:
+        """Standing trunk pitch [rad], positive = withers higher than the sacrum."""
+        rise = self._vertical_extent("fore", True) - self._vertical_extent("hind", True)
+        ratio = max(-0.95, min(0.95, rise / self.segments["trunk"]))
+        return math.asin(ratio)
+
+    @property
+    def gallop(self) -> str | None:
+        """The species' gallop form (``transverse_gallop`` / ``rotary_gallop``) if any."""
+        for g in ("rotary_gallop", "transverse_gallop"):
+            if g in self.gaits:
+                return g
+        return None
+
+    def summary(self) -> dict[str, Any]:
+        """Plain JSON-ready summary used by ``habitsim species list --json``."""
+        return {
+            "name": self.name,
+            "common_name": self.common_name,
+            "mass_kg": self.mass_kg,
+            "hip_height_m": round(self.hip_height, 4),
+            "leg_length_m": round(self.leg_length, 4),
+            "posture": self.posture,
+            "held_out": self.held_out,
+            "cousin": self.cousin,
+            "outlier": self.outlier,
+            "gaits": sorted(self.gaits),
+        }
+
+
+# ------------------------------------------------------------------ parsing
+
+
+def _req(d: dict[str, Any], key: str, where: str) -> Any:
+    if key not in d:
+        raise SpeciesFileError(f"{where}: missing required key {key!r}")
+    return d[key]
+
+
+def _num(v: Any, where: str, positive: bool = False) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise SpeciesFileError(f"{where}: expected a finite number, got {v!r}")
+    if positive and v <= 0:
+        raise SpeciesFileError(f"{where}: expected a positive number, got {v!r}")
+    return float(v)
+
+
+def _pair(v: Any, where: str) -> tuple[float, float]:
+    if not isinstance(v, list) or len(v) != 2:
+        raise SpeciesFileError(f"{where}: expected [min, max], got {v!r}")
+    lo, hi = _num(v[0], where), _num(v[1], where)
+    if lo > hi:
+        raise SpeciesFileError(f"{where}: min {lo} > max {hi}")
+    return lo, hi
+
+
+def _parse(data: dict[str, Any], path: Path | None) -> Species:
+    where = str(path) if path else "<species>"
+    name = _req(data, "name", where)
+    if not isinstance(name, str) or not name.isidentifier() or name.lower() != name:
+        raise SpeciesFileError(f"{where}: name must be a lower-case identifier, got {name!r}")
+    posture_tbl = _req(data, "posture", where)
+    posture = _req(posture_tbl, "class", f"{where} [posture]")
+    if posture not in POSTURES:
+        raise SpeciesFileError(f"{where}: posture class {posture!r}; valid: {', '.join(POSTURES)}")
+
+    segs_tbl = _req(data, "segments", where)
+    segments = {k: _num(_req(segs_tbl, k, f"{where} [segments]"), f"{where} segments.{k}", True)
+                for k in SEGMENT_KEYS}
+    girth_tbl = _req(data, "girths", where)
+    girths = {k: _num(_req(girth_tbl, k, f"{where} [girths]"), f"{where} girths.{k}", True)
+              for k in GIRTH_KEYS}
+    incl = {
+        k: math.radians(_num(_req(posture_tbl, f"{k}_deg", f"{where} [posture]"), f"{where} posture.{k}_deg"))
+        for k in INCLINATION_KEYS
+    }
+    lim_tbl = _req(data, "joint_limits", where)
+    limits: dict[str, tuple[float, float]] = {}
+    for k in LIMIT_KEYS:
+        lo, hi = _pair(_req(lim_tbl, f"{k}_deg", f"{where} [joint_limits]"), f"{where} joint_limits.{k}_deg")
+        limits[k] = (math.radians(lo), math.radians(hi))
+
+    gaits_tbl = _req(data, "gaits", where)
+    gaits: dict[str, GaitHabit] = {}
+    for g, tbl in gaits_tbl.items():
+        gw = f"{where} [gaits.{g}]"
+        if g not in GAITS:
+            raise SpeciesFileError(f"{gw}: unknown gait {g!r}; valid: {', '.join(GAITS)}")
+        ff = _req(tbl, "footfall", gw)
+        if set(ff) != set(FEET):
+            raise SpeciesFileError(f"{gw}: footfall needs exactly the feet {', '.join(FEET)}")
+        footfall = {f: _num(ff[f], f"{gw} footfall.{f}") % 1.0 for f in FEET}
+        if abs(footfall["LH"]) > 1e-9:
+            raise SpeciesFileError(f"{gw}: footfall phases are relative to LH, so LH must be 0")
+        df = _pair(_req(tbl, "duty_factor", gw), f"{gw} duty_factor")
+        if not (0.0 < df[0] <= df[1] < 1.0):
+            raise SpeciesFileError(f"{gw}: duty_factor must lie in (0, 1), got {df}")
+        fr = _pair(_req(tbl, "froude", gw), f"{gw} froude")
+        if fr[0] < 0.0:
+            raise SpeciesFileError(f"{gw}: froude band must be non-negative, got {fr}")
+        gaits[g] = GaitHabit(footfall=footfall, duty_factor=df, froude=fr)
+    if "walk" not in gaits:
+        raise SpeciesFileError(f"{where}: every species needs a 'walk' gait")
+
+    hab = _req(data, "habits", where)
+    hw = f"{where} [habits]"
+    habits = Habits(
+        stride_frequency_coeff_hz=_num(_req(hab, "stride_frequency_coeff_hz", hw), hw, True),
+        spine_flex=math.radians(_num(_req(hab, "spine_flex_deg", hw), hw)),
+        head_bob=math.radians(_num(_req(hab, "head_bob_deg", hw), hw)),
+        tail_sway=math.radians(_num(_req(hab, "tail_sway_deg", hw), hw)),
+        swing_height=_num(_req(hab, "swing_height", hw), hw, True),
+        trunk_sway=_num(_req(hab, "trunk_sway", hw), hw),
+    )
+    desc = _req(data, "description", where)
+    if not isinstance(desc, str) or len(desc.split()) < 15:
+        raise SpeciesFileError(f"{where}: description must be a plain-language paragraph")
+    sources = _req(data, "sources", where)
+    if not isinstance(sources, list) or not sources or not all(isinstance(s, str) for s in sources):
+        raise SpeciesFileError(f"{where}: sources must be a non-empty list of strings")
+    held_out = bool(data.get("held_out", False))
+    cousin = data.get("cousin") or None
+    if held_out and not cousin:
+        raise SpeciesFileError(f"{where}: a held-out species must name its training cousin")
+
+    sp = Species(
+        name=name,
+        common_name=str(_req(data, "common_name", where)),
+        taxonomy=str(_req(data, "taxonomy", where)),
+        held_out=held_out,
+        outlier=bool(data.get("outlier", False)),
+        cousin=cousin,
+        posture=posture,
+        mass_kg=_num(_req(data, "mass_kg", where), f"{where} mass_kg", True),
+        segments=segments,
+        girths=girths,
+        inclinations=incl,
+        neck_elevation=math.radians(_num(_req(posture_tbl, "neck_deg", where), where)),
+        head_pitch=math.radians(_num(_req(posture_tbl, "head_deg", where), where)),
+        tail_carriage=math.radians(_num(_req(posture_tbl, "tail_deg", where), where)),
+        joint_limits=limits,
+        gaits=gaits,
+        habits=habits,
+        description=" ".join(desc.split()),
+        sources=tuple(sources),
+        path=path,
+    )
+    _check_limits_hold_posture(sp, where)
+    return sp
+
+
+def _check_limits_hold_posture(sp: Species, where: str) -> None:
+    """The standing posture's local joint angles must lie inside the joint limits."""
+    from .skeleton import standing_leg_angles  # local import: skeleton imports species
+
+    for role, angle in standing_leg_angles(sp).items():
+        lo, hi = sp.joint_limits[role]
+        if not lo - 1e-9 <= angle <= hi + 1e-9:
+            raise SpeciesFileError(
+                f"{where}: standing {role} angle {math.degrees(angle):.1f} deg lies outside "
+                f"its joint limits [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] deg"
+            )
+
+
+def load_species_file(path: str | Path) -> Species:
+    """Load and validate one species TOML file.
+
+    Raises:
+        SpeciesFileError: unreadable TOML, a missing key or inconsistent numbers.
+    """
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise SpeciesFileError(f"{p}: cannot read species file: {e}") from e
+    return _parse(data, p)
+
+
+@functools.cache
+def _catalog() -> dict[str, Species]:
+    out: dict[str, Species] = {}
+    root = resources.files("habitsim.catalog")
+    for entry in sorted(root.iterdir(), key=lambda e: e.name):
+        if entry.name.endswith(".toml"):
+            sp = load_species_file(Path(str(entry)))
+            if sp.name in out:
+                raise SpeciesFileError(f"duplicate species name {sp.name!r} in the catalog")
+            out[sp.name] = sp
+    return out
+
+
+def species_names() -> list[str]:
+    """Names of every species in the catalog, sorted."""
+    return sorted(_catalog())
+
+
+def load_species(name: str | Species) -> Species:
+    """The catalog species called ``name`` (a :class:`Species` passes through).
+
+    Raises:
+        UnknownSpeciesError: with the list of known names.
+    """
+    if isinstance(name, Species):
+        return name
+    cat = _catalog()
+    if name not in cat:
+        raise UnknownSpeciesError(name, cat)
+    return cat[name]
+
+
+def all_species() -> list[Species]:
+    """Every catalog species, sorted by name."""
+    return [v for _, v in sorted(_catalog().items())]
+
+
+def training_species() -> list[Species]:
+    """Species whose motions may be used for training (``held_out = false``)."""
+    return [s for s in all_species() if not s.held_out]
+
+
+def held_out_species() -> list[Species]:
+    """Species never used for training."""
+    return [s for s in all_species() if s.held_out]
