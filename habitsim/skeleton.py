@@ -15,6 +15,19 @@ canonical pose (all local rotations identity) the legs point straight down (-z),
 neck and head point forward (+x) and the tail points backward (-x); world frame z up,
 x forward, y left, metres. The species' standing posture is a set of local rotations
 about the lateral (+y) axis on top of this canonical pose (see :func:`standing_pose`).
+
+Hinge convention (what the MJCF models of each species can represent exactly, so a
+motion made of these rotations maps onto ``qpos`` without residual):
+
+* ``*_shoulder`` and ``*_hip``: R = R_x(abd) · R_y(flex) (abduction outermost);
+* other leg joints (``scapula, elbow, wrist, ilium, knee, hock``): R = R_y(flex);
+* ``spine1..3``, ``neck``, ``head``, ``tail1..2``: R = R_z(yaw) · R_y(pitch);
+* ``pelvis``: free (the root's global orientation); end points (``snout``, ``tail3``,
+  ``*_toe``) carry no rotation of consequence (identity by convention).
+
+R_y(a) with a > 0 swings a downward-pointing bone backward; R_x(a) with a > 0 swings it
+toward -y (to the animal's right) — so for the left legs positive abduction is adduction;
+use :data:`ABDUCTION_SIGN` to get "outward = positive" for either side.
 """
 
 from __future__ import annotations
@@ -34,6 +47,8 @@ __all__ = [
     "JOINT_NAMES",
     "PARENTS",
     "FOOT_JOINTS",
+    "ABDUCTION_SIGN",
+    "LEG_ROLE_JOINTS",
     "LEG_PREFIXES",
     "Skeleton",
     "get_skeleton",
@@ -74,6 +89,8 @@ JOINT_NAMES: tuple[str, ...] = tuple(n for n, _ in _TOPOLOGY)
 _INDEX = {n: i for i, n in enumerate(JOINT_NAMES)}
 PARENTS: tuple[int, ...] = tuple(-1 if p is None else _INDEX[p] for _, p in _TOPOLOGY)
 FOOT_JOINTS: tuple[str, ...] = ("lf_toe", "rf_toe", "lh_toe", "rh_toe")
+#: Multiply an "outward" abduction angle by this to get the R_x angle of a leg's side.
+ABDUCTION_SIGN: dict[str, float] = {"l": -1.0, "r": 1.0}
 
 #: Which local joint carries which leg-flexion role of the species' joint limits.
 LEG_ROLE_JOINTS: dict[str, tuple[str, ...]] = {
