@@ -245,11 +245,14 @@ class Skeleton:
         return fk_torch(self, root_pos, quats)
 
 
-@functools.cache
 def get_skeleton(species: str | Species) -> Skeleton:
-    """The skeleton of a catalog species (cached)."""
-    sp = load_species(species)
-    return Skeleton(sp.name, JOINT_NAMES, PARENTS, _offsets(sp))
+    """The skeleton of a catalog species (cached per species name)."""
+    return _skeleton(load_species(species).name)
+
+
+@functools.cache
+def _skeleton(name: str) -> Skeleton:
+    return Skeleton(name, JOINT_NAMES, PARENTS, _offsets(load_species(name)))
 
 
 def _check_fk_shapes(root_shape: tuple[int, ...], q_shape: tuple[int, ...], j: int) -> None:

@@ -167,7 +167,7 @@ class Habits:
     trunk_sway: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Species:
     """One quadruped species, loaded from its TOML file. All numbers SI."""
 
