@@ -136,8 +136,8 @@ def quat_to_axis_angle(q: np.ndarray) -> np.ndarray:
 
 def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Geodesic angle [rad] between unit quaternions a and b, (…)."""
-    d = np.abs(np.sum(np.asarray(a) * np.asarray(b), axis=-1))
-    return 2.0 * np.arccos(np.clip(d, -1.0, 1.0))
+    rel = quat_mul(quat_conj(a), b)  # atan2 form stays accurate for tiny angles
+    return 2.0 * np.arctan2(np.linalg.norm(rel[..., 1:], axis=-1), np.abs(rel[..., 0]))
 
 
 def quat_fix_continuity(q: np.ndarray, axis: int = 0) -> np.ndarray:
