@@ -26,7 +26,7 @@ motion made of these rotations maps onto ``qpos`` without residual):
   ``*_toe``) carry no rotation of consequence (identity by convention).
 
 R_y(a) with a > 0 swings a downward-pointing bone backward; R_x(a) with a > 0 swings it
-toward -y (to the animal's right) — so for the left legs positive abduction is adduction;
+toward +y (to the animal's left) — outward for the left legs, inward for the right legs;
 use :data:`ABDUCTION_SIGN` to get "outward = positive" for either side.
 """
 
@@ -90,7 +90,7 @@ _INDEX = {n: i for i, n in enumerate(JOINT_NAMES)}
 PARENTS: tuple[int, ...] = tuple(-1 if p is None else _INDEX[p] for _, p in _TOPOLOGY)
 FOOT_JOINTS: tuple[str, ...] = ("lf_toe", "rf_toe", "lh_toe", "rh_toe")
 #: Multiply an "outward" abduction angle by this to get the R_x angle of a leg's side.
-ABDUCTION_SIGN: dict[str, float] = {"l": -1.0, "r": 1.0}
+ABDUCTION_SIGN: dict[str, float] = {"l": 1.0, "r": -1.0}
 
 #: Which local joint carries which leg-flexion role of the species' joint limits.
 LEG_ROLE_JOINTS: dict[str, tuple[str, ...]] = {

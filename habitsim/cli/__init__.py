@@ -19,6 +19,7 @@ _GROUPS: list[tuple[str | None, str, tuple[str, ...]]] = [
     ("species", "the species catalog", ("species_cmd",)),
     ("data", "data sets: synthetic gaits, BVH import", ("synth_cmd", "bvh_cmd")),
     ("motion", "inspect motion files", ("motion_cmd",)),
+    ("models", "per-species MuJoCo (MJCF) models", ("models_cmd",)),
     ("bench", "benchmarks that print figures", ("bench_cmd",)),
     (None, "", ("demo_cmd",)),
 ]

@@ -1,0 +1,39 @@
+"""``habitsim models build|path``: generate the per-species MJCF models."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def _build(ns: argparse.Namespace) -> int:
+    from habitsim.mjcf_models.builder import write_model
+    from habitsim.species import load_species, species_names
+
+    names = ns.species.split(",") if ns.species else species_names()
+    for n in names:
+        load_species(n)  # fail early, with the list of known species
+    for n in names:
+        scene = write_model(n, ns.out)
+        print(f"{n:10s} -> {scene}")
+    return 0
+
+
+def _path(ns: argparse.Namespace) -> int:
+    from habitsim.mjcf_models.builder import model_path, scene_path
+
+    print(scene_path(ns.species) if ns.scene else model_path(ns.species))
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``models build`` and ``models path``."""
+    p = sub.add_parser("build", help="write <species>/<species>.xml, scene.xml, README.md")
+    p.add_argument("--species", help="comma-separated species (default: all)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="models folder (default: the installed habitsim.mjcf_models)")
+    p.set_defaults(func=_build)
+    q = sub.add_parser("path", help="print the path of a species' model file")
+    q.add_argument("species")
+    q.add_argument("--scene", action="store_true", help="the scene.xml (floor + light)")
+    q.set_defaults(func=_path)

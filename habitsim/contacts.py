@@ -1,0 +1,180 @@
+"""Foot-contact detection from toe kinematics, with thresholds scaled to the animal's size.
+
+A foot (its toe end point, see :meth:`habitsim.motion.Motion.foot_positions`) is in
+contact with the ground (the plane z = 0) in a frame when
+
+* its height is below :data:`CONTACT_HEIGHT_PER_LEG` × leg length (2 %, the contact
+  definition of METRICS.md's ``skate_mm``), and
+* its horizontal speed is below :data:`CONTACT_SPEED_PER_LEG` × leg length per second
+  (0.3 leg lengths per second; for a 0.61 m dog leg that is 0.18 m/s, for a cat's 0.27 m
+  leg 0.08 m/s). The speed of frame t is the smaller of the backward and the forward
+  one-frame displacement times fps, so the touchdown frame (foot still moving into frame
+  t, resting from t on) and the last stance frame (resting until t, moving after) both
+  count as resting.
+
+"Leg length" is the species' hind-leg length (:attr:`habitsim.species.Species.leg_length`).
+
+Cleanup, in this order:
+
+1. hysteresis: a frame that only meets the looser thresholds (× :data:`HYSTERESIS`, i.e.
+   1.5 × both limits) is in contact if it belongs to a run of such frames that contains
+   at least one frame meeting the strict thresholds — noise around the threshold does
+   not break a stance phase, but a hovering foot never starts one;
+2. single-frame gaps inside a stance phase are filled (``1 0 1`` → ``1 1 1``);
+3. single-frame contacts between two swing frames are removed (``0 1 0`` → ``0 0 0``).
+
+Everything is vectorised numpy; a 6 s clip at 30 fps takes well under a millisecond
+beyond the forward kinematics.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .errors import InvalidMotionError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .motion import Motion
+
+__all__ = [
+    "CONTACT_HEIGHT_PER_LEG",
+    "CONTACT_SPEED_PER_LEG",
+    "HYSTERESIS",
+    "detect_contacts",
+    "contacts_from_feet",
+    "contact_segments",
+    "touchdown_frames",
+]
+
+#: Toe height threshold as a fraction of the hind-leg length (METRICS.md: 2 %).
+CONTACT_HEIGHT_PER_LEG = 0.02
+#: Horizontal toe speed threshold in hind-leg lengths per second.
+CONTACT_SPEED_PER_LEG = 0.3
+#: Factor on both thresholds for the loose (staying-in-contact) condition.
+HYSTERESIS = 1.5
+
+
+def _toe_speed(feet: np.ndarray, fps: float) -> np.ndarray:
+    """(T, F) horizontal toe speed [m/s]: min of backward and forward differences."""
+    t = feet.shape[0]
+    if t < 2:
+        return np.zeros(feet.shape[:2])
+    step = np.linalg.norm(np.diff(feet[..., :2], axis=0), axis=-1) * fps  # (T-1, F)
+    back = np.concatenate([step[:1], step], axis=0)
+    fwd = np.concatenate([step, step[-1:]], axis=0)
+    return np.minimum(back, fwd)
+
+
+def _runs_with_seed(loose: np.ndarray, strict: np.ndarray) -> np.ndarray:
+    """Keep the runs of ``loose`` (along axis 0) that contain a ``strict`` frame."""
+    t, f = loose.shape
+    pad = np.zeros((1, f), dtype=bool)
+    lp = np.concatenate([pad, loose, pad], axis=0)
+    starts = lp[1:] & ~lp[:-1]  # (T+1, F): True at the first frame of a run
+    run_id = np.cumsum(starts, axis=0)[:-1]  # (T, F) id of the run a frame belongs to
+    run_id = np.where(loose, run_id, 0)
+    # A run is seeded if it holds a strict frame: per foot, mark seeded ids.
+    n_ids = int(run_id.max()) + 1 if run_id.size else 1
+    seeded = np.zeros((n_ids, f), dtype=bool)
+    cols = np.broadcast_to(np.arange(f), (t, f))
+    sel = strict & loose
+    seeded[run_id[sel], cols[sel]] = True
+    seeded[0] = False
+    return seeded[run_id, cols]
+
+
+def _fill_and_open(c: np.ndarray) -> np.ndarray:
+    """Fill single-frame gaps, then remove single-frame contacts (along axis 0)."""
+    c = c.copy()
+    if c.shape[0] >= 3:
+        gap = ~c[1:-1] & c[:-2] & c[2:]
+        c[1:-1] |= gap
+        lone = c[1:-1] & ~c[:-2] & ~c[2:]
+        c[1:-1] &= ~lone
+    return c
+
+
+def contacts_from_feet(feet: np.ndarray, fps: float, leg_length: float) -> np.ndarray:
+    """Contacts from toe trajectories (the core of :func:`detect_contacts`).
+
+    Args:
+        feet: (T, F, 3) toe positions [m], z up, ground at z = 0.
+        fps: frame rate [Hz].
+        leg_length: the normalising hind-leg length [m].
+
+    Returns:
+        (T, F) bool contact flags.
+    """
+    feet = np.asarray(feet, dtype=np.float64)
+    if feet.ndim != 3 or feet.shape[-1] != 3:
+        raise InvalidMotionError(f"feet must have shape (T, F, 3), got {feet.shape}")
+    if not (leg_length > 0 and fps > 0):
+        raise InvalidMotionError("leg_length and fps must be positive")
+    h_thr = CONTACT_HEIGHT_PER_LEG * leg_length
+    v_thr = CONTACT_SPEED_PER_LEG * leg_length
+    height = feet[..., 2]
+    speed = _toe_speed(feet, fps)
+    strict = (height < h_thr) & (speed < v_thr)
+    loose = (height < HYSTERESIS * h_thr) & (speed < HYSTERESIS * v_thr)
+    return _fill_and_open(_runs_with_seed(loose, strict))
+
+
+def detect_contacts(motion: Motion) -> np.ndarray:
+    """Foot contacts of a motion from toe height and horizontal speed.
+
+    Thresholds are size-normalised (see the module docstring): height < 2 % and
+    horizontal speed < 0.3 hind-leg lengths per second, with 1.5× hysteresis and
+    single-frame cleanup.
+
+    Args:
+        motion: the motion (its ``contacts`` labels are ignored).
+
+    Returns:
+        (T, 4) bool, feet LF, RF, LH, RH.
+    """
+    return contacts_from_feet(motion.foot_positions(), motion.fps, motion.species_info.leg_length)
+
+
+def contact_segments(contacts: np.ndarray) -> list[list[tuple[int, int]]]:
+    """Runs of contact per foot.
+
+    Args:
+        contacts: (T, F) bool contact flags.
+
+    Returns:
+        For each of the F feet, the list of ``(start, stop)`` frame ranges (``stop``
+        exclusive, Python slice convention) during which the foot is in contact, in
+        time order. A run touching the clip's start has ``start = 0``; one touching its
+        end has ``stop = T``.
+    """
+    c = np.asarray(contacts, dtype=bool)
+    if c.ndim != 2:
+        raise InvalidMotionError(f"contacts must have shape (T, F), got {c.shape}")
+    pad = np.zeros((1, c.shape[1]), dtype=bool)
+    d = np.diff(np.concatenate([pad, c, pad], axis=0).astype(np.int8), axis=0)  # (T+1, F)
+    out: list[list[tuple[int, int]]] = []
+    for f in range(c.shape[1]):
+        starts = np.flatnonzero(d[:, f] == 1)
+        stops = np.flatnonzero(d[:, f] == -1)
+        out.append([(int(a), int(b)) for a, b in zip(starts, stops, strict=True)])
+    return out
+
+
+def touchdown_frames(contacts: np.ndarray) -> list[np.ndarray]:
+    """Touchdown frames per foot: frames t ≥ 1 with contact at t and none at t − 1.
+
+    A contact already present in frame 0 is not a touchdown (its start is unknown).
+
+    Args:
+        contacts: (T, F) bool contact flags.
+
+    Returns:
+        For each foot, an int array of touchdown frame indices (ascending).
+    """
+    c = np.asarray(contacts, dtype=bool)
+    if c.ndim != 2:
+        raise InvalidMotionError(f"contacts must have shape (T, F), got {c.shape}")
+    td = c[1:] & ~c[:-1]
+    return [np.flatnonzero(td[:, f]) + 1 for f in range(c.shape[1])]

@@ -1,0 +1,519 @@
+"""Build a MuJoCo model (MJCF) of a species from its catalog entry.
+
+The model follows the habitsim skeleton exactly: one body per rotating skeleton joint,
+placed at the joint's canonical-pose offset, carrying the hinges of the convention in
+:mod:`habitsim.skeleton` (shoulder / hip: abduction about x then flexion about y; other
+leg joints: flexion about y; spine, neck, head, tail: yaw about z then pitch about y),
+so a habitsim :class:`~habitsim.motion.Motion` maps onto ``qpos`` by joint name. End
+points of the skeleton (toes, snout, tail tip) are sites.
+
+Conventions (after MuJoCo Menagerie):
+
+* joints ``<skeleton joint>_<axis>`` with ``axis`` in ``flex, abd, pitch, yaw``; one
+  ``<default>`` class per joint role carrying damping, armature and the motor's
+  ``ctrlrange``; ranges from the species' joint limits;
+* visual geoms (meshes exported with trimesh) in group 2 with contype = conaffinity = 0;
+  collision capsules in group 3; foot spheres ``<leg>_foot`` with touch-sensor sites
+  ``<leg>_foot_touch``; a free joint ``root`` on the pelvis;
+* a ``home`` keyframe standing in the species' posture, ``implicitfast`` integrator,
+  timestep 2 ms; ``<species>.xml`` holds the animal, ``scene.xml`` adds floor, light and
+  includes it.
+
+Mass properties: each bone is a capsule (radius from the species' girth, i.e.
+circumference / 2π) made with trimesh, which gives its volume and inertia tensor; one
+density for the whole animal is chosen so the total mass equals the species' mass.
+Actuator torque limits scale with m·g·L (L = hind-leg length), damping and armature with
+the size too (see :data:`ROLE_TORQUE`).
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import trimesh
+
+from habitsim.body import bone_girth_keys
+from habitsim.errors import HabitsimError
+from habitsim.skeleton import ABDUCTION_SIGN, FOOT_JOINTS, JOINT_NAMES, PARENTS, get_skeleton
+from habitsim.species import Species, load_species
+
+__all__ = [
+    "MODELS_DIR",
+    "GRAVITY",
+    "TIMESTEP",
+    "ROLE_TORQUE",
+    "HingeJoint",
+    "hinge_joints",
+    "build_spec",
+    "write_model",
+    "build_all",
+    "model_path",
+    "scene_path",
+]
+
+MODELS_DIR = Path(__file__).resolve().parent
+GRAVITY = 9.81  # [m/s^2]
+TIMESTEP = 0.002  # [s]
+END_POINTS = ("snout", "tail3", *FOOT_JOINTS)
+FOOT_FRICTION = 1.0  # sliding friction of feet (dry ground, unitless)
+
+#: Peak actuator torque per joint role as a multiple of m·g·L; each joint also gets at
+#: least :data:`LOAD_FACTOR` times the gravity moment of the body parts it carries.
+ROLE_TORQUE = {
+    "girdle": 0.40,
+    "upper_flex": 0.40,
+    "upper_abd": 0.15,
+    "lower": 0.35,
+    "distal": 0.25,
+    "spine": 0.40,
+    "neck": 0.06,
+    "head": 0.02,
+    "tail": 0.01,
+}
+
+
+LOAD_FACTOR = 4.0
+
+
+class ModelBuildError(HabitsimError, RuntimeError):
+    """The MJCF of a species failed to compile or write."""
+
+
+@dataclass(frozen=True)
+class HingeJoint:
+    """One hinge of a species model.
+
+    Attributes:
+        name: MJCF joint (and actuator) name, ``<skeleton joint>_<axis>``.
+        skeleton_joint: the habitsim joint it belongs to.
+        axis: unit axis in the body frame (x, y or z).
+        kind: ``flex``, ``abd``, ``pitch`` or ``yaw``.
+        role: the species joint-limit role (e.g. ``hind_upper_flex``).
+        torque_role: key of :data:`ROLE_TORQUE`.
+        sign: +1, or -1 where the limit role is expressed as "outward" abduction for a
+            left leg (the range is mirrored).
+    """
+
+    name: str
+    skeleton_joint: str
+    axis: tuple[float, float, float]
+    kind: str
+    role: str
+    torque_role: str
+    sign: float = 1.0
+
+
+_X, _Y, _Z = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
+_LEG_SEG_ROLE = {
+    "scapula": ("girdle", "girdle"),
+    "shoulder": ("upper", "upper_flex"),
+    "elbow": ("lower", "lower"),
+    "wrist": ("foot", "distal"),
+    "ilium": ("girdle", "girdle"),
+    "hip": ("upper", "upper_flex"),
+    "knee": ("lower", "lower"),
+    "hock": ("foot", "distal"),
+}
+
+
+def hinge_joints() -> list[HingeJoint]:
+    """Every hinge of the habitsim model, in MJCF order (same for all species)."""
+    out: list[HingeJoint] = []
+    for name in JOINT_NAMES:
+        if name == "pelvis" or name in END_POINTS:
+            continue
+        if name.startswith("spine") or name in ("neck", "head") or name.startswith("tail"):
+            base = "spine" if name.startswith("spine") else ("tail" if name.startswith("tail") else name)
+            out.append(HingeJoint(f"{name}_yaw", name, _Z, "yaw", f"{base}_yaw", base))
+            out.append(HingeJoint(f"{name}_pitch", name, _Y, "pitch", f"{base}_pitch", base))
+            continue
+        limb = "fore" if name[1] == "f" else "hind"
+        seg = name[3:]
+        part, trole = _LEG_SEG_ROLE[seg]
+        if seg in ("shoulder", "hip"):
+            out.append(
+                HingeJoint(f"{name}_abd", name, _X, "abd", f"{limb}_upper_abd", "upper_abd",
+                           ABDUCTION_SIGN[name[0]])
+            )
+        out.append(HingeJoint(f"{name}_flex", name, _Y, "flex", f"{limb}_{part}_flex", trole))
+    return out
+
+
+def _capsule(p0: np.ndarray, p1: np.ndarray, radius: float) -> trimesh.Trimesh:
+    """A trimesh capsule from p0 to p1 (body frame) with the given radius [m]."""
+    d = p1 - p0
+    length = float(np.linalg.norm(d))
+    cap = trimesh.creation.capsule(height=length, radius=radius, count=[10, 10])
+    # trimesh's capsule runs along z, centred; align z with d and move to the midpoint.
+    tf = trimesh.geometry.align_vectors([0.0, 0.0, 1.0], d / length)
+    tf[:3, 3] = 0.5 * (p0 + p1)
+    cap.apply_transform(tf)
+    return cap
+
+
+def _bones_by_body(sp: Species) -> dict[str, list[tuple[str, np.ndarray, float]]]:
+    """For each body (rotating skeleton joint), its bones as (child, offset, radius)."""
+    skel = get_skeleton(sp)
+    keys = bone_girth_keys()
+    bones: dict[str, list[tuple[np.ndarray, float]]] = {}
+    for j, p in enumerate(PARENTS):
+        if p < 0:
+            continue
+        key = keys[JOINT_NAMES[j]]
+        if key is None:
+            continue
+        bones.setdefault(JOINT_NAMES[p], []).append(
+            (JOINT_NAMES[j], skel.offsets[j].copy(), sp.girths[key] / (2.0 * math.pi))
+        )
+    return bones
+
+
+def _body_meshes(sp: Species) -> dict[str, trimesh.Trimesh]:
+    return {
+        body: trimesh.util.concatenate([_capsule(np.zeros(3), off, r) for _, off, r in bl])
+        for body, bl in _bones_by_body(sp).items()
+    }
+
+
+def _gravity_moments(sp: Species, solids: dict[str, trimesh.Trimesh], density: float) -> dict[str, float]:
+    """Largest gravity moment [N·m] about each joint from the bodies distal to it.
+
+    Computed in the canonical pose with the distal subtree's centre of mass at its
+    distance from the joint (the worst case: that lever horizontal).
+    """
+    skel = get_skeleton(sp)
+    pos = skel.fk(np.zeros(3), np.tile([1.0, 0.0, 0.0, 0.0], (len(JOINT_NAMES), 1)))
+    mass = np.zeros(len(JOINT_NAMES))
+    com = np.zeros((len(JOINT_NAMES), 3))
+    for j, name in enumerate(JOINT_NAMES):
+        if name in solids:
+            mass[j] = density * solids[name].volume
+            com[j] = pos[j] + solids[name].center_mass
+    out: dict[str, float] = {}
+    for j, name in enumerate(JOINT_NAMES):
+        sub = [j]
+        for c in range(j + 1, len(JOINT_NAMES)):  # parents precede children
+            if PARENTS[c] in sub:
+                sub.append(c)
+        m_sub = mass[sub].sum()
+        if m_sub <= 0:
+            out[name] = 0.0
+            continue
+        c_sub = (mass[sub, None] * com[sub]).sum(0) / m_sub
+        out[name] = float(m_sub * GRAVITY * np.linalg.norm(c_sub - pos[j]))
+    return out
+
+
+def _foot_radius(sp: Species, toe: str) -> float:
+    """Radius [m] of a foot's contact sphere: the foot segment's girth radius."""
+    limb = "fore" if toe[1] == "f" else "hind"
+    return sp.girths[f"{limb}_foot"] / (2.0 * math.pi)
+
+
+def _qpos_addresses(spec: mujoco.MjSpec) -> tuple[dict[str, int], int]:
+    """qpos address of each joint of a spec (tree order, as the compiler assigns it)."""
+    size = {mujoco.mjtJoint.mjJNT_FREE: 7, mujoco.mjtJoint.mjJNT_BALL: 4}
+    adr: dict[str, int] = {}
+    n = 0
+    for jnt in spec.joints:
+        adr[jnt.name] = n
+        n += size.get(jnt.type, 1)
+    return adr, n
+
+
+def _home_qpos(sp: Species, joints: list[HingeJoint], spec: mujoco.MjSpec) -> np.ndarray:
+    """qpos of the standing pose, placed by joint name (MuJoCo orders qpos depth-first)."""
+    from habitsim.skeleton import standing_leg_angles
+
+    skel = get_skeleton(sp)
+    root, quats = skel.standing_pose()
+    loc = standing_leg_angles(sp)
+    adr, nq = _qpos_addresses(spec)
+    q = np.zeros(nq)
+    q[0:3] = root
+    q[3:7] = quats[0]
+    for h in joints:
+        angle = 0.0
+        if h.kind == "flex" or (h.kind == "pitch" and h.skeleton_joint in ("neck", "head", "tail1")):
+            angle = loc[h.role]
+        q[adr[h.name]] = angle
+    return q
+
+
+def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mujoco.MjSpec:
+    """The MjSpec of a species' model (no floor; see :func:`write_model` for the scene).
+
+    Args:
+        species: catalog name or Species.
+        mesh_dir: folder the visual meshes are (or will be) written to as
+            ``<body>.stl``; None builds the model without visual meshes.
+
+    Returns:
+        An MjSpec ready to compile.
+    """
+    sp = load_species(species)
+    skel = get_skeleton(sp)
+    g = GRAVITY
+    mgl = sp.mass_kg * g * sp.leg_length
+    spec = mujoco.MjSpec()
+    spec.modelname = sp.name
+    spec.compiler.degree = False
+    spec.compiler.autolimits = True
+    spec.option.timestep = TIMESTEP
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.gravity = [0.0, 0.0, -g]
+    spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+    if mesh_dir is not None:
+        spec.meshdir = str(mesh_dir)
+
+    # ---- default classes ------------------------------------------------------------
+    root_def = spec.add_default(sp.name, spec.default)
+    visual = spec.add_default("visual", root_def)
+    visual.geom.group = 2
+    visual.geom.contype = 0
+    visual.geom.conaffinity = 0
+    visual.geom.density = 0.0
+    visual.geom.rgba = [0.72, 0.58, 0.42, 1.0]
+    collision = spec.add_default("collision", root_def)
+    collision.geom.group = 3
+    collision.geom.contype = 1
+    collision.geom.conaffinity = 0  # collide with the floor only, never with itself
+    collision.geom.density = 0.0
+    collision.geom.rgba = [0.5, 0.5, 0.9, 0.4]
+    foot = spec.add_default("foot", collision)
+    foot.geom.friction = [FOOT_FRICTION, 0.005, 0.0001]
+    foot.geom.condim = 3
+    classes = {}
+    joints = hinge_joints()
+    for role in ROLE_TORQUE:
+        d = spec.add_default(role, root_def)
+        tau = ROLE_TORQUE[role] * mgl
+        d.actuator.ctrlrange = [-tau, tau]
+        d.actuator.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        d.joint.armature = 1e-3 * sp.mass_kg * sp.leg_length**2 * ROLE_TORQUE[role]
+        # damping time constant ~5 % of the pendulum time sqrt(L/g) at peak torque
+        d.joint.damping = [0.05 * tau * math.sqrt(sp.leg_length / g), 0.0, 0.0]
+        classes[role] = d
+
+    # ---- bodies -------------------------------------------------------------------
+    root_pos, _ = skel.standing_pose()
+    solids = _body_meshes(sp)
+    bones = _bones_by_body(sp)
+    density = sp.mass_kg / sum(m.volume for m in solids.values())  # [kg/m^3]
+    by_joint: dict[str, list[HingeJoint]] = {}
+    for h in joints:
+        by_joint.setdefault(h.skeleton_joint, []).append(h)
+    bodies: dict[str, mujoco.MjsBody] = {}
+    for j, name in enumerate(JOINT_NAMES):
+        parent = PARENTS[j]
+        if name in END_POINTS:
+            continue
+        if parent < 0:
+            body = spec.worldbody.add_body(name=name, pos=list(root_pos), childclass=sp.name)
+            body.add_freejoint(name="root")
+            body.add_camera(name="track", mode=mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM,
+                            pos=[0.0, -4.0 * sp.hip_height, 1.0 * sp.hip_height],
+                            xyaxes=[1, 0, 0, 0, 0.25, 1])
+        else:
+            body = bodies[JOINT_NAMES[parent]].add_body(name=name, pos=list(skel.offsets[j]))
+        bodies[name] = body
+        for h in by_joint.get(name, []):
+            lo, hi = sp.joint_limits[h.role]
+            rng = [lo, hi] if h.sign > 0 else [-hi, -lo]
+            body.add_joint(classes[h.torque_role], name=h.name, axis=list(h.axis), range=rng,
+                           limited=mujoco.mjtLimited.mjLIMITED_TRUE)
+        # mass properties from the trimesh solids of this body's bones
+        if name in solids:
+            mesh = solids[name]
+            body.mass = float(density * mesh.volume)
+            body.ipos = list(mesh.center_mass)
+            it = density * mesh.moment_inertia
+            body.fullinertia = [it[0, 0], it[1, 1], it[2, 2], it[0, 1], it[0, 2], it[1, 2]]
+            body.explicitinertial = True
+        else:  # massless girdle root: a tiny inertia keeps the model well posed
+            body.mass = 1e-4 * sp.mass_kg
+            body.ipos = [0.0, 0.0, 0.0]
+            r = 0.02 * sp.leg_length
+            body.fullinertia = [0.4 * body.mass * r * r] * 3 + [0.0, 0.0, 0.0]
+            body.explicitinertial = True
+        for child, off, radius in bones.get(name, []):
+            end = np.asarray(off, dtype=float)
+            if child in FOOT_JOINTS:  # stop at the foot sphere's centre, never below it
+                r_foot = _foot_radius(sp, child)
+                end = end - r_foot * end / np.linalg.norm(end)
+                radius = min(radius, 0.8 * r_foot)
+            body.add_geom(collision, name=f"{name}_{child}_col",
+                          type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[radius, 0, 0],
+                          fromto=[0, 0, 0, *end])
+        if mesh_dir is not None and name in solids:
+            mname = f"{name}_mesh"
+            spec.add_mesh(name=mname, file=f"{name}.stl")
+            body.add_geom(visual, name=f"{name}_visual", type=mujoco.mjtGeom.mjGEOM_MESH,
+                          meshname=mname)
+    # end-point sites, feet
+    for j, name in enumerate(JOINT_NAMES):
+        if name not in END_POINTS:
+            continue
+        parent_body = bodies[JOINT_NAMES[PARENTS[j]]]
+        off = skel.offsets[j]
+        parent_body.add_site(name=name, pos=list(off), size=[0.01 * sp.leg_length, 0, 0], group=4)
+        if name in FOOT_JOINTS:
+            leg = name[:2]
+            limb = "fore" if leg[1] == "f" else "hind"
+            r = _foot_radius(sp, name)
+            centre = off - r * off / np.linalg.norm(off)  # sole tangent to the toe end point
+            parent_body.add_geom(foot, name=f"{leg}_foot", type=mujoco.mjtGeom.mjGEOM_SPHERE,  # noqa: E501
+                                 size=[r, 0, 0], pos=list(centre))
+            parent_body.add_site(name=f"{leg}_foot_touch", pos=list(centre),
+                                 size=[1.05 * r, 0, 0], group=4)
+            spec.add_sensor(name=f"{leg}_touch", type=mujoco.mjtSensor.mjSENS_TOUCH,
+                            objtype=mujoco.mjtObj.mjOBJ_SITE, objname=f"{leg}_foot_touch")
+    # ---- actuators: one torque motor per hinge --------------------------------------
+    load = _gravity_moments(sp, solids, density)
+    for h in joints:
+        act = spec.add_actuator(classes[h.torque_role], name=h.name, target=h.name,
+                                trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act.set_to_motor()
+        tau = max(ROLE_TORQUE[h.torque_role] * mgl, LOAD_FACTOR * load[h.skeleton_joint])
+        if tau > ROLE_TORQUE[h.torque_role] * mgl:
+            act.ctrlrange = [-tau, tau]
+    spec.add_key(name="home", qpos=list(_home_qpos(sp, joints, spec)))
+    return spec
+
+
+_SCENE = """<mujoco model="{name} scene">
+  <include file="{name}.xml"/>
+
+  <statistic center="0 0 {cz:.4f}" extent="{extent:.4f}"/>
+
+  <visual>
+    <headlight diffuse="0.6 0.6 0.6" ambient="0.3 0.3 0.3" specular="0 0 0"/>
+    <global azimuth="-120" elevation="-20"/>
+  </visual>
+
+  <asset>
+    <texture type="skybox" builtin="gradient" rgb1="0.3 0.5 0.7" rgb2="0 0 0" width="512" height="3072"/>
+    <texture type="2d" name="groundplane" builtin="checker" mark="edge" rgb1="0.2 0.3 0.4"
+      rgb2="0.1 0.2 0.3" markrgb="0.8 0.8 0.8" width="300" height="300"/>
+    <material name="groundplane" texture="groundplane" texuniform="true" texrepeat="5 5"
+      reflectance="0.2"/>
+  </asset>
+
+  <worldbody>
+    <light pos="0 0 {light:.3f}" dir="0 0 -1" directional="true"/>
+    <geom name="floor" size="0 0 0.05" type="plane" material="groundplane" contype="1"
+      conaffinity="1" friction="1 0.005 0.0001"/>
+  </worldbody>
+</mujoco>
+"""
+
+
+def model_path(species: str | Species, root: str | Path | None = None) -> Path:
+    """Path of ``<species>/<species>.xml`` in the models folder (or ``root``)."""
+    sp = load_species(species)
+    return Path(root or MODELS_DIR) / sp.name / f"{sp.name}.xml"
+
+
+def scene_path(species: str | Species, root: str | Path | None = None) -> Path:
+    """Path of ``<species>/scene.xml`` in the models folder (or ``root``)."""
+    sp = load_species(species)
+    return Path(root or MODELS_DIR) / sp.name / "scene.xml"
+
+
+def _readme(sp: Species, model: mujoco.MjModel, density: float) -> str:
+    hinges = hinge_joints()
+    lines = [
+        f"# {sp.common_name} (`{sp.name}`)",
+        "",
+        "Generated by `habitsim models build` from `habitsim/catalog/"
+        f"{sp.name}.toml`; do not edit by hand.",
+        "",
+        "## How it was derived",
+        "",
+        "* Kinematic tree: the habitsim quadruped skeleton (30 joints) with this species'"
+        " segment lengths as bone offsets; bodies sit at skeleton joints and carry the"
+        " hinges of habitsim's convention (shoulder/hip abduction then flexion, other leg"
+        " joints flexion, spine/neck/head/tail yaw then pitch).",
+        "* Joint ranges: the species' joint limits (radians).",
+        "* Solids: one capsule per bone, radius = girth / 2π, built with trimesh, which gives"
+        " each body's volume, centre of mass and inertia tensor. One density"
+        f" ({density:.0f} kg/m³) makes the total mass equal the species' mass"
+        f" ({sp.mass_kg:g} kg; compiled total {model.body_mass.sum():.3f} kg).",
+        "* Feet: spheres tangent to the toe end points (friction 1.0), with touch sensors.",
+        f"* Actuators: {len(hinges)} torque motors, limits = role factor × m·g·L"
+        f" (m·g·L = {sp.mass_kg * GRAVITY * sp.leg_length:.1f} N·m, L = hind-leg length"
+        f" {sp.leg_length:.3f} m); joint damping and armature scale with the same size.",
+        f"* `home` keyframe: the species' standing posture (hip height {sp.hip_height:.3f} m).",
+        f"* Integrator implicitfast, timestep {TIMESTEP * 1000:g} ms, pyramidal friction cones.",
+        "",
+        "## Sources of the species numbers",
+        "",
+        *[f"* {s}" for s in sp.sources],
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def write_model(species: str | Species, root: str | Path | None = None) -> Path:
+    """Write ``<root>/<species>/{<species>.xml, scene.xml, README.md, assets/*.stl}``.
+
+    Everything is built in a temporary folder, compiled from the written XML as a check,
+    then moved into place, so a failed build leaves the previous model untouched.
+
+    Returns:
+        The path of the written ``scene.xml``.
+
+    Raises:
+        ModelBuildError: the generated model does not compile.
+    """
+    sp = load_species(species)
+    final = Path(root or MODELS_DIR) / sp.name
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{sp.name}.", dir=final.parent))
+    try:
+        assets = tmp / "assets"
+        assets.mkdir()
+        for body, mesh in _body_meshes(sp).items():
+            mesh.export(assets / f"{body}.stl")
+        spec = build_spec(sp, mesh_dir="assets")
+        spec.modelfiledir = str(tmp)  # resolve "assets/" while compiling for to_xml
+        xml = spec.to_xml()
+        (tmp / f"{sp.name}.xml").write_text(xml, encoding="utf-8")
+        solids = _body_meshes(sp)
+        density = sp.mass_kg / sum(m.volume for m in solids.values())
+        extent = 2.0 * sp.segments["trunk"] + sp.segments["neck"] + sp.segments["head"]
+        (tmp / "scene.xml").write_text(
+            _SCENE.format(name=sp.name, cz=0.6 * sp.hip_height, extent=extent,
+                          light=3.0 * sp.hip_height + 1.0),
+            encoding="utf-8",
+        )
+        try:
+            model = mujoco.MjModel.from_xml_path(str(tmp / "scene.xml"))
+        except ValueError as e:
+            raise ModelBuildError(f"generated model of {sp.name!r} does not compile: {e}") from e
+        (tmp / "README.md").write_text(_readme(sp, model, density), encoding="utf-8")
+        if final.exists():
+            old = final.with_name(f".{sp.name}.old")
+            shutil.rmtree(old, ignore_errors=True)
+            final.rename(old)
+            tmp.rename(final)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            tmp.rename(final)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return final / "scene.xml"
+
+
+def build_all(root: str | Path | None = None, species: list[str] | None = None) -> list[Path]:
+    """Write the models of the given (default: all catalog) species."""
+    from habitsim.species import species_names
+
+    return [write_model(n, root) for n in (species or species_names())]
