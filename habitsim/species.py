@@ -334,13 +334,20 @@ def _parse(data: dict[str, Any], path: Path | None) -> Species:
 
     hab = _req(data, "habits", where)
     hw = f"{where} [habits]"
+
+    def habit(key: str, lo: float, hi: float) -> float:
+        v = _num(_req(hab, key, hw), f"{hw} {key}")
+        if not lo <= v <= hi:
+            raise SpeciesFileError(f"{hw} {key} = {v} outside its valid range [{lo}, {hi}]")
+        return v
+
     habits = Habits(
-        stride_frequency_coeff_hz=_num(_req(hab, "stride_frequency_coeff_hz", hw), hw, True),
-        spine_flex=math.radians(_num(_req(hab, "spine_flex_deg", hw), hw)),
-        head_bob=math.radians(_num(_req(hab, "head_bob_deg", hw), hw)),
-        tail_sway=math.radians(_num(_req(hab, "tail_sway_deg", hw), hw)),
-        swing_height=_num(_req(hab, "swing_height", hw), hw, True),
-        trunk_sway=_num(_req(hab, "trunk_sway", hw), hw),
+        stride_frequency_coeff_hz=habit("stride_frequency_coeff_hz", 0.5, 20.0),
+        spine_flex=math.radians(habit("spine_flex_deg", 0.0, 45.0)),
+        head_bob=math.radians(habit("head_bob_deg", 0.0, 30.0)),
+        tail_sway=math.radians(habit("tail_sway_deg", 0.0, 60.0)),
+        swing_height=habit("swing_height", 0.01, 0.5),
+        trunk_sway=habit("trunk_sway", 0.0, 1.0),
     )
     desc = _req(data, "description", where)
     if not isinstance(desc, str) or len(desc.split()) < 15:
@@ -383,7 +390,13 @@ def _check_limits_hold_posture(sp: Species, where: str) -> None:
     """The standing posture's local joint angles must lie inside the joint limits."""
     from .skeleton import standing_leg_angles  # local import: skeleton imports species
 
-    for role, angle in standing_leg_angles(sp).items():
+    standing = standing_leg_angles(sp)
+    # Joints resting at 0 in the standing pose: tail2 (tail_pitch), spine, yaws, abductions.
+    rest_zero = {
+        "tail_pitch", "spine_pitch", "spine_yaw", "neck_yaw", "head_yaw", "tail_yaw",
+        "fore_upper_abd", "hind_upper_abd",
+    }
+    for role, angle in [*standing.items(), *((r, 0.0) for r in sorted(rest_zero))]:
         lo, hi = sp.joint_limits[role]
         if not lo - 1e-9 <= angle <= hi + 1e-9:
             raise SpeciesFileError(
@@ -416,6 +429,11 @@ def _catalog() -> dict[str, Species]:
             if sp.name in out:
                 raise SpeciesFileError(f"duplicate species name {sp.name!r} in the catalog")
             out[sp.name] = sp
+    for sp in out.values():
+        if sp.cousin is not None and (sp.cousin not in out or out[sp.cousin].held_out):
+            raise SpeciesFileError(
+                f"{sp.path}: cousin {sp.cousin!r} must be a training species of the catalog"
+            )
     return out
 
 

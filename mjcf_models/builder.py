@@ -40,7 +40,7 @@ import trimesh
 
 from habitsim.body import bone_girth_keys
 from habitsim.errors import HabitsimError
-from habitsim.skeleton import ABDUCTION_SIGN, FOOT_JOINTS, JOINT_NAMES, PARENTS, get_skeleton
+from habitsim.skeleton import ABDUCTION_SIGN, FOOT_JOINTS, JOINT_NAMES, PARENTS, fk, get_skeleton
 from habitsim.species import Species, load_species
 
 __all__ = [
@@ -305,6 +305,7 @@ def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mu
     root_pos, _ = skel.standing_pose()
     solids = _body_meshes(sp)
     bones = _bones_by_body(sp)
+    _, home_rot = fk(skel, *skel.standing_pose(), return_rotations=True)  # (J, 3, 3)
     density = sp.mass_kg / sum(m.volume for m in solids.values())  # [kg/m^3]
     by_joint: dict[str, list[HingeJoint]] = {}
     for h in joints:
@@ -346,7 +347,7 @@ def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mu
             end = np.asarray(off, dtype=float)
             if child in FOOT_JOINTS:  # stop at the foot sphere's centre, never below it
                 r_foot = _foot_radius(sp, child)
-                end = end - r_foot * end / np.linalg.norm(end)
+                end = end + home_rot[j].T @ np.array([0.0, 0.0, r_foot])
                 radius = min(radius, 0.8 * r_foot)
             body.add_geom(collision, name=f"{name}_{child}_col",
                           type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[radius, 0, 0],
@@ -356,7 +357,7 @@ def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mu
             spec.add_mesh(name=mname, file=f"{name}.stl")
             body.add_geom(visual, name=f"{name}_visual", type=mujoco.mjtGeom.mjGEOM_MESH,
                           meshname=mname)
-    # end-point sites, feet
+    # end-point sites, feet; foot spheres sit straight above the toe in the home pose
     for j, name in enumerate(JOINT_NAMES):
         if name not in END_POINTS:
             continue
@@ -367,7 +368,8 @@ def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mu
             leg = name[:2]
             limb = "fore" if leg[1] == "f" else "hind"
             r = _foot_radius(sp, name)
-            centre = off - r * off / np.linalg.norm(off)  # sole tangent to the toe end point
+            up_local = home_rot[PARENTS[j]].T @ np.array([0.0, 0.0, r])
+            centre = off + up_local  # sole tangent to the ground at the toe end point
             parent_body.add_geom(foot, name=f"{leg}_foot", type=mujoco.mjtGeom.mjGEOM_SPHERE,  # noqa: E501
                                  size=[r, 0, 0], pos=list(centre))
             parent_body.add_site(name=f"{leg}_foot_touch", pos=list(centre),

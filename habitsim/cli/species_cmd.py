@@ -1,9 +1,197 @@
-"""Command registration placeholder (filled in by the owning module's work)."""
+"""``habitsim species list`` and ``habitsim species show``: browse the species catalog."""
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
+from typing import Any
+
+from ..species import Species, all_species, load_species
+
+_COLUMNS = (
+    "name",
+    "common name",
+    "mass kg",
+    "hip m",
+    "leg m",
+    "posture",
+    "gaits",
+    "held out / cousin",
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Adds no command yet."""
+    """Add ``list`` and ``show`` to the ``species`` command group."""
+    p = sub.add_parser(
+        "list",
+        help="list every species in the catalog",
+        description="List every species in the catalog with its main numbers.",
+    )
+    p.add_argument("--json", action="store_true", help="print a JSON list of species summaries")
+    p.set_defaults(func=_cmd_list)
+
+    p = sub.add_parser(
+        "show",
+        help="print all numbers of one species",
+        description="Print one species' numbers, gaits, habits and description.",
+    )
+    p.add_argument("name", help="species name (see 'habitsim species list')")
+    p.add_argument("--json", action="store_true", help="print the species as a JSON object")
+    p.set_defaults(func=_cmd_show)
+
+
+# ------------------------------------------------------------------ list
+
+
+def _held_out_text(sp: Species) -> str:
+    parts = []
+    if sp.held_out:
+        parts.append(f"held out (cousin {sp.cousin})")
+    if sp.outlier:
+        parts.append("outlier")
+    return ", ".join(parts) or "-"
+
+
+def _list_rows(species: list[Species]) -> list[tuple[str, ...]]:
+    return [
+        (
+            sp.name,
+            sp.common_name,
+            f"{sp.mass_kg:g}",
+            f"{sp.hip_height:.2f}",
+            f"{sp.leg_length:.2f}",
+            sp.posture,
+            ",".join(sorted(sp.gaits)),
+            _held_out_text(sp),
+        )
+        for sp in species
+    ]
+
+
+def format_table(rows: list[tuple[str, ...]], header: tuple[str, ...] = _COLUMNS) -> str:
+    """Left-aligned text columns (numbers right-aligned), two spaces apart."""
+    numeric = {2, 3, 4}
+    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
+
+    def line(r: tuple[str, ...]) -> str:
+        pairs = enumerate(zip(r, widths, strict=True))
+        cells = [c.rjust(w) if i in numeric else c.ljust(w) for i, (c, w) in pairs]
+        return "  ".join(cells).rstrip()
+
+    return "\n".join([line(header), "  ".join("-" * w for w in widths), *map(line, rows)])
+
+
+def _cmd_list(ns: argparse.Namespace) -> int:
+    species = all_species()
+    if ns.json:
+        print(json.dumps([sp.summary() for sp in species], indent=2))
+    else:
+        print(format_table(_list_rows(species)))
+    return 0
+
+
+# ------------------------------------------------------------------ show
+
+
+def species_details(sp: Species) -> dict[str, Any]:
+    """Every number of a species in file units (degrees for angles), JSON-ready."""
+    deg = math.degrees
+    h = sp.habits
+    return {
+        **sp.summary(),
+        "taxonomy": sp.taxonomy,
+        "fore_leg_length_m": round(sp.fore_leg_length, 4),
+        "shoulder_height_m": round(sp.shoulder_height, 4),
+        "trunk_pitch_deg": round(deg(sp.trunk_pitch), 2),
+        "segments_m": dict(sp.segments),
+        "girths_m": dict(sp.girths),
+        "inclinations_deg": {k: round(deg(v), 3) for k, v in sp.inclinations.items()},
+        "neck_elevation_deg": round(deg(sp.neck_elevation), 3),
+        "head_pitch_deg": round(deg(sp.head_pitch), 3),
+        "tail_carriage_deg": round(deg(sp.tail_carriage), 3),
+        "joint_limits_deg": {
+            k: [round(deg(lo), 3), round(deg(hi), 3)] for k, (lo, hi) in sp.joint_limits.items()
+        },
+        "gait_habits": {
+            g: {
+                "footfall": {f: gh.footfall[f] for f in ("LH", "LF", "RH", "RF")},
+                "duty_factor": list(gh.duty_factor),
+                "froude": list(gh.froude),
+            }
+            for g, gh in sp.gaits.items()
+        },
+        "habits": {
+            "stride_frequency_coeff_hz": h.stride_frequency_coeff_hz,
+            "spine_flex_deg": round(deg(h.spine_flex), 3),
+            "head_bob_deg": round(deg(h.head_bob), 3),
+            "tail_sway_deg": round(deg(h.tail_sway), 3),
+            "swing_height": h.swing_height,
+            "trunk_sway": h.trunk_sway,
+        },
+        "description": sp.description,
+        "sources": list(sp.sources),
+        "path": str(sp.path) if sp.path else None,
+    }
+
+
+def _wrap(text: str, width: int = 88, indent: str = "  ") -> str:
+    lines, cur = [], indent
+    for word in text.split():
+        if len(cur) + len(word) + 1 > width and cur.strip():
+            lines.append(cur.rstrip())
+            cur = indent
+        cur += word + " "
+    if cur.strip():
+        lines.append(cur.rstrip())
+    return "\n".join(lines)
+
+
+def _cmd_show(ns: argparse.Namespace) -> int:
+    sp = load_species(ns.name)  # UnknownSpeciesError -> "error: ..." and exit 2 in cli.main
+    d = species_details(sp)
+    if ns.json:
+        print(json.dumps(d, indent=2))
+        return 0
+    out = [
+        f"{sp.name}: {sp.common_name} ({sp.taxonomy})",
+        f"  mass {sp.mass_kg:g} kg, posture {sp.posture}, {_held_out_text(sp)}",
+        f"  hip height {sp.hip_height:.3f} m, shoulder height {sp.shoulder_height:.3f} m, "
+        f"trunk pitch {d['trunk_pitch_deg']:+.1f} deg",
+        f"  hind leg {sp.hind_leg_length:.3f} m, fore leg {sp.fore_leg_length:.3f} m",
+        "",
+        "description:",
+        _wrap(sp.description),
+        "",
+        "segments [m]:",
+        _wrap(", ".join(f"{k} {v:g}" for k, v in sp.segments.items())),
+        "girths [m]:",
+        _wrap(", ".join(f"{k} {v:g}" for k, v in sp.girths.items())),
+        "posture [deg from vertical, + = distal end ahead]:",
+        _wrap(", ".join(f"{k} {v:+.1f}" for k, v in d["inclinations_deg"].items())),
+        f"  neck {d['neck_elevation_deg']:+.1f}, head {d['head_pitch_deg']:+.1f}, "
+        f"tail {d['tail_carriage_deg']:+.1f}",
+        "joint limits [deg]:",
+        _wrap(", ".join(f"{k} [{lo:g}, {hi:g}]" for k, (lo, hi) in d["joint_limits_deg"].items())),
+        "",
+    ]
+    rows = [
+        (
+            g,
+            " ".join(f"{f}={gh.footfall[f]:.2f}" for f in ("LH", "LF", "RH", "RF")),
+            f"{gh.duty_factor[0]:.2f}-{gh.duty_factor[1]:.2f}",
+            f"{gh.froude[0]:.2f}-{gh.froude[1]:.2f}",
+        )
+        for g, gh in sp.gaits.items()
+    ]
+    out.append(format_table(rows, header=("gait", "footfall (LH = 0)", "duty factor", "froude")))
+    hb = d["habits"]
+    out += [
+        "",
+        "habits:",
+        _wrap(", ".join(f"{k} {v:g}" for k, v in hb.items())),
+        "sources:",
+        *[f"  - {s}" for s in sp.sources],
+    ]
+    print("\n".join(out))
+    return 0
