@@ -1,0 +1,15 @@
+"""Synthetic quadruped gaits: :func:`generate` one clip of any species and action.
+
+Actions (:data:`ACTIONS`): ``walk, trot, pace, amble, canter, gallop, bound, turn_left,
+turn_right, walk_backward, idle, sit, jump``; which of them a species has follows its
+gait table (:func:`available_actions`). See :mod:`habitsim.gaits.locomotion` for how a
+cyclic clip is built, :mod:`habitsim.gaits.stationary` and :mod:`habitsim.gaits.jump`
+for the others.
+"""
+
+from __future__ import annotations
+
+from .actions import ACTIONS, LOCOMOTION_ACTIONS, action_gait, available_actions
+from .generator import GENERATOR_VERSION, generate
+
+__all__ = ["ACTIONS", "LOCOMOTION_ACTIONS", "GENERATOR_VERSION", "action_gait", "available_actions", "generate"]

@@ -1,0 +1,319 @@
+"""Shared machinery of the gait generator: trunk state, leg solving, reach and sway fixes.
+
+Internal module. Angles in rad, lengths in m, arrays have a leading frame axis T.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.ndimage import maximum_filter1d, uniform_filter1d
+
+from ..body import center_of_mass
+from ..ik import LEGS, LegIKResult, axial_frames, leg_geometry, leg_ik
+from ..rotations import quat_mul, rot_x, rot_y, rot_z
+from ..skeleton import JOINT_NAMES, fk, get_skeleton, standing_leg_angles
+from ..species import Species
+
+GRAVITY = 9.81
+_J = {n: i for i, n in enumerate(JOINT_NAMES)}
+#: How much the scapula / ilium follows the leg's sweep angle (fore, hind).
+GIRDLE_SWEEP_GAIN = {"fore": 0.35, "hind": 0.0}
+#: How much the foot segment follows the leg's sweep angle (fore, hind).
+FOOT_SWEEP_GAIN = {"fore": 0.5, "hind": 0.6}
+#: Foot fold in mid-swing [rad] (toe trailing), fore and hind.
+SWING_FOOT_FOLD = {"fore": 0.6, "hind": 0.3}
+#: Stance legs keep this share of their maximal upper+lower reach in reserve.
+REACH_MARGIN = 0.03
+
+
+@functools.lru_cache(maxsize=64)
+def standing_info(sp: Species) -> dict[str, np.ndarray | float]:
+    """Standing root height, trunk values and neutral toe offsets of a species.
+
+    Returns a dict with ``root_z`` [m], ``pitch`` (trunk, nose up) [rad], ``neutral``
+    (4, 2) toe xy offsets from the root in the heading frame [m], ``loc`` standing local
+    angles, ``d_stand`` (4,) standing proximal-to-distal distances [m], ``trunk_span``
+    horizontal pelvis-to-withers distance [m].
+    """
+    skel = get_skeleton(sp)
+    root, quats = skel.standing_pose()
+    pos = fk(skel, root, quats)
+    toes = pos[skel.foot_indices]
+    d_stand = np.zeros(4)
+    for k, leg in enumerate(LEGS):
+        geo = leg_geometry(sp, leg)
+        d_stand[k] = np.linalg.norm(pos[_J[geo.joints[1]]] - pos[_J[geo.joints[3]]])
+    return {
+        "root_z": float(root[2]),
+        "pitch": float(sp.trunk_pitch),
+        "neutral": toes[:, :2] - root[None, :2],
+        "loc": standing_leg_angles(sp),
+        "d_stand": d_stand,
+        "trunk_span": float(np.linalg.norm(pos[_J["spine3"], [0, 2]] - pos[_J["pelvis"], [0, 2]])),
+    }
+
+
+@dataclass
+class Trunk:
+    """Per-frame trunk, spine, neck, head and tail state (local hinge angles).
+
+    Attributes:
+        root: (T, 3) pelvis position [m].
+        yaw, pitch, roll: (T,) pelvis heading, nose-up pitch and roll [rad]; the pelvis
+            rotation is R_z(yaw)·R_y(−pitch)·R_x(roll).
+        spine_pitch, spine_yaw: (T, 3) local angles of spine1..3.
+        neck_pitch, neck_yaw, head_pitch, head_yaw: (T,) local angles.
+        tail_pitch, tail_yaw: (T, 2) local angles of tail1..2.
+    """
+
+    root: np.ndarray
+    yaw: np.ndarray
+    pitch: np.ndarray
+    roll: np.ndarray
+    spine_pitch: np.ndarray
+    spine_yaw: np.ndarray
+    neck_pitch: np.ndarray
+    neck_yaw: np.ndarray
+    head_pitch: np.ndarray
+    head_yaw: np.ndarray
+    tail_pitch: np.ndarray
+    tail_yaw: np.ndarray
+
+    @classmethod
+    def standing(cls, sp: Species, t: int) -> Trunk:
+        """The standing trunk repeated over T frames (root at the origin, yaw 0)."""
+        info = standing_info(sp)
+        loc = info["loc"]
+        root = np.zeros((t, 3))
+        root[:, 2] = info["root_z"]
+        z = np.zeros(t)
+        return cls(
+            root=root,
+            yaw=z.copy(),
+            pitch=np.full(t, info["pitch"]),
+            roll=z.copy(),
+            spine_pitch=np.zeros((t, 3)),
+            spine_yaw=np.zeros((t, 3)),
+            neck_pitch=np.full(t, loc["neck_pitch"]),
+            neck_yaw=z.copy(),
+            head_pitch=np.full(t, loc["head_pitch"]),
+            head_yaw=z.copy(),
+            tail_pitch=np.stack([np.full(t, loc["tail_pitch"]), z], 1),
+            tail_yaw=np.zeros((t, 2)),
+        )
+
+    def copy(self) -> Trunk:
+        return replace(self, **{k: np.array(v, copy=True) for k, v in self.__dict__.items()})
+
+    def rotations(self) -> np.ndarray:
+        """(T, J, 4) local rotations of the axial joints (legs identity)."""
+        t = self.root.shape[0]
+        q = np.zeros((t, len(JOINT_NAMES), 4))
+        q[..., 0] = 1.0
+        q[:, _J["pelvis"]] = quat_mul(quat_mul(rot_z(self.yaw), rot_y(-self.pitch)), rot_x(self.roll))
+        for i in range(3):
+            q[:, _J[f"spine{i + 1}"]] = quat_mul(rot_z(self.spine_yaw[:, i]), rot_y(self.spine_pitch[:, i]))
+        q[:, _J["neck"]] = quat_mul(rot_z(self.neck_yaw), rot_y(self.neck_pitch))
+        q[:, _J["head"]] = quat_mul(rot_z(self.head_yaw), rot_y(self.head_pitch))
+        for i in range(2):
+            q[:, _J[f"tail{i + 1}"]] = quat_mul(rot_z(self.tail_yaw[:, i]), rot_y(self.tail_pitch[:, i]))
+        return q
+
+
+@dataclass
+class LegPlan:
+    """World toe targets and foot-shape modulation for the four legs.
+
+    Attributes:
+        targets: (T, 4, 3) toe targets [m], legs LF, RF, LH, RH.
+        contacts: (T, 4) planned stance.
+        swing_s: (T, 4) swing progress in [0, 1] (0 in stance).
+        foot_extra: (T, 4) extra foot inclination [rad] added to the modulated one.
+        girdle_extra: (T, 4) extra girdle flexion [rad].
+        sweep_gain: multiply the girdle / foot sweep gains by this (0 = rigid legs).
+    """
+
+    targets: np.ndarray
+    contacts: np.ndarray
+    swing_s: np.ndarray
+    foot_extra: np.ndarray = field(default=None)  # type: ignore[assignment]
+    girdle_extra: np.ndarray = field(default=None)  # type: ignore[assignment]
+    sweep_gain: float = 1.0
+
+    def __post_init__(self) -> None:
+        t = self.targets.shape[0]
+        if self.foot_extra is None:
+            self.foot_extra = np.zeros((t, 4))
+        if self.girdle_extra is None:
+            self.girdle_extra = np.zeros((t, 4))
+
+
+@dataclass
+class Solved:
+    """A solved pose: rotations, the legs' IK results and the reach errors."""
+
+    rotations: np.ndarray
+    legs: tuple[LegIKResult, ...]
+    reach_error: np.ndarray  # (T, 4) [m]
+
+
+def solve(sp: Species, trunk: Trunk, plan: LegPlan) -> Solved:
+    """Leg IK on a trunk: girdle and foot modulated by each leg's sweep angle."""
+    rot = trunk.rotations()
+    frames = axial_frames(sp, trunk.root, rot)
+    swing_fold = np.sin(np.pi * plan.swing_s)
+    legs = []
+    for k, leg in enumerate(LEGS):
+        geo = leg_geometry(sp, leg)
+        groot = frames.girdle_root[:, k]
+        prot = frames.parent_rotation[:, k]
+        tgt = plan.targets[:, k]
+        fwd = prot[:, :, 0].copy()
+        fwd[:, 2] = 0.0
+        fwd /= np.maximum(np.linalg.norm(fwd, axis=-1, keepdims=True), 1e-9)
+        rel = tgt - groot
+        sweep = np.arctan2(np.sum(rel * fwd, -1), -rel[:, 2])
+        g = plan.sweep_gain
+        gflex = geo.girdle_flex0 - g * GIRDLE_SWEEP_GAIN[geo.limb] * sweep + plan.girdle_extra[:, k]
+        finc = (
+            geo.foot_inclination0
+            + g * FOOT_SWEEP_GAIN[geo.limb] * sweep
+            - SWING_FOOT_FOLD[geo.limb] * swing_fold[:, k]
+            + plan.foot_extra[:, k]
+        )
+        res = leg_ik(sp, leg, groot, prot, tgt, gflex, finc)
+        q = res.quaternions()
+        for n, joint in enumerate(geo.joints[:4]):
+            rot[:, _J[joint]] = q[:, n]
+        legs.append(res)
+    err = np.stack([r.reach_error for r in legs], axis=1)
+    return Solved(rotations=rot, legs=tuple(legs), reach_error=err)
+
+
+def _odd(n: int) -> int:
+    return n if n % 2 else n + 1
+
+
+def upper_envelope(x: np.ndarray, window: int) -> np.ndarray:
+    """Smooth function ≥ x (1-D): moving average of a moving maximum of one window."""
+    if window <= 1 or x.size < 2:
+        return x.copy()
+    w = _odd(window)
+    return uniform_filter1d(maximum_filter1d(x, w, mode="nearest"), w, mode="nearest")
+
+
+def required_lowering(sp: Species, legs: tuple[LegIKResult, ...]) -> np.ndarray:
+    """(T, 4) how far [m] each girdle must come down so its leg keeps its reach reserve.
+
+    A leg may reach max(standing extension, (1 − REACH_MARGIN)·(upper + lower)).
+    """
+    info = standing_info(sp)
+    out = []
+    for k, (leg, res) in enumerate(zip(LEGS, legs, strict=True)):
+        geo = leg_geometry(sp, leg)
+        dmax = min(geo.max_reach * (1 - 1e-9), max(float(info["d_stand"][k]), geo.max_reach * (1 - REACH_MARGIN)))
+        v = res.proximal - res.distal_target
+        dz = v[:, 2]
+        dist = np.linalg.norm(v, axis=-1)
+        r2 = np.maximum(dist**2 - dz**2, 0.0)
+        dz_new = np.sqrt(np.maximum(dmax**2 - r2, (0.3 * dmax) ** 2))
+        out.append(np.where(dist > dmax, np.maximum(dz - dz_new, 0.0), 0.0))
+    return np.stack(out, axis=1)
+
+
+def fix_reach(
+    sp: Species, trunk: Trunk, plan: LegPlan, window: int, iterations: int = 8, mask: np.ndarray | None = None
+) -> tuple[Trunk, Solved]:
+    """Lower the pelvis and withers (smoothly) until every leg keeps its reach reserve.
+
+    Args:
+        sp: species.
+        trunk: trunk state (not modified).
+        plan: leg targets.
+        window: smoothing window [frames] of the lowering envelope.
+        iterations: maximal number of correction passes.
+        mask: optional (T,) frames where the trunk may be moved (default all).
+
+    Returns:
+        The corrected trunk and its solved pose.
+    """
+    tr = trunk.copy()
+    span = float(standing_info(sp)["trunk_span"])
+    sol = solve(sp, tr, plan)
+    for _ in range(iterations):
+        low = required_lowering(sp, sol.legs)
+        if mask is not None:
+            low = low * mask[:, None]
+        if low.max() < 1e-7:
+            break
+        lp = upper_envelope(1.05 * low[:, 2:].max(axis=1), window)
+        lw = upper_envelope(1.05 * low[:, :2].max(axis=1), window)
+        tr.root[:, 2] -= lp
+        tr.pitch -= np.arcsin(np.clip((lw - lp) / span, -0.9, 0.9))
+        sol = solve(sp, tr, plan)
+    return tr, sol
+
+
+def apply_sway(
+    sp: Species,
+    trunk: Trunk,
+    plan: LegPlan,
+    gain: float,
+    sigma_frames: float,
+    iterations: int = 3,
+) -> Trunk:
+    """Shift the trunk horizontally so the centre of mass moves toward the support polygon.
+
+    Per frame the target is the centroid of the stance toes; the centre of mass is moved
+    ``gain`` of the way toward it. Frames with exactly three feet down (where static
+    stability is at stake) weigh most, four feet less, fewer feet not at all; the shift
+    is a kernel-weighted average over neighbouring frames (Gaussian, ``sigma_frames``),
+    so it is smooth and anticipates each lift-off.
+    """
+    if gain <= 0:
+        return trunk
+    tr = trunk.copy()
+    skel = get_skeleton(sp)
+    c = plan.contacts
+    n = c.sum(axis=1)
+    w = np.where(n == 3, 1.0, np.where(n >= 4, 0.25, 0.0))
+    t = c.shape[0]
+    idx = np.arange(t)
+    kern = np.exp(-0.5 * ((idx[:, None] - idx[None, :]) / max(sigma_frames, 0.5)) ** 2) * w[None, :]
+    norm = kern.sum(axis=1) + 1e-3
+    feet_xy = plan.targets[:, :, :2]
+    cent = (feet_xy * c[..., None]).sum(axis=1) / np.maximum(n, 1)[:, None]
+    limit = 0.12 * sp.leg_length
+    com0 = None
+    for _ in range(iterations):
+        sol = solve(sp, tr, plan)
+        com = center_of_mass(sp, fk(skel, tr.root, sol.rotations))[:, :2]
+        if com0 is None:
+            com0 = com
+            desired = com0 + gain * (cent - com0)
+        err = np.where(n[:, None] >= 3, desired - com, 0.0)
+        step = (kern @ err) / norm[:, None]
+        tr.root[:, :2] += step
+        shift = tr.root[:, :2] - trunk.root[:, :2]
+        mag = np.linalg.norm(shift, axis=-1, keepdims=True)
+        tr.root[:, :2] = trunk.root[:, :2] + shift * np.minimum(1.0, limit / np.maximum(mag, 1e-12))
+    return tr
+
+
+def min_jerk(s: np.ndarray) -> np.ndarray:
+    """Minimum-jerk profile 10s³ − 15s⁴ + 6s⁵ on [0, 1] (clipped outside)."""
+    s = np.clip(s, 0.0, 1.0)
+    return s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
+
+
+def smooth_noise(rng: np.random.Generator, t: np.ndarray, freq_hz: float, n: int = 3) -> np.ndarray:
+    """A smooth zero-mean signal (sum of ``n`` random sinusoids), amplitude ≈ 1."""
+    out = np.zeros_like(t)
+    for _ in range(n):
+        f = freq_hz * rng.uniform(0.5, 1.5)
+        out += np.sin(2 * math.pi * f * t + rng.uniform(0, 2 * math.pi))
+    return out / math.sqrt(n)

@@ -1,0 +1,490 @@
+"""Analytic leg inverse kinematics on the habitsim skeleton's hinge convention.
+
+A leg is the chain girdle root (``scapula`` / ``ilium``) → ``shoulder`` / ``hip`` →
+``elbow`` / ``knee`` → ``wrist`` / ``hock`` → ``toe``. Following the hinge convention of
+:mod:`habitsim.skeleton`, the girdle joint is R_y(girdle_flex), the shoulder / hip is
+R_x(abduction)·R_y(upper_flex) and the two distal joints are R_y(flex). All the rotations
+below the shoulder / hip are about one axis, so the upper, lower and foot segments lie
+in one plane (the *leg plane*) through the shoulder / hip joint. The solver
+
+1. places the shoulder / hip from the girdle root, the trunk orientation and the given
+   girdle flexion;
+2. picks the abduction that puts the toe target in the leg plane (exact);
+3. sets the foot segment to the requested *foot inclination* and derives the wrist /
+   hock target from the toe target;
+4. solves the upper + lower two-link chain with the law of cosines, the middle joint
+   bending the way the species' standing posture bends it (usually the knee points
+   forward and the elbow backward);
+5. clamps an out-of-reach wrist / hock distance to the reachable interval and reports
+   the resulting toe error honestly (never NaN).
+
+Foot inclination: the angle [rad] of the foot segment (wrist/hock → toe) from the
+downward vertical, measured in the leg plane, positive when the toe lies ahead (toward
+the leg frame's +x) of the wrist / hock — the same sign convention as the species'
+standing ``[posture]`` inclinations. For an unabducted leg of a level trunk it is exactly
+the posture inclination.
+
+Everything is vectorised over a leading frame axis of length T.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import IKError
+from .rotations import quat_mul, quat_to_matrix, rot_x, rot_y
+from .skeleton import JOINT_NAMES, get_skeleton, standing_leg_angles
+from .species import FEET, Species, load_species
+
+__all__ = [
+    "LEGS",
+    "LegIKResult",
+    "LegGeometry",
+    "leg_geometry",
+    "leg_ik",
+    "leg_fk",
+    "foot_inclination",
+    "axial_frames",
+    "pose_from_targets",
+    "PoseIK",
+]
+
+#: Leg names, the order of :data:`habitsim.species.FEET`.
+LEGS: tuple[str, ...] = FEET
+_J = {n: i for i, n in enumerate(JOINT_NAMES)}
+_SEGS = {"fore": ("scapula", "shoulder", "elbow", "wrist", "toe"),
+         "hind": ("ilium", "hip", "knee", "hock", "toe")}
+
+
+@dataclass(frozen=True)
+class LegGeometry:
+    """Segment lengths and standing angles of one leg of a species.
+
+    Attributes:
+        leg: ``LF``, ``RF``, ``LH`` or ``RH``.
+        limb: ``fore`` or ``hind``.
+        prefix: joint-name prefix (``lf`` …).
+        girdle, upper, lower, foot: segment lengths [m].
+        bend: +1 if the middle joint (knee / elbow) points forward (+x of the leg
+            plane), −1 if it points backward.
+        girdle_flex0: standing girdle flexion [rad].
+        foot_inclination0: standing foot-segment inclination [rad].
+        joints: the five joint names of the chain (girdle … toe).
+    """
+
+    leg: str
+    limb: str
+    prefix: str
+    girdle: float
+    upper: float
+    lower: float
+    foot: float
+    bend: float
+    girdle_flex0: float
+    foot_inclination0: float
+    joints: tuple[str, ...]
+
+    @property
+    def max_reach(self) -> float:
+        """Longest proximal-to-distal (shoulder/hip → wrist/hock) distance [m]."""
+        return self.upper + self.lower
+
+    @property
+    def min_reach(self) -> float:
+        """Shortest proximal-to-distal distance [m] (fully folded)."""
+        return abs(self.upper - self.lower)
+
+
+def _check_leg(leg: str) -> str:
+    if not isinstance(leg, str) or leg.upper() not in LEGS:
+        raise IKError(f"unknown leg {leg!r}; valid: {', '.join(LEGS)}")
+    return leg.upper()
+
+
+def leg_geometry(species: str | Species, leg: str) -> LegGeometry:
+    """The :class:`LegGeometry` of ``leg`` of a species.
+
+    Raises:
+        IKError: unknown leg name (the message lists the valid ones).
+        UnknownSpeciesError: unknown species.
+    """
+    return _leg_geometry(load_species(species), _check_leg(leg))
+
+
+@functools.lru_cache(maxsize=512)
+def _leg_geometry(sp: Species, leg: str) -> LegGeometry:
+    limb = "fore" if leg[1] == "F" else "hind"
+    s = sp.segments
+    loc = standing_leg_angles(sp)
+    mid = loc[f"{limb}_lower_flex"]
+    if abs(mid) > 1e-6:
+        bend = math.copysign(1.0, mid)
+    else:  # straight column: knees forward, elbows backward, as in mammals
+        bend = 1.0 if limb == "hind" else -1.0
+    prefix = leg.lower()
+    return LegGeometry(
+        leg=leg,
+        limb=limb,
+        prefix=prefix,
+        girdle=s[f"{limb}_girdle"],
+        upper=s[f"{limb}_upper"],
+        lower=s[f"{limb}_lower"],
+        foot=s[f"{limb}_foot"],
+        bend=bend,
+        girdle_flex0=loc[f"{limb}_girdle_flex"],
+        foot_inclination0=sp.inclinations[f"{limb}_foot"],
+        joints=tuple(f"{prefix}_{j}" for j in _SEGS[limb]),
+    )
+
+
+@dataclass(frozen=True)
+class LegIKResult:
+    """Solution of :func:`leg_ik` (all arrays have the leading frame axis T).
+
+    Attributes:
+        abduction: (T,) R_x angle of the shoulder / hip [rad] in the hinge convention
+            (positive swings the leg toward +y, the animal's left).
+        girdle_flex: (T,) scapula / ilium flexion [rad].
+        upper_flex: (T,) shoulder / hip flexion [rad].
+        lower_flex: (T,) elbow / knee flexion [rad].
+        foot_flex: (T,) wrist / hock flexion [rad].
+        toe: (T, 3) toe position the solution actually reaches [m].
+        reach_error: (T,) |toe − target| [m] (0 up to rounding when reachable).
+        proximal: (T, 3) shoulder / hip joint position [m].
+        distal_target: (T, 3) wrist / hock position demanded by the toe target and the
+            foot inclination [m] (before clamping).
+        reach_ratio: (T,) demanded proximal-to-distal distance / maximal reach.
+    """
+
+    abduction: np.ndarray
+    girdle_flex: np.ndarray
+    upper_flex: np.ndarray
+    lower_flex: np.ndarray
+    foot_flex: np.ndarray
+    toe: np.ndarray
+    reach_error: np.ndarray
+    proximal: np.ndarray
+    distal_target: np.ndarray
+    reach_ratio: np.ndarray
+
+    def quaternions(self) -> np.ndarray:
+        """(T, 4, 4) local quaternions of girdle, shoulder/hip, elbow/knee, wrist/hock."""
+        return np.stack(
+            [
+                rot_y(self.girdle_flex),
+                quat_mul(rot_x(self.abduction), rot_y(self.upper_flex)),
+                rot_y(self.lower_flex),
+                rot_y(self.foot_flex),
+            ],
+            axis=1,
+        )
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def _as_frames(x: np.ndarray | float, t: int, name: str) -> np.ndarray:
+    a = np.asarray(x, dtype=np.float64)
+    try:
+        a = np.broadcast_to(a, (t,)) if a.ndim <= 1 else a
+    except ValueError:
+        raise IKError(f"{name} must be a scalar or have shape ({t},), got {a.shape}") from None
+    if a.shape != (t,):
+        raise IKError(f"{name} must be a scalar or have shape ({t},), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise IKError(f"{name} contains NaN or inf")
+    return a
+
+
+def _as_rotmats(r: np.ndarray, t: int) -> np.ndarray:
+    r = np.asarray(r, dtype=np.float64)
+    if r.shape[-1:] == (4,) and r.ndim in (1, 2):
+        r = quat_to_matrix(r)
+    if r.shape == (3, 3):
+        r = np.broadcast_to(r, (t, 3, 3))
+    if r.shape != (t, 3, 3):
+        raise IKError(f"parent rotation must be (3, 3), (T, 3, 3), (4,) or (T, 4); got {r.shape}")
+    if not np.all(np.isfinite(r)):
+        raise IKError("parent rotation contains NaN or inf")
+    return r
+
+
+def _ry(a: np.ndarray) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    z, o = np.zeros_like(a), np.ones_like(a)
+    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+
+
+def _rx(a: np.ndarray) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    z, o = np.zeros_like(a), np.ones_like(a)
+    return np.stack([np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)], -2)
+
+
+def _mv(m: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return np.einsum("...ij,...j->...i", m, v)
+
+
+def _mtv(m: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return np.einsum("...ji,...j->...i", m, v)
+
+
+def leg_ik(
+    species: str | Species,
+    leg: str,
+    girdle_root: np.ndarray,
+    parent_rotation: np.ndarray,
+    target: np.ndarray,
+    girdle_flex: np.ndarray | float | None = None,
+    foot_inclination: np.ndarray | float | None = None,
+) -> LegIKResult:
+    """Analytic IK of one leg for a toe target, vectorised over frames.
+
+    Args:
+        species: species name or :class:`~habitsim.species.Species`.
+        leg: ``LF``, ``RF``, ``LH`` or ``RH`` (case-insensitive).
+        girdle_root: (T, 3) or (3,) world position of the scapula / ilium joint [m].
+        parent_rotation: global rotation of the girdle's parent (``spine3`` for the
+            fore legs, ``pelvis`` for the hind legs): (T, 3, 3) / (3, 3) matrices or
+            (T, 4) / (4,) quaternions wxyz.
+        target: (T, 3) or (3,) world toe target [m].
+        girdle_flex: (T,) or scalar girdle flexion [rad]; default: the standing value.
+        foot_inclination: (T,) or scalar foot-segment inclination [rad] (module
+            docstring); default: the species' standing foot inclination.
+
+    Returns:
+        The :class:`LegIKResult`; ``reach_error`` is the honest toe error after clamping
+        an unreachable target.
+
+    Raises:
+        IKError: unknown leg, bad shapes or non-finite inputs.
+    """
+    geo = leg_geometry(species, leg)
+    tgt = np.asarray(target, dtype=np.float64)
+    if tgt.ndim == 1:
+        tgt = tgt[None]
+    if tgt.ndim != 2 or tgt.shape[1] != 3:
+        raise IKError(f"target must have shape (T, 3) or (3,), got {tgt.shape}")
+    if not np.all(np.isfinite(tgt)):
+        raise IKError("target contains NaN or inf")
+    t = tgt.shape[0]
+    root = np.asarray(girdle_root, dtype=np.float64)
+    if root.shape == (3,):
+        root = np.broadcast_to(root, (t, 3))
+    if root.shape != (t, 3):
+        raise IKError(f"girdle_root must have shape ({t}, 3) or (3,), got {root.shape}")
+    if not np.all(np.isfinite(root)):
+        raise IKError("girdle_root contains NaN or inf")
+    prot = _as_rotmats(parent_rotation, t)
+    gflex = _as_frames(geo.girdle_flex0 if girdle_flex is None else girdle_flex, t, "girdle_flex")
+    finc = _as_frames(
+        geo.foot_inclination0 if foot_inclination is None else foot_inclination, t, "foot_inclination"
+    )
+
+    g = prot @ _ry(gflex)  # girdle global rotation
+    shoulder = root + _mv(g, np.array([0.0, 0.0, -geo.girdle]))
+    d = _mtv(g, tgt - shoulder)  # target in the girdle frame
+    abd = np.arctan2(d[:, 1], -d[:, 2])
+    frame = g @ _rx(abd)  # leg-plane frame: the chain rotates about its +y
+    p = _mtv(frame, tgt - shoulder)
+    w = _mtv(frame, np.broadcast_to(np.array([0.0, 0.0, -1.0]), (t, 3)))
+    beta_down = np.arctan2(-w[:, 0], -w[:, 2])
+    b3 = beta_down - finc
+    foot_dir = np.stack([-np.sin(b3), -np.cos(b3)], -1)
+    wx = p[:, [0, 2]] - geo.foot * foot_dir  # demanded wrist/hock in plane coords (x, z)
+    dist = np.linalg.norm(wx, axis=-1)
+    lo, hi = geo.min_reach, geo.max_reach
+    dc = np.clip(dist, lo, hi)
+    bw = np.arctan2(-wx[:, 0], -wx[:, 1])
+    den = np.maximum(2.0 * geo.upper * dc, 1e-12)
+    cos_a = np.clip((geo.upper**2 + dc**2 - geo.lower**2) / den, -1.0, 1.0)
+    alpha = np.arccos(cos_a)
+    b1 = bw - geo.bend * alpha
+    knee = geo.upper * np.stack([-np.sin(b1), -np.cos(b1)], -1)
+    wc = dc[:, None] * np.stack([-np.sin(bw), -np.cos(bw)], -1)
+    lower_vec = wc - knee
+    b2 = np.arctan2(-lower_vec[:, 0], -lower_vec[:, 1])
+    toe_plane = wc + geo.foot * foot_dir
+    toe = shoulder + _mv(frame, np.stack([toe_plane[:, 0], np.zeros(t), toe_plane[:, 1]], -1))
+    distal = shoulder + _mv(frame, np.stack([wx[:, 0], np.zeros(t), wx[:, 1]], -1))
+    return LegIKResult(
+        abduction=abd,
+        girdle_flex=gflex.copy(),
+        upper_flex=_wrap(b1),
+        lower_flex=_wrap(b2 - b1),
+        foot_flex=_wrap(b3 - b2),
+        toe=toe,
+        reach_error=np.linalg.norm(toe - tgt, axis=-1),
+        proximal=shoulder,
+        distal_target=distal,
+        reach_ratio=dist / hi,
+    )
+
+
+def leg_fk(
+    species: str | Species,
+    leg: str,
+    girdle_root: np.ndarray,
+    parent_rotation: np.ndarray,
+    abduction: np.ndarray,
+    girdle_flex: np.ndarray,
+    upper_flex: np.ndarray,
+    lower_flex: np.ndarray,
+    foot_flex: np.ndarray,
+) -> np.ndarray:
+    """Toe position (T, 3) [m] of a leg from its hinge angles (the inverse of :func:`leg_ik`)."""
+    geo = leg_geometry(species, leg)
+    root = np.atleast_2d(np.asarray(girdle_root, dtype=np.float64))
+    t = root.shape[0]
+    prot = _as_rotmats(parent_rotation, t)
+    a = [_as_frames(x, t, "angle") for x in (abduction, girdle_flex, upper_flex, lower_flex, foot_flex)]
+    g = prot @ _ry(a[1])
+    pos = root + _mv(g, np.array([0.0, 0.0, -geo.girdle]))
+    r = g @ _rx(a[0]) @ _ry(a[2])
+    pos = pos + _mv(r, np.array([0.0, 0.0, -geo.upper]))
+    r = r @ _ry(a[3])
+    pos = pos + _mv(r, np.array([0.0, 0.0, -geo.lower]))
+    r = r @ _ry(a[4])
+    return pos + _mv(r, np.array([0.0, 0.0, -geo.foot]))
+
+
+def foot_inclination(
+    parent_rotation: np.ndarray,
+    abduction: np.ndarray,
+    girdle_flex: np.ndarray,
+    upper_flex: np.ndarray,
+    lower_flex: np.ndarray,
+    foot_flex: np.ndarray,
+) -> np.ndarray:
+    """Foot-segment inclination (T,) [rad] of a posed leg, as defined in the module docstring."""
+    a = np.asarray(abduction, dtype=np.float64)
+    t = a.shape[0] if a.ndim else 1
+    prot = _as_rotmats(parent_rotation, t)
+    frame = prot @ _ry(np.broadcast_to(girdle_flex, (t,))) @ _rx(np.broadcast_to(a, (t,)))
+    w = _mtv(frame, np.broadcast_to(np.array([0.0, 0.0, -1.0]), (t, 3)))
+    beta_down = np.arctan2(-w[:, 0], -w[:, 2])
+    b3 = np.asarray(upper_flex) + np.asarray(lower_flex) + np.asarray(foot_flex)
+    return _wrap(beta_down - b3)
+
+
+@dataclass(frozen=True)
+class AxialFrames:
+    """Global frames of the trunk needed by the legs (leading axis T).
+
+    Attributes:
+        girdle_root: (T, 4, 3) scapula / ilium joint positions, legs LF, RF, LH, RH [m].
+        parent_rotation: (T, 4, 3, 3) global rotation of each girdle's parent.
+    """
+
+    girdle_root: np.ndarray
+    parent_rotation: np.ndarray
+
+
+def axial_frames(species: str | Species, root_positions: np.ndarray, rotations: np.ndarray) -> AxialFrames:
+    """Girdle roots and parent rotations from the root and the axial joint rotations.
+
+    Args:
+        species: the species.
+        root_positions: (T, 3) pelvis positions [m].
+        rotations: (T, J, 4) local rotations (only pelvis and spine1..3 are used).
+    """
+    skel = get_skeleton(species)
+    off = skel.offsets
+    idx = [_J["pelvis"], _J["spine1"], _J["spine2"], _J["spine3"]]
+    m = quat_to_matrix(np.asarray(rotations)[:, idx])  # (T, 4, 3, 3)
+    r_pel = m[:, 0]
+    r1 = r_pel @ m[:, 1]
+    r2 = r1 @ m[:, 2]
+    r3 = r2 @ m[:, 3]
+    p1 = root_positions + _mv(r_pel, off[_J["spine1"]])
+    p2 = p1 + _mv(r1, off[_J["spine2"]])
+    p3 = p2 + _mv(r2, off[_J["spine3"]])
+    roots = np.stack(
+        [
+            p3 + _mv(r3, off[_J["lf_scapula"]]),
+            p3 + _mv(r3, off[_J["rf_scapula"]]),
+            root_positions + _mv(r_pel, off[_J["lh_ilium"]]),
+            root_positions + _mv(r_pel, off[_J["rh_ilium"]]),
+        ],
+        axis=1,
+    )
+    parents = np.stack([r3, r3, r_pel, r_pel], axis=1)
+    return AxialFrames(girdle_root=roots, parent_rotation=parents)
+
+
+@dataclass(frozen=True)
+class PoseIK:
+    """Result of :func:`pose_from_targets`.
+
+    Attributes:
+        rotations: (T, J, 4) local rotations with the legs solved.
+        reach_error: (T, 4) toe error per leg [m] (LF, RF, LH, RH).
+        legs: the four :class:`LegIKResult`.
+        frames: the trunk frames the legs were solved in.
+    """
+
+    rotations: np.ndarray
+    reach_error: np.ndarray
+    legs: tuple[LegIKResult, ...]
+    frames: AxialFrames
+
+
+def pose_from_targets(
+    species: str | Species,
+    root_positions: np.ndarray,
+    rotations: np.ndarray,
+    toe_targets: np.ndarray,
+    girdle_flex: np.ndarray | None = None,
+    foot_inclination: np.ndarray | None = None,
+) -> PoseIK:
+    """Solve all four legs for toe targets on a posed trunk.
+
+    Args:
+        species: the species.
+        root_positions: (T, 3) pelvis positions [m].
+        rotations: (T, J, 4) local rotations giving the pelvis and spine (the leg
+            joints are overwritten; other joints are kept).
+        toe_targets: (T, 4, 3) world toe targets, legs LF, RF, LH, RH [m].
+        girdle_flex: optional (T, 4) girdle flexion [rad] (default: standing).
+        foot_inclination: optional (T, 4) foot inclination [rad] (default: standing).
+
+    Returns:
+        A :class:`PoseIK` with the completed rotations and per-leg reach errors.
+
+    Raises:
+        IKError: bad shapes or non-finite targets.
+    """
+    sp = load_species(species)
+    root = np.asarray(root_positions, dtype=np.float64)
+    rot = np.array(rotations, dtype=np.float64, copy=True)
+    tg = np.asarray(toe_targets, dtype=np.float64)
+    t = root.shape[0]
+    if tg.shape != (t, 4, 3):
+        raise IKError(f"toe_targets must have shape ({t}, 4, 3), got {tg.shape}")
+    if rot.shape != (t, len(JOINT_NAMES), 4):
+        raise IKError(f"rotations must have shape ({t}, {len(JOINT_NAMES)}, 4), got {rot.shape}")
+    frames = axial_frames(sp, root, rot)
+    legs = []
+    for k, leg in enumerate(LEGS):
+        res = leg_ik(
+            sp,
+            leg,
+            frames.girdle_root[:, k],
+            frames.parent_rotation[:, k],
+            tg[:, k],
+            None if girdle_flex is None else girdle_flex[:, k],
+            None if foot_inclination is None else foot_inclination[:, k],
+        )
+        geo = leg_geometry(sp, leg)
+        q = res.quaternions()
+        for n, joint in enumerate(geo.joints[:4]):
+            rot[:, _J[joint]] = q[:, n]
+        rot[:, _J[geo.joints[4]]] = np.array([1.0, 0.0, 0.0, 0.0])
+        legs.append(res)
+    err = np.stack([r.reach_error for r in legs], axis=1)
+    return PoseIK(rotations=rot, reach_error=err, legs=tuple(legs), frames=frames)
