@@ -4,9 +4,12 @@ stride period and length, and the static stability margin.
 Definitions (keys of :meth:`GaitStats.to_dict`; METRICS.md names where it has them):
 
 * ``duration_s``: T / fps.
-* ``speed_mps``: magnitude of the horizontal root displacement from the first to the
-  last frame divided by the elapsed time (T − 1) / fps — the average forward speed along
-  the net heading (a clip that returns to its start reads 0). 0 for a one-frame clip.
+* ``speed_mps``: the mean horizontal root displacement over one stride period P,
+  ‖x(t + P) − x(t)‖ / P averaged over every t with t + P inside the clip — the speed
+  along the path (a turn reads its path speed, not its chord; one stride averages out
+  the trunk's sway). Without a stride period (standing, fewer than two touchdowns) or a
+  clip shorter than one stride: the net displacement from the first to the last frame
+  over (T − 1) / fps. 0 for a one-frame clip.
 * ``froude``: v² / (g·h), g = 9.81 m/s², h = the species' standing hip height.
 * ``duty_factor_per_foot``: the share of frames in contact, counted over the foot's
   complete strides (from its first to its last touchdown, exclusive) when it has at
@@ -232,13 +235,6 @@ def gait_statistics(motion: Motion, contacts: np.ndarray | None = None) -> GaitS
     h = sp.hip_height
     leg = sp.leg_length
 
-    root = motion.root_positions
-    if t_frames >= 2:
-        speed = float(np.linalg.norm(root[-1, :2] - root[0, :2]) * fps / (t_frames - 1))
-    else:
-        speed = 0.0
-    froude = speed * speed / (GRAVITY * h)
-
     tds = touchdown_frames(c)
     duty: dict[str, float] = {}
     periods: dict[str, float] = {}
@@ -252,6 +248,16 @@ def gait_statistics(motion: Motion, contacts: np.ndarray | None = None) -> GaitS
             periods[foot] = math.nan
     finite_p = [v for v in periods.values() if math.isfinite(v)]
     period = float(np.median(finite_p)) if finite_p else math.nan
+
+    root = motion.root_positions
+    w = int(round(period * fps)) if math.isfinite(period) else 0
+    if 1 <= w < t_frames:
+        speed = float(np.linalg.norm(root[w:, :2] - root[:-w, :2], axis=-1).mean() * fps / w)
+    elif t_frames >= 2:
+        speed = float(np.linalg.norm(root[-1, :2] - root[0, :2]) * fps / (t_frames - 1))
+    else:
+        speed = 0.0
+    froude = speed * speed / (GRAVITY * h)
     stride_len = speed * period
     freq = 1.0 / period if math.isfinite(period) and period > 0 else math.nan
 

@@ -225,8 +225,27 @@ def required_lowering(sp: Species, legs: tuple[LegIKResult, ...]) -> np.ndarray:
     return np.stack(out, axis=1)
 
 
+#: Stance legs keep at least this multiple of their minimal reach.
+FOLD_MARGIN = 1.15
+
+
+def required_raising(sp: Species, legs: tuple[LegIKResult, ...]) -> np.ndarray:
+    """(T, 4) how far [m] each girdle must come up so its leg is not folded past its range."""
+    out = []
+    for leg, res in zip(LEGS, legs, strict=True):
+        geo = leg_geometry(sp, leg)
+        dmin = min(FOLD_MARGIN * geo.min_reach, 0.9 * geo.max_reach)
+        v = res.proximal - res.distal_target
+        dz = v[:, 2]
+        dist = np.linalg.norm(v, axis=-1)
+        r2 = np.maximum(dist**2 - dz**2, 0.0)
+        dz_new = np.sqrt(np.maximum(dmin**2 - r2, 0.0))
+        out.append(np.where(dist < dmin, np.maximum(dz_new - dz, 0.0), 0.0))
+    return np.stack(out, axis=1)
+
+
 def fix_reach(
-    sp: Species, trunk: Trunk, plan: LegPlan, window: int, iterations: int = 8, mask: np.ndarray | None = None
+    sp: Species, trunk: Trunk, plan: LegPlan, window: int, iterations: int = 30, mask: np.ndarray | None = None
 ) -> tuple[Trunk, Solved]:
     """Lower the pelvis and withers (smoothly) until every leg keeps its reach reserve.
 
@@ -246,14 +265,21 @@ def fix_reach(
     sol = solve(sp, tr, plan)
     for _ in range(iterations):
         low = required_lowering(sp, sol.legs)
+        up = required_raising(sp, sol.legs) * plan.contacts
         if mask is not None:
             low = low * mask[:, None]
-        if low.max() < 1e-7:
+            up = up * mask[:, None]
+        if low.max() < 1e-7 and up.max() < 1e-7:
             break
+        # Lowering wins where a girdle's legs disagree (a folded leg is clamped, an
+        # over-reaching one would leave the ground).
         lp = upper_envelope(1.05 * low[:, 2:].max(axis=1), window)
         lw = upper_envelope(1.05 * low[:, :2].max(axis=1), window)
-        tr.root[:, 2] -= lp
-        tr.pitch -= np.arcsin(np.clip((lw - lp) / span, -0.9, 0.9))
+        rp = upper_envelope(1.05 * up[:, 2:].max(axis=1), window) * (lp < 1e-9)
+        rw = upper_envelope(1.05 * up[:, :2].max(axis=1), window) * (lw < 1e-9)
+        dp, dw = lp - rp, lw - rw
+        tr.root[:, 2] -= dp
+        tr.pitch -= np.arcsin(np.clip((dw - dp) / span, -0.9, 0.9))
         sol = solve(sp, tr, plan)
     return tr, sol
 

@@ -27,7 +27,7 @@ from .stationary import build_idle, build_sit
 __all__ = ["generate", "draw_params", "GENERATOR_VERSION"]
 
 #: Bumped whenever the same inputs would produce a different clip.
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2
 _MIN_DUR, _MAX_DUR = 2.0, 6.0
 #: Dimensionless turn rate ω·sqrt(h/g) range of the turn actions.
 TURN_RATE_ND = (0.08, 0.25)
@@ -89,6 +89,41 @@ def _metadata_base(sp: Species, action: str, gait: str, seed: int | None, fps: f
         "frames": n,
         "duration_s": n / fps,
     }
+
+
+#: A cyclic clip whose planted toes miss their footholds by more than this is redrawn.
+FEASIBLE_STANCE_ERROR_M = 5e-4
+_MAX_ATTEMPTS = 6
+_RETRY_SHRINK = 0.7
+
+
+def _build_cyclic(sp, action, gait, band, params, t, fps, froude, duty_factor, turn_rate, direction,
+                  trunk_sway, duty_shrink=1.0):
+    """Build one cyclic clip for given speed and turn rate (validated here)."""
+    if not (isinstance(froude, int | float) and math.isfinite(froude) and froude > 0):
+        raise GaitError(f"froude must be a positive number for {action!r}, got {froude!r}")
+    u_fr = (froude - band.froude[0]) / max(band.froude[1] - band.froude[0], 1e-12)
+    if duty_factor is None:
+        duty, _ = _duty_from(band.duty_factor, float(np.clip(u_fr, 0, 1)), params["u_duty_noise"])
+        # a shorter stance (lower duty factor) sweeps the leg through a smaller angle
+        duty = band.duty_factor[0] + (duty - band.duty_factor[0]) * duty_shrink
+    else:
+        if not (0.0 < duty_factor < 1.0):
+            raise GaitError(f"duty_factor must lie in (0, 1), got {duty_factor!r}")
+        duty = float(duty_factor)
+    if not math.isfinite(turn_rate):
+        raise GaitError(f"turn_rate must be finite, got {turn_rate!r}")
+    if action == "turn_left" and turn_rate <= 0 or action == "turn_right" and turn_rate >= 0:
+        raise GaitError(f"{action} needs a turn rate of the matching sign (left positive), got {turn_rate}")
+    phases = {f: (band.footfall[f] + params["phase_jitter"][f]) % 1.0 for f in FEET}
+    if direction < 0:  # the walk run in reverse: the footfall sequence reverses
+        phases = {f: (-v) % 1.0 for f, v in phases.items()}
+    g = gait_numbers(sp, gait, float(froude), duty, phases, float(turn_rate),
+                     params["start_phase"], params["heading"], direction)
+    gain = sp.habits.trunk_sway if trunk_sway is None else float(trunk_sway)
+    style = {k: params[k] for k in ("neck_offset", "head_offset", "tail_offset", "swing_scale")}
+    tr, sol, plan = build_locomotion(sp, gait, g, t, fps, style, gain)
+    return g, tr, sol, plan
 
 
 def generate(
@@ -186,36 +221,29 @@ def generate(
     if action in LOCOMOTION_ACTIONS:
         band = sp.gaits[gait]
         direction = -1.0 if action == "walk_backward" else 1.0
-        if froude is None:
-            u = params["u_froude"]
-            if action == "walk_backward":
-                u *= 0.5  # backward walking is slow: lower half of the band
-            froude = band.froude[0] + u * (band.froude[1] - band.froude[0])
-        if not (isinstance(froude, int | float) and math.isfinite(froude) and froude > 0):
-            raise GaitError(f"froude must be a positive number for {action!r}, got {froude!r}")
-        u_fr = (froude - band.froude[0]) / max(band.froude[1] - band.froude[0], 1e-12)
-        if duty_factor is None:
-            duty, _ = _duty_from(band.duty_factor, float(np.clip(u_fr, 0, 1)), params["u_duty_noise"])
-        else:
-            if not (0.0 < duty_factor < 1.0):
-                raise GaitError(f"duty_factor must lie in (0, 1), got {duty_factor!r}")
-            duty = float(duty_factor)
-        if turn_rate is None:
-            w_nd = params["turn_rate_nd"]
-            w_nd = w_nd if action == "turn_left" else (-w_nd if action == "turn_right" else 0.0)
-            turn_rate = w_nd * math.sqrt(GRAVITY / sp.hip_height)
-        if not math.isfinite(turn_rate):
-            raise GaitError(f"turn_rate must be finite, got {turn_rate!r}")
-        if action == "turn_left" and turn_rate <= 0 or action == "turn_right" and turn_rate >= 0:
-            raise GaitError(f"{action} needs a turn rate of the matching sign (left positive), got {turn_rate}")
-        phases = {f: (band.footfall[f] + params["phase_jitter"][f]) % 1.0 for f in FEET}
-        if direction < 0:  # the walk run in reverse: the footfall sequence reverses
-            phases = {f: (-v) % 1.0 for f, v in phases.items()}
-        g = gait_numbers(sp, gait, float(froude), duty, phases, float(turn_rate),
-                         params["start_phase"], params["heading"], direction)
-        gain = sp.habits.trunk_sway if trunk_sway is None else float(trunk_sway)
-        style = {k: params[k] for k in ("neck_offset", "head_offset", "tail_offset", "swing_scale")}
-        tr, sol, plan = build_locomotion(sp, gait, g, t, fps, style, gain)
+        froude_drawn, turn_drawn = froude is None, turn_rate is None
+        for attempt in range(_MAX_ATTEMPTS):
+            # A drawn speed or turn rate that the legs cannot reach without leaving a
+            # planted foot (the clip would skate) is drawn again closer to the slow end
+            # of its range; explicit or paired values are kept and the error reported.
+            shrink = _RETRY_SHRINK**attempt
+            if froude_drawn:
+                u = params["u_froude"] * shrink
+                if action == "walk_backward":
+                    u *= 0.5  # backward walking is slow: lower half of the band
+                froude = band.froude[0] + u * (band.froude[1] - band.froude[0])
+            if turn_drawn:
+                lo_nd = TURN_RATE_ND[0]
+                w_nd = lo_nd + (params["turn_rate_nd"] - lo_nd) * shrink
+                w_nd = w_nd if action == "turn_left" else (-w_nd if action == "turn_right" else 0.0)
+                turn_rate = w_nd * math.sqrt(GRAVITY / sp.hip_height)
+            built = _build_cyclic(sp, action, gait, band, params, t, fps, froude, duty_factor,
+                                  turn_rate, direction, trunk_sway, shrink)
+            g, tr, sol, plan = built
+            err = sol.reach_error[plan.contacts]
+            if not (froude_drawn or turn_drawn) or err.size == 0 or err.max() <= FEASIBLE_STANCE_ERROR_M:
+                break
+        meta_out["attempts"] = attempt + 1
         meta_out.update(
             speed_mps=abs(g.speed_mps),
             velocity_mps=g.speed_mps,
@@ -228,7 +256,7 @@ def generate(
             footfall=g.phases,
             start_phase=g.start_phase,
             heading=g.heading,
-            trunk_sway=gain,
+            trunk_sway=sp.habits.trunk_sway if trunk_sway is None else float(trunk_sway),
         )
     else:
         heading = params["heading"]

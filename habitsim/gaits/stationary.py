@@ -114,19 +114,24 @@ def _sit_pose(sp: Species, heading: float, hip_frac: float, hind_foot_incl: floa
     hip_z = root_z + hip[:, 2]
     hip_x = root_x + hip[:, 0]
     target = hip_frac * sp.hip_height
-    # hind hock target from the planted toe and the sitting foot inclination
-    hock_x = neutral[2, 0] - gh.foot * math.sin(hind_foot_incl)
-    hock_z = gh.foot * math.cos(hind_foot_incl)
-    dist = np.hypot(hip_x - hock_x, hip_z - hock_z)
-    ok = (dist < 0.97 * gh.max_reach) & (dist > gh.min_reach + 0.05 * gh.max_reach)
-    below = ok & (hip_z <= target)
-    if below.any():
-        i = int(np.argmax(below))
-    elif ok.any():
-        i = int(np.flatnonzero(ok)[np.argmin(hip_z[ok])])
-    else:
-        raise GaitError(f"species {sp.name!r}: no reachable sitting posture")
-    return {"d_pitch": float(d_th[i]), "root_x": float(root_x[i]), "root_z": float(root_z[i])}
+    # Hind hock target from the planted toe and the sitting foot inclination; when the
+    # drawn inclination admits no reachable posture (long-legged species), it is
+    # relaxed step by step toward the standing inclination.
+    for incl in np.linspace(hind_foot_incl, gh.foot_inclination0, 9):
+        hock_x = neutral[2, 0] - gh.foot * math.sin(incl)
+        hock_z = gh.foot * math.cos(incl)
+        dist = np.hypot(hip_x - hock_x, hip_z - hock_z)
+        ok = (dist < 0.97 * gh.max_reach) & (dist > gh.min_reach + 0.05 * gh.max_reach)
+        below = ok & (hip_z <= target)
+        if below.any():
+            i = int(np.argmax(below))
+        elif ok.any():
+            i = int(np.flatnonzero(ok)[np.argmin(hip_z[ok])])
+        else:
+            continue
+        return {"d_pitch": float(d_th[i]), "root_x": float(root_x[i]), "root_z": float(root_z[i]),
+                "foot_incl": float(incl)}
+    raise GaitError(f"species {sp.name!r}: no reachable sitting posture")
 
 
 def build_sit(
@@ -142,6 +147,7 @@ def build_sit(
     gh = leg_geometry(sp, "LH")
     foot1 = p["sit_foot_incl"]
     fin = _sit_pose(sp, heading, p["sit_hip_frac"], foot1)
+    foot1 = fin["foot_incl"]
     t0 = p["sit_start"] * tau
     dur = p["sit_duration"] * tau
     s = min_jerk((t - t0) / dur)

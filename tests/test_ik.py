@@ -1,0 +1,105 @@
+"""Leg IK: targets reached within 1 mm, honest errors when out of reach, typed errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from habitsim.errors import IKError
+from habitsim.ik import LEGS, foot_inclination, leg_fk, leg_geometry, leg_ik, pose_from_targets
+from habitsim.motion import Motion
+from habitsim.rotations import rot_z
+from habitsim.skeleton import fk, get_skeleton
+from habitsim.species import load_species
+
+SPECIES = ("dog", "horse", "cat", "elephant", "rabbit", "giraffe")
+
+
+def _random_leg_angles(rng: np.random.Generator, geo, t: int) -> list[np.ndarray]:
+    """Angles around the standing pose with the middle joint bent its natural way."""
+    abd = rng.uniform(-0.25, 0.25, t)
+    gflex = geo.girdle_flex0 + rng.uniform(-0.2, 0.2, t)
+    up = rng.uniform(-0.6, 0.6, t)
+    low = geo.bend * rng.uniform(0.15, 1.4, t)  # never straight: the solution is unique
+    foot = rng.uniform(-0.8, 0.8, t)
+    return [abd, gflex, up, low, foot]
+
+
+@pytest.mark.parametrize("species", SPECIES)
+@pytest.mark.parametrize("leg", LEGS)
+def test_ik_reaches_fk_targets_within_1mm(species: str, leg: str) -> None:
+    rng = np.random.default_rng(7)
+    geo = leg_geometry(species, leg)
+    t = 400
+    root = rng.normal(0, 0.3, (t, 3))
+    prot = rot_z(rng.uniform(-np.pi, np.pi, t))
+    abd, gflex, up, low, foot = _random_leg_angles(rng, geo, t)
+    target = leg_fk(species, leg, root, prot, abd, gflex, up, low, foot)
+    # the solver's domain: toe below the shoulder / hip (a leg, not an arm raised overhead)
+    zero = np.zeros(t)
+    shoulder = leg_fk(species, leg, root, prot, zero, gflex, zero, zero, zero)
+    shoulder_z = shoulder[:, 2] + geo.upper + geo.lower + geo.foot
+    keep = target[:, 2] < shoulder_z - 0.25 * (geo.upper + geo.lower)
+    assert keep.sum() > 100
+    root, prot, target = root[keep], prot[keep], target[keep]
+    abd, gflex, up, low, foot = (a[keep] for a in (abd, gflex, up, low, foot))
+    incl = foot_inclination(prot, abd, gflex, up, low, foot)
+    res = leg_ik(species, leg, root, prot, target, gflex, incl)
+    assert res.reach_error.max() < 1e-3
+    # the solution is a real pose: its own FK lands on the target
+    toe = leg_fk(species, leg, root, prot, res.abduction, res.girdle_flex, res.upper_flex,
+                 res.lower_flex, res.foot_flex)
+    np.testing.assert_allclose(toe, target, atol=1e-3)
+    np.testing.assert_allclose(res.toe, toe, atol=1e-9)
+
+
+def test_ik_unreachable_target_is_clamped_and_reported() -> None:
+    geo = leg_geometry("dog", "LH")
+    root = np.zeros((1, 3))
+    far = np.array([[0.0, 0.0, -3.0 * (geo.upper + geo.lower + geo.foot)]])
+    res = leg_ik("dog", "LH", root, np.eye(3), far)
+    assert np.all(np.isfinite(res.upper_flex))
+    # the leg is stretched toward the target: the error is the missing length
+    assert res.reach_error[0] > geo.upper + geo.lower
+    assert res.reach_ratio[0] > 1.0
+
+
+def test_pose_from_targets_matches_full_skeleton_fk() -> None:
+    """Solved rotations, put through the skeleton's FK, put the toes on the targets."""
+    sp = load_species("dog")
+    skel = get_skeleton(sp)
+    root, quats = skel.standing_pose()
+    t = 30
+    roots = np.repeat(root[None], t, 0)
+    rots = np.repeat(quats[None], t, 0)
+    pos = fk(skel, roots, rots)
+    toes = pos[:, skel.foot_indices].copy()
+    rng = np.random.default_rng(3)
+    toes[..., :2] += rng.uniform(-0.04, 0.04, (t, 4, 2))  # step the feet about
+    toes[..., 2] += rng.uniform(0.0, 0.05, (t, 4))
+    sol = pose_from_targets(sp, roots, rots, toes)
+    assert sol.reach_error.max() < 1e-3
+    got = fk(skel, roots, sol.rotations)[:, skel.foot_indices]
+    np.testing.assert_allclose(got, toes, atol=1e-3)
+    Motion(species="dog", fps=30.0, root_positions=roots, rotations=sol.rotations)  # valid motion
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"target": np.full((2, 3), np.nan)},
+        {"target": np.zeros((2, 2))},
+        {"girdle_root": np.zeros((5, 3))},
+        {"foot_inclination": np.array([np.inf, 0.0])},
+    ],
+)
+def test_ik_bad_inputs_raise(kwargs: dict) -> None:
+    args = {"girdle_root": np.zeros((2, 3)), "parent_rotation": np.eye(3), "target": np.zeros((2, 3)) - [0, 0, 0.3]}
+    args.update(kwargs)
+    with pytest.raises(IKError):
+        leg_ik("dog", "LF", **args)
+
+
+def test_ik_unknown_leg() -> None:
+    with pytest.raises(IKError, match="LF"):
+        leg_ik("dog", "XX", np.zeros(3), np.eye(3), np.array([0.0, 0.0, -0.3]))
