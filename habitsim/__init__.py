@@ -14,6 +14,8 @@ from .errors import (
     SpeciesFileError,
     UnknownSpeciesError,
 )
+from .gaits import available_actions, generate
+from .motion import Motion, load_motion
 from .skeleton import JOINT_NAMES, Skeleton, get_skeleton
 from .species import Species, all_species, load_species, species_names
 
@@ -38,4 +40,8 @@ __all__ = [
     "Skeleton",
     "get_skeleton",
     "JOINT_NAMES",
+    "Motion",
+    "load_motion",
+    "generate",
+    "available_actions",
 ]

@@ -1,0 +1,94 @@
+"""pytest plugin of habitsim (registered through the ``pytest11`` entry point).
+
+Installing habitsim makes these available in any pytest suite, with no import:
+
+Fixtures:
+    ``habitsim_species_model``: callable ``(species) -> mujoco.MjModel`` of the shipped
+        scene of a catalog species (cached for the session).
+    ``habitsim_clip``: callable ``(species, action, seed=0, **kw) -> Motion`` — a
+        synthetic clip from :func:`habitsim.gaits.generate` (cached).
+    ``habitsim_track``: callable ``(motion, **kw)`` running :func:`habitsim.sim.track`
+        on a motion and returning its result.
+    ``habitsim_golden``: callable ``(figures, name=None, tolerances=None)`` comparing a
+        ``{metric: number}`` dict with the golden file
+        ``<test file dir>/goldens/<test module>/<name or test name>.json`` (see
+        :func:`habitsim.testing.assert_matches_golden`).
+    ``habitsim_assert_plausible``: :func:`habitsim.testing.assert_plausible`.
+
+Option:
+    ``--habitsim-update-goldens``: (re)record golden files instead of failing.
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("habitsim")
+    group.addoption(
+        "--habitsim-update-goldens",
+        action="store_true",
+        default=False,
+        help="record habitsim golden figure files instead of comparing against them",
+    )
+
+
+@pytest.fixture(scope="session")
+def habitsim_species_model() -> Callable[[str], Any]:
+    from .qpos import load_species_model
+
+    return functools.lru_cache(maxsize=None)(load_species_model)
+
+
+@pytest.fixture(scope="session")
+def habitsim_clip() -> Callable[..., Any]:
+    from .gaits import generate
+
+    cache: dict[tuple, Any] = {}
+
+    def make(species: str, action: str, seed: int = 0, **kw: Any) -> Any:
+        key = (species, action, seed, tuple(sorted(kw.items())))
+        if key not in cache:
+            cache[key] = generate(species, action, seed=seed, **kw)
+        return cache[key]
+
+    return make
+
+
+@pytest.fixture
+def habitsim_track() -> Callable[..., Any]:
+    def run(motion: Any, **kw: Any) -> Any:
+        from .sim import track
+
+        return track(motion, **kw)
+
+    return run
+
+
+@pytest.fixture
+def habitsim_golden(request: pytest.FixtureRequest) -> Callable[..., Any]:
+    from .testing import assert_matches_golden
+
+    update = bool(request.config.getoption("--habitsim-update-goldens"))
+    test_path = Path(str(request.node.path))
+    folder = test_path.parent / "goldens" / test_path.stem
+
+    def check(figures: dict[str, Any], name: str | None = None, tolerances: dict[str, Any] | None = None):
+        stem = name or re.sub(r"[^A-Za-z0-9_.-]+", "_", request.node.name)
+        return assert_matches_golden(figures, folder / f"{stem}.json", tolerances, update=update)
+
+    return check
+
+
+@pytest.fixture
+def habitsim_assert_plausible() -> Callable[..., None]:
+    from .testing import assert_plausible
+
+    return assert_plausible
