@@ -94,6 +94,29 @@ def _rotate(xy: np.ndarray, psi: np.ndarray) -> np.ndarray:
     return np.stack([c * xy[..., 0] - s * xy[..., 1], s * xy[..., 0] + c * xy[..., 1]], -1)
 
 
+#: Share of the swing over which the foot speeds up (and, at its end, slows down).
+SWING_RAMP = 0.15
+_GRID = np.linspace(0.0, 1.0, 2001)
+
+
+def _profile_table(ramp: float) -> np.ndarray:
+    vel = np.minimum(1.0, np.minimum(_GRID, 1.0 - _GRID) / ramp)
+    vel = min_jerk(vel)  # smooth ramps: zero velocity and acceleration at the ends
+    pos = np.concatenate([[0.0], np.cumsum(0.5 * (vel[1:] + vel[:-1]) * np.diff(_GRID))])
+    return pos / pos[-1]
+
+
+_PROFILE = _profile_table(SWING_RAMP)
+
+
+def swing_profile(s: np.ndarray) -> np.ndarray:
+    """Horizontal swing progress in [0, 1] for swing phase s: the foot leaves and lands
+    with zero velocity and acceleration but reaches its cruise speed within
+    :data:`SWING_RAMP` of the swing, so it stays close to the moving body (a foot that
+    accelerates over the whole swing lags far behind the body in a fast gait)."""
+    return np.interp(np.clip(s, 0.0, 1.0), _GRID, _PROFILE)
+
+
 def plan_feet(sp: Species, g: GaitNumbers, t: np.ndarray, swing_height: float) -> LegPlan:
     """Toe targets, stance schedule and swing progress of the four feet."""
     info = standing_info(sp)
@@ -104,6 +127,7 @@ def plan_feet(sp: Species, g: GaitNumbers, t: np.ndarray, swing_height: float) -
     targets = np.zeros((n, 4, 3))
     contacts = np.zeros((n, 4), dtype=bool)
     swing_s = np.zeros((n, 4))
+    xy_now, psi_now = _root_path(g, t)
     for i, foot in enumerate(FEET):
         x = phi_t - g.phases[foot]
         k = np.floor(x)
@@ -118,7 +142,22 @@ def plan_feet(sp: Species, g: GaitNumbers, t: np.ndarray, swing_height: float) -
         s = np.where(stance, 0.0, (u - beta) / (1.0 - beta))
         a, b = holds[kk], holds[np.minimum(kk + 1, len(ks) - 1)]
         m = min_jerk(s)[:, None]
-        targets[:, i, :2] = np.where(stance[:, None], a, a + (b - a) * m)
+        world = a + (b - a) * swing_profile(s)[:, None]
+        # Swing relative to the moving body: a world-frame minimum-jerk path lags far
+        # behind the body early in the swing of a fast gait (beyond the leg's reach);
+        # the body-frame path keeps the foot under the body. Blended with weight
+        # sin²(πs), so the swing leaves and lands with zero world velocity.
+        t_lo = (g.phases[foot] + ks + beta - g.start_phase) / f
+        t_td = (g.phases[foot] + ks + 1.0 - g.start_phase) / f
+        xy_lo, psi_lo = _root_path(g, t_lo)
+        xy_td, psi_td = _root_path(g, t_td)
+        rel_a = _rotate(holds - xy_lo, -psi_lo)  # lift-off foothold in the body frame
+        rel_b = _rotate(np.roll(holds, -1, axis=0) - xy_td, -psi_td)  # next foothold
+        rel = rel_a[kk] + (rel_b[kk] - rel_a[kk]) * m
+        body = xy_now + _rotate(rel, psi_now)
+        w = np.sin(np.pi * s)[:, None] ** 2
+        swing_xy = (1.0 - w) * world + w * body
+        targets[:, i, :2] = np.where(stance[:, None], a, swing_xy)
         targets[:, i, 2] = np.where(stance, 0.0, swing_height * np.sin(np.pi * s))
         contacts[:, i] = stance
         swing_s[:, i] = s

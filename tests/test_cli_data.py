@@ -1,0 +1,85 @@
+"""``habitsim demo`` and ``habitsim bench data`` (small configurations)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import types
+from pathlib import Path
+
+import pytest
+
+from habitsim.cli import bench_cmd, build_parser, main
+from habitsim.dataset import MANIFEST_NAME, build_dataset, load_manifest
+from habitsim.species import species_names
+
+
+def test_demo_runs_and_reruns(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "demo_out"
+    args = ["demo", "--out", str(out), "--clips-per-species", "1", "--workers", "1",
+            "--no-progress"]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "phase err" in text and str(out) in text
+    man = load_manifest(out)
+    assert man.species_names == species_names()
+    assert main(args) == 0
+    assert f"0 generated, {len(man.clips)} reused" in capsys.readouterr().out
+
+
+def test_demo_rebuilds_other_configuration(tmp_path: Path) -> None:
+    out = tmp_path / "demo_out"
+    build_dataset(out, clips_per_species=1, seed=5, species=["cat"], workers=1, progress=False)
+    assert main(["demo", "--out", str(out), "--clips-per-species", "1", "--no-progress"]) == 0
+    man = load_manifest(out)
+    assert man.seed == 0 and len(man.species) == len(species_names())
+    assert not list(out.glob("*/cat/*_0001.npz"))
+
+
+def test_demo_on_a_file_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    f = tmp_path / "f"
+    f.write_text("x")
+    assert main(["demo", "--out", str(f), "--no-progress"]) == 2
+    assert capsys.readouterr().err.startswith("error:")
+
+
+def test_bench_data_small(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "bench"
+    args = ["bench", "data", "--clips-per-species", "1", "--workers", "1", "--no-progress",
+            "--out", str(out)]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    for key in ("build wall time", "synthetic clips/s", "FK numpy frames/s",
+                "FK torch f32 frames/s"):
+        assert key in text
+    assert (out / MANIFEST_NAME).is_file()
+    assert main(args) == 0  # --out replaces the earlier build, regenerating every clip
+    assert f"{len(species_names())} clips" in capsys.readouterr().out
+
+
+def test_bench_extra_modules(monkeypatch: pytest.MonkeyPatch) -> None:
+    calls: list[object] = []
+    fake = types.ModuleType("habitsim.cli.bench_fake")
+
+    def register(sub) -> None:
+        calls.append(sub)
+        p = sub.add_parser("fake")
+        p.set_defaults(func=lambda ns: 0)
+
+    fake.register = register  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "habitsim.cli.bench_fake", fake)
+    monkeypatch.setattr(bench_cmd, "_EXTRA", ("bench_does_not_exist", "bench_fake"))
+    parser = build_parser()
+    assert len(calls) == 1
+    assert parser.parse_args(["bench", "fake"]).func(None) == 0
+    assert parser.parse_args(["bench", "data"]).clips_per_species == 40
+
+
+def test_bench_extra_module_missing_dependency_is_raised(monkeypatch: pytest.MonkeyPatch) -> None:
+    def fake_import(name: str):
+        raise ModuleNotFoundError("No module named 'somedep'", name="somedep")
+
+    sub = argparse.ArgumentParser().add_subparsers()
+    monkeypatch.setattr(bench_cmd.importlib, "import_module", fake_import)
+    with pytest.raises(ModuleNotFoundError, match="somedep"):
+        bench_cmd.register(sub)
