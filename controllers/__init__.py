@@ -1,5 +1,18 @@
-"""Controllers usable on any MuJoCo model (installed as ``habitsim.controllers``)."""
+"""Controllers usable on any MuJoCo model (installed as ``habitsim.controllers``).
 
+* :class:`PDController`: explicit joint PD torques for torque motors, clipped to limits.
+* :func:`configure_servos` / :class:`ServoController`: PD inside the engine (position or
+  pid actuators), torque limits preserved.
+* :mod:`~habitsim.controllers.gains`: stiffness rules, critical damping, stability limits.
+* :class:`InverseDynamicsFeedforward`: ``mj_inverse`` on the reference.
+* :class:`TrunkStabilizer` / :class:`StabilizedController`: stance-leg virtual model
+  control of the trunk (a wrench distributed over the stance feet by a QP, applied as
+  ``Jᵀf`` joint torques), no external force.
+* :class:`RootAssist`: optional external PD wrench on the free joint, off unless created,
+  always recorded.
+"""
+
+from .assist import RootAssist
 from .base import (
     Controller,
     ControllerError,
@@ -8,14 +21,40 @@ from .base import (
     PDController,
     Reference,
     actuated_joints,
+    check_reference,
 )
+from .feedforward import InverseDynamicsFeedforward
+from .gains import (
+    critical_damping,
+    effective_inertia,
+    max_stable_gains,
+    max_stable_kd,
+    stiffness_rule,
+)
+from .servo import ServoController, ServoMap, configure_servos, servo_map
+from .stance import StabilizedController, TrunkStabilizer, distribute_wrench
 
 __all__ = [
     "Controller",
     "ControllerError",
     "ControllerStats",
+    "InverseDynamicsFeedforward",
     "JointActuatorMap",
     "PDController",
     "Reference",
+    "RootAssist",
+    "ServoController",
+    "ServoMap",
+    "StabilizedController",
+    "TrunkStabilizer",
     "actuated_joints",
+    "check_reference",
+    "configure_servos",
+    "critical_damping",
+    "distribute_wrench",
+    "effective_inertia",
+    "max_stable_gains",
+    "max_stable_kd",
+    "servo_map",
+    "stiffness_rule",
 ]

@@ -29,6 +29,10 @@ __all__ = [
     "Controller",
     "JointActuatorMap",
     "actuated_joints",
+    "check_reference",
+    "ctrl_adr",
+    "joint_torques",
+    "n_actuators",
     "PDController",
 ]
 
@@ -65,19 +69,28 @@ class ControllerStats:
     max_time_s: float = 0.0
     failures: int = 0
     notes: list[str] = field(default_factory=list)
+    #: Named running figures a controller adds (e.g. feed-forward effort), SI units.
+    extra: dict[str, float] = field(default_factory=dict)
 
     @property
     def mean_time_ms(self) -> float:
         return 1e3 * self.total_time_s / self.calls if self.calls else 0.0
 
+    def note(self, text: str) -> None:
+        """Record a note once (the list is capped at 100 entries)."""
+        if text not in self.notes and len(self.notes) < 100:
+            self.notes.append(text)
+
     def to_dict(self) -> dict[str, float | int | list[str]]:
-        return {
+        out: dict[str, float | int | list[str]] = {
             "calls": self.calls,
             "mean_time_ms": round(self.mean_time_ms, 4),
             "max_time_ms": round(1e3 * self.max_time_s, 4),
             "failures": self.failures,
             "notes": list(self.notes[:20]),
         }
+        out.update({k: float(v) for k, v in self.extra.items()})
+        return out
 
 
 @dataclass(frozen=True)
@@ -90,6 +103,14 @@ class JointActuatorMap:
         actuator_ids: per joint, the actuator with ``trntype`` joint driving it.
         gear: per joint, the actuator's gear ratio (torque = gear · ctrl for motors).
         ctrl_lo, ctrl_hi: per joint, the actuator's control range (±inf if unlimited).
+        gain: per joint, ``gainprm[0]`` of a fixed-gain actuator (1 for ``<motor>``; a
+            ``<general>`` actuator gives force = gain · ctrl).
+        force_lo, force_hi: per joint, the actuator's force range (±inf if not
+            force-limited), in actuator units (torque = gear · force).
+        biased: per joint, True if the actuator has a bias (a position / pid servo).
+        ctrl_ids: per joint, index of the actuator's first control in ``data.ctrl``
+            (MuJoCo ≥ 4 actuators may take several controls, e.g. a pid actuator a
+            position and a velocity target); equal to ``actuator_ids`` for motors.
     """
 
     names: tuple[str, ...]
@@ -100,11 +121,51 @@ class JointActuatorMap:
     gear: np.ndarray
     ctrl_lo: np.ndarray
     ctrl_hi: np.ndarray
+    gain: np.ndarray | None = None
+    force_lo: np.ndarray | None = None
+    force_hi: np.ndarray | None = None
+    biased: np.ndarray | None = None
+    ctrl_ids: np.ndarray | None = None
+
+    @property
+    def ctrl_index(self) -> np.ndarray:
+        """(n,) index in ``data.ctrl`` of each actuator's (first) control."""
+        return self.actuator_ids if self.ctrl_ids is None else self.ctrl_ids
+
+    @property
+    def torque_per_ctrl(self) -> np.ndarray:
+        """(n,) joint torque per unit control of a torque actuator (gear · gain)."""
+        gain = np.ones_like(self.gear) if self.gain is None else self.gain
+        return self.gear * gain
 
     @property
     def torque_limit(self) -> np.ndarray:
-        """(n,) largest |torque| [N·m] each actuator can give (gear · ctrl range)."""
-        return np.abs(self.gear) * np.maximum(np.abs(self.ctrl_lo), np.abs(self.ctrl_hi))
+        """(n,) largest |torque| [N·m] each actuator can give.
+
+        A torque actuator (no bias): the smaller of |gear·gain|·max|ctrl range| and
+        |gear|·max|force range|. A servo (biased actuator, its control is a target
+        position): |gear|·max|force range|.
+        """
+        by_force = np.full(self.gear.shape, np.inf)
+        if self.force_lo is not None and self.force_hi is not None:
+            by_force = np.abs(self.gear) * np.maximum(np.abs(self.force_lo), np.abs(self.force_hi))
+        ctrl_max = np.maximum(np.abs(self.ctrl_lo), np.abs(self.ctrl_hi))
+        by_ctrl = np.abs(self.torque_per_ctrl) * ctrl_max
+        if self.biased is None:
+            return np.minimum(by_force, by_ctrl)
+        return np.where(self.biased, by_force, np.minimum(by_force, by_ctrl))
+
+
+def n_actuators(model: mujoco.MjModel) -> int:
+    """Number of actuators (``nactuator`` in MuJoCo ≥ 4, where ``nu`` counts controls)."""
+    return int(getattr(model, "nactuator", model.nu))
+
+
+def ctrl_adr(model: mujoco.MjModel) -> np.ndarray:
+    """(nactuator,) index of each actuator's first control in ``data.ctrl``."""
+    if hasattr(model, "actuator_ctrladr"):
+        return np.asarray(model.actuator_ctrladr, dtype=int).copy()
+    return np.arange(model.nu)
 
 
 def actuated_joints(model: mujoco.MjModel, names: Sequence[str] | None = None) -> JointActuatorMap:
@@ -115,17 +176,18 @@ def actuated_joints(model: mujoco.MjModel, names: Sequence[str] | None = None) -
             no actuator driving it; the message lists the valid names.
     """
     driven: dict[int, int] = {}
-    for a in range(model.nu):
+    for a in range(n_actuators(model)):
         if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT:
             driven.setdefault(int(model.actuator_trnid[a, 0]), a)
-    single = (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE)
-    valid = [model.joint(j).name for j in sorted(driven) if model.jnt_type[j] in single]
+    # ints: pybind11 enums do not compare equal to numpy ints inside `in`
+    single = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+    valid = [model.joint(j).name for j in sorted(driven) if int(model.jnt_type[j]) in single]
     if names is None:
         names = valid
     jids, acts = [], []
     for n in names:
         jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n)
-        if jid < 0 or jid not in driven or model.jnt_type[jid] not in single:
+        if jid < 0 or jid not in driven or int(model.jnt_type[jid]) not in single:
             raise ControllerError(
                 f"joint {n!r} is not an actuated hinge/slide joint of the model; "
                 f"valid: {', '.join(valid) or '(none)'}"
@@ -133,9 +195,12 @@ def actuated_joints(model: mujoco.MjModel, names: Sequence[str] | None = None) -
         jids.append(jid)
         acts.append(driven[jid])
     jids_a, acts_a = np.array(jids, dtype=int), np.array(acts, dtype=int)
-    limited = model.actuator_ctrllimited[acts_a].astype(bool)
-    lo = np.where(limited, model.actuator_ctrlrange[acts_a, 0], -np.inf)
-    hi = np.where(limited, model.actuator_ctrlrange[acts_a, 1], np.inf)
+    cadr = ctrl_adr(model)[acts_a]
+    limited = model.actuator_ctrllimited[cadr].astype(bool)
+    lo = np.where(limited, model.actuator_ctrlrange[cadr, 0], -np.inf)
+    hi = np.where(limited, model.actuator_ctrlrange[cadr, 1], np.inf)
+    flimited = model.actuator_forcelimited[acts_a].astype(bool)
+    fixed = model.actuator_gaintype[acts_a] == mujoco.mjtGain.mjGAIN_FIXED
     return JointActuatorMap(
         names=tuple(names),
         joint_ids=jids_a,
@@ -145,7 +210,59 @@ def actuated_joints(model: mujoco.MjModel, names: Sequence[str] | None = None) -
         gear=model.actuator_gear[acts_a, 0].copy(),
         ctrl_lo=lo,
         ctrl_hi=hi,
+        gain=np.where(fixed, model.actuator_gainprm[acts_a, 0], 1.0),
+        force_lo=np.where(flimited, model.actuator_forcerange[acts_a, 0], -np.inf),
+        force_hi=np.where(flimited, model.actuator_forcerange[acts_a, 1], np.inf),
+        biased=model.actuator_biastype[acts_a] != mujoco.mjtBias.mjBIAS_NONE,
+        ctrl_ids=cadr,
     )
+
+
+def check_reference(model: mujoco.MjModel, ref: Reference) -> None:
+    """Raise :class:`ControllerError` unless ``ref`` fits ``model`` and is finite."""
+    for name, arr, size in (("qpos", ref.qpos, model.nq), ("qvel", ref.qvel, model.nv),
+                            ("qacc", ref.qacc, model.nv)):
+        a = np.asarray(arr)
+        if a.shape != (size,):
+            raise ControllerError(f"reference {name} has shape {a.shape}, model needs ({size},)")
+        if not np.all(np.isfinite(a)):
+            bad = np.flatnonzero(~np.isfinite(a))[:5].tolist()
+            raise ControllerError(f"reference {name} is not finite at index {bad} (t={ref.time})")
+    if not np.isfinite(ref.time):
+        raise ControllerError(f"reference time is not finite: {ref.time}")
+
+
+def joint_torques(component, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference,
+                  names: Sequence[str]) -> np.ndarray:
+    """(n,) torques of a feed-forward ``component`` in the joint order ``names``.
+
+    ``component`` is a callable ``(model, data, ref) -> (k,)``, or a list of them (summed).
+    A component that has a ``joint_names`` attribute is re-ordered by name (its joints must
+    all be among ``names``); one without must return exactly ``len(names)`` values in
+    ``names`` order.
+    """
+    n = len(names)
+    if isinstance(component, (list, tuple)):
+        total = np.zeros(n)
+        for c in component:
+            total += joint_torques(c, model, data, ref, names)
+        return total
+    tau = np.asarray(component(model, data, ref), dtype=float)
+    own = getattr(component, "joint_names", None)
+    if own is None or tuple(own) == tuple(names):
+        if tau.shape != (n,):
+            raise ControllerError(f"feed-forward returned shape {tau.shape}, expected ({n},)")
+        return tau
+    index = {nm: i for i, nm in enumerate(names)}
+    missing = [nm for nm in own if nm not in index]
+    if missing:
+        raise ControllerError(
+            f"feed-forward drives joints the controller does not: {', '.join(missing)}; "
+            f"controller joints: {', '.join(names)}"
+        )
+    out = np.zeros(n)
+    out[[index[nm] for nm in own]] = tau
+    return out
 
 
 class Controller(abc.ABC):
@@ -154,16 +271,29 @@ class Controller(abc.ABC):
     #: Short name used in reports and on the command line.
     name: str = "controller"
 
-    def __init__(self) -> None:
+    def __init__(self, assist=None) -> None:
         self.stats = ControllerStats()
+        #: Optional :class:`~habitsim.controllers.assist.RootAssist` (an external force on
+        #: the free joint). ``None`` by default: no controller ever adds outside force
+        #: unless the user passes one, and then it is recorded in ``assist.report()``.
+        self.assist = assist
 
-    def reset(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:  # noqa: B027
-        """Called once before a run (clear internal state). Default: nothing."""
+    def reset(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        """Called once before a run (clear internal state and the assist's record)."""
+        if self.assist is not None:
+            self.assist.reset(model, data)
 
     def control(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:
-        """(nu,) actuator controls for this tick (timed into :attr:`stats`)."""
+        """(nu,) actuator controls for this tick (timed into :attr:`stats`).
+
+        Raises:
+            ControllerError: the reference does not fit the model or is not finite.
+        """
         t0 = time.perf_counter()
+        check_reference(model, ref)
         u = self._control(model, data, ref)
+        if self.assist is not None:
+            self.assist.apply(model, data, ref)
         dt = time.perf_counter() - t0
         self.stats.calls += 1
         self.stats.total_time_s += dt
@@ -179,7 +309,8 @@ class PDController(Controller):
     """Explicit joint-space PD torque control for torque (motor) actuators.
 
     τ_i = kp_i (q_ref,i − q_i) + kd_i (q̇_ref,i − q̇_i) + τ_ff,i, converted to controls by
-    the actuator's gear and clipped to its control range.
+    the actuator's torque per control (gear · gain) and clipped to its control range (and
+    force range), so the applied torque never exceeds the actuator's limit.
 
     Args:
         model: the MuJoCo model.
@@ -187,25 +318,49 @@ class PDController(Controller):
         kd: damping [N·m·s/rad] per joint or one value.
         joints: joint names to control (default: every actuated hinge/slide joint).
         feedforward: optional callable ``(model, data, ref) -> (n,)`` torques added to the
-            PD terms (e.g. inverse dynamics of the reference).
+            PD terms (e.g. :class:`~habitsim.controllers.feedforward.InverseDynamicsFeedforward`,
+            :class:`~habitsim.controllers.stance.TrunkStabilizer`), or a list of them.
+        assist: optional :class:`~habitsim.controllers.assist.RootAssist`; ``None`` (the
+            default) means no external force, ever.
 
     Explicit PD is only stable when kd·dt / M_ii stays well below 2 for every joint
     (M_ii the joint-space inertia); use the gain rules of :mod:`habitsim.controllers.gains`
     or the in-engine servos of :mod:`habitsim.controllers.servo` for stiff, light joints.
+
+    After each tick :attr:`last_torque` holds the (n,) joint torques [N·m] sent.
+
+    Raises:
+        ControllerError: unknown joints, negative / non-finite gains, or an actuator that
+            is not a torque actuator (a biased position / pid servo).
     """
 
     name = "pd"
 
     def __init__(self, model: mujoco.MjModel, kp: float | np.ndarray, kd: float | np.ndarray,
-                 joints: Sequence[str] | None = None, feedforward=None) -> None:
-        super().__init__()
+                 joints: Sequence[str] | None = None, feedforward=None, *, assist=None) -> None:
+        super().__init__(assist=assist)
         self.map = actuated_joints(model, joints)
         n = len(self.map.names)
-        self.kp = np.broadcast_to(np.asarray(kp, dtype=float), (n,)).copy()
-        self.kd = np.broadcast_to(np.asarray(kd, dtype=float), (n,)).copy()
-        if np.any(~np.isfinite(self.kp)) or np.any(self.kp < 0) or np.any(self.kd < 0):
+        try:
+            self.kp = np.broadcast_to(np.asarray(kp, dtype=float), (n,)).copy()
+            self.kd = np.broadcast_to(np.asarray(kd, dtype=float), (n,)).copy()
+        except ValueError as exc:
+            raise ControllerError(f"PD gains must be scalars or have {n} entries: {exc}") from None
+        if (np.any(~np.isfinite(self.kp)) or np.any(~np.isfinite(self.kd))
+                or np.any(self.kp < 0) or np.any(self.kd < 0)):
             raise ControllerError("PD gains must be finite and non-negative")
+        biased = [nm for nm, b in zip(self.map.names, self.map.biased, strict=True) if b]
+        if biased:
+            raise ControllerError(
+                f"PDController needs torque actuators; these joints have servo (biased) "
+                f"actuators: {', '.join(biased)}; use ServoController instead"
+            )
         self.feedforward = feedforward
+        self.last_torque = np.zeros(n)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self.map.names
 
     def torques(self, data: mujoco.MjData, ref: Reference) -> np.ndarray:
         """(n,) unclipped PD torques [N·m] of the controlled joints."""
@@ -215,9 +370,20 @@ class PDController(Controller):
         )
 
     def _control(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:
+        return self._control_with(model, data, ref, None)
+
+    def _control_with(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference,
+                      extra: np.ndarray | None) -> np.ndarray:
+        """Controls with ``extra`` (n,) joint torques added to PD + feed-forward."""
+        m = self.map
         tau = self.torques(data, ref)
         if self.feedforward is not None:
-            tau = tau + self.feedforward(model, data, ref)
+            tau = tau + joint_torques(self.feedforward, model, data, ref, m.names)
+        if extra is not None:
+            tau = tau + extra
+        limit = m.torque_limit
+        tau = np.clip(tau, -limit, limit)
         u = np.array(data.ctrl, copy=True)
-        u[self.map.actuator_ids] = np.clip(tau / self.map.gear, self.map.ctrl_lo, self.map.ctrl_hi)
+        u[m.ctrl_index] = np.clip(tau / m.torque_per_ctrl, m.ctrl_lo, m.ctrl_hi)
+        self.last_torque = u[m.ctrl_index] * m.torque_per_ctrl
         return u
