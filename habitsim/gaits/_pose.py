@@ -289,16 +289,29 @@ def apply_sway(
     trunk: Trunk,
     plan: LegPlan,
     gain: float,
-    sigma_frames: float,
+    phase: np.ndarray,
     iterations: int = 3,
+    harmonics: int = 1,
 ) -> Trunk:
     """Shift the trunk horizontally so the centre of mass moves toward the support polygon.
 
     Per frame the target is the centroid of the stance toes; the centre of mass is moved
     ``gain`` of the way toward it. Frames with exactly three feet down (where static
-    stability is at stake) weigh most, four feet less, fewer feet not at all; the shift
-    is a kernel-weighted average over neighbouring frames (Gaussian, ``sigma_frames``),
-    so it is smooth and anticipates each lift-off.
+    stability is at stake) weigh most, four feet less, fewer feet not at all. The shift
+    is a periodic function of the gait phase (a constant plus ``harmonics`` harmonics of
+    the stride frequency, fitted by weighted least squares in the heading frame), so it
+    is smooth by construction — animals sway at the stride frequency (laterally) and
+    twice it (fore-aft), but a second harmonic demands trunk accelerations above g in a
+    brisk walk, so one harmonic is the default — and it anticipates every lift-off.
+
+    Args:
+        sp: species.
+        trunk: trunk state (not modified).
+        plan: leg plan (targets and stance).
+        gain: share of the way toward the stance centroid (0 disables).
+        phase: (T,) gait phase [cycles].
+        iterations: refits (the centre of mass moves with the legs' IK).
+        harmonics: number of stride-frequency harmonics.
     """
     if gain <= 0:
         return trunk
@@ -307,26 +320,36 @@ def apply_sway(
     c = plan.contacts
     n = c.sum(axis=1)
     w = np.where(n == 3, 1.0, np.where(n >= 4, 0.25, 0.0))
-    t = c.shape[0]
-    idx = np.arange(t)
-    kern = np.exp(-0.5 * ((idx[:, None] - idx[None, :]) / max(sigma_frames, 0.5)) ** 2) * w[None, :]
-    norm = kern.sum(axis=1) + 1e-3
+    cols = [np.ones_like(phase)]
+    for h in range(1, harmonics + 1):
+        cols += [np.cos(2 * np.pi * h * phase), np.sin(2 * np.pi * h * phase)]
+    basis = np.stack(cols, axis=1)  # (T, B)
+    gram = basis.T @ (basis * w[:, None]) + 1e-6 * np.eye(basis.shape[1]) * max(w.sum(), 1.0)
     feet_xy = plan.targets[:, :, :2]
     cent = (feet_xy * c[..., None]).sum(axis=1) / np.maximum(n, 1)[:, None]
     limit = 0.12 * sp.leg_length
-    com0 = None
+    cy, sy = np.cos(trunk.yaw), np.sin(trunk.yaw)
+
+    def to_heading(v: np.ndarray) -> np.ndarray:
+        return np.stack([cy * v[:, 0] + sy * v[:, 1], -sy * v[:, 0] + cy * v[:, 1]], -1)
+
+    def to_world(v: np.ndarray) -> np.ndarray:
+        return np.stack([cy * v[:, 0] - sy * v[:, 1], sy * v[:, 0] + cy * v[:, 1]], -1)
+
+    desired = None
+    shift = np.zeros((phase.shape[0], 2))  # heading frame
     for _ in range(iterations):
         sol = solve(sp, tr, plan)
         com = center_of_mass(sp, fk(skel, tr.root, sol.rotations))[:, :2]
-        if com0 is None:
-            com0 = com
-            desired = com0 + gain * (cent - com0)
-        err = np.where(n[:, None] >= 3, desired - com, 0.0)
-        step = (kern @ err) / norm[:, None]
-        tr.root[:, :2] += step
-        shift = tr.root[:, :2] - trunk.root[:, :2]
-        mag = np.linalg.norm(shift, axis=-1, keepdims=True)
-        tr.root[:, :2] = trunk.root[:, :2] + shift * np.minimum(1.0, limit / np.maximum(mag, 1e-12))
+        if desired is None:
+            desired = com + gain * (cent - com)
+        err = to_heading(desired - com)
+        coef = np.linalg.solve(gram, basis.T @ (err * w[:, None]))
+        shift = shift + basis @ coef
+        mag = float(np.linalg.norm(shift, axis=-1).max())
+        if mag > limit:
+            shift *= limit / mag
+        tr.root[:, :2] = trunk.root[:, :2] + to_world(shift)
     return tr
 
 

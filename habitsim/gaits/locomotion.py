@@ -239,6 +239,6 @@ def build_locomotion(
 
     window = max(3, int(round(0.2 * fps / f)))
     if sway_gain > 0 and g.duty_factor >= 0.5:
-        tr = apply_sway(sp, tr, plan, sway_gain, sigma_frames=0.05 * fps / f)
+        tr = apply_sway(sp, tr, plan, sway_gain, phi)
     tr, sol = fix_reach(sp, tr, plan, window)
     return tr, sol, plan
