@@ -1,0 +1,154 @@
+"""``habitsim track IN.npz``: track a motion in MuJoCo and report how it went.
+
+::
+
+    habitsim track IN.npz --out SIM.npz --report R.json [--controller servo]
+                          [--assist root] [--video V.mp4|V.gif] [--control-hz HZ]
+                          [--settle S] [--no-stop] [--json]
+
+* ``--out``: the simulated frames as a habitsim motion file (with the simulated foot
+  contacts; shorter than the input when the run fell or went unstable).
+* ``--report``: one JSON object (written atomically): ``input``, the tracking report of
+  :meth:`habitsim.sim.TrackResult.report` (``metrics`` with every key of
+  :data:`habitsim.evaluation.simulated.SIMULATED_KEYS`, ``fell``/``fall_time_s``/
+  ``fall_reason``, ``unstable``/``unstable_reason``, ``controller_stats``, ``assist``),
+  ``reference_dynamic`` (:data:`habitsim.evaluation.dynamic.DYNAMIC_KEYS` of the input)
+  and ``simulated_kinematic`` (:data:`habitsim.evaluation.kinematic.KINEMATIC_KEYS` of the
+  simulated frames, skating judged on the simulated contacts). Non-finite numbers are
+  ``null``.
+* ``--video``: MP4 (needs ``imageio`` + ``imageio-ffmpeg``) or GIF (needs ``Pillow``),
+  rendered headless with the model's tracking camera. The writer is checked before the
+  simulation runs.
+
+A fall or an unstable simulation is a result (exit code 0, reported), not an error; bad
+input (unreadable file, unknown species or controller, NaN) is ``error: ...``, exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the top-level ``track`` command."""
+    from ..sim import CONTROLLERS
+
+    p = sub.add_parser(
+        "track",
+        help="track a motion in MuJoCo (PD servos), detect falls, report metrics",
+        description=(
+            "Play a motion file through a controller in MuJoCo at the simulation rate, "
+            "detect falls and instability, and report the simulated-tracking metrics."
+        ),
+    )
+    p.add_argument("input", metavar="IN.npz", help="motion file")
+    p.add_argument("--out", metavar="SIM.npz", help="write the simulated motion here")
+    p.add_argument("--report", metavar="R.json", help="write the JSON report here")
+    p.add_argument("--controller", default="servo", choices=CONTROLLERS,
+                   help="controller (default servo: in-engine position servos)")
+    p.add_argument("--assist", choices=("root",), default=None,
+                   help="external root assistance (a PD wrench on the trunk; reported)")
+    p.add_argument("--video", metavar="V.mp4", help="render a video (.mp4 or .gif)")
+    p.add_argument("--control-hz", type=float, metavar="HZ",
+                   help="control rate [Hz] (default: every simulation step)")
+    p.add_argument("--settle", type=float, default=0.0, metavar="S",
+                   help="hold the first frame S seconds before the clip (default 0)")
+    p.add_argument("--no-stop", action="store_true",
+                   help="keep simulating after a fall (metrics still use the survived part)")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.set_defaults(func=_track)
+
+
+def _finite(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, list):
+        return [_finite(x) for x in v]
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
+def track_report(ns: argparse.Namespace) -> tuple[dict[str, Any], Any]:
+    """Run the tracking of ``ns.input`` and build the JSON report (and the result)."""
+    from ..evaluation.dynamic import dynamic_metrics
+    from ..evaluation.kinematic import kinematic_metrics
+    from ..motion import load_motion
+    from ..sim import track
+
+    motion = load_motion(ns.input)
+    result = track(
+        motion,
+        controller=ns.controller,
+        assist=ns.assist or False,
+        control_hz=ns.control_hz,
+        settle_s=ns.settle,
+        stop_on_fall=not ns.no_stop,
+    )
+    report: dict[str, Any] = {"input": str(ns.input)}
+    report.update(result.report())
+    report["reference_dynamic"] = dynamic_metrics(motion)
+    report["simulated_kinematic"] = kinematic_metrics(result.motion(), contacts=result.contacts)
+    return _finite(report), result
+
+
+def _summary(report: dict[str, Any]) -> str:
+    m = report["metrics"]
+
+    def f(v: Any, spec: str = ".4g") -> str:
+        return "n/a" if v is None else format(v, spec)
+
+    if report["unstable"]:
+        status = f"UNSTABLE ({report['unstable_reason']})"
+    elif report["fell"]:
+        status = f"fell at {report['fall_time_s']:.2f} s ({report['fall_reason']})"
+    else:
+        status = "completed"
+    lines = [
+        f"track {report['input']}: {report['species']}, {report['frames']} frames at "
+        f"{report['fps']:g} fps, controller {report['controller']}, "
+        f"assist {'on' if report['assist'].get('assist_on') else 'off'}",
+        f"  {status}",
+        f"  survival            {f(m['survival'], '.3f')}",
+        f"  sim_mpjpe_mm        {f(m['sim_mpjpe_mm'])}   ({f(m['sim_mpjpe_per_leg'], '.3f')} leg)",
+        f"  root_drift_mm       {f(m['root_drift_mm'])}   "
+        f"({f(m['root_drift_per_leg'], '.3f')} leg)",
+        f"  contact_f1          {f(m['contact_f1'], '.3f')}",
+        f"  assist_force_mg     {f(m['assist_force_mg'], '.3f')}",
+        f"  cost_of_transport   {f(m['cost_of_transport'], '.3f')}",
+        f"  realtime_factor     {f(m['realtime_factor'], '.1f')}",
+    ]
+    dyn = report["reference_dynamic"]
+    lines.append(
+        f"  reference: root_residual_mg {f(dyn['root_residual_mg'], '.3f')}, "
+        f"root_residual_torque_mgl {f(dyn['root_residual_torque_mgl'], '.3f')}, "
+        f"torque_saturation {f(dyn['torque_saturation'], '.3f')}"
+    )
+    return "\n".join(lines)
+
+
+def _track(ns: argparse.Namespace) -> int:
+    from ..fileio import atomic_write_text
+
+    if ns.video:
+        from ..render import check_video_writer
+
+        check_video_writer(Path(ns.video))  # fail before simulating
+    report, result = track_report(ns)
+    if ns.out:
+        result.motion().save(ns.out)
+    if ns.report:
+        atomic_write_text(ns.report, json.dumps(report, indent=2, allow_nan=False) + "\n")
+    if ns.video:
+        from ..render import render_video
+
+        render_video(result.model, result.qpos, result.fps, ns.video)
+    if ns.json:
+        print(json.dumps(report, allow_nan=False))
+    else:
+        print(_summary(report))
+    return 0
