@@ -30,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="gait statistics and kinematic plausibility metrics of a motion file",
         description=(
             "Report duration, speed, Froude number, duty factor, footfall phase offsets, "
-            "stride, static stability margin and the kinematic metrics of METRICS.md."
+            "stride, static stability margin and the kinematic and dynamic metrics of METRICS.md."
         ),
     )
     p.add_argument("file", metavar="FILE", help="motion file (.npz)")
@@ -55,6 +55,7 @@ def motion_stats(path: str) -> dict[str, Any]:
     Raises:
         MotionFileError, InvalidMotionError, UnknownSpeciesError: a bad file.
     """
+    from ..evaluation.dynamic import dynamic_metrics
     from ..evaluation.kinematic import kinematic_metrics
     from ..gait_stats import gait_statistics
     from ..motion import load_motion
@@ -69,6 +70,7 @@ def motion_stats(path: str) -> dict[str, Any]:
     }
     out.update(gait_statistics(m).to_dict())
     out.update(kinematic_metrics(m))
+    out.update(dynamic_metrics(m))
     return _clean(out)
 
 
@@ -113,6 +115,9 @@ _ROWS: list[tuple[str, str]] = [
     ("float_per_leg", ""),
     ("skate_per_leg", ""),
     ("bone_length_error_per_leg", ""),
+    ("root_residual_mg", "m·g"),
+    ("root_residual_torque_mgl", "m·g·L"),
+    ("torque_saturation", ""),
 ]
 
 
