@@ -58,3 +58,23 @@ __all__ = [
     "servo_map",
     "stiffness_rule",
 ]
+
+# Balance-aware tracking (issue [6/6]): stance-force QP, convex MPC, swing legs, factory.
+from .balance import BalanceConfig, BalanceController, StanceQP  # noqa: E402
+from .factory import CONTROLLER_NAMES, make_controller  # noqa: E402
+from .mpc import ConvexMPC, MPCController, MPCWeights  # noqa: E402
+from .swing import LegSet, MotionPlan, plan_from_qpos  # noqa: E402
+
+__all__ += [
+    "BalanceConfig",
+    "BalanceController",
+    "CONTROLLER_NAMES",
+    "ConvexMPC",
+    "LegSet",
+    "MPCController",
+    "MPCWeights",
+    "MotionPlan",
+    "StanceQP",
+    "make_controller",
+    "plan_from_qpos",
+]

@@ -67,7 +67,7 @@ __all__ = [
 #: ``servo`` in-engine position servos (ctrl = target angle); ``pd`` explicit PD torques
 #: on the motors; ``+stance`` adds the stance-leg trunk stabiliser (virtual model control,
 #: no external force); ``+id`` adds inverse-dynamics feed-forward torques of the reference.
-CONTROLLERS = ("servo", "pd", "servo+stance", "servo+id", "servo+id+stance")
+CONTROLLERS = ("servo", "pd", "servo+stance", "servo+id", "servo+id+stance", "balance", "mpc")
 #: METRICS.md fall rule: trunk height below this share of its reference height …
 FALL_HEIGHT_RATIO = 0.5
 #: … or trunk tilt (from the reference's trunk orientation) above this [deg] …
@@ -363,21 +363,32 @@ def _default_pd(model: mujoco.MjModel) -> Any:
     return PDController(model, kp, kd)
 
 
-def _make_controller(controller: Any, model: mujoco.MjModel) -> Any:
+def _make_controller(controller: Any, model: mujoco.MjModel, clip: _Clip | None = None,
+                     control_dt: float | None = None) -> Any:
     """A controller instance for a name (on ``model``, already servo-configured when the
-    name asks for servos) or the given instance."""
+    name asks for servos) or the given instance. The balance-aware controllers
+    (``balance``, ``mpc``) get the clip's reference plan (qpos, fps, contact table)."""
     if not isinstance(controller, str):
         if not hasattr(controller, "control"):
             raise SimulationError(
                 f"controller must be one of {', '.join(CONTROLLERS)} or a Controller, "
                 f"got {type(controller).__name__}"
             )
+        if clip is not None and hasattr(controller, "set_plan"):
+            controller.set_plan(clip.qpos, clip.fps, clip.contacts)
         return controller
     if controller not in CONTROLLERS:
         raise SimulationError(unknown_choice("controller", controller, CONTROLLERS))
     from .controllers import ControllerError
 
     try:
+        if controller in ("balance", "mpc"):
+            from .controllers.factory import make_controller
+
+            opts = {} if control_dt is None else {"control_dt": control_dt}
+            plan = {} if clip is None else {"qpos": clip.qpos, "fps": clip.fps, "contacts": clip.contacts}
+            species = None if clip is None else clip.species
+            return make_controller(controller, model, species, **plan, **opts)
         if controller == "pd":
             return _default_pd(model)
         from .controllers.feedforward import InverseDynamicsFeedforward
@@ -1076,6 +1087,9 @@ def track(
         controller: a name of :data:`CONTROLLERS` — ``"servo"`` (in-engine position
             servos, ``ctrl`` = target angle), ``"pd"`` (explicit PD torques on the motors),
             ``"servo+stance"`` (plus the stance-leg trunk stabiliser, no external force),
+            ``"balance"`` (stance-force QP every tick + swing-leg control on the torque
+            motors) and ``"mpc"`` (convex single-rigid-body MPC feeding that QP), both
+            planned from the clip's reference and contact table,
             ``"servo+id"`` / ``"servo+id+stance"`` (plus inverse-dynamics feed-forward) —
             or a :class:`~habitsim.controllers.Controller` instance for ``model``.
         assist: ``False``; ``True`` or ``"root"`` for
@@ -1112,7 +1126,8 @@ def track(
     if use_rollout if use_rollout is not None else fast:
         run = _run_rollout(sim_model, [clip], 1, settle_s, stop_on_fall, [detector])[0]
         return _finish(clip, sim_model, run, "servo", _rollout_stats(1))
-    ctl = _make_controller(controller, sim_model)
+    ctl = _make_controller(controller, sim_model, clip,
+                           None if every == 1 else every * sim_model.opt.timestep)
     run = _run_python(sim_model, clip, ctl, asst, every, settle_s, stop_on_fall, detector)
     name = controller if isinstance(controller, str) else str(getattr(ctl, "name", "custom"))
     return _finish(clip, sim_model, run, name, ctl.stats.to_dict())

@@ -1,0 +1,802 @@
+"""Balance-aware tracking without external force: the stance-force QP every control tick.
+
+:class:`BalanceController` (name ``"balance"``) follows a reference motion on any MJCF
+with a free joint and named feet, using only the joint actuators (Bledt et al. 2018, MIT
+Cheetah 3's balance controller, in its whole-body form):
+
+1. **Wanted trunk wrench** about the whole-body centre of mass ``c``::
+
+       b = [m (c̈_des − g); I_c ω̇_des]
+       c̈_des = c̈_ref + Kp (c_ref − c) + Kd (ċ_ref − ċ)
+       ω̇_des = ω̇_ref + Kp_r e_R + Kd_r (ω_ref − ω)
+
+   with the reference from the motion (:class:`~habitsim.controllers.swing.MotionPlan`,
+   or the current :class:`~habitsim.controllers.base.Reference` alone), ``I_c`` the
+   centroidal inertia of the model at its current pose, gains scaled with the body
+   (:class:`BalanceConfig`).
+2. **Stance-force QP** (:class:`StanceQP`) over the ground forces ``f_i`` of the stance
+   feet::
+
+       min_f ‖S (A f − b)‖² + α ‖f − f_prev‖² + ε ‖f‖²
+       s.t.  |f_x|, |f_y| ≤ μ f_z   (linear friction pyramid, flat ground, z up)
+             f_z,min ≤ f_z ≤ f_z,max on stance feet; f = 0 on swing feet
+             τ_lo ≤ −Σ_i J_iᵀ f_i ≤ τ_hi on every joint of a leg chain
+
+   ``A = [I … I; [p_i − c]× …]``, ``S = diag(1, 1, 1, 1/L, 1/L, 1/L)`` (L the leg length)
+   so force and torque rows are both in newtons; ``τ_lo, τ_hi`` are the actuator limits
+   minus the torque the bias and swing terms already take, so the distribution never asks
+   a weak joint (an abductor, the spine) for more than it has. Solved by a CasADi
+   ``qpsol`` with the ``daqp`` plugin (or ``qpoases``), built once, evaluated through
+   CasADi's zero-copy function buffer (the QP itself takes ~15 µs; CasADi's ordinary
+   Python call would add ~150 µs of conversions). A result that is not finite or breaks
+   the constraints is replaced by a clipped least-squares solution and counted as a
+   failure.
+3. **Torques** (joint actuators only; nothing is ever applied to the free joint), in
+   order of priority::
+
+       τ = h + M q̈_ref|free + Σ_swing J_own,iᵀ F_i − Σ_stance J_iᵀ f_i + τ_posture
+
+   ``h`` the bias forces (gravity, Coriolis; ``qfrc_bias``) of the actuated joints;
+   ``M q̈_ref`` the inertial feed-forward of the reference accelerations of the swinging
+   legs and of the joints on no leg chain (neck, head, tail); ``F_i`` the swing feet's
+   Cartesian PD (:class:`~habitsim.controllers.swing.SwingLegs`); ``J_i`` the
+   translational Jacobian, on the actuated joints of the foot's chain (spine joints
+   included: they carry the front feet's load), of the point where foot i touches the
+   ground (the mean of its body's contacts: a paw lying on its toe capsule or a
+   plantigrade sole is pushed there, not at the foot sphere); ``τ_posture`` a joint PD
+   to the reference — full on the joints outside the legs, projected into the null space
+   of each foot Jacobian on the leg joints (``null_space_posture``) — plus light leg
+   damping, clipped into whatever torque is left. The sum is clipped to the actuators'
+   limits. ``f_i`` is the force the ground exerts on foot i; the leg pushes the ground
+   with ``−f_i``, hence ``−J_iᵀ f_i``: a stance leg asked for an upward force extends and
+   lifts the trunk (tested).
+4. **Contacts** (:class:`~habitsim.controllers.swing.ContactTracker`): schedule from the
+   motion, early touch-down switches a leg to stance, a lost contact zeroes its force.
+
+Kinematic quantities are read from ``data`` as left by ``mj_step`` (the state at the
+start of the last step: one step old), velocities from ``data.qvel``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+
+import casadi
+import mujoco
+import numpy as np
+
+from .base import Controller, ControllerError, ControllerStats, Reference
+from .gains import critical_damping, max_stable_gains, stiffness_rule
+from .swing import (
+    STANCE,
+    SWING,
+    ContactTracker,
+    LegSet,
+    MotionPlan,
+    PlanSample,
+    SwingLegs,
+    matrix_from_rpy,
+    model_leg_length,
+    plan_from_qpos,
+    rpy_from_matrix,
+)
+
+__all__ = [
+    "BalanceConfig",
+    "StanceQP",
+    "BalanceController",
+    "centroidal_inertia",
+    "wrench_matrix",
+    "STANCE_SOLVERS",
+]
+
+#: Upper bound of the trunk PD natural frequencies [rad/s]: above ~12 rad/s the trunk
+#: loop excites the redundant legs of small species (rabbit, cat, fox) and they fold.
+OMEGA_CAP = 10.0
+#: CasADi conic plugins the stance QP accepts (dense active-set solvers first).
+STANCE_SOLVERS = ("daqp", "qpoases", "proxqp", "osqp")
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (k, 3) arrays (numpy's cross is slow on small arrays)."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+                     a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def wrench_matrix(r: np.ndarray) -> np.ndarray:
+    """(6, 3k) ``A`` mapping k foot forces to the wrench about the CoM; ``r`` (k, 3) are
+    the foot points minus the CoM [m]."""
+    r = np.asarray(r, dtype=float).reshape(-1, 3)
+    a = np.zeros((6, 3 * len(r)))
+    for i, ri in enumerate(r):
+        a[:3, 3 * i:3 * i + 3] = np.eye(3)
+        a[3:, 3 * i:3 * i + 3] = _skew(ri)
+    return a
+
+
+def centroidal_inertia(model: mujoco.MjModel, data: mujoco.MjData, bodies: np.ndarray,
+                       com: np.ndarray) -> np.ndarray:
+    """(3, 3) inertia [kg·m²] of ``bodies`` about ``com``, world frame, at ``data``'s pose."""
+    r = data.xipos[bodies] - com
+    rot = data.ximat[bodies].reshape(-1, 3, 3)
+    inertia = np.einsum("bij,bj,bkj->ik", rot, model.body_inertia[bodies], rot)
+    m = model.body_mass[bodies]
+    rr = np.einsum("bi,bi->b", r, r)
+    outer = r[:, :, None] * r[:, None, :]
+    inertia += np.einsum("b,bij->ij", m, rr[:, None, None] * np.eye(3) - outer)
+    return inertia
+
+
+@dataclass(frozen=True)
+class BalanceConfig:
+    """Parameters of the balance and MPC controllers, scaled to the body.
+
+    Build with :meth:`scaled` (every default follows from mass m, leg length L and
+    gravity g, so one set of dimensionless numbers serves a 2 kg rabbit and a 3.5 t
+    elephant); override any field by keyword.
+
+    Attributes:
+        mass: total mass m [kg]; leg_length: L [m]; gravity: g [m/s²].
+        trunk_omega: natural frequency of the CoM PD [rad/s] (default 2·sqrt(g/L), at
+            most :data:`OMEGA_CAP`).
+        rot_omega: of the trunk orientation PD [rad/s] (same default).
+        damping_ratio: ζ of both.
+        mu: friction coefficient of the pyramid (keep below the floor's).
+        fz_min, fz_max: normal force bounds per stance foot [N] (default 0, 1.5·m·g).
+        smooth: α on ‖f − f_prev‖² (relative to the scaled wrench residual).
+        regularization: ε on ‖f‖².
+        swing_omega: swing-foot PD natural frequency [rad/s] (default 8·sqrt(g/L));
+            Cartesian gains ``kp = m_leg ω²``, ``kd = 2 m_leg ω`` per leg, capped at half
+            the explicit-integration stability limit of the leg's joints.
+        capture_gain, capture_pos_gain: foothold correction gains (velocity error ×
+            sqrt(h/g); CoM position error).
+        capture_max: bound of the foothold correction [m] (default 0.15·L).
+        seek_depth: a lost-contact foot aims this far below its reference point [m]
+            (default 0.03·L).
+        posture_body: scale of the joint PD on non-leg joints (1 = kp = τmax/0.15 rad,
+            capped at half the explicit stability limit; kd critical, capped).
+        posture_leg: scale of the posture PD of the leg joints.
+        null_space_posture: project the leg posture PD into the null space of each foot
+            Jacobian (default), so it never changes a redundant leg's foot force; off, the
+            plain joint PD acts on the legs as well (stiffer posture, foot forces a little
+            off the QP's plan — it keeps the fox standing).
+        leg_damping: scale of the (unprojected) damping of the leg joints.
+        early_phase: swing phase after which a touch-down switches to stance.
+        lost_s: grace time before a stance foot without contact loses its force [s].
+    """
+
+    mass: float
+    leg_length: float
+    gravity: float = 9.81
+    trunk_omega: float = 0.0
+    rot_omega: float = 0.0
+    damping_ratio: float = 1.0
+    mu: float = 0.6
+    fz_min: float = 0.0
+    fz_max: float = 0.0
+    smooth: float = 1e-3
+    regularization: float = 1e-6
+    swing_omega: float = 0.0
+    capture_gain: float = 1.0
+    capture_pos_gain: float = 0.5
+    capture_max: float = 0.0
+    seek_depth: float = 0.0
+    posture_body: float = 1.0
+    posture_leg: float = 0.3
+    leg_damping: float = 0.1
+    early_phase: float = 0.5
+    lost_s: float = 0.01
+    null_space_posture: bool = True
+    extra: dict = field(default_factory=dict)
+
+    @classmethod
+    def scaled(cls, mass: float, leg_length: float, gravity: float = 9.81,
+               **overrides: float) -> BalanceConfig:
+        """The defaults for a body of ``mass`` [kg] and ``leg_length`` [m].
+
+        Raises:
+            ControllerError: non-positive mass, leg length or gravity; unknown field.
+        """
+        for name, v in (("mass", mass), ("leg_length", leg_length), ("gravity", gravity)):
+            if not (np.isfinite(v) and v > 0):
+                raise ControllerError(f"{name} must be finite and > 0, got {v}")
+        w0 = float(np.sqrt(gravity / leg_length))
+        cfg = cls(mass=float(mass), leg_length=float(leg_length), gravity=float(gravity),
+                  trunk_omega=min(2.0 * w0, OMEGA_CAP), rot_omega=min(2.0 * w0, OMEGA_CAP),
+                  fz_max=1.5 * mass * gravity,
+                  swing_omega=8.0 * w0, capture_max=0.15 * leg_length,
+                  seek_depth=0.03 * leg_length)
+        known = set(cls.__dataclass_fields__) - {"mass", "leg_length", "gravity"}
+        bad = sorted(set(overrides) - known)
+        if bad:
+            raise ControllerError(f"unknown balance option(s) {', '.join(bad)}; valid: "
+                                  f"{', '.join(sorted(known))}")
+        cfg = replace(cfg, **{k: (v if isinstance(v, (dict, bool)) else float(v))
+                              for k, v in overrides.items()})
+        for name in known - {"extra", "null_space_posture", "fz_min", "capture_gain",
+                             "capture_pos_gain",
+                             "posture_body", "posture_leg", "leg_damping", "regularization",
+                             "smooth"}:
+            v = getattr(cfg, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ControllerError(f"balance option {name} must be > 0, got {v}")
+        for name in ("fz_min", "capture_gain", "capture_pos_gain", "posture_body",
+                     "posture_leg", "leg_damping", "regularization", "smooth"):
+            v = getattr(cfg, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ControllerError(f"balance option {name} must be >= 0, got {v}")
+        if cfg.fz_min >= cfg.fz_max:
+            raise ControllerError("fz_min must be below fz_max")
+        return cfg
+
+
+class StanceQP:
+    """The stance-force QP for up to ``n_feet`` feet (built once; see module docstring).
+
+    Decision variables: all feet's forces (3·n_feet, world frame); swing feet are held
+    at zero by their bounds, so one problem serves every stance set.
+
+    With ``n_joints > 0`` the torques the forces need are kept inside given bounds,
+    ``τ_lo ≤ −Σ_i J_iᵀ f_i ≤ τ_hi`` (``J_i`` (3, n_joints) the foot Jacobians on those
+    joints): the controller passes the actuator limits minus the torque the other terms
+    already use, so the distribution never asks a weak joint (an abductor, the spine) for
+    more than it has.
+
+    Args:
+        n_feet: number of feet.
+        solver: CasADi conic plugin (:data:`STANCE_SOLVERS`; "daqp" default).
+        n_joints: number of joints with torque bounds (0: none).
+
+    Attributes:
+        times: solve times [s] of the last up to 4096 calls (ring buffer), for medians.
+        failures: number of solves whose result was replaced by the fallback.
+    """
+
+    def __init__(self, n_feet: int, solver: str = "daqp", n_joints: int = 0) -> None:
+        if solver not in STANCE_SOLVERS or not casadi.has_conic(solver):
+            avail = [s for s in STANCE_SOLVERS if casadi.has_conic(s)]
+            raise ControllerError(f"stance QP solver {solver!r} is not available; "
+                                  f"available: {', '.join(avail)}")
+        if n_feet < 1:
+            raise ControllerError("the stance QP needs at least one foot")
+        self.n = int(n_feet)
+        self.nj = int(n_joints)
+        self.solver = solver
+        nx = 3 * self.n
+        f = casadi.SX.sym("f", nx)
+        # parameters: r (3n), b (6), anchor (3n), S (6), alpha, eps, mu, Jᵀ (nj × 3n, by column)
+        p = casadi.SX.sym("p", 3 * self.n + 6 + 3 * self.n + 6 + 3 + self.nj * nx)
+        r = p[0:nx]
+        b = p[nx:nx + 6]
+        anchor = p[nx + 6:2 * nx + 6]
+        s = p[2 * nx + 6:2 * nx + 12]
+        alpha, eps, mu = p[2 * nx + 12], p[2 * nx + 13], p[2 * nx + 14]
+        force = casadi.SX.zeros(3)
+        torque = casadi.SX.zeros(3)
+        g = []
+        for i in range(self.n):
+            fi, ri = f[3 * i:3 * i + 3], r[3 * i:3 * i + 3]
+            force += fi
+            torque += casadi.cross(ri, fi)
+            g += [fi[0] - mu * fi[2], -fi[0] - mu * fi[2], fi[1] - mu * fi[2], -fi[1] - mu * fi[2]]
+        if self.nj:
+            jt = casadi.reshape(p[2 * nx + 15:], self.nj, nx)
+            g += casadi.vertsplit(-(jt @ f))
+        res = s * (casadi.vertcat(force, torque) - b)
+        obj = casadi.sumsqr(res) + alpha * casadi.sumsqr(f - anchor) + eps * casadi.sumsqr(f)
+        opts: dict = {"error_on_fail": False}
+        if solver == "qpoases":
+            opts["printLevel"] = "none"
+        elif solver == "osqp":
+            opts["osqp"] = {"verbose": False, "eps_abs": 1e-6, "eps_rel": 1e-6}
+        self._fn = casadi.qpsol(f"stance_qp_{self.n}", solver,
+                                {"x": f, "p": p, "f": obj, "g": casadi.vertcat(*g)}, opts)
+        self._buf, self._eval = self._fn.buffer()
+        self._in = [np.zeros(self._fn.nnz_in(i)) for i in range(self._fn.n_in())]
+        self._out = [np.zeros(self._fn.nnz_out(i)) for i in range(self._fn.n_out())]
+        for i, a in enumerate(self._in):
+            self._buf.set_arg(i, memoryview(a))
+        for i, a in enumerate(self._out):
+            self._buf.set_res(i, memoryview(a))
+        self._in[4][:] = -np.inf  # lbg
+        self._in[5][:] = 0.0  # ubg
+        self._np = 2 * nx + 15
+        self.times = np.zeros(4096)
+        self.calls = 0
+        self.failures = 0
+        self._bits = 1 << np.arange(self.n)
+        self._bounds: dict = {}
+
+    def solve(self, r: np.ndarray, wrench: np.ndarray, stance: np.ndarray, *,
+              mu: float, fz_min: float, fz_max: float, row_scale: np.ndarray,
+              anchor: np.ndarray | None = None, smooth: float = 1e-3,
+              regularization: float = 1e-6, jac: np.ndarray | None = None,
+              tau_lo: np.ndarray | None = None,
+              tau_hi: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
+        """Ground forces ``(n, 3)`` [N] and whether the QP solution was used.
+
+        Args:
+            r: (n, 3) foot points minus CoM [m] (world frame).
+            wrench: (6,) wanted [force N; torque about the CoM N·m].
+            stance: (n,) bool, feet allowed to carry force.
+            mu, fz_min, fz_max: friction coefficient and normal-force bounds [N].
+            row_scale: (6,) S.
+            anchor: (n, 3) forces the smoothing term pulls towards (f_prev); default 0.
+            smooth, regularization: α and ε.
+            jac: (n, 3, n_joints) foot Jacobians on the bounded joints; tau_lo, tau_hi:
+                (n_joints,) bounds of ``−Σ J_iᵀ f_i`` [N·m] (widened to include 0, so
+                ``f = 0`` is always feasible). Needed when built with ``n_joints > 0``.
+        """
+        t0 = time.perf_counter()
+        n, nj = self.n, self.nj
+        st = np.asarray(stance, dtype=bool)
+        prm, lbg, ubg = self._in[1], self._in[4], self._in[5]
+        prm[0:3 * n] = np.ravel(r)
+        prm[3 * n:3 * n + 6] = wrench
+        prm[3 * n + 6:6 * n + 6] = 0.0 if anchor is None else np.ravel(anchor)
+        prm[6 * n + 6:6 * n + 12] = row_scale
+        prm[6 * n + 12:6 * n + 15] = (smooth, regularization, mu)
+        if nj:
+            if jac is None or tau_lo is None or tau_hi is None:
+                raise ControllerError(
+                    "this stance QP has joint torque bounds: pass jac, tau_lo, tau_hi")
+            # column-major (nj × 3n) Jᵀ: entry (j, 3i+k) = jac[i, k, j]
+            prm[self._np:] = np.ravel(jac)
+            np.minimum(tau_lo, 0.0, out=lbg[4 * n:])
+            np.maximum(tau_hi, 0.0, out=ubg[4 * n:])
+        key = (int(st @ self._bits), fz_min, fz_max)
+        bounds = self._bounds.get(key)
+        if bounds is None:
+            big = 10.0 * fz_max
+            bounds = (np.where(st[:, None], np.array([-big, -big, fz_min]), 0.0).ravel(),
+                      np.where(st[:, None], np.array([big, big, fz_max]), 0.0).ravel())
+            if len(self._bounds) < 256:
+                self._bounds[key] = bounds
+        lbx, ubx = bounds
+        self._in[2][:] = lbx
+        self._in[3][:] = ubx
+        ok = True
+        if st.any():
+            self._eval()
+            x = self._out[0].copy()
+            g = self._out[2]
+            viol = max(float(np.max(x - ubx)), float(np.max(lbx - x)),
+                       float(np.max(g - ubg)), float(np.max(lbg - g)))
+            ok = viol <= 1e-5 * max(fz_max, 1.0)  # False for NaN as well
+            if not ok:
+                self.failures += 1
+                x = self._fallback(r, wrench, st, mu, fz_min, fz_max, row_scale)
+            x.reshape(n, 3)[~st] = 0.0  # exactly (the solver leaves ~1e-15 on fixed bounds)
+        else:
+            x = np.zeros(3 * n)
+        self.times[self.calls % self.times.size] = time.perf_counter() - t0
+        self.calls += 1
+        return x.reshape(n, 3), ok
+
+    def _fallback(self, r, wrench, stance, mu, fz_min, fz_max, row_scale) -> np.ndarray:
+        """Regularised least squares on the stance feet, clipped into the pyramid."""
+        idx = np.flatnonzero(stance)
+        a = wrench_matrix(np.asarray(r).reshape(-1, 3)[idx]) * row_scale[:, None]
+        f = np.linalg.solve(a.T @ a + 1e-6 * np.eye(a.shape[1]), a.T @ (wrench * row_scale))
+        out = np.zeros((self.n, 3))
+        for k, i in enumerate(idx):
+            fi = f[3 * k:3 * k + 3]
+            fz = float(np.clip(fi[2], fz_min, fz_max))
+            out[i] = (np.clip(fi[0], -mu * fz, mu * fz), np.clip(fi[1], -mu * fz, mu * fz), fz)
+        return out.reshape(-1)
+
+    def median_ms(self) -> float:
+        """Median solve time [ms] over the recorded calls (NaN before the first)."""
+        k = min(self.calls, self.times.size)
+        return float(np.median(self.times[:k]) * 1e3) if k else float("nan")
+
+
+def _posture_gains(model: mujoco.MjModel, names: Sequence[str],
+                   dt: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(kp, kd): torque rule (τmax / 0.15 rad) and critical damping, both capped at half
+    the explicit-integration stability limit for a control period ``dt`` (the runner's
+    default PD rule)."""
+    kp_max, kd_max = max_stable_gains(model, dt, joints=names)
+    try:
+        kp = stiffness_rule(model, names, mode="torque")
+    except ControllerError:
+        kp = stiffness_rule(model, names, mode="gravity")
+    kp = np.minimum(kp, kp_max)
+    kd = np.minimum(critical_damping(model, kp, names), kd_max)
+    return kp, kd
+
+
+@dataclass
+class _LiveStats(ControllerStats):
+    """Controller stats whose running figures are filled in when read."""
+
+    refresh: Callable[[], None] | None = None
+
+    def to_dict(self) -> dict[str, float | int | list[str]]:
+        if self.refresh is not None:
+            self.refresh()
+        return super().to_dict()
+
+
+class BalanceController(Controller):
+    """Stance-force QP + swing legs + posture: balance-aware tracking, no external force.
+
+    Args:
+        model: the MuJoCo model (torque actuators on the joints, one free joint).
+        feet: foot names in contact-label order (default: ``lf_foot, rf_foot, lh_foot,
+            rh_foot`` or the usual robot names, see
+            :func:`~habitsim.controllers.swing.default_feet`).
+        plan: a :class:`~habitsim.controllers.swing.MotionPlan` of the clip to track
+            (or set it later with :meth:`set_plan`). Without a plan the controller still
+            works from each tick's :class:`Reference` (current CoM and feet by forward
+            kinematics, contacts from ``ref.contacts``), but swing feet then follow their
+            reference point without lift-off / touch-down bending.
+        leg_length: L [m] for scaling (default: the model's trunk height over the feet).
+        config: a :class:`BalanceConfig` (default: :meth:`BalanceConfig.scaled` of the
+            model's mass and ``leg_length`` with ``options`` as overrides).
+        solver: stance QP solver (:data:`STANCE_SOLVERS`).
+        control_dt: period [s] at which the runner calls the controller (default: the
+            model's time step); the explicit-integration gain caps use it.
+        assist: optional root assistance (off by default; never used by the benchmarks).
+        **options: overrides of :class:`BalanceConfig` fields.
+
+    A runner gives the clip with :meth:`set_plan` (reference qpos, fps, contact labels)
+    before :meth:`reset`; with ``settle_s`` the first frame is held while ``ref.time`` is 0
+    and ``ref.qvel`` is zero.
+
+    Attributes:
+        stats: timing and failures; ``stats.to_dict()`` adds ``stance_qp_median_ms``,
+            ``qp_failures``, ``early_touchdowns``, ``lost_contacts``,
+            ``torque_clipped_share``.
+        last_forces (nf, 3) ground forces; last_wrench (6,) wanted; last_achieved (6,)
+        achieved by the forces; last_modes (nf,) leg modes; last_torque (n,) joint
+        torques sent.
+
+    Raises:
+        ControllerError: no free joint, unknown feet, a foot without joints of its own,
+            bad options, a missing solver plugin.
+    """
+
+    name = "balance"
+
+    def __init__(self, model: mujoco.MjModel, feet: Sequence[str] | None = None, *,
+                 plan: MotionPlan | None = None, leg_length: float | None = None,
+                 config: BalanceConfig | None = None, solver: str = "daqp", assist=None,
+                 control_dt: float | None = None, **options: float) -> None:
+        super().__init__(assist=assist)
+        self.control_dt = float(model.opt.timestep if control_dt is None else control_dt)
+        if not (np.isfinite(self.control_dt) and self.control_dt > 0):
+            raise ControllerError(f"control_dt must be > 0, got {control_dt}")
+        self.legs = LegSet(model, feet)
+        legs = self.legs
+        jm = legs.jmap
+        biased = [n for n, b in zip(jm.names, jm.biased, strict=True) if b]
+        if biased:
+            raise ControllerError(f"{type(self).__name__} needs torque actuators; servo "
+                                  f"(biased) actuators on: {', '.join(biased[:8])}")
+        gnorm = float(np.linalg.norm(model.opt.gravity))
+        if config is None:
+            length = model_leg_length(model, legs.feet) if leg_length is None else float(leg_length)
+            config = BalanceConfig.scaled(legs.mass, length, gnorm if gnorm > 0 else 9.81,
+                                          **options)
+        elif options:
+            config = replace(config, **options)
+        self.config = config
+        self.gravity_vec = np.array(model.opt.gravity, dtype=float)
+        self._chain = np.flatnonzero(legs.on_chain.any(axis=0))
+        self.qp = StanceQP(legs.n_feet, solver, n_joints=self._chain.size)
+        self.tracker = ContactTracker(legs.n_feet, config.lost_s, config.early_phase)
+        kp_sw, kd_sw = self._swing_gains(model)
+        self.swing = SwingLegs(legs, kp_sw, kd_sw, capture_gain=config.capture_gain,
+                               capture_pos_gain=config.capture_pos_gain,
+                               capture_max=config.capture_max, seek_depth=config.seek_depth,
+                               seek_speed=0.3 * float(np.sqrt(config.gravity * config.leg_length)))
+        kp, kd = _posture_gains(model, jm.names, self.control_dt)
+        leg = legs.own.any(axis=0)
+        self.kp_post = np.where(leg, config.posture_leg, config.posture_body) * kp
+        self.kd_post = np.where(leg, config.posture_leg, config.posture_body) * kd
+        self.kd_damp = np.where(leg, config.leg_damping * kd, 0.0)
+        self.leg_joint = leg
+        self.leg_free = ~legs.on_chain.any(axis=0)  # neck, head, tail: on no foot's chain
+        self._qacc_buf = np.zeros(model.nv)
+        self._mq_buf = np.zeros(model.nv)
+        w, z = config.trunk_omega, config.damping_ratio
+        self.kp_pos, self.kd_pos = w * w, 2.0 * z * w
+        w = config.rot_omega
+        self.kp_rot, self.kd_rot = w * w, 2.0 * z * w
+        length = config.leg_length
+        self.row_scale = np.array([1.0, 1.0, 1.0, 1.0 / length, 1.0 / length, 1.0 / length])
+        self._bodies = np.array([b for b in range(1, model.nbody) if self._below_trunk(model, b)])
+        self._model = model
+        self._scratch = mujoco.MjData(model)
+        self._jcom = np.zeros((3, model.nv))
+        self.plan = plan
+        nf, n = legs.n_feet, len(jm.names)
+        self.last_forces = np.zeros((nf, 3))
+        self.last_wrench = np.zeros(6)
+        self.last_modes = np.full(nf, STANCE)
+        self.last_torque = np.zeros(n)
+        self._inertia = np.eye(3)
+        self._ticks = 0
+        self._clipped = 0
+        # per-tick caches (see _control / _other_torques)
+        self._dof = jm.dof_adr
+        self._qadr = jm.qpos_adr
+        self._limit = jm.torque_limit
+        self._limit_ch = self._limit[self._chain]
+        self._tpc = jm.torque_per_ctrl
+        self._ctrl_idx = jm.ctrl_index
+        self._jac_all = np.zeros((nf, 3, model.nv))
+        self._jc = np.zeros((nf, 3, n + 1))
+        self._own_any = legs.own.any(axis=0).astype(float)
+        self._body_mask = (~leg).astype(float)
+        self._leg_mask = leg.astype(float)
+        self._feet_col = np.arange(nf)[:, None]
+        self._own_idx = legs.own_idx
+        self._own_valid = legs.own_idx < n
+        self._own_flat = legs.own_idx[self._own_valid]
+        self._eps3 = 1e-6 * np.eye(3)
+        self._eye_w = np.eye(legs.own_idx.shape[1])[None]
+        self._proj: np.ndarray | None = None
+        self._proj_every = 5
+        self._r = np.zeros((nf, 3))
+        self._bits = 1 << np.arange(nf)
+        self._moving: dict[int, np.ndarray] = {}
+        self.stats = _LiveStats(refresh=self._refresh_stats)
+        self.debug = False
+        self._dbg: dict = {}
+
+    # ------------------------------------------------------------------ set-up
+    def _below_trunk(self, model: mujoco.MjModel, b: int) -> bool:
+        while b > 0:
+            if b == self.legs.trunk:
+                return True
+            b = int(model.body_parentid[b])
+        return False
+
+    def _swing_gains(self, model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
+        """Cartesian swing gains per leg, capped at half the stability limit of its joints."""
+        legs, cfg = self.legs, self.config
+        w = cfg.swing_omega
+        kp = legs.leg_mass * w * w
+        kd = 2.0 * legs.leg_mass * w
+        d = mujoco.MjData(model)
+        from .gains import home_qpos, joint_space_inertia
+
+        d.qpos[:] = home_qpos(model)
+        mujoco.mj_forward(model, d)
+        mdiag = np.diag(joint_space_inertia(model, d.qpos))
+        dt = self.control_dt
+        pts = legs.positions(d)
+        jac = legs.jacobians(model, d, pts)
+        for i in range(legs.n_feet):
+            dofs = legs.jmap.dof_adr[legs.own[i]]
+            lever2 = np.maximum((jac[i][:, dofs] ** 2).sum(axis=0), 1e-12)
+            kd_lim = 0.5 * float(np.min(2.0 * mdiag[dofs] / dt / lever2))
+            kp_lim = 0.5 * float(np.min(4.0 * mdiag[dofs] / dt**2 / lever2))
+            kd[i] = min(kd[i], kd_lim)
+            kp[i] = min(kp[i], kp_lim)
+        return kp, kd
+
+    def set_plan(self, plan_or_qpos: MotionPlan | np.ndarray | None, fps: float | None = None,
+                 contacts: np.ndarray | None = None) -> None:
+        """Give the controller the clip it will track (before :meth:`reset`).
+
+        Args:
+            plan_or_qpos: a :class:`MotionPlan`, or the (T, nq) reference qpos at ``fps``
+                (then ``contacts`` (T, nf) are the contact labels, default: from the
+                foot heights); ``None`` removes the plan.
+        """
+        if plan_or_qpos is None or isinstance(plan_or_qpos, MotionPlan):
+            self.plan = plan_or_qpos
+            return
+        if fps is None:
+            raise ControllerError("set_plan with a qpos array needs fps")
+        self.plan = plan_from_qpos(self._model, plan_or_qpos, fps, contacts,
+                                   legs=self.legs, leg_length=self.config.leg_length)
+
+    def reset(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        super().reset(model, data)
+        self.tracker.reset()
+        self.swing.reset()
+        self.last_forces[:] = 0.0
+        self.last_modes[:] = STANCE
+        self._proj = None
+        self._ticks = 0
+        self._clipped = 0
+        self._inertia = centroidal_inertia(model, data, self._bodies,
+                                           data.subtree_com[self.legs.trunk])
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self.legs.jmap.names
+
+    # ------------------------------------------------------------------ per tick
+    def _sample(self, model: mujoco.MjModel, ref: Reference) -> PlanSample:
+        """The plan at ``ref.time`` (or, without a plan, from ``ref`` by forward kinematics)."""
+        hold = ref.time == 0.0 and not np.any(ref.qvel)
+        if self.plan is not None:
+            return self.plan.sample(ref.time, hold=hold)
+        legs, d = self.legs, self._scratch
+        d.qpos[:] = ref.qpos
+        mujoco.mj_kinematics(model, d)
+        mujoco.mj_comPos(model, d)
+        tr = legs.trunk
+        mujoco.mj_jacSubtreeCom(model, d, self._jcom, tr)
+        feet = legs.positions(d)
+        jac = legs.jacobians(model, d, feet)
+        rot = d.xmat[tr].reshape(3, 3)
+        da = legs.dadr
+        nf = legs.n_feet
+        contacts = (np.ones(nf, dtype=bool) if ref.contacts is None
+                    else np.asarray(ref.contacts, dtype=bool).reshape(-1))
+        if contacts.shape != (nf,):
+            raise ControllerError(f"ref.contacts has {contacts.size} entries, the controller "
+                                  f"has {nf} feet ({', '.join(legs.feet)})")
+        nan = np.full(nf, np.nan)
+        return PlanSample(
+            t=float(ref.time), com=d.subtree_com[tr].copy(), com_vel=self._jcom @ ref.qvel,
+            com_acc=np.array(ref.qacc[da:da + 3]), rpy=rpy_from_matrix(rot),
+            omega=rot @ ref.qvel[da + 3:da + 6], omega_dot=rot @ ref.qacc[da + 3:da + 6],
+            feet=feet, feet_vel=jac @ ref.qvel, contacts=contacts, phase=nan,
+            t_liftoff=nan, t_touchdown=nan, foothold=feet.copy(),
+        )
+
+    def _trunk_state(self, model: mujoco.MjModel, data: mujoco.MjData):
+        tr, da = self.legs.trunk, self.legs.dadr
+        mujoco.mj_subtreeVel(model, data)
+        com = data.subtree_com[tr].copy()
+        com_vel = data.subtree_linvel[tr].copy()
+        rot = data.xmat[tr].reshape(3, 3).copy()
+        omega = rot @ data.qvel[da + 3:da + 6]
+        return com, com_vel, rot, omega
+
+    @staticmethod
+    def _rotation_error(rot_des: np.ndarray, rot: np.ndarray) -> np.ndarray:
+        """World-frame rotation vector taking ``rot`` to ``rot_des``."""
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, (rot_des @ rot.T).ravel())
+        err = np.zeros(3)
+        mujoco.mju_quat2Vel(err, quat, 1.0)
+        return err
+
+    def _wanted(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference,
+                smp: PlanSample, com: np.ndarray, com_vel: np.ndarray, rot: np.ndarray,
+                omega: np.ndarray, r: np.ndarray,
+                stance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(wanted wrench b (6,), anchor forces (nf, 3)) of this tick."""
+        acc = (smp.com_acc + self.kp_pos * (smp.com - com)
+               + self.kd_pos * (smp.com_vel - com_vel))
+        e_rot = self._rotation_error(matrix_from_rpy(smp.rpy), rot)
+        alpha = smp.omega_dot + self.kp_rot * e_rot + self.kd_rot * (smp.omega - omega)
+        b = np.concatenate([self.config.mass * (acc - self.gravity_vec), self._inertia @ alpha])
+        return b, self.last_forces
+
+    def _control(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:
+        legs, cfg = self.legs, self.config
+        if self._ticks % 10 == 0:
+            self._inertia = centroidal_inertia(model, data, self._bodies,
+                                               data.subtree_com[legs.trunk])
+        self._ticks += 1
+        com, com_vel, rot, omega = self._trunk_state(model, data)
+        p = legs.positions(data)
+        touch, p_contact = legs.contact_points(data)
+        smp = self._sample(model, ref)
+        prev = self.last_modes
+        modes = self.tracker.update(smp.t, smp.contacts, touch, smp.phase)
+        lifted = (modes == SWING) & (prev != SWING)
+        if lifted.any():
+            self.swing.lift_off(np.flatnonzero(lifted), p, smp.feet)
+        self.last_modes = modes
+        stance = modes == STANCE
+        # stance feet push where their contacts are; swing feet are steered by the foot point
+        use = stance & touch
+        p_force = np.where(use[:, None], p_contact, p) if use.any() else p
+        jac = legs.jacobians(model, data, p_force, out=self._jac_all)
+        v = jac @ data.qvel  # for swing feet: the foot point's velocity
+        r = p_force - com
+        # swing feet
+        height = max(float(com[2] - p[:, 2].min()), 1e-3)
+        delta = self.swing.correction(com, com_vel, smp.com, smp.com_vel, height, cfg.gravity)
+        p_des, v_des = self.swing.targets(smp, modes, delta)
+        force_sw = self.swing.forces(p, v, p_des, v_des)
+        force_sw[stance] = 0.0
+        jc = self._jc
+        jc[:, :, :-1] = jac[:, :, self._dof]  # (nf, 3, n + 1), last column zero
+        tau0, post = self._other_torques(model, data, ref, jc, force_sw, modes)
+        # stance forces, within what the actuators have left after bias and swing
+        b, anchor = self._wanted(model, data, ref, smp, com, com_vel, rot, omega, r, stance)
+        ch = self._chain
+        t0 = tau0[ch]
+        forces, ok = self.qp.solve(r, b, stance, mu=cfg.mu, fz_min=cfg.fz_min,
+                                   fz_max=cfg.fz_max, row_scale=self.row_scale, anchor=anchor,
+                                   smooth=cfg.smooth, regularization=cfg.regularization,
+                                   jac=jc[:, :, ch], tau_lo=-self._limit_ch - t0,
+                                   tau_hi=self._limit_ch - t0)
+        if not ok:
+            self.stats.failures += 1
+            self.stats.note(f"stance QP failed at t={ref.time:.3f}s; used clipped least squares")
+        self.last_forces = forces
+        self.last_wrench = b
+        self._r = r
+        tau = tau0 - np.einsum("fkn,fk->n", jc[:, :, :-1], forces)
+        # posture last, within the torque that is left (balance comes first)
+        post = np.minimum(np.maximum(post, -self._limit - tau), self._limit - tau)
+        if self.debug:
+            self._dbg["stance"] = tau - tau0
+            self._dbg["posture"] = post
+        return self._to_ctrl(data, tau + post)
+
+    @property
+    def last_achieved(self) -> np.ndarray:
+        """(6,) wrench about the CoM of :attr:`last_forces` (at the last tick's lever arms)."""
+        f = self.last_forces
+        return np.concatenate([f.sum(axis=0), _cross(self._r, f).sum(axis=0)])
+
+    def _other_torques(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference,
+                       jc: np.ndarray, force_sw: np.ndarray, modes: np.ndarray) -> np.ndarray:
+        """(base, posture), each (n,): every torque but the stance forces' — ``base`` the
+        bias, inertial feed-forward and swing PD, ``posture`` the joint PD (null-space
+        projected on the legs) and damping. ``jc`` is (nf, 3, n + 1), last column zero."""
+        legs = self.legs
+        dof = self._dof
+        tau = data.qfrc_bias[dof]  # a copy (fancy index)
+        # inertial feed-forward of the reference joint accelerations of the swinging legs
+        # and of the joints outside the legs: M[j, j'] q̈_ref[j'] over those joints only
+        key = int((modes == SWING) @ self._bits)
+        moving = self._moving.get(key)
+        if moving is None:
+            moving = self._moving[key] = (self.leg_free | legs.own[modes == SWING].any(axis=0)
+                                          ).astype(float)
+        vec = self._qacc_buf
+        vec[dof] = ref.qacc[dof] * moving
+        mujoco.mj_mulM(model, data, self._mq_buf, vec)
+        tau += self._mq_buf[dof] * moving
+        t_sw = np.einsum("fkn,fk->n", jc[:, :, :-1], force_sw * 1.0) * self._own_any
+        if self.debug:
+            self._dbg = {"bias": tau.copy(), "swing": t_sw}
+        tau += t_sw
+        e_q = ref.qpos[self._qadr] - data.qpos[self._qadr]
+        e_v = ref.qvel[dof] - data.qvel[dof]
+        pd = self.kp_post * e_q + self.kd_post * e_v
+        post = self._body_mask * pd + self.kd_damp * e_v
+        if not self.config.null_space_posture:
+            post += self._leg_mask * pd
+            return tau, post
+        # leg posture in the null space of each foot Jacobian on the leg's own joints;
+        # the projector I − J⁺J changes slowly and is refreshed every few ticks
+        if self._ticks % self._proj_every == 1 or self._proj is None:
+            jo = jc[self._feet_col, :, self._own_idx]  # (nf, w, 3) = J_ownᵀ
+            jjt = np.einsum("fwk,fwl->fkl", jo, jo) + self._eps3
+            pinv_t = np.linalg.solve(jjt, jo.transpose(0, 2, 1))  # (nf, 3, w) = (J⁺)ᵀ
+            self._proj = self._eye_w - np.einsum("fwk,fkv->fwv", jo, pinv_t)
+        pd_pad = np.append(pd, 0.0)[self._own_idx]  # (nf, w)
+        proj = np.einsum("fwv,fv->fw", self._proj, pd_pad)
+        post[self._own_flat] += proj[self._own_valid]  # each joint belongs to one leg
+        return tau, post
+
+    def _to_ctrl(self, data: mujoco.MjData, tau: np.ndarray) -> np.ndarray:
+        jm = self.legs.jmap
+        clipped = np.clip(tau, -self._limit, self._limit)
+        if (clipped != tau).any():
+            self._clipped += 1
+        u = np.array(data.ctrl)
+        u[self._ctrl_idx] = np.clip(clipped / self._tpc, jm.ctrl_lo, jm.ctrl_hi)
+        self.last_torque = u[self._ctrl_idx] * self._tpc
+        return u
+
+    def _refresh_stats(self) -> None:
+        """Fill ``stats.extra`` (called by ``stats.to_dict()``)."""
+        ex = self.stats.extra
+        ex["stance_qp_median_ms"] = self.qp.median_ms()
+        ex["qp_failures"] = self.qp.failures
+        ex["early_touchdowns"] = self.tracker.events["early_touchdown"]
+        ex["lost_contacts"] = self.tracker.events["lost_contact"]
+        ex["torque_clipped_share"] = self._clipped / max(self._ticks, 1)

@@ -1,0 +1,111 @@
+"""Build a tracking controller by name: ``make_controller("pd" | "balance" | "mpc", model)``.
+
+The one entry point the tracking runner (``habitsim track --controller …``) and the
+evaluation use, so every caller gets the same defaults:
+
+* ``"pd"`` — :class:`~habitsim.controllers.PDController` on the joint motors, stiffness by
+  the torque rule (kp = τmax / 0.15 rad) and critical damping, both capped at half the
+  explicit-integration stability limit; no balance, no external force.
+* ``"balance"`` — :class:`~habitsim.controllers.balance.BalanceController`: stance-force QP
+  every tick, swing legs on the motion's foot paths, posture PD.
+* ``"mpc"`` — :class:`~habitsim.controllers.mpc.MPCController`: convex single-rigid-body
+  MPC (30 Hz, horizon ≥ one stride) feeding the same stance QP.
+
+Parameters scale with the body: its mass (from the model) and leg length (the species'
+hind-leg length when ``species`` is given, else the model's trunk height over the feet).
+``balance`` and ``mpc`` plan with the whole clip: pass it here (``qpos``, ``fps``,
+``contacts``) or later with ``controller.set_plan(qpos, fps, contacts)`` before
+``reset``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import mujoco
+import numpy as np
+
+from .base import Controller, ControllerError, PDController, actuated_joints
+
+__all__ = ["CONTROLLER_NAMES", "make_controller", "default_pd"]
+
+#: Names accepted by :func:`make_controller`.
+CONTROLLER_NAMES = ("pd", "balance", "mpc")
+
+
+def default_pd(model: mujoco.MjModel, joints: Sequence[str] | None = None,
+               dt: float | None = None) -> PDController:
+    """Explicit joint PD with the torque rule and critical damping, capped at half the
+    explicit-integration stability limit for a control period ``dt`` (default: the
+    model's time step)."""
+    from .gains import critical_damping, max_stable_gains, stiffness_rule
+
+    names = actuated_joints(model, joints).names
+    kp_max, kd_max = max_stable_gains(model, dt, joints=names)
+    kp = np.minimum(stiffness_rule(model, names, mode="torque"), kp_max)
+    kd = np.minimum(critical_damping(model, kp, names), kd_max)
+    return PDController(model, kp, kd, names)
+
+
+def _leg_length(species) -> float | None:
+    if species is None:
+        return None
+    from habitsim.species import load_species
+
+    return float(load_species(species).leg_length)
+
+
+def make_controller(name: str, model: mujoco.MjModel, species=None, *,
+                    qpos: np.ndarray | None = None, fps: float | None = None,
+                    contacts: np.ndarray | None = None, feet: Sequence[str] | None = None,
+                    **options) -> Controller:
+    """A controller for ``model`` by name.
+
+    Args:
+        name: one of :data:`CONTROLLER_NAMES`.
+        model: the model to control (torque motors on the joints; the shipped species
+            models and most robot MJCFs qualify).
+        species: catalog species name or :class:`~habitsim.species.Species` (sets the
+            leg length used for scaling); ``None`` for a user model.
+        qpos, fps, contacts: the reference clip, (T, nq) at ``fps`` with (T, n_feet)
+            contact labels (LF, RF, LH, RH), given to ``balance`` / ``mpc`` as their plan.
+        feet: foot names (default: ``lf_foot …`` or the usual robot names).
+        **options: passed on — ``pd``: ``kp``, ``kd``, ``joints``, ``dt``; ``balance``:
+            :class:`~habitsim.controllers.balance.BalanceConfig` fields, ``solver``,
+            ``control_dt``; ``mpc``: those plus ``rate_hz``, ``horizon_s``, ``max_steps``,
+            ``mpc_solver``, ``weights``, ``feedback_scale``.
+
+    Raises:
+        ControllerError: unknown name (the message lists the valid ones), a model the
+            controller does not fit, bad options.
+        UnknownSpeciesError: unknown species.
+    """
+    if name not in CONTROLLER_NAMES:
+        raise ControllerError(f"unknown controller {name!r}; valid: {', '.join(CONTROLLER_NAMES)}")
+    if name == "pd":
+        kp, kd = options.pop("kp", None), options.pop("kd", None)
+        joints, dt = options.pop("joints", None), options.pop("dt", None)
+        if options:
+            raise ControllerError(f"unknown pd option(s): {', '.join(sorted(options))}; "
+                                  "valid: kp, kd, joints, dt")
+        if kp is None and kd is None:
+            return default_pd(model, joints, dt)
+        if kp is None or kd is None:
+            raise ControllerError("pass both kp and kd (or neither for the default rule)")
+        return PDController(model, kp, kd, joints)
+    leg = _leg_length(species)
+    if leg is not None:
+        options.setdefault("leg_length", leg)
+    if name == "balance":
+        from .balance import BalanceController
+
+        ctl: Controller = BalanceController(model, feet, **options)
+    else:
+        from .mpc import MPCController
+
+        ctl = MPCController(model, feet, **options)
+    if qpos is not None:
+        if fps is None:
+            raise ControllerError("a reference qpos needs fps")
+        ctl.set_plan(qpos, fps, contacts)  # type: ignore[attr-defined]
+    return ctl
