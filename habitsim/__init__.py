@@ -44,4 +44,19 @@ __all__ = [
     "load_motion",
     "generate",
     "available_actions",
+    "transfer",
+    "refine",
 ]
+
+
+def __getattr__(name: str):
+    """``habitsim.transfer`` and ``habitsim.refine`` load their stage on first use."""
+    if name == "transfer":
+        from .models import transfer
+
+        return transfer
+    if name == "refine":
+        from .refine import refine
+
+        return refine
+    raise AttributeError(f"module 'habitsim' has no attribute {name!r}")

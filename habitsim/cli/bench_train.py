@@ -1,0 +1,167 @@
+"""``habitsim bench train``: training throughput and transfer latency of the learning core.
+
+Training throughput: optimiser steps of a preset's model (fresh weights) on windows of
+synthetic clips generated in memory (no data set needed): steps/s, windows/s, frames/s.
+Transfer latency: :func:`habitsim.models.transfer` of one 64-frame clip (horse trot to
+cat) with a checkpoint (default: the shipped ``habit`` one), best and median of repeats,
+end to end (features, network, blending, contacts) and for the network alone. Target of
+the issue: ≤ 20 ms per 64-frame clip on CPU.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+#: Transfer latency target per 64-frame clip [ms].
+TARGET_LATENCY_MS = 20.0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``train`` to the ``bench`` command group."""
+    p = sub.add_parser(
+        "train",
+        help="time training steps and transfer latency of the learning core",
+        description=(
+            "Print training throughput (steps/s, frames/s) of a config preset and the "
+            "transfer latency per 64-frame clip (target ≤ 20 ms on CPU)."
+        ),
+    )
+    p.add_argument("--config", default="default", help="preset to time (default: default)")
+    p.add_argument(
+        "--steps", type=int, default=10, metavar="N", help="timed training steps (default 10)"
+    )
+    p.add_argument("--threads", type=int, metavar="N", help="torch CPU threads (default: torch's)")
+    p.add_argument(
+        "--checkpoint",
+        type=Path,
+        metavar="DIR",
+        help="checkpoint for the latency (default: shipped)",
+    )
+    p.add_argument(
+        "--repeats", type=int, default=20, metavar="R", help="latency repeats (default 20)"
+    )
+    p.set_defaults(func=_bench_train)
+
+
+def training_throughput(config: str = "default", steps: int = 10) -> dict[str, float]:
+    """Steps/s of fresh training on in-memory synthetic windows (after 2 warm-up steps)."""
+    import numpy as np
+    import torch
+
+    from ..gaits import available_actions, generate
+    from ..models.config import preset
+    from ..models.data import ClipSet, WindowSampler, feature_stats
+    from ..models.features import clip_arrays
+    from ..models.train import build_untrained, compute_losses
+    from ..species import species_names, training_species
+
+    cfg = preset(config)
+    clips, keys, acts = [], [], []
+    for sp in training_species():
+        for k, action in enumerate(available_actions(sp)[:3]):
+            m = generate(sp, action, seed=1000 + k, duration_s=4.0)
+            clips.append(clip_arrays(m))
+            keys.append(f"{action}:{1000 + k}")
+            acts.append(action)
+    data = ClipSet(clips, keys, acts, clips[0].fps)
+    rng = np.random.default_rng(0)
+    emb = {
+        n: np.random.default_rng(i).standard_normal(384).astype(np.float32)
+        for i, n in enumerate(species_names())
+    }  # timing only: no text model needed
+    model = build_untrained(
+        cfg, sorted({c.species for c in clips}), emb, feature_stats(data, cfg.model.window)
+    )
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr)
+    sampler = WindowSampler(data, cfg.model.window, rng, paired=cfg.train.paired_weight > 0)
+    gen = torch.Generator().manual_seed(0)
+
+    def step() -> None:
+        loss, _ = compute_losses(model, sampler.sample(cfg.train.batch_size), cfg, gen, data.fps)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+
+    for _ in range(2):
+        step()
+    t = time.perf_counter()
+    for _ in range(steps):
+        step()
+    dt = (time.perf_counter() - t) / steps
+    return {
+        "s_per_step": dt,
+        "steps_per_s": 1.0 / dt,
+        "windows_per_s": cfg.train.batch_size / dt,
+        "frames_per_s": cfg.train.batch_size * cfg.model.window / dt,
+        "planned_steps": float(cfg.train.steps),
+        "planned_minutes": cfg.train.steps * dt / 60.0,
+    }
+
+
+def transfer_latency(checkpoint: str | Path | None = None, repeats: int = 20) -> dict[str, float]:
+    """Latency [ms] of transferring one 64-frame clip (best and median of ``repeats``)."""
+    import torch
+
+    from ..gaits import generate
+    from ..models.features import canonical_window, clip_arrays
+    from ..models.transfer import load_model, transfer
+
+    clip = generate("horse", "trot", seed=7, duration_s=70 / 30.0)
+    clip = clip.slice(0, 64)
+    ck = load_model(checkpoint)
+    transfer(clip, to="cat", checkpoint=checkpoint)  # warm-up (loads the model)
+    full = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        transfer(clip, to="cat", checkpoint=checkpoint, seed=1)
+        full.append(time.perf_counter() - t)
+    m = ck.model
+    w = ck.config.model.window
+    x = torch.from_numpy(canonical_window(clip_arrays(clip), 0, w)[0][None])
+    net = []
+    with torch.no_grad():
+        for _ in range(repeats):
+            t = time.perf_counter()
+            codes = m.quantize(m.encode(x), sample=False, update=False).quantized
+            z = m.sample_prior("cat", 1, torch.Generator().manual_seed(1)) if m.cfg.use_z else None
+            m.decode(codes, m.condition(["cat"], z))
+            net.append(time.perf_counter() - t)
+    return {
+        "frames": float(clip.num_frames),
+        "end_to_end_best_ms": 1000 * min(full),
+        "end_to_end_median_ms": 1000 * statistics.median(full),
+        "network_best_ms": 1000 * min(net),
+        "network_median_ms": 1000 * statistics.median(net),
+    }
+
+
+def _bench_train(ns: argparse.Namespace) -> int:
+    import torch
+
+    if ns.threads is not None:
+        torch.set_num_threads(ns.threads)
+    tp = training_throughput(ns.config, ns.steps)
+    print(f"bench train ({ns.config} config, {torch.get_num_threads()} torch thread(s))")
+    print(
+        f"  training      {tp['steps_per_s']:8.2f} steps/s  {tp['windows_per_s']:8.1f} windows/s  "
+        f"{tp['frames_per_s']:9.0f} frames/s"
+    )
+    print(
+        f"  planned run   {tp['planned_steps']:8.0f} steps ≈ {tp['planned_minutes']:.1f} min "
+        "(training steps only)"
+    )
+    lat = transfer_latency(ns.checkpoint, ns.repeats)
+    verdict = "met" if lat["end_to_end_median_ms"] <= TARGET_LATENCY_MS else "MISSED"
+    print(
+        f"  transfer 64 frames  end-to-end {lat['end_to_end_best_ms']:6.1f} ms best, "
+        f"{lat['end_to_end_median_ms']:6.1f} ms median "
+        f"(target ≤ {TARGET_LATENCY_MS:.0f} ms: {verdict})"
+    )
+    print(
+        f"                      network    {lat['network_best_ms']:6.1f} ms best, "
+        f"{lat['network_median_ms']:6.1f} ms median"
+    )
+    return 0

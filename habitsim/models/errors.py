@@ -1,0 +1,43 @@
+"""Typed errors of the learning core, all under :class:`habitsim.errors.HabitsimError`."""
+
+from __future__ import annotations
+
+from ..errors import HabitsimError
+
+__all__ = [
+    "ModelError",
+    "CheckpointError",
+    "UnknownMethodError",
+    "MethodNotAvailableError",
+    "TextEncoderError",
+    "TrainingDataError",
+    "ConfigError",
+]
+
+
+class ModelError(HabitsimError, ValueError):
+    """Root of the learning core's errors (bad model input or state)."""
+
+
+class ConfigError(ModelError):
+    """A model / training configuration with unknown keys, bad values or an unknown preset."""
+
+
+class CheckpointError(ModelError):
+    """A checkpoint folder that is missing files, corrupt, or does not match its config."""
+
+
+class UnknownMethodError(ModelError):
+    """A transfer method name that is not registered (the message lists the valid ones)."""
+
+
+class MethodNotAvailableError(ModelError):
+    """A registered transfer method whose trained checkpoint is not shipped / not given."""
+
+
+class TextEncoderError(ModelError):
+    """The sentence-embedding model cannot be loaded or a description cannot be embedded."""
+
+
+class TrainingDataError(ModelError):
+    """A training data set that is empty or lacks the species / splits training needs."""

@@ -1,0 +1,275 @@
+"""The network's per-frame representation of a motion and its inverse.
+
+Per frame t (``FEAT_DIM`` = J·4 + J·3 + 1 = 211 numbers):
+
+* ``q_t`` (J·4): local joint quaternions wxyz, hemisphere-continuous in time (the first
+  frame of a clip has w ≥ 0) — the paper's q (Sec. 3.1);
+* ``v_t`` (J·3): global joint velocities, backward differences (x_t − x_{t−1})·fps with
+  v_0 = v_1, divided by √(g·h) (h = the species' standing hip height), i.e. in units of
+  the Froude velocity, and expressed in the frame of frame t's pelvis heading (rotated
+  about z by −ψ_t) — the paper's v, made size-free so that one network serves a cat and
+  an elephant (transferred speeds follow the Froude scaling of gaits), and
+  heading-invariant so that a turn reads as a constant forward speed, not as a rotating
+  vector;
+* ``h_t`` (1): pelvis height / h. The paper recovers the root from velocities only; a
+  height channel keeps long clips from drifting vertically (a habitsim addition).
+
+Windows are *heading-canonical*: the pelvis quaternion is rotated about z by −ψ₀,
+ψ₀ = the pelvis heading at the window's first frame, so every window starts facing +x;
+:func:`uncanonicalize` turns decoded windows back. The root's horizontal path is the
+integral of the pelvis velocity turned back to the world by each frame's decoded heading
+ψ_t (:func:`features_to_motion`, :func:`window_positions`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..motion import Motion
+from ..rotations import quat_fix_continuity, quat_mul
+from ..skeleton import JOINT_NAMES, get_skeleton
+from ..species import load_species
+
+__all__ = [
+    "GRAVITY",
+    "NUM_JOINTS",
+    "Q_DIM",
+    "V_DIM",
+    "FEAT_DIM",
+    "H_INDEX",
+    "ClipArrays",
+    "clip_arrays",
+    "velocity_scale",
+    "heading_yaw",
+    "canonical_window",
+    "uncanonicalize",
+    "features_to_motion",
+    "window_positions",
+    "batched_fk",
+    "species_offsets",
+]
+
+GRAVITY = 9.81  # [m/s²]
+NUM_JOINTS = len(JOINT_NAMES)
+Q_DIM = NUM_JOINTS * 4
+V_DIM = NUM_JOINTS * 3
+H_INDEX = Q_DIM + V_DIM
+FEAT_DIM = Q_DIM + V_DIM + 1
+
+
+def velocity_scale(species: str) -> float:
+    """√(g·h) [m/s] of a species (h = standing hip height): the unit of ``v_t``."""
+    return math.sqrt(GRAVITY * load_species(species).hip_height)
+
+
+def heading_yaw(pelvis_quats: np.ndarray) -> np.ndarray:
+    """Heading ψ [rad] of the pelvis' forward (+x) axis projected on the ground, (…)."""
+    q = np.asarray(pelvis_quats, dtype=np.float64)
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    fx = 1.0 - 2.0 * (y * y + z * z)
+    fy = 2.0 * (x * y + w * z)
+    return np.arctan2(fy, fx)
+
+
+def _yaw_quat(yaw: np.ndarray | float) -> np.ndarray:
+    half = 0.5 * np.asarray(yaw, dtype=np.float64)
+    return np.stack([np.cos(half), np.zeros_like(half), np.zeros_like(half), np.sin(half)], axis=-1)
+
+
+def _rotate_z(v: np.ndarray, yaw: np.ndarray | float) -> np.ndarray:
+    """Rotate vectors (…, 3) about z by ``yaw`` (broadcast against v's leading axes)."""
+    yaw = np.asarray(yaw, dtype=np.float64)
+    yaw = yaw.reshape(yaw.shape + (1,) * (np.ndim(v) - 1 - yaw.ndim))
+    c, s = np.cos(yaw), np.sin(yaw)
+    out = np.array(v, dtype=np.float64, copy=True)
+    out[..., 0] = c * v[..., 0] - s * v[..., 1]
+    out[..., 1] = s * v[..., 0] + c * v[..., 1]
+    return out
+
+
+@dataclass(frozen=True)
+class ClipArrays:
+    """A motion pre-processed for windowing (world frame, float64).
+
+    Attributes:
+        species: catalog species name.
+        fps: frame rate [Hz].
+        quats: (T, J, 4) local quaternions, continuous in time, w ≥ 0 at frame 0.
+        velocities: (T, J, 3) global joint velocities / √(g·h), in frame t's heading frame.
+        height: (T,) pelvis height / h.
+        yaw: (T,) pelvis heading [rad].
+        root: (T, 3) pelvis positions [m].
+        meta: the motion's metadata (action, pair key, …).
+    """
+
+    species: str
+    fps: float
+    quats: np.ndarray
+    velocities: np.ndarray
+    height: np.ndarray
+    yaw: np.ndarray
+    root: np.ndarray
+    meta: dict[str, Any]
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.quats.shape[0])
+
+
+def clip_arrays(motion: Motion) -> ClipArrays:
+    """Pre-process a :class:`~habitsim.motion.Motion` (see the module docstring)."""
+    q = np.array(motion.rotations, dtype=np.float64, copy=True)
+    q[0][q[0, :, 0] < 0] *= -1.0
+    q = quat_fix_continuity(q, axis=0)
+    x = motion.global_positions()
+    v = np.zeros_like(x)
+    if x.shape[0] > 1:
+        v[1:] = (x[1:] - x[:-1]) * motion.fps
+        v[0] = v[1]
+    sp = load_species(motion.species)
+    yaw = heading_yaw(q[:, 0])
+    return ClipArrays(
+        species=motion.species,
+        fps=float(motion.fps),
+        quats=q,
+        velocities=_rotate_z(v, -yaw) / velocity_scale(motion.species),
+        height=motion.root_positions[:, 2] / sp.hip_height,
+        yaw=yaw,
+        root=np.array(motion.root_positions, dtype=np.float64),
+        meta=dict(motion.metadata),
+    )
+
+
+def canonical_window(
+    clip: ClipArrays, start: int, length: int
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Heading-canonical features of frames ``start : start + length``.
+
+    Frames past the clip's end repeat its last frame (edge padding).
+
+    Returns:
+        ``(features (length, FEAT_DIM) float32, valid (length,) bool, yaw0 [rad])``.
+    """
+    t = clip.num_frames
+    if not 0 <= start < t:
+        raise IndexError(f"window start {start} outside a {t}-frame clip")
+    idx = np.minimum(np.arange(start, start + length), t - 1)
+    valid = np.arange(start, start + length) < t
+    yaw0 = float(clip.yaw[start])
+    q = clip.quats[idx].copy()
+    q[:, 0] = quat_mul(_yaw_quat(-yaw0), q[:, 0])
+    v = clip.velocities[idx]
+    feats = np.concatenate(
+        [q.reshape(length, -1), v.reshape(length, -1), clip.height[idx, None]], axis=1
+    )
+    return feats.astype(np.float32), valid, yaw0
+
+
+def uncanonicalize(feats: np.ndarray, yaw0: float) -> np.ndarray:
+    """Turn canonical window features (T, FEAT_DIM) back to heading ``yaw0`` (float64).
+
+    Only the pelvis quaternion changes: velocities are in each frame's own heading frame.
+    """
+    f = np.array(feats, dtype=np.float64, copy=True)
+    t = f.shape[0]
+    q = f[:, :Q_DIM].reshape(t, NUM_JOINTS, 4)
+    q[:, 0] = quat_mul(_yaw_quat(yaw0), q[:, 0])
+    f[:, :Q_DIM] = q.reshape(t, -1)
+    return f
+
+
+def features_to_motion(
+    feats: np.ndarray,
+    species: str,
+    fps: float,
+    root_start_xy: np.ndarray | None = None,
+    metadata: dict[str, Any] | None = None,
+) -> Motion:
+    """Build a Motion on ``species``' skeleton from world-frame features (T, FEAT_DIM).
+
+    Rotations are the normalised quaternion part; the pelvis height is h·``h_t``; its
+    horizontal path integrates the pelvis velocity ·√(g·h), turned to the world by each
+    frame's pelvis heading, from ``root_start_xy`` [m].
+    """
+    f = np.asarray(feats, dtype=np.float64)
+    t = f.shape[0]
+    sp = load_species(species)
+    q = f[:, :Q_DIM].reshape(t, NUM_JOINTS, 4)
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    q = np.where(n > 1e-6, q / np.maximum(n, 1e-12), np.array([1.0, 0.0, 0.0, 0.0]))
+    v_root = _rotate_z(f[:, Q_DIM : Q_DIM + 3], heading_yaw(q[:, 0])) * velocity_scale(species)
+    root = np.zeros((t, 3))
+    start = (
+        np.zeros(2) if root_start_xy is None else np.asarray(root_start_xy, dtype=np.float64)[:2]
+    )
+    steps = np.concatenate([np.zeros((1, 2)), v_root[1:, :2] / fps], axis=0)
+    root[:, :2] = start[None] + np.cumsum(steps, axis=0)
+    root[:, 2] = f[:, H_INDEX] * sp.hip_height
+    return Motion(species, fps, root, q, None, dict(metadata or {}))
+
+
+def batched_fk(root: torch.Tensor, quats: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
+    """Forward kinematics of the shared topology with per-item bone offsets, differentiable.
+
+    Same maths as :func:`habitsim.skeleton.fk_torch`, but every batch item may have its own
+    species: one pass over the joints for a whole mixed-species batch.
+
+    Args:
+        root: (B, T, 3) pelvis positions [m].
+        quats: (B, T, J, 4) local rotations wxyz (normalised inside).
+        offsets: (B, J, 3) canonical-pose offsets from each joint's parent [m].
+
+    Returns:
+        (B, T, J, 3) global joint positions [m].
+    """
+    from ..rotations import torch_quat_to_matrix
+    from ..skeleton import PARENTS
+
+    local = torch_quat_to_matrix(quats).unbind(2)  # J × (B, T, 3, 3); one backward stack
+    off = offsets[:, None, :, :, None].to(quats.dtype).unbind(2)  # J × (B, 1, 3, 1)
+    glob: list[torch.Tensor] = []
+    pos: list[torch.Tensor] = []
+    for j, p in enumerate(PARENTS):
+        if p < 0:
+            glob.append(local[j])
+            pos.append(root.to(quats.dtype))
+        else:
+            glob.append(glob[p] @ local[j])
+            pos.append(pos[p] + (glob[p] @ off[j]).squeeze(-1))
+    return torch.stack(pos, dim=-2)
+
+
+def species_offsets(species: list[str], dtype: torch.dtype = torch.float32) -> torch.Tensor:
+    """(B, J, 3) bone offsets [m] of each item's species."""
+    return torch.as_tensor(np.stack([get_skeleton(s).offsets for s in species]), dtype=dtype)
+
+
+def window_positions(feats: torch.Tensor, species: list[str], fps: float) -> torch.Tensor:
+    """Joint positions (B, T, J, 3) [m] of canonical windows (B, T, FEAT_DIM), differentiable.
+
+    The root starts at the origin (x, y) and integrates the pelvis velocity like
+    :func:`features_to_motion`; each item uses its own species' skeleton.
+    """
+    b, t, _ = feats.shape
+    q = feats[..., :Q_DIM].reshape(b, t, NUM_JOINTS, 4)
+    scale = torch.tensor([velocity_scale(s) / fps for s in species], dtype=feats.dtype)[
+        :, None, None
+    ]
+    hip = torch.tensor([load_species(s).hip_height for s in species], dtype=feats.dtype)[
+        :, None, None
+    ]
+    w, x, y, z = (q[..., 0, :] / q[..., 0, :].norm(dim=-1, keepdim=True).clamp_min(1e-8)).unbind(-1)
+    hx = 1.0 - 2.0 * (y * y + z * z)  # pelvis forward axis on the ground = heading ψ_t
+    hy = 2.0 * (x * y + w * z)
+    hn = torch.sqrt(hx * hx + hy * hy).clamp_min(1e-6)
+    c, s = hx / hn, hy / hn
+    vl = feats[..., Q_DIM : Q_DIM + 2] * scale
+    vr = torch.stack([c * vl[..., 0] - s * vl[..., 1], s * vl[..., 0] + c * vl[..., 1]], dim=-1)
+    xy = torch.cumsum(torch.cat([torch.zeros_like(vr[:, :1]), vr[:, 1:]], dim=1), dim=1)
+    root = torch.cat([xy, feats[..., H_INDEX : H_INDEX + 1] * hip], dim=-1)
+    return batched_fk(root, q, species_offsets(species, feats.dtype))

@@ -1,0 +1,177 @@
+"""The habit-preserving motion VQ-VAE: encoder, codebook, habit encoders, text projection,
+conditioned decoder (paper Fig. 2).
+
+``HabitVQVAE`` holds every tensor of a checkpoint. It works on *raw* feature windows
+(B, T, FEAT_DIM) (see :mod:`habitsim.models.features`); inputs are normalised with the
+training set's per-dimension mean / std (buffers ``feat_mean`` / ``feat_std``) and the
+decoder's output is de-normalised with them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from torch import nn
+
+from ..errors import UnknownSpeciesError
+from .config import ModelConfig
+from .features import FEAT_DIM
+from .habit import HabitPosterior, RealNVP, gaussian_log_prob
+from .quantizer import EMAQuantizer, QuantizerOutput
+from .vqvae import MotionDecoder, MotionEncoder
+
+__all__ = ["HabitVQVAE"]
+
+
+class HabitVQVAE(nn.Module):
+    """Motion VQ-VAE whose decoder takes the habit latent z_c and the text embedding g_c.
+
+    Args:
+        cfg: model configuration (variant decides whether z_c / g_c are used).
+        species: training species: each gets a habit posterior and a flow prior.
+        text_names: species whose text embeddings are stored (rows of ``text_table``).
+        text_dim: dimension of the raw sentence embeddings.
+    """
+
+    def __init__(
+        self, cfg: ModelConfig, species: Sequence[str], text_names: Sequence[str], text_dim: int
+    ):
+        super().__init__()
+        cfg.validate()
+        self.cfg = cfg
+        self.species = tuple(species)
+        self.text_names = tuple(text_names)
+        self.text_dim = int(text_dim)
+        self.register_buffer("feat_mean", torch.zeros(FEAT_DIM))
+        self.register_buffer("feat_std", torch.ones(FEAT_DIM))
+        self.register_buffer("text_table", torch.zeros(len(self.text_names), self.text_dim))
+        qc = cfg.quantizer
+        self.encoder = MotionEncoder(FEAT_DIM, qc.code_dim, cfg.net)
+        self.quantizer = EMAQuantizer(qc, reset=cfg.code_reset)
+        cond = (cfg.habit.z_dim if cfg.use_z else 0) + (cfg.text.proj_dim if cfg.use_g else 0)
+        self.cond_dim = cond
+        self.decoder = MotionDecoder(qc.code_dim, cond, FEAT_DIM, cfg.net)
+        if cfg.use_z:
+            h = cfg.habit
+            self.posteriors = nn.ModuleDict({s: HabitPosterior(FEAT_DIM, h) for s in self.species})
+            self.priors = nn.ModuleDict(
+                {s: RealNVP(h.z_dim, h.flow_layers, h.flow_hidden) for s in self.species}
+            )
+        if cfg.use_g:
+            self.text_proj = nn.Linear(self.text_dim, cfg.text.proj_dim)
+
+    # ------------------------------------------------------------------ normalisation
+    def normalize(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self.feat_mean) / self.feat_std
+
+    def denormalize(self, y: torch.Tensor) -> torch.Tensor:
+        return y * self.feat_std + self.feat_mean
+
+    # ------------------------------------------------------------------ VQ-VAE
+    def encode(self, x: torch.Tensor) -> torch.Tensor:
+        """Raw windows (B, T, F) → latents f (B, code_dim, T / rate)."""
+        return self.encoder(self.normalize(x).transpose(1, 2))
+
+    def quantize(self, f: torch.Tensor, **kw) -> QuantizerOutput:
+        return self.quantizer(f, **kw)
+
+    def decode(self, codes: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
+        """Codes (B, code_dim, T') and condition (B, C) → raw windows (B, T'·rate, F)."""
+        return self.denormalize(self.decoder(codes, cond).transpose(1, 2))
+
+    # ------------------------------------------------------------------ habit latent
+    def _check_species(self, names: Sequence[str]) -> None:
+        bad = sorted({s for s in names if s not in self.species})
+        if bad:
+            raise UnknownSpeciesError(bad[0], self.species)
+
+    @staticmethod
+    def _groups(names: Sequence[str]) -> dict[str, list[int]]:
+        g: dict[str, list[int]] = {}
+        for i, s in enumerate(names):
+            g.setdefault(s, []).append(i)
+        return g
+
+    def posterior(
+        self, x: torch.Tensor, species: Sequence[str]
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(μ, log σ) of q(z | m) for raw windows (B, T, F), each with its species' encoder."""
+        self._check_species(species)
+        xn = self.normalize(x)
+        z = self.cfg.habit.z_dim
+        mu = x.new_zeros(x.shape[0], z)
+        ls = x.new_zeros(x.shape[0], z)
+        for s, idx in self._groups(species).items():
+            ii = torch.as_tensor(idx, dtype=torch.long, device=x.device)
+            m, lg = self.posteriors[s](xn[ii])
+            mu = mu.index_copy(0, ii, m)
+            ls = ls.index_copy(0, ii, lg)
+        return mu, ls
+
+    def prior_log_prob(self, z: torch.Tensor, species: Sequence[str]) -> torch.Tensor:
+        """log p_c(z) (B,), each row under its species' flow prior."""
+        self._check_species(species)
+        out = z.new_zeros(z.shape[0])
+        for s, idx in self._groups(species).items():
+            ii = torch.as_tensor(idx, dtype=torch.long, device=z.device)
+            out = out.index_copy(0, ii, self.priors[s].log_prob(z[ii]))
+        return out
+
+    def sample_posterior(
+        self, x: torch.Tensor, species: Sequence[str], generator: torch.Generator | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """z ~ q(z | m) by reparameterisation and the one-sample KL estimate
+        log q(z|m) − log p_c(z) (B,)."""
+        mu, ls = self.posterior(x, species)
+        eps = torch.randn(mu.shape, generator=generator, dtype=mu.dtype, device=mu.device)
+        z = mu + torch.exp(ls) * eps
+        kl = gaussian_log_prob(z, mu, ls) - self.prior_log_prob(z, species)
+        return z, kl
+
+    def sample_prior(
+        self,
+        species: str,
+        n: int = 1,
+        generator: torch.Generator | None = None,
+        temperature: float = 1.0,
+    ) -> torch.Tensor:
+        """n habit latents z_c ~ p_c (n, z_dim) from a training species' flow prior."""
+        self._check_species([species])
+        return self.priors[species].sample(n, generator, temperature)
+
+    # ------------------------------------------------------------------ text embedding
+    def text_embedding(self, species: Sequence[str]) -> torch.Tensor:
+        """Raw stored embeddings g_c (B, text_dim) of catalog species."""
+        idx = []
+        for s in species:
+            if s not in self.text_names:
+                raise UnknownSpeciesError(s, self.text_names)
+            idx.append(self.text_names.index(s))
+        return self.text_table[
+            torch.as_tensor(idx, dtype=torch.long, device=self.text_table.device)
+        ]
+
+    # ------------------------------------------------------------------ condition
+    def condition(
+        self,
+        species: Sequence[str],
+        z: torch.Tensor | None = None,
+        text: torch.Tensor | None = None,
+    ) -> torch.Tensor | None:
+        """Decoder condition (B, C) = [z_c, W·g_c] (the parts the variant uses; None if none).
+
+        Args:
+            species: species whose text embedding g_c is used (ignored without text).
+            z: habit latents (B, z_dim), required when the variant uses z.
+            text: raw embeddings (B, text_dim) to use instead of the stored rows.
+        """
+        parts = []
+        if self.cfg.use_z:
+            if z is None:
+                raise ValueError("this model variant needs a habit latent z")
+            parts.append(z)
+        if self.cfg.use_g:
+            g = self.text_embedding(species) if text is None else text
+            parts.append(self.text_proj(g))
+        return torch.cat(parts, dim=-1) if parts else None

@@ -1,0 +1,477 @@
+"""Motion transfer to another species: the API, the method registry and the model cache.
+
+``transfer(motion, to="cat", method="habit")`` re-expresses a motion on the target
+species' skeleton. Registered methods (:data:`METHODS`, extendable with
+:func:`register_method`):
+
+==============  ================================================================
+``habit``       VQ-VAE, EMA + code reset, decoder gets z_c (target's flow prior) and g_c
+``habit_ema``   the same trained with an EMA codebook but no code reset
+``no_habit``    VQ-VAE whose decoder gets neither z_c nor g_c (reconstruction model)
+``habit_only``  decoder gets z_c only
+``text_only``   decoder gets g_c only
+``direct``      no network: copy the local rotations, scale the root by the hip-height ratio
+==============  ================================================================
+
+A network method needs a checkpoint of its variant: the ``checkpoint=`` argument, else
+``$HABITSIM_MODELS_DIR/<variant>``, else the one shipped in
+``habitsim/models/checkpoints/<variant>`` (only ``habit`` is shipped).
+
+Long motions are cut into windows of the model's length overlapping by a quarter; each
+window is encoded in its own heading frame, decoded with the target's condition, turned
+back, and the windows are cross-faded. One z_c is drawn per call (``seed``) and used for
+every window so that the habit stays the same along the clip. A motion at another frame
+rate is resampled to the model's and back.
+
+For a target species without a habit encoder (held out from training), z_c is drawn from
+the prior of the nearest training species in text-embedding space (paper eq. 11,
+:func:`habitsim.models.text.retrieve_neighbour`); the decoder still receives the target's
+own text embedding g_c. The choice and its reason are stored in the result's
+``metadata["transfer"]["retrieval"]``.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..errors import InvalidMotionError
+from ..motion import Motion
+from ..rotations import quat_slerp
+from ..species import load_species
+from .checkpoint import CONFIG_FILE, LoadedCheckpoint, load_checkpoint
+from .config import VARIANTS
+from .errors import MethodNotAvailableError, TextEncoderError, UnknownMethodError
+from .features import (
+    NUM_JOINTS,
+    Q_DIM,
+    canonical_window,
+    clip_arrays,
+    features_to_motion,
+    uncanonicalize,
+)
+from .text import Retrieval, retrieve_neighbour
+
+__all__ = [
+    "TransferMethod",
+    "METHODS",
+    "available_methods",
+    "register_method",
+    "transfer",
+    "reconstruct",
+    "direct_transfer",
+    "resolve_checkpoint",
+    "load_model",
+    "shipped_checkpoint",
+    "habit_species_for",
+]
+
+_LOG = logging.getLogger("habitsim.models")
+
+#: Environment variable naming a folder of ``<variant>/`` checkpoint folders.
+MODELS_DIR_ENV = "HABITSIM_MODELS_DIR"
+
+
+@dataclass(frozen=True)
+class TransferMethod:
+    """A registered transfer method.
+
+    Attributes:
+        name: registry key (``method=`` of :func:`transfer`).
+        description: one line for listings.
+        variant: model variant whose checkpoint it needs (None: no network).
+        fn: ``fn(motion, to, *, seed, checkpoint, temperature) -> Motion``.
+    """
+
+    name: str
+    description: str
+    variant: str | None
+    fn: Callable[..., Motion]
+
+
+METHODS: dict[str, TransferMethod] = {}
+
+
+def register_method(
+    name: str,
+    fn: Callable[..., Motion],
+    *,
+    description: str,
+    variant: str | None = None,
+    overwrite: bool = False,
+) -> TransferMethod:
+    """Add a transfer method to :data:`METHODS` (plug-in point for evaluation).
+
+    Raises:
+        ValueError: the name is taken (unless ``overwrite``).
+    """
+    if name in METHODS and not overwrite:
+        raise ValueError(f"transfer method {name!r} is already registered")
+    m = TransferMethod(name, description, variant, fn)
+    METHODS[name] = m
+    return m
+
+
+def available_methods() -> list[str]:
+    """Names of the registered methods (registration order)."""
+    return list(METHODS)
+
+
+# ---------------------------------------------------------------------------- checkpoints
+
+
+def shipped_checkpoint(variant: str = "habit") -> Path | None:
+    """Folder of the checkpoint shipped in the package for ``variant`` (None if absent)."""
+    root = Path(str(resources.files("habitsim.models") / "checkpoints" / variant))
+    return root if (root / CONFIG_FILE).is_file() else None
+
+
+def resolve_checkpoint(variant: str, checkpoint: str | Path | None = None) -> Path:
+    """The checkpoint folder to use for a variant (see the module docstring).
+
+    Raises:
+        MethodNotAvailableError: no checkpoint of that variant anywhere.
+    """
+    if checkpoint is not None:
+        return Path(checkpoint)
+    env = os.environ.get(MODELS_DIR_ENV)
+    if env and (Path(env) / variant / CONFIG_FILE).is_file():
+        return Path(env) / variant
+    shipped = shipped_checkpoint(variant)
+    if shipped is not None:
+        return shipped
+    raise MethodNotAvailableError(
+        f"no trained {variant!r} checkpoint: only {', '.join(_shipped_variants()) or 'none'} "
+        f"ship(s) with habitsim; train one with `habitsim train --data DIR --variant {variant} "
+        f"--out CKPT` and pass checkpoint=CKPT (or put it in ${MODELS_DIR_ENV}/{variant})"
+    )
+
+
+def _shipped_variants() -> list[str]:
+    return [v for v in VARIANTS if shipped_checkpoint(v) is not None]
+
+
+@functools.lru_cache(maxsize=8)
+def _load_cached(path: str, mtime: float) -> LoadedCheckpoint:
+    return load_checkpoint(path)
+
+
+def load_model(checkpoint: str | Path | None = None, variant: str = "habit") -> LoadedCheckpoint:
+    """Load (and cache) a checkpoint: a folder, or the default one of ``variant``.
+
+    Raises:
+        CheckpointError / MethodNotAvailableError.
+    """
+    p = resolve_checkpoint(variant, checkpoint).resolve()
+    cfg = p / CONFIG_FILE
+    mtime = cfg.stat().st_mtime if cfg.is_file() else 0.0
+    return _load_cached(str(p), mtime)
+
+
+# ---------------------------------------------------------------------------- helpers
+
+
+def _resample(motion: Motion, fps: float) -> Motion:
+    """The motion at another frame rate (slerp rotations, linear root, nearest contacts)."""
+    if abs(motion.fps - fps) < 1e-9:
+        return motion
+    n = motion.num_frames
+    dur = (n - 1) / motion.fps
+    m = max(1, int(round(dur * fps)) + 1)
+    t = np.arange(m) / fps * motion.fps  # fractional source frame
+    i0 = np.clip(np.floor(t).astype(int), 0, n - 1)
+    i1 = np.minimum(i0 + 1, n - 1)
+    a = (t - i0)[:, None]
+    root = motion.root_positions[i0] * (1 - a) + motion.root_positions[i1] * a
+    rot = quat_slerp(
+        motion.rotations[i0], motion.rotations[i1], np.broadcast_to(a, (m, NUM_JOINTS))
+    )
+    contacts = (
+        None
+        if motion.contacts is None
+        else motion.contacts[np.clip(np.round(t).astype(int), 0, n - 1)]
+    )
+    return Motion(motion.species, fps, root, rot, contacts, dict(motion.metadata))
+
+
+def _window_starts(n: int, window: int) -> list[int]:
+    if n <= window:
+        return [0]
+    hop = max(1, window - window // 4)
+    starts = list(range(0, n - window + 1, hop))
+    if starts[-1] != n - window:
+        starts.append(n - window)
+    return starts
+
+
+def _blend(windows: list[np.ndarray], starts: list[int], n: int, window: int) -> np.ndarray:
+    """Cross-fade world-frame window features into one (n, F) sequence."""
+    f = windows[0].shape[1]
+    acc = np.zeros((n, f))
+    wsum = np.zeros(n)
+    ov = max(1, window // 4)
+    for k, (w, s) in enumerate(zip(windows, starts, strict=True)):
+        length = min(window, n - s)
+        w = w[:length].copy()
+        ramp = np.ones(length)
+        if k > 0:
+            ramp = np.minimum(ramp, (np.arange(length) + 1) / (ov + 1))
+        if k < len(starts) - 1:
+            ramp = np.minimum(ramp, (length - np.arange(length)) / (ov + 1))
+        if k > 0:  # put each joint's quaternions in the hemisphere of what is there already
+            q = w[:, :Q_DIM].reshape(length, NUM_JOINTS, 4)
+            prev = acc[s : s + length, :Q_DIM].reshape(length, NUM_JOINTS, 4)
+            have = wsum[s : s + length] > 0
+            if have.any():
+                dots = np.sum(q[have] * prev[have], axis=-1).sum(0)
+                q[:, dots < 0] *= -1.0
+                w[:, :Q_DIM] = q.reshape(length, -1)
+        acc[s : s + length] += w * ramp[:, None]
+        wsum[s : s + length] += ramp
+    return acc / np.maximum(wsum, 1e-9)[:, None]
+
+
+def habit_species_for(ck: LoadedCheckpoint, target: str) -> tuple[str, Retrieval | None]:
+    """Species whose habit encoder / prior serves ``target``, and the retrieval if any."""
+    model = ck.model
+    if target in model.species:
+        return target, None
+    emb = _embeddings(ck, [target, *model.species])
+    r = retrieve_neighbour(target, list(model.species), emb, ck.config.model.text.morphology_weight)
+    _LOG.info(r.explain())
+    return r.neighbour, r
+
+
+def _embeddings(ck: LoadedCheckpoint, names: list[str]) -> dict[str, np.ndarray]:
+    table = ck.model.text_table.detach().numpy()
+    out = {n: table[i] for i, n in enumerate(ck.model.text_names)}
+    missing = [n for n in names if n not in out]
+    if missing:
+        from .text import species_embeddings
+
+        try:
+            out.update(species_embeddings(missing, ck.config.model.text.model))
+        except TextEncoderError as e:
+            raise TextEncoderError(
+                f"the checkpoint has no text embedding of {', '.join(missing)} and {e}"
+            ) from e
+    return out
+
+
+def _text_rows(ck: LoadedCheckpoint, species: str, n: int) -> torch.Tensor | None:
+    if species in ck.model.text_names:
+        return None  # the model looks it up itself
+    g = _embeddings(ck, [species])[species]
+    return torch.from_numpy(np.repeat(g[None], n, axis=0))
+
+
+@torch.no_grad()
+def _run_network(
+    ck: LoadedCheckpoint,
+    motion: Motion,
+    to: str,
+    *,
+    seed: int | None,
+    temperature: float,
+    reconstruct: bool = False,
+) -> tuple[Motion, dict[str, Any]]:
+    model = ck.model
+    window = ck.config.model.window
+    src = _resample(motion, ck.fps)
+    arrays = clip_arrays(src)
+    n = arrays.num_frames
+    starts = _window_starts(n, window)
+    wins = [canonical_window(arrays, s, window) for s in starts]
+    x = torch.from_numpy(np.stack([w[0] for w in wins]))
+    k = x.shape[0]
+    codes = model.quantize(model.encode(x), sample=False, update=False).quantized
+    habit_sp: str | None = None
+    retrieval: Retrieval | None = None
+    z = None
+    if model.cfg.use_z:
+        habit_sp, retrieval = habit_species_for(ck, to)
+        if reconstruct:
+            z = model.posterior(x, [habit_sp] * k)[0]
+        else:
+            gen = torch.Generator().manual_seed(0 if seed is None else int(seed))
+            z = model.sample_prior(habit_sp, 1, gen, temperature).expand(k, -1)
+    cond = model.condition([to] * k, z, _text_rows(ck, to, k) if model.cfg.use_g else None)
+    y = model.decode(codes, cond).numpy()
+    world = [uncanonicalize(y[i], wins[i][2]) for i in range(k)]
+    feats = _blend(world, starts, n, window)
+    ratio = load_species(to).hip_height / load_species(src.species).hip_height
+    out = features_to_motion(feats, to, ck.fps, src.root_positions[0, :2] * ratio)
+    info = {
+        "habit_species": habit_sp,
+        "retrieval": None
+        if retrieval is None
+        else {
+            "neighbour": retrieval.neighbour,
+            "text_distance": round(retrieval.text_distance, 4),
+            "morphology_distance": round(retrieval.morphology_distance, 4),
+            "explanation": retrieval.explain(),
+        },
+        "windows": k,
+        "checkpoint": str(ck.path) if ck.path else None,
+    }
+    return out, info
+
+
+def _finish(out: Motion, source: Motion, info: dict[str, Any]) -> Motion:
+    out = _resample(out, source.fps)
+    meta = {k: v for k, v in source.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
+    meta["transfer"] = info
+    return Motion(
+        out.species, out.fps, out.root_positions, out.rotations, None, meta
+    ).with_contacts()
+
+
+# ---------------------------------------------------------------------------- methods
+
+
+def direct_transfer(motion: Motion, to: str, **_: Any) -> Motion:
+    """The ``direct`` baseline: the source's local rotations on the target skeleton, the
+    root path scaled by the hip-height ratio h_target / h_source."""
+    tgt = load_species(to).name
+    ratio = load_species(tgt).hip_height / load_species(motion.species).hip_height
+    info = {
+        "method": "direct",
+        "from": motion.species,
+        "to": tgt,
+        "hip_height_ratio": round(ratio, 4),
+    }
+    meta = {k: v for k, v in motion.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
+    meta["transfer"] = info
+    return Motion(
+        tgt,
+        motion.fps,
+        motion.root_positions * ratio,
+        motion.rotations.copy(),
+        None if motion.contacts is None else motion.contacts.copy(),
+        meta,
+    )
+
+
+def _network_method(variant: str) -> Callable[..., Motion]:
+    def run(
+        motion: Motion,
+        to: str,
+        *,
+        seed: int | None = 0,
+        checkpoint: str | Path | None = None,
+        temperature: float = 1.0,
+        **_: Any,
+    ) -> Motion:
+        ck = load_model(checkpoint, variant)
+        if ck.config.model.variant != variant:
+            raise MethodNotAvailableError(
+                f"method {variant!r} needs a {variant!r} checkpoint; {ck.path} is a "
+                f"{ck.config.model.variant!r} one"
+            )
+        out, info = _run_network(
+            ck, motion, load_species(to).name, seed=seed, temperature=temperature
+        )
+        info = {"method": variant, "from": motion.species, "to": out.species, "seed": seed, **info}
+        return _finish(out, motion, info)
+
+    run.__name__ = f"transfer_{variant}"
+    return run
+
+
+_DESCRIPTIONS = {
+    "habit": "VQ-VAE (EMA + code reset) with habit latent z_c and text embedding g_c",
+    "habit_ema": "VQ-VAE (EMA, no code reset) with z_c and g_c",
+    "no_habit": "VQ-VAE without z_c and g_c (reconstruction model)",
+    "habit_only": "VQ-VAE with the habit latent z_c only",
+    "text_only": "VQ-VAE with the text embedding g_c only",
+}
+for _v in VARIANTS:
+    register_method(_v, _network_method(_v), description=_DESCRIPTIONS[_v], variant=_v)
+register_method(
+    "direct", direct_transfer, description="copy local rotations, scale the root by hip height"
+)
+
+
+def transfer(
+    motion: Motion,
+    to: str,
+    method: str = "habit",
+    *,
+    source: str | None = None,
+    seed: int | None = 0,
+    checkpoint: str | Path | None = None,
+    temperature: float = 1.0,
+) -> Motion:
+    """Transfer a motion onto another species, keeping the target's habits.
+
+    Args:
+        motion: the source motion (any catalog species, any frame rate).
+        to: target species name.
+        method: a name of :data:`METHODS` (default ``habit``).
+        source: treat the motion as this species' (relabel) instead of ``motion.species``.
+        seed: seed of the habit latent z_c drawn from the target's prior (same seed ⇒
+            same output).
+        checkpoint: checkpoint folder to use instead of the default of the method.
+        temperature: scale of the flow's base Gaussian when drawing z_c (1 = the prior).
+
+    Returns:
+        A :class:`~habitsim.motion.Motion` on ``to``'s skeleton at the source's frame
+        rate, with detected foot contacts and ``metadata["transfer"]`` (method, habit
+        species, retrieval explanation for held-out targets).
+
+    Raises:
+        UnknownMethodError: the method is not registered (lists the valid ones).
+        UnknownSpeciesError: unknown target / source species.
+        MethodNotAvailableError: no checkpoint for the method's variant.
+        CheckpointError: the checkpoint cannot be loaded.
+    """
+    if method not in METHODS:
+        raise UnknownMethodError(f"unknown transfer method {method!r}; valid: {', '.join(METHODS)}")
+    if not isinstance(motion, Motion):
+        raise InvalidMotionError(f"transfer needs a habitsim Motion, got {type(motion).__name__}")
+    tgt = load_species(to).name
+    if source is not None:
+        src_name = load_species(source).name
+        if src_name != motion.species:
+            motion = Motion(
+                src_name,
+                motion.fps,
+                motion.root_positions,
+                motion.rotations,
+                motion.contacts,
+                dict(motion.metadata),
+            )
+    return METHODS[method].fn(
+        motion, tgt, seed=seed, checkpoint=checkpoint, temperature=temperature
+    )
+
+
+def reconstruct(
+    motion: Motion, checkpoint: str | Path | None = None, variant: str = "habit"
+) -> Motion:
+    """Encode and decode a motion on its own species (codes: nearest; z_c: posterior mean
+    of its species' habit encoder, or of the retrieved neighbour's for a held-out one).
+
+    The reconstruction error of this function is the figure recorded in a checkpoint.
+    """
+    ck = load_model(checkpoint, variant)
+    out, info = _run_network(
+        ck, motion, motion.species, seed=None, temperature=1.0, reconstruct=True
+    )
+    info = {
+        "method": f"reconstruct:{ck.config.model.variant}",
+        "from": motion.species,
+        "to": motion.species,
+        **info,
+    }
+    out = _resample(out, motion.fps)
+    return Motion(out.species, out.fps, out.root_positions, out.rotations, None, {"transfer": info})

@@ -1,0 +1,230 @@
+"""The shipped ``habit`` checkpoint, the transfer API and the ``train`` / ``transfer`` CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from habitsim.cli import main
+from habitsim.errors import HabitsimError, UnknownSpeciesError
+from habitsim.gaits import generate
+from habitsim.models import (
+    METHODS,
+    available_methods,
+    load_model,
+    reconstruction_error,
+    shipped_checkpoint,
+    transfer,
+)
+from habitsim.models.checkpoint import MODEL_FILE
+from habitsim.models.errors import MethodNotAvailableError, UnknownMethodError
+from habitsim.models.evaluate import REFERENCE_CLIPS, reference_motions
+from habitsim.motion import load_motion
+
+SHIPPED = shipped_checkpoint("habit")
+needs_ckpt = pytest.mark.skipif(
+    SHIPPED is None, reason="no shipped habit checkpoint in this checkout"
+)
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@pytest.fixture(scope="module")
+def trot():
+    return generate("horse", "trot", seed=5, duration_s=3.0)
+
+
+def test_method_registry():
+    assert available_methods()[:6] == [
+        "habit",
+        "habit_ema",
+        "no_habit",
+        "habit_only",
+        "text_only",
+        "direct",
+    ]
+    assert METHODS["direct"].variant is None
+    assert all(
+        METHODS[v].variant == v
+        for v in ("habit", "habit_ema", "no_habit", "habit_only", "text_only")
+    )
+    with pytest.raises(UnknownMethodError, match="valid: habit, habit_ema"):
+        transfer(generate("cat", "walk", seed=1, duration_s=1.0), to="dog", method="best")
+
+
+def test_direct_transfer(trot):
+    out = transfer(trot, to="cat", method="direct")
+    assert out.species == "cat" and out.num_frames == trot.num_frames
+    np.testing.assert_allclose(out.rotations, trot.rotations)
+    from habitsim.species import load_species
+
+    k = load_species("cat").hip_height / load_species("horse").hip_height
+    np.testing.assert_allclose(out.root_positions, trot.root_positions * k)
+    with pytest.raises(UnknownSpeciesError):
+        transfer(trot, to="unicorn", method="direct")
+
+
+@needs_ckpt
+def test_shipped_checkpoint_size_and_config():
+    size = (SHIPPED / MODEL_FILE).stat().st_size
+    assert size <= 30e6
+    doc = json.loads((SHIPPED / "config.json").read_text())
+    assert doc["config"]["name"] == "default" and doc["config"]["model"]["variant"] == "habit"
+    q = doc["config"]["model"]["quantizer"]
+    assert (q["num_codes"], q["code_dim"]) == (512, 512)
+    assert not (SHIPPED / "train_state.safetensors").exists()  # shipped without optimiser state
+
+
+@needs_ckpt
+def test_shipped_checkpoint_reproduces_recorded_reconstruction_error():
+    ck = load_model()
+    rec = ck.metrics["reference"]
+    assert [tuple(c) for c in rec["clips"]] == [tuple(c) for c in REFERENCE_CLIPS]
+    res = reconstruction_error(reference_motions())
+    assert res["mpjpe_mm"] == pytest.approx(rec["mpjpe_mm"], rel=1e-3, abs=0.05)
+    assert res["pct_leg"] == pytest.approx(rec["pct_leg"], rel=1e-3, abs=0.01)
+
+
+@needs_ckpt
+def test_habit_transfer_to_training_and_held_out_species(trot):
+    cat = transfer(trot, to="cat", seed=3)
+    assert cat.species == "cat" and cat.num_frames == trot.num_frames and cat.fps == trot.fps
+    assert cat.contacts is not None and cat.contacts.shape == (trot.num_frames, 4)
+    assert cat.metadata["transfer"]["habit_species"] == "cat"
+    assert cat.metadata["transfer"]["retrieval"] is None
+    again = transfer(trot, to="cat", seed=3)
+    np.testing.assert_array_equal(cat.rotations, again.rotations)  # same seed, same motion
+    tiger = transfer(trot, to="tiger")
+    r = tiger.metadata["transfer"]["retrieval"]
+    assert tiger.species == "tiger" and r["neighbour"] == "cat"
+    assert "tiger" in r["explanation"] and "cat" in r["explanation"]
+    # closer to the cat's own trot (the paired synthetic clip: same action and draws) than
+    # the direct copy, both in posture (root-relative) and in the whole trajectory
+    from habitsim.models.evaluate import clip_mpjpe
+
+    gt = generate("cat", "trot", seed=5, duration_s=3.0)
+    direct = transfer(trot, to="cat", method="direct")
+    e_habit, e_direct = clip_mpjpe(cat, gt), clip_mpjpe(direct, gt)
+    assert e_habit["root_relative_mm"] < 0.8 * e_direct["root_relative_mm"]
+    assert e_habit["mpjpe_mm"] < 0.8 * e_direct["mpjpe_mm"]
+    assert abs(cat.root_positions[:, 2].mean() - gt.root_positions[:, 2].mean()) < abs(
+        direct.root_positions[:, 2].mean() - gt.root_positions[:, 2].mean()
+    )
+
+
+@needs_ckpt
+def test_long_and_resampled_motions(trot):
+    long = generate("dog", "walk", seed=9, duration_s=6.0)  # 181 frames: several windows
+    out = transfer(long, to="goat")
+    assert out.num_frames == long.num_frames
+    assert out.metadata["transfer"]["windows"] >= 3
+    assert np.all(np.isfinite(out.global_positions()))
+    from habitsim.models.transfer import _resample
+
+    fast = _resample(trot, 60.0)
+    out60 = transfer(fast, to="cat")
+    assert out60.fps == 60.0 and abs(out60.num_frames - fast.num_frames) <= 1
+
+
+def test_unavailable_ablation_names_the_fix(tmp_path, monkeypatch, trot):
+    monkeypatch.setenv("HABITSIM_MODELS_DIR", str(tmp_path))
+    if shipped_checkpoint("no_habit") is None:
+        with pytest.raises(MethodNotAvailableError, match="--variant no_habit"):
+            transfer(trot, to="cat", method="no_habit")
+    if SHIPPED is not None:
+        with pytest.raises(MethodNotAvailableError, match="'habit' one"):
+            transfer(trot, to="cat", method="no_habit", checkpoint=SHIPPED)
+    assert issubclass(MethodNotAvailableError, HabitsimError)
+
+
+@needs_ckpt
+def test_transfer_cli(tmp_path, capsys, trot):
+    src = tmp_path / "trot.npz"
+    trot.save(src)
+    out = tmp_path / "zebra.npz"
+    bvh = tmp_path / "zebra.bvh"
+    assert (
+        main(
+            [
+                "transfer",
+                str(src),
+                "--to",
+                "zebra",
+                "--out",
+                str(out),
+                "--bvh",
+                str(bvh),
+                "--seed",
+                "2",
+            ]
+        )
+        == 0
+    )
+    text = capsys.readouterr().out
+    assert "borrowing the habit latent of horse" in text and "zebra" in text
+    m = load_motion(out)
+    assert m.species == "zebra" and bvh.is_file()
+    assert main(["transfer", str(src), "--to", "cat", "--out", str(tmp_path / "x.txt")]) == 2
+    assert main(["transfer", str(src), "--to", "cat", "--out", str(out), "--method", "nope"]) == 2
+    assert "valid: habit" in capsys.readouterr().err
+    assert main(["transfer", "--list-methods"]) == 0
+    assert "direct" in capsys.readouterr().out
+
+
+def test_train_cli_small(tmp_path, capsys):
+    from habitsim.dataset import build_dataset
+
+    data = tmp_path / "data"
+    build_dataset(
+        data, clips_per_species=4, seed=1, species=["cat", "dog"], workers=1, progress=False
+    )
+    ck = tmp_path / "ck"
+    args = [
+        "train",
+        "--data",
+        str(data),
+        "--out",
+        str(ck),
+        "--config",
+        "small",
+        "--steps",
+        "2",
+        "--no-progress",
+        "--set",
+        "train.val_every=1",
+        "--set",
+        "model.net.width=16",
+    ]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "reference clips: reconstruction MPJPE" in out
+    doc = json.loads((ck / "config.json").read_text())
+    assert doc["config"]["name"] == "small" and doc["training"]["step"] == 2
+    assert "reference" in doc["metrics"] and doc["text"]["model"] == "all-MiniLM-L6-v2"
+    assert main(args) == 2  # refuses to overwrite
+    assert "--resume" in capsys.readouterr().err
+    assert (
+        main(
+            args[:-4]
+            + [
+                "--resume",
+                "--steps",
+                "3",
+                "--set",
+                "train.val_every=1",
+                "--set",
+                "model.net.width=16",
+            ]
+        )
+        == 0
+    )
+    assert json.loads((ck / "config.json").read_text())["training"]["step"] == 3

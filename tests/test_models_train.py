@@ -1,0 +1,314 @@
+"""Training, determinism, resuming and checkpoint validation of the learning core."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from habitsim.dataset import build_dataset
+from habitsim.errors import HabitsimError
+from habitsim.gaits import generate
+from habitsim.models.checkpoint import MODEL_FILE, load_checkpoint, save_checkpoint
+from habitsim.models.config import preset
+from habitsim.models.data import ClipSet, WindowSampler, feature_stats
+from habitsim.models.errors import CheckpointError, TrainingDataError
+from habitsim.models.features import clip_arrays
+from habitsim.models.train import build_untrained, compute_losses, train
+from habitsim.species import species_names
+
+SPECIES = ("cat", "dog", "horse")
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+def _fake_text(dim: int = 16) -> dict[str, np.ndarray]:
+    return {
+        n: np.random.default_rng(i).standard_normal(dim).astype(np.float32)
+        for i, n in enumerate(species_names())
+    }
+
+
+def _tiny_config(steps: int = 6, **changes):
+    cfg = preset("small").replace(
+        **{
+            "model.window": 16,
+            "model.net.width": 16,
+            "model.quantizer.num_codes": 16,
+            "model.quantizer.code_dim": 8,
+            "model.habit.d_model": 8,
+            "model.habit.ff": 16,
+            "model.text.proj_dim": 8,
+            "train.steps": steps,
+            "train.batch_size": 4,
+            "train.val_every": 3,
+            "train.checkpoint_every": 3,
+            "train.warmup_steps": 0,
+            "train.position_weight": 0.5,
+        }
+    )
+    return cfg.replace(**changes) if changes else cfg
+
+
+def _tiny_clipset() -> ClipSet:
+    clips, keys, acts = [], [], []
+    for sp in SPECIES:
+        for k, a in enumerate(("walk", "trot")):
+            clips.append(clip_arrays(generate(sp, a, seed=10 + k, duration_s=1.2)))
+            keys.append(f"{a}:{10 + k}")
+            acts.append(a)
+    return ClipSet(clips, keys, acts, 30.0)
+
+
+@pytest.fixture(scope="module")
+def tiny_data(tmp_path_factory):
+    out = tmp_path_factory.mktemp("models") / "data"
+    build_dataset(
+        out, clips_per_species=10, seed=3, species=list(SPECIES), workers=1, progress=False
+    )
+    return out
+
+
+def test_loss_falls_on_a_tiny_set():
+    cfg = _tiny_config().replace(**{"train.lr": 1e-2, "model.net.width": 32})
+    data = _tiny_clipset()
+    model = build_untrained(cfg, list(SPECIES), _fake_text(), feature_stats(data, cfg.model.window))
+    sampler = WindowSampler(data, cfg.model.window, np.random.default_rng(0))
+    batch = sampler.sample(8)  # the same batch every step: the loss must fall
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr)
+    gen = torch.Generator().manual_seed(0)
+    losses = []
+    for _ in range(80):
+        loss, logs = compute_losses(model, batch, cfg, gen, 30.0)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(logs["rec_q"] + logs["rec_v"])
+    assert batch.pair_x.shape[0] > 0  # the paired term was exercised
+    assert np.mean(losses[-5:]) < 0.6 * np.mean(losses[:5])
+
+
+def test_total_loss_is_the_sum_of_its_parts():
+    cfg = _tiny_config()
+    data = _tiny_clipset()
+    model = build_untrained(cfg, list(SPECIES), _fake_text(), feature_stats(data, cfg.model.window))
+    batch = WindowSampler(data, cfg.model.window, np.random.default_rng(1)).sample(6)
+    _, logs = compute_losses(model, batch, cfg, torch.Generator().manual_seed(0), 30.0)
+    t = cfg.train
+    total = (
+        logs["rec_q"]
+        + t.alpha * logs["rec_v"]
+        + t.beta * logs["commit"]
+        + t.kl_weight * logs["kl"]
+        + t.position_weight * logs["pos"]
+        + t.paired_weight * logs["paired"]
+    )
+    assert logs["loss"] == pytest.approx(total, rel=1e-5)
+
+
+def test_same_seed_same_weights_and_resume(tiny_data, tmp_path):
+    text = _fake_text()
+    cfg = _tiny_config(steps=6)
+    a = train(
+        tiny_data, tmp_path / "a", cfg, progress=False, log=lambda s: None, text_embeddings=text
+    )
+    b = train(
+        tiny_data, tmp_path / "b", cfg, progress=False, log=lambda s: None, text_embeddings=text
+    )
+    wa = load_checkpoint(a.out_dir).model.state_dict()
+    wb = load_checkpoint(b.out_dir).model.state_dict()
+    assert all(torch.equal(wa[k], wb[k]) for k in wa)
+    c = train(
+        tiny_data,
+        tmp_path / "c",
+        cfg.replace(**{"train.seed": 1}),
+        progress=False,
+        log=lambda s: None,
+        text_embeddings=text,
+    )
+    wc = load_checkpoint(c.out_dir).model.state_dict()
+    assert not all(torch.equal(wa[k], wc[k]) for k in wa)
+    # 3 steps, then resume to 6 == 6 straight steps
+    train(
+        tiny_data,
+        tmp_path / "r",
+        cfg.replace(**{"train.steps": 3}),
+        progress=False,
+        log=lambda s: None,
+        text_embeddings=text,
+    )
+    r = train(
+        tiny_data,
+        tmp_path / "r",
+        cfg,
+        resume=True,
+        progress=False,
+        log=lambda s: None,
+        text_embeddings=text,
+    )
+    assert r.steps == 6
+    wr = load_checkpoint(r.out_dir).model.state_dict()
+    for k in wa:
+        torch.testing.assert_close(wr[k], wa[k], atol=1e-6, rtol=1e-5)
+    doc = json.loads((a.out_dir / "config.json").read_text())
+    assert [h["step"] for h in doc["training"]["history"]] == [3, 6]
+    assert "val_mpjpe_mm" in doc["training"]["history"][-1]
+    # an existing checkpoint is never silently replaced
+    with pytest.raises(CheckpointError, match="--resume"):
+        train(
+            tiny_data, tmp_path / "a", cfg, progress=False, log=lambda s: None, text_embeddings=text
+        )
+    # resuming with another model is refused
+    with pytest.raises(CheckpointError, match="cannot resume"):
+        train(
+            tiny_data,
+            tmp_path / "a",
+            cfg.replace(**{"model.net.width": 8}),
+            resume=True,
+            progress=False,
+            log=lambda s: None,
+            text_embeddings=text,
+        )
+
+
+def test_training_needs_training_species(tmp_path):
+    out = tmp_path / "held"
+    build_dataset(out, clips_per_species=2, seed=0, species=["tiger"], workers=1, progress=False)
+    with pytest.raises(TrainingDataError):
+        train(
+            out,
+            tmp_path / "ck",
+            _tiny_config(),
+            progress=False,
+            log=lambda s: None,
+            text_embeddings=_fake_text(),
+        )
+
+
+# ---------------------------------------------------------------------------- checkpoints
+
+
+@pytest.fixture()
+def saved(tmp_path):
+    cfg = _tiny_config()
+    data = _tiny_clipset()
+    model = build_untrained(cfg, list(SPECIES), _fake_text(), feature_stats(data, cfg.model.window))
+    out = save_checkpoint(tmp_path / "ck", model, cfg, {"fps": 30.0, "text": {"model": "custom"}})
+    return out, model
+
+
+def test_checkpoint_round_trip(saved):
+    path, model = saved
+    ck = load_checkpoint(path)
+    sd = model.state_dict()
+    assert all(torch.equal(ck.model.state_dict()[k], sd[k]) for k in sd)
+    assert ck.fps == 30.0 and list(ck.model.species) == list(SPECIES)
+    assert not ck.model.training
+
+
+def test_corrupt_checkpoint_is_rejected(saved, tmp_path):
+    path, _ = saved
+    f = path / MODEL_FILE
+    data = bytearray(f.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    f.write_bytes(bytes(data))
+    with pytest.raises(CheckpointError, match="corrupt.*SHA-256"):
+        load_checkpoint(path)
+    f.write_bytes(b"not a safetensors file")
+    with pytest.raises(CheckpointError, match="not a readable safetensors"):
+        load_checkpoint(path, verify=False)
+    assert issubclass(CheckpointError, HabitsimError)
+
+
+def test_checkpoint_config_mismatch_is_rejected(saved):
+    path, _ = saved
+    doc = json.loads((path / "config.json").read_text())
+    doc["config"]["model"]["net"]["width"] = 24
+    (path / "config.json").write_text(json.dumps(doc))
+    with pytest.raises(
+        CheckpointError, match="does not match config.json.*shape mismatch.*encoder"
+    ):
+        load_checkpoint(path)
+
+
+def test_checkpoint_species_mismatch_is_rejected(saved):
+    path, _ = saved
+    doc = json.loads((path / "config.json").read_text())
+    doc["species"] = ["cat", "dog"]
+    (path / "config.json").write_text(json.dumps(doc))
+    with pytest.raises(CheckpointError, match="unexpected tensors.*horse"):
+        load_checkpoint(path)
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda d: d.update(format_version=99), "format_version 99"),
+        (lambda d: d.update(format="something.else"), "not a habitsim model checkpoint"),
+        (lambda d: d["config"]["model"].update(variant="best"), "unknown variant"),
+        (lambda d: d.pop("species"), "missing key 'species'"),
+        (lambda d: d.update(species=["unicorn"]), "unicorn"),
+    ],
+)
+def test_bad_checkpoint_config_is_rejected(saved, edit, message):
+    path, _ = saved
+    doc = json.loads((path / "config.json").read_text())
+    edit(doc)
+    (path / "config.json").write_text(json.dumps(doc))
+    with pytest.raises(CheckpointError, match=message):
+        load_checkpoint(path)
+
+
+def test_missing_files_are_named(saved, tmp_path):
+    path, _ = saved
+    with pytest.raises(CheckpointError, match="no such checkpoint folder"):
+        load_checkpoint(tmp_path / "nowhere")
+    other = tmp_path / "copy"
+    shutil.copytree(path, other)
+    (other / MODEL_FILE).unlink()
+    with pytest.raises(CheckpointError, match="missing model.safetensors"):
+        load_checkpoint(other)
+    (other / "config.json").write_text("{not json")
+    with pytest.raises(CheckpointError, match="not valid JSON"):
+        load_checkpoint(other)
+    (other / "config.json").unlink()
+    with pytest.raises(CheckpointError, match="missing config.json"):
+        load_checkpoint(other)
+
+
+def test_export_drops_training_state(tiny_data, tmp_path):
+    from habitsim.models.checkpoint import export_checkpoint
+
+    cfg = _tiny_config(steps=3)
+    r = train(
+        tiny_data,
+        tmp_path / "ck",
+        cfg,
+        progress=False,
+        log=lambda s: None,
+        text_embeddings=_fake_text(),
+    )
+    assert (r.out_dir / "train_state.safetensors").is_file()
+    out = export_checkpoint(r.out_dir, tmp_path / "shipped", {"note": "x"})
+    assert sorted(p.name for p in out.iterdir()) == ["config.json", "model.safetensors"]
+    doc = json.loads((out / "config.json").read_text())
+    assert list(doc["files"]) == ["model.safetensors"] and doc["note"] == "x"
+    with pytest.raises(CheckpointError, match="no training state"):
+        train(
+            tiny_data,
+            out,
+            cfg.replace(**{"train.steps": 4}),
+            resume=True,
+            progress=False,
+            log=lambda s: None,
+            text_embeddings=_fake_text(),
+        )

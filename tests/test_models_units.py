@@ -1,0 +1,331 @@
+"""Unit tests of the learning core's maths: shapes, quantizer, flow, features, retrieval,
+configuration."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from habitsim.gaits import generate
+from habitsim.models.config import Config, ModelConfig, NetConfig, QuantizerConfig, preset
+from habitsim.models.errors import ConfigError, TextEncoderError
+from habitsim.models.features import (
+    FEAT_DIM,
+    batched_fk,
+    canonical_window,
+    clip_arrays,
+    features_to_motion,
+    species_offsets,
+    uncanonicalize,
+    window_positions,
+)
+from habitsim.models.habit import AffineCoupling, HabitPosterior, RealNVP
+from habitsim.models.model import HabitVQVAE
+from habitsim.models.quantizer import EMAQuantizer, code_probabilities
+from habitsim.models.text import morphology_vector, retrieve_neighbour
+from habitsim.models.vqvae import MotionDecoder, MotionEncoder
+from habitsim.skeleton import get_skeleton
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+# ---------------------------------------------------------------------------- shapes
+
+
+def test_encoder_decoder_shapes_and_rate():
+    net = NetConfig(width=32, depth=2, dilation=3, down_t=2)
+    enc = MotionEncoder(FEAT_DIM, 24, net)
+    dec = MotionDecoder(24, 10, FEAT_DIM, net)
+    x = torch.randn(3, FEAT_DIM, 64)
+    f = enc(x)
+    assert f.shape == (3, 24, 16)  # temporal rate 4
+    y = dec(f, torch.randn(3, 10))
+    assert y.shape == (3, FEAT_DIM, 64)
+    with pytest.raises(ValueError, match="condition"):
+        dec(f, None)
+
+
+def test_model_shapes_every_variant():
+    species = ["cat", "horse"]
+    for variant in ("habit", "no_habit", "habit_only", "text_only", "habit_ema"):
+        cfg = preset("small", variant).model
+        m = HabitVQVAE(cfg, species, ["cat", "horse", "tiger"], 8)
+        x = torch.randn(2, cfg.window, FEAT_DIM)
+        f = m.encode(x)
+        assert f.shape == (2, cfg.quantizer.code_dim, cfg.window // 4)
+        q = m.quantize(f, sample=False, update=False)
+        assert q.indices.shape == (2, cfg.window // 4)
+        z = m.posterior(x, species)[0] if cfg.use_z else None
+        cond = m.condition(species, z)
+        assert (cond is None) == (m.cond_dim == 0)
+        y = m.decode(q.quantized, cond)
+        assert y.shape == x.shape
+        if cfg.use_z:
+            assert m.sample_prior("cat", 5).shape == (5, cfg.habit.z_dim)
+
+
+# ---------------------------------------------------------------------------- quantizer
+
+
+def _quantizer(k=6, d=3, decay=0.9, threshold=1.0, reset=True) -> EMAQuantizer:
+    return EMAQuantizer(
+        QuantizerConfig(num_codes=k, code_dim=d, ema_decay=decay, reset_threshold=threshold),
+        reset=reset,
+    )
+
+
+def test_ema_update_matches_formula():
+    q = _quantizer(reset=False, threshold=0.0)
+    g = torch.Generator().manual_seed(0)
+    q.codebook.copy_(torch.randn(6, 3, generator=g))
+    q.code_sum.copy_(torch.randn(6, 3, generator=g))
+    q.code_count.copy_(torch.rand(6, generator=g) + 0.5)
+    q.initialized.fill_(True)
+    f = torch.randn(10, 3, generator=g)
+    idx = torch.tensor([0, 0, 1, 2, 2, 2, 3, 3, 4, 4])
+    sum0, cnt0 = q.code_sum.clone(), q.code_count.clone()
+    q.ema_update(f, idx)
+    lam = 0.9
+    exp_cnt = lam * cnt0 + (1 - lam) * torch.bincount(idx, minlength=6).float()
+    exp_sum = lam * sum0 + (1 - lam) * torch.stack([f[idx == k].sum(0) for k in range(6)])
+    torch.testing.assert_close(q.code_count, exp_cnt)
+    torch.testing.assert_close(q.code_sum, exp_sum)
+    torch.testing.assert_close(q.codebook, exp_sum / exp_cnt[:, None])
+
+
+def test_code_reset_revives_dead_codes():
+    q = _quantizer(k=8, d=2, decay=0.5, threshold=1.0, reset=True)
+    q.codebook.copy_(torch.tensor([[0.0, 0.0]] + [[100.0 + i, 100.0] for i in range(7)]))
+    q.code_sum.copy_(q.codebook)
+    q.code_count.fill_(1.0)
+    q.initialized.fill_(True)
+    g = torch.Generator().manual_seed(1)
+    f = torch.randn(64, 2, generator=g) * 0.1  # all latents near code 0
+    idx = q.select(f, sample=False)
+    assert (idx == 0).all()
+    n_reset = q.ema_update(f, idx, g)
+    assert n_reset == 7
+    # every revived code now sits on one of the batch's latents
+    d = torch.cdist(q.codebook[1:], f).min(dim=1).values
+    assert (d < 1e-6).all()
+    assert (q.code_count[1:] == 1.0).all()
+    # without reset the dead codes keep their stale value
+    q2 = _quantizer(k=8, d=2, decay=0.5, reset=False)
+    q2.codebook.copy_(torch.tensor([[0.0, 0.0]] + [[100.0 + i, 100.0] for i in range(7)]))
+    q2.code_sum.copy_(q2.codebook)
+    q2.code_count.fill_(1.0)
+    q2.initialized.fill_(True)
+    q2.ema_update(f, idx, g)
+    assert torch.allclose(q2.codebook[1:, 0], torch.arange(7.0) + 100.0)
+
+
+def test_soft_quantization_tends_to_nearest_code():
+    g = torch.Generator().manual_seed(3)
+    q = _quantizer(k=16, d=4)
+    q.codebook.copy_(torch.randn(16, 4, generator=g))
+    f = torch.randn(500, 4, generator=g)
+    nearest = q.select(f, sample=False)
+    agree = []
+    for tau in (10.0, 1.0, 0.1, 1e-3, 1e-6):
+        s = q.select(f, sample=True, tau=tau, generator=torch.Generator().manual_seed(0))
+        agree.append(float((s == nearest).float().mean()))
+    assert agree == sorted(agree)
+    assert agree[-1] == 1.0 and agree[0] < 0.5
+    p = code_probabilities(f, q.codebook, 1e-4)
+    assert torch.equal(p.argmax(-1), nearest)
+
+
+def test_sampling_follows_softmax_distribution():
+    q = _quantizer(k=3, d=1)
+    q.codebook.copy_(torch.tensor([[0.0], [1.0], [2.0]]))
+    f = torch.zeros(20000, 1)
+    s = q.select(f, sample=True, tau=1.0, generator=torch.Generator().manual_seed(0))
+    freq = torch.bincount(s, minlength=3).float() / s.numel()
+    expect = torch.softmax(-torch.tensor([0.0, 1.0, 4.0]), 0)
+    torch.testing.assert_close(freq, expect, atol=0.015, rtol=0)
+
+
+def test_straight_through_gradient():
+    q = _quantizer(k=4, d=2)
+    q.eval()
+    q.codebook.copy_(torch.randn(4, 2))
+    f = torch.randn(1, 2, 5, requires_grad=True)
+    out = q(f)
+    out.quantized.sum().backward()
+    torch.testing.assert_close(f.grad, torch.ones_like(f))
+
+
+# ---------------------------------------------------------------------------- flow
+
+
+def _trained_like_flow(dim=6, layers=4, seed=0) -> RealNVP:
+    torch.manual_seed(seed)
+    flow = RealNVP(dim, layers, 16).double()
+    for layer in flow.layers:  # non-trivial (a fresh flow is the identity)
+        torch.nn.init.normal_(layer.net[-1].weight, std=0.5)
+        torch.nn.init.normal_(layer.net[-1].bias, std=0.5)
+    return flow
+
+
+def test_flow_inverse_of_forward_is_identity():
+    flow = _trained_like_flow()
+    w = torch.randn(32, 6, dtype=torch.float64)
+    z, ld_f = flow(w)
+    w2, ld_i = flow.inverse(z)
+    torch.testing.assert_close(w2, w, atol=1e-10, rtol=0)
+    torch.testing.assert_close(ld_f, -ld_i, atol=1e-10, rtol=0)
+    assert not torch.allclose(z, w)
+
+
+def test_flow_logdet_equals_autograd_jacobian():
+    flow = _trained_like_flow()
+    for i in range(4):
+        w = torch.randn(6, dtype=torch.float64, generator=torch.Generator().manual_seed(i))
+        jac = torch.autograd.functional.jacobian(lambda v: flow(v[None])[0][0], w)
+        expect = torch.linalg.slogdet(jac).logabsdet
+        torch.testing.assert_close(flow(w[None])[1][0], expect, atol=1e-9, rtol=0)
+        z = flow(w[None])[0][0]
+        jac_i = torch.autograd.functional.jacobian(lambda v: flow.inverse(v[None])[0][0], z)
+        torch.testing.assert_close(
+            flow.inverse(z[None])[1][0], torch.linalg.slogdet(jac_i).logabsdet, atol=1e-9, rtol=0
+        )
+
+
+def test_flow_log_prob_is_a_density():
+    # 1-D marginal check in 2-D: the density integrates to ≈ 1 on a grid
+    flow = _trained_like_flow(dim=2, layers=2, seed=1)
+    xs = torch.linspace(-12, 12, 801, dtype=torch.float64)
+    gx, gy = torch.meshgrid(xs, xs, indexing="ij")
+    z = torch.stack([gx.reshape(-1), gy.reshape(-1)], dim=-1)
+    with torch.no_grad():
+        p = flow.log_prob(z).exp()
+    cell = float((xs[1] - xs[0]) ** 2)
+    assert abs(float(p.sum()) * cell - 1.0) < 0.02
+
+
+def test_coupling_starts_as_identity():
+    layer = AffineCoupling(4, 8, torch.tensor([1, 0, 1, 0], dtype=torch.bool))
+    w = torch.randn(3, 4)
+    z, ld = layer(w)
+    torch.testing.assert_close(z, w)
+    torch.testing.assert_close(ld, torch.zeros(3))
+
+
+def test_posterior_handles_any_length():
+    cfg = preset("small").model.habit
+    post = HabitPosterior(FEAT_DIM, cfg)
+    for t in (5, 32, 33):
+        mu, ls = post(torch.randn(2, t, FEAT_DIM))
+        assert mu.shape == ls.shape == (2, cfg.z_dim)
+
+
+# ---------------------------------------------------------------------------- features
+
+
+def test_features_round_trip_reproduces_the_motion():
+    m = generate("dog", "turn_left", seed=4, duration_s=2.5)
+    arr = clip_arrays(m)
+    n = arr.num_frames
+    f, valid, yaw0 = canonical_window(arr, 0, n)
+    assert valid.all() and f.shape == (n, FEAT_DIM)
+    back = uncanonicalize(f, yaw0)
+    rebuilt = features_to_motion(back, "dog", m.fps, m.root_positions[0, :2])
+    err = np.linalg.norm(rebuilt.global_positions() - m.global_positions(), axis=-1).max()
+    assert err < 1e-4  # float32 features, integrated root
+
+
+def test_window_is_heading_canonical_and_padded():
+    m = generate("horse", "walk", seed=2, duration_s=2.0)
+    arr = clip_arrays(m)
+    f, valid, yaw0 = canonical_window(arr, arr.num_frames - 10, 32)
+    assert valid.sum() == 10 and not valid[10:].any()
+    from habitsim.models.features import heading_yaw
+
+    assert abs(heading_yaw(f[0, :4].astype(np.float64))) < 1e-5
+    assert np.allclose(f[10:], f[9])  # edge padding
+
+
+def test_window_positions_match_skeleton_fk():
+    ms = [generate(s, "walk", seed=1, duration_s=1.5) for s in ("cat", "elephant")]
+    arrs = [clip_arrays(m) for m in ms]
+    x = torch.from_numpy(np.stack([canonical_window(a, 0, 32)[0] for a in arrs])).double()
+    pos = window_positions(x, [m.species for m in ms], 30.0)
+    for i, (m, a) in enumerate(zip(ms, arrs, strict=True)):
+        ref = m.global_positions()[:32] - np.r_[m.root_positions[0, :2], 0.0]
+        c, s = math.cos(-a.yaw[0]), math.sin(-a.yaw[0])
+        rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+        np.testing.assert_allclose(pos[i].numpy(), ref @ rot.T, atol=2e-4)
+
+
+def test_batched_fk_matches_fk_torch():
+    ms = [
+        generate(s, "trot" if s != "bear" else "walk", seed=1, duration_s=1.0)
+        for s in ("cat", "bear", "horse")
+    ]
+    q = torch.tensor(np.stack([m.rotations[:20] for m in ms]))
+    r = torch.tensor(np.stack([m.root_positions[:20] for m in ms]))
+    a = batched_fk(r, q, species_offsets([m.species for m in ms], torch.float64))
+    b = torch.stack([get_skeleton(m.species).fk_torch(r[i], q[i]) for i, m in enumerate(ms)])
+    torch.testing.assert_close(a, b)
+
+
+# ---------------------------------------------------------------------------- retrieval
+
+
+def test_retrieval_on_hand_made_embeddings():
+    emb = {
+        "cat": np.array([0.0, 0.0]),
+        "dog": np.array([1.0, 0.0]),
+        "horse": np.array([5.0, 5.0]),
+        "tiger": np.array([0.2, 0.1]),
+        "wolf": np.array([0.8, 0.0]),
+    }
+    r = retrieve_neighbour("tiger", ["cat", "dog", "horse"], emb)
+    assert r.neighbour == "cat"
+    assert r.text_distance == pytest.approx(math.hypot(0.2, 0.1))
+    assert [n for n, *_ in r.ranking] == ["cat", "dog", "horse"]
+    assert "cat" in r.explain() and "tiger" in r.explain()
+    assert retrieve_neighbour("wolf", ["cat", "dog", "horse"], emb).neighbour == "dog"
+    # morphology can overturn a close text match: tiger (200 kg) is far from a cat (4.5 kg)
+    morph = {k: morphology_vector(k) for k in emb}
+    r2 = retrieve_neighbour(
+        "tiger", ["cat", "dog", "horse"], emb, morphology_weight=1.0, morphology=morph
+    )
+    assert r2.neighbour == "dog"
+    assert r2.score == pytest.approx(r2.text_distance + r2.morphology_distance)
+    with pytest.raises(TextEncoderError, match="no text embedding"):
+        retrieve_neighbour("zebra", ["cat"], emb)
+    with pytest.raises(TextEncoderError):
+        retrieve_neighbour("cat", ["cat"], emb)
+
+
+# ---------------------------------------------------------------------------- config
+
+
+def test_config_round_trip_and_errors():
+    cfg = preset("default")
+    assert Config.from_dict(cfg.to_dict()) == cfg
+    assert cfg.model.quantizer.num_codes == 512 and cfg.model.quantizer.code_dim == 512
+    assert cfg.train.alpha == 0.5 and cfg.train.beta == 0.02
+    d = cfg.to_dict()
+    d["model"]["net"]["widht"] = 3
+    with pytest.raises(ConfigError, match="widht"):
+        Config.from_dict(d)
+    with pytest.raises(ConfigError, match="unknown variant"):
+        preset("default", "best")
+    with pytest.raises(ConfigError, match="valid: default, small"):
+        preset("huge")
+    with pytest.raises(ConfigError, match="multiple"):
+        ModelConfig(window=30).validate()
+    with pytest.raises(ConfigError, match="expected int"):
+        Config.from_dict({"train": {"steps": "10"}})
+    assert cfg.replace(**{"train.steps": 7}).train.steps == 7
