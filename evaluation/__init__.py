@@ -6,4 +6,74 @@ Modules:
   METRICS.md (``penetration_mm``, ``float_mm``, ``skate_mm``, ``skate_ratio``, ``jerk``,
   ``bone_length_error_mm``, ``joint_limit_violation_rad`` and the ``*_per_leg`` variants);
   entry point :func:`habitsim.evaluation.kinematic.kinematic_metrics`.
+* :mod:`habitsim.evaluation.dynamic` — dynamic plausibility (inverse dynamics):
+  :func:`~habitsim.evaluation.dynamic.dynamic_metrics`.
+* :mod:`habitsim.evaluation.simulated` — simulated-tracking metrics.
+* :mod:`habitsim.evaluation.distribution` — the paper's distribution metrics (``fid``,
+  ``intra_fid``, ``downstream_fid``, ``diversity``, ``one_nna``) and ``mpjpe_mm``.
+* :mod:`habitsim.evaluation.evaluator` — the frozen evaluator network (features and
+  species / action heads): :func:`load_evaluator`, :func:`train_evaluator`.
+* :mod:`habitsim.evaluation.biomech` — biomechanical consistency with a species' gait
+  table: :func:`biomech_metrics`.
+* :mod:`habitsim.evaluation.methods` — the transfer-method registry (``direct``,
+  ``ground_truth``, the learned methods of :mod:`habitsim.models`).
+* :mod:`habitsim.evaluation.runner` — the benchmark runner (``habitsim eval``):
+  :class:`EvalConfig`, :func:`run_benchmark`.
+* :mod:`habitsim.evaluation.executors` — local process pool and Dask executors.
+* :mod:`habitsim.evaluation.report` — HTML / Markdown report: :func:`write_report`.
+
+The names below are imported lazily (the evaluator pulls in torch, the report
+matplotlib), so ``import habitsim.evaluation.kinematic`` stays light.
 """
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+#: public name → defining submodule
+_EXPORTS = {
+    "kinematic_metrics": "kinematic",
+    "KINEMATIC_KEYS": "kinematic",
+    "fid": "distribution",
+    "intra_fid": "distribution",
+    "downstream_fid": "distribution",
+    "diversity": "distribution",
+    "one_nna": "distribution",
+    "frechet_distance": "distribution",
+    "mpjpe_mm": "distribution",
+    "transfer_mpjpe_mm": "distribution",
+    "FIDError": "distribution",
+    "biomech_metrics": "biomech",
+    "BiomechResult": "biomech",
+    "BIOMECH_KEYS": "biomech",
+    "Evaluator": "evaluator",
+    "EvaluatorConfig": "evaluator",
+    "EvaluatorError": "evaluator",
+    "load_evaluator": "evaluator",
+    "train_evaluator": "evaluator",
+    "register_method": "methods",
+    "get_method": "methods",
+    "method_names": "methods",
+    "MethodUnavailable": "methods",
+    "EvalConfig": "runner",
+    "EvalError": "runner",
+    "run_benchmark": "runner",
+    "summarize": "runner",
+    "make_executor": "executors",
+    "write_report": "report",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -1,0 +1,197 @@
+"""Executors: where the benchmark's independent tasks run.
+
+The runner hands an executor a picklable function and a list of picklable tasks and
+consumes ``(task, result)`` pairs *as they finish* (so each finished row is written at
+once and a killed run loses at most the tasks in flight). Scheduling is delegated, never
+home-made:
+
+* :class:`LocalExecutor` — the standard library's ``ProcessPoolExecutor`` (``workers``
+  processes; ``workers=1`` runs in-process, handy for debugging and profiling).
+* :class:`DaskExecutor` — a Dask ``distributed`` cluster (``pip install
+  'habitsim[cluster]'``), via ``Client.submit`` and ``as_completed``. Every worker needs
+  the same habitsim installation and access to the data set and output folders (a
+  shared file system), because tasks carry file paths, not arrays.
+
+Starting a Dask cluster by hand (one scheduler, any number of workers, any machines)::
+
+    dask scheduler --host 0.0.0.0 --port 8786              # on the head node
+    dask worker tcp://HEAD:8786 --nworkers 2 --nthreads 1  # on each worker machine
+    habitsim eval --data DIR --methods direct --out OUT --executor dask --scheduler tcp://HEAD:8786
+
+(``dask-scheduler`` / ``dask-worker`` are the older names of the same commands;
+``python -m distributed.cli.dask_scheduler`` works everywhere.) Use ``--nthreads 1``:
+each task already keeps a core busy (MuJoCo, numpy), and threads inside one worker
+process would contend for the GIL. Results do not depend on the executor: every task is
+deterministic and independent of where and in which order it runs.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import os
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any, Protocol
+
+from habitsim.errors import HabitsimError, unknown_choice
+
+__all__ = [
+    "EXECUTORS",
+    "ExecutorError",
+    "Executor",
+    "LocalExecutor",
+    "DaskExecutor",
+    "make_executor",
+]
+
+#: Names accepted by :func:`make_executor` (``--executor``).
+EXECUTORS = ("local", "dask")
+
+
+class ExecutorError(HabitsimError, RuntimeError):
+    """An executor that cannot start (e.g. Dask not installed, scheduler unreachable)."""
+
+
+class Executor(Protocol):
+    """Runs independent tasks, yielding results as they complete."""
+
+    name: str
+
+    def map_unordered(
+        self, fn: Callable[[Any], Any], tasks: Sequence[Any]
+    ) -> Iterator[tuple[Any, Any]]:
+        """Yield ``(task, fn(task))`` in completion order; exceptions propagate."""
+        ...
+
+    def close(self) -> None:
+        """Release workers / connections."""
+        ...
+
+
+def _init_worker() -> None:
+    # One busy core per worker process: no thread oversubscription from torch/BLAS.
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+    except ImportError:  # pragma: no cover
+        pass
+
+
+class LocalExecutor:
+    """A local process pool (``workers`` processes; 1 = in this process).
+
+    Args:
+        workers: number of processes (default: the CPU count).
+    """
+
+    name = "local"
+
+    def __init__(self, workers: int | None = None):
+        n = workers if workers is not None else (os.cpu_count() or 1)
+        if not isinstance(n, int) or n < 1:
+            raise ExecutorError(f"workers must be a positive integer, got {workers!r}")
+        self.workers = n
+        self._pool: cf.ProcessPoolExecutor | None = None
+
+    def map_unordered(
+        self, fn: Callable[[Any], Any], tasks: Sequence[Any]
+    ) -> Iterator[tuple[Any, Any]]:
+        if self.workers == 1:
+            for t in tasks:
+                yield t, fn(t)
+            return
+        if self._pool is None:
+            self._pool = cf.ProcessPoolExecutor(self.workers, initializer=_init_worker)
+        futs = {self._pool.submit(fn, t): t for t in tasks}
+        try:
+            for f in cf.as_completed(futs):
+                yield futs[f], f.result()
+        finally:
+            for f in futs:
+                f.cancel()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+
+class DaskExecutor:
+    """Tasks on a Dask distributed cluster.
+
+    Args:
+        scheduler: scheduler address (``tcp://host:8786``); ``None`` starts a local
+            cluster in this process (``workers`` processes, one thread each).
+        workers: processes of the local cluster when ``scheduler`` is None.
+        timeout_s: how long to wait for the scheduler [s].
+
+    Raises:
+        ExecutorError: dask/distributed missing, or the scheduler is unreachable.
+    """
+
+    name = "dask"
+
+    def __init__(
+        self, scheduler: str | None = None, workers: int | None = None, timeout_s: float = 30.0
+    ):
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError as e:
+            raise ExecutorError(
+                "the dask executor needs dask[distributed]: pip install 'habitsim[cluster]'"
+            ) from e
+        self._cluster = None
+        try:
+            if scheduler is None:
+                self._cluster = LocalCluster(
+                    n_workers=workers or (os.cpu_count() or 1),
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=None,
+                )
+                self.client = Client(self._cluster, timeout=timeout_s)
+            else:
+                self.client = Client(scheduler, timeout=timeout_s)
+        except (OSError, TimeoutError) as e:
+            raise ExecutorError(f"cannot reach the Dask scheduler {scheduler!r}: {e}") from e
+        self.scheduler = scheduler
+
+    def map_unordered(
+        self, fn: Callable[[Any], Any], tasks: Sequence[Any]
+    ) -> Iterator[tuple[Any, Any]]:
+        from distributed import as_completed
+
+        if not tasks:
+            return
+        futs = [self.client.submit(fn, t, pure=False) for t in tasks]
+        index = {f.key: i for i, f in enumerate(futs)}
+        try:
+            for f in as_completed(futs):
+                yield tasks[index[f.key]], f.result()
+        finally:
+            for f in futs:
+                f.cancel()
+
+    def close(self) -> None:
+        self.client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+
+
+def make_executor(
+    kind: str = "local", *, workers: int | None = None, scheduler: str | None = None
+) -> LocalExecutor | DaskExecutor:
+    """An executor by name (``local`` or ``dask``).
+
+    Raises:
+        ExecutorError: an unknown name, or a scheduler address given to ``local``.
+    """
+    if kind not in EXECUTORS:
+        raise ExecutorError(unknown_choice("executor", kind, EXECUTORS))
+    if kind == "local":
+        if scheduler:
+            raise ExecutorError("--scheduler is only used with --executor dask")
+        return LocalExecutor(workers)
+    return DaskExecutor(scheduler, workers)

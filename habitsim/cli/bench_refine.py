@@ -1,0 +1,252 @@
+"""``habitsim bench refine``: refinement speed, scaling, success rate and tracking survival.
+
+In one run:
+
+* per species (or ``--species``) and stage (``--stages``, default A and B): the time to
+  build the window problem (once per process), and the median over ``--clips``
+  100-frame, 30 fps synthetic clips with injected artefacts (slide, sink, jitter,
+  limits; :func:`habitsim.refine.inject_artefacts`) of the IPOPT solve time summed over
+  the windows (``solve``), of the wall time of the whole :func:`habitsim.refine.refine`
+  call without metrics (``call``) and of its CPU time (``cpu``; on a shared machine the
+  fairest of the three). Targets of the issue: stage A ≤ 0.5 s, stage B ≤ 2 s per clip;
+* survival of unassisted ``servo`` tracking (:func:`habitsim.sim.track`) of the same
+  clips before and after stage-A refinement, per species (target: after ≥ before);
+* scaling on ``--scaling-species``: solve time of 100, 300 and 1000 frames (``--lengths``)
+  per stage, with the time per frame (linear growth = constant time per frame);
+* IPOPT success rate over ``--success-clips`` clips per stage of random species, action
+  and artefact mix (target ≥ 98 %).
+
+Benchmarks print figures; nothing here is a timed test.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from typing import Any
+
+import numpy as np
+
+#: Median solve-time targets per 100-frame clip [s].
+TARGET_S = {"A": 0.5, "B": 2.0}
+#: Target IPOPT success rate on artefact clips.
+TARGET_SUCCESS = 0.98
+_ARTEFACTS = ("slide", "sink", "jitter", "limits")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``refine`` to the ``bench`` command group."""
+    p = sub.add_parser(
+        "refine",
+        help="refinement solve time per species (stage A/B), scaling, success rate",
+        description=(
+            "Median solve time of 100-frame artefact clips per species and stage, tracking "
+            "survival before/after, time for 100/300/1000 frames, IPOPT success rate."
+        ),
+    )
+    p.add_argument("--species", nargs="+", metavar="NAME", help="species (default: all)")
+    p.add_argument(
+        "--stages",
+        nargs="+",
+        choices=("A", "B"),
+        default=["A", "B"],
+        help="stages to time (default A B)",
+    )
+    p.add_argument(
+        "--clips",
+        type=int,
+        default=3,
+        metavar="N",
+        help="100-frame clips per species and stage (default 3)",
+    )
+    p.add_argument("--no-survival", action="store_true", help="skip the tracking survival")
+    p.add_argument(
+        "--scaling-species",
+        default="dog",
+        metavar="NAME",
+        help="species of the scaling run (default dog)",
+    )
+    p.add_argument(
+        "--lengths",
+        nargs="+",
+        type=int,
+        default=[100, 300, 1000],
+        metavar="T",
+        help="clip lengths of the scaling run (default 100 300 1000)",
+    )
+    p.add_argument(
+        "--success-clips",
+        type=int,
+        default=50,
+        metavar="M",
+        help="random artefact clips per stage for the success rate (default 50)",
+    )
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
+    p.add_argument("--json", action="store_true", help="also print one JSON object at the end")
+    p.set_defaults(func=_bench_refine)
+
+
+def _clip(
+    species: str,
+    frames: int,
+    seed: int,
+    action: str | None = None,
+    kinds: tuple[str, ...] = _ARTEFACTS,
+) -> Any:
+    from ..gaits import available_actions, generate
+    from ..refine import inject_artefacts
+
+    rng = np.random.default_rng(seed)
+    acts = [a for a in available_actions(species) if a not in ("sit",)]
+    act = action or ("walk" if "walk" in acts else acts[0])
+    clean = generate(
+        species, act, seed=int(rng.integers(1 << 30)), fps=30.0, duration_s=frames / 30.0
+    )
+    return inject_artefacts(clean, kinds, seed=seed)
+
+
+def _timed(motion: Any, stage: str) -> dict[str, float | bool]:
+    from ..refine import RefineConvergenceError, RefineOptions, refine
+
+    opts = RefineOptions(dynamics=stage == "B", metrics=False)
+    w0, c0 = time.perf_counter(), time.process_time()
+    try:
+        res = refine(motion, opts)
+        ok, solve, build = True, res.report["solve_time_s"], res.report["build_time_s"]
+        iters = res.report["iterations"]
+    except RefineConvergenceError as e:
+        ok, solve, build = False, float("nan"), e.report.get("build_time_s", 0.0)
+        iters = e.report.get("iterations", 0)
+        res = None
+    return {
+        "ok": ok,
+        "solve": solve,
+        "call": time.perf_counter() - w0 - build,
+        "cpu": time.process_time() - c0,
+        "build": build,
+        "iterations": iters,
+        "result": res,
+    }
+
+
+def _survival(motion: Any) -> float:
+    from ..sim import track
+
+    return float(track(motion, controller="servo").survival)
+
+
+def _fmt(v: float, width: int = 7) -> str:
+    return f"{v:{width}.3f}" if np.isfinite(v) else f"{'—':>{width}}"
+
+
+def _bench_refine(ns: argparse.Namespace) -> int:
+    from ..errors import HabitsimError
+    from ..gaits import available_actions
+    from ..refine import RefineOptions
+    from ..refine.solve import get_problem
+    from ..species import species_names
+
+    species = ns.species or species_names()
+    out: dict[str, Any] = {"species": {}, "scaling": {}, "success": {}}
+    print(
+        f"bench refine: {ns.clips} clip(s) of 100 frames at 30 fps per species and stage, "
+        f"artefacts {', '.join(_ARTEFACTS)}; times [s]; targets: stage A ≤ "
+        f"{TARGET_S['A']} s, stage B ≤ {TARGET_S['B']} s per clip"
+    )
+    head = f"{'species':10s}"
+    for st in ns.stages:
+        head += f" | {st}: build   solve    call     cpu  iters"
+    if not ns.no_survival:
+        head += " | survival before → after"
+    print(head)
+    for sp in species:
+        row = f"{sp:10s}"
+        rec: dict[str, Any] = {}
+        clips = [_clip(sp, 100, ns.seed + k) for k in range(ns.clips)]
+        for st in ns.stages:
+            t0 = time.perf_counter()
+            get_problem(sp, 64, st == "B", RefineOptions(dynamics=st == "B").settings)
+            build = time.perf_counter() - t0
+            runs = [_timed(c, st) for c in clips]
+            good = [r for r in runs if r["ok"]]
+            med = {
+                k: statistics.median([r[k] for r in good]) if good else float("nan")
+                for k in ("solve", "call", "cpu", "iterations")
+            }
+            rec[st] = {
+                "build_s": build,
+                **{f"median_{k}": v for k, v in med.items()},
+                "failed": len(runs) - len(good),
+            }
+            flag = "" if not good or med["solve"] <= TARGET_S[st] else "!"
+            row += (
+                f" | {_fmt(build, 8)} {_fmt(med['solve'])}{flag:1s}{_fmt(med['call'])}"
+                f" {_fmt(med['cpu'])} {med['iterations']:5.0f}"
+            )
+            if st == "A":
+                rec["_results"] = [r["result"] for r in runs]
+        if not ns.no_survival:
+            before = [_survival(c) for c in clips]
+            after = [_survival(r.motion) for r in rec.get("_results", []) if r is not None]
+            rec["survival_before"] = float(np.mean(before))
+            rec["survival_after"] = float(np.mean(after)) if after else float("nan")
+            row += f" | {rec['survival_before']:.2f} → {_fmt(rec['survival_after'], 4)}"
+        rec.pop("_results", None)
+        out["species"][sp] = rec
+        print(row, flush=True)
+    print(
+        "(! = over the target; survival: unassisted servo tracking, share of the clip "
+        "completed; stage-A refinement)"
+    )
+
+    # ---------------------------------------------------------------- scaling
+    print(f"\nscaling on {ns.scaling_species} (solve time summed over windows, one clip each):")
+    for st in ns.stages:
+        parts = []
+        for n in ns.lengths:
+            r = _timed(_clip(ns.scaling_species, n, ns.seed + 100), st)
+            out["scaling"].setdefault(st, {})[n] = {k: r[k] for k in ("ok", "solve", "call", "cpu")}
+            parts.append(
+                f"{n} frames {_fmt(r['solve'], 6)} s ({1000 * r['solve'] / n:5.2f} ms/frame, "
+                f"cpu {_fmt(r['cpu'], 6)} s)"
+            )
+        print(f"  stage {st}: " + "; ".join(parts))
+
+    # ---------------------------------------------------------------- success
+    rng = np.random.default_rng(ns.seed + 7)
+    print(
+        f"\nIPOPT success on {ns.success_clips} random artefact clips per stage "
+        f"(100 frames, random species, action and artefact mix):"
+    )
+    for st in ns.stages:
+        ok = tried = 0
+        fails = []
+        for _ in range(ns.success_clips):
+            sp = str(rng.choice(species))
+            act = str(rng.choice(available_actions(sp)))
+            kinds = tuple(a for a in _ARTEFACTS + ("float",) if rng.random() < 0.5) or ("slide",)
+            try:
+                m = _clip(sp, 100, int(rng.integers(1 << 30)), act, kinds)
+            except HabitsimError as e:  # an action that cannot be generated at this length
+                fails.append(f"{sp}/{act}: {e}")
+                continue
+            r = _timed(m, st)
+            tried += 1
+            ok += bool(r["ok"])
+            if not r["ok"]:
+                fails.append(f"{sp}/{act}/{'+'.join(kinds)}")
+        rate = ok / max(tried, 1)
+        verdict = "met" if rate >= TARGET_SUCCESS else "MISSED"
+        out["success"][st] = {"rate": rate, "failed": fails}
+        print(
+            f"  stage {st}: {ok}/{tried} = {100 * rate:.1f} % "
+            f"(target ≥ {100 * TARGET_SUCCESS:.0f} %: {verdict})"
+            + (f"; failed: {', '.join(fails[:6])}" if fails else "")
+        )
+    if ns.json:
+        from ..refine.report import clean_json
+
+        print(json.dumps(clean_json(out)))
+    return 0

@@ -1,0 +1,201 @@
+"""``habitsim refine IN.npz --out OUT.npz``: make a motion physically plausible.
+
+::
+
+    habitsim refine IN.npz --out OUT.npz [--report R.json] [--qpos Q.npz] [--dynamics]
+                           [--fallback] [--detect-contacts] [--window W] [--overlap V]
+                           [--max-iter N] [--no-metrics] [--json]
+
+Runs :func:`habitsim.refine.refine` (stage A, kinematic; stage B with ``--dynamics``) and
+writes
+
+* ``--out``: the refined motion (habitsim ``.npz``, with the contact labels used and
+  ``metadata["refine"]``);
+* ``--report``: the JSON report of :mod:`habitsim.refine.report` (status, iterations,
+  solve time, each cost term, constraint violations, MuJoCo checks, METRICS.md kinematic
+  and dynamic metrics before / after);
+* ``--qpos``: the refined qpos trajectory of the species' model (``.npz`` with ``qpos``
+  (T, nq), ``fps``, ``species`` and ``qpos_names``, one per column: ``root_x`` …
+  ``root_qz`` for the free joint, then the hinge names).
+
+Every output is written atomically, and only once the refinement has finished: a failed
+run leaves no file behind. Exit codes: 0 success; 1 IPOPT failed and ``--fallback``
+wrote the input unchanged (status in the report); 2 bad input or (without
+``--fallback``) a failed refinement, with ``error: ...`` on stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MotionFileError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the top-level ``refine`` command."""
+    p = sub.add_parser(
+        "refine",
+        help="refine a motion (CasADi/IPOPT): no foot sliding, penetration, hovering, "
+        "joint-limit excursions or jitter",
+        description=(
+            "Trajectory optimisation on the species' MuJoCo model that removes foot "
+            "sliding, ground penetration, hovering, joint-limit excursions and jitter while "
+            "staying close to the input; --dynamics adds contact forces and centroidal "
+            "dynamics."
+        ),
+    )
+    p.add_argument("input", metavar="IN.npz", help="motion file")
+    p.add_argument("--out", required=True, metavar="OUT.npz", help="refined motion file")
+    p.add_argument("--report", metavar="R.json", help="write the JSON report here")
+    p.add_argument("--qpos", metavar="Q.npz", help="write the refined qpos trajectory here")
+    p.add_argument(
+        "--dynamics",
+        action="store_true",
+        help="stage B: contact forces in friction pyramids + centroidal dynamics",
+    )
+    p.add_argument(
+        "--fallback",
+        action="store_true",
+        help="if IPOPT fails, write the input unchanged (exit code 1) instead of failing",
+    )
+    p.add_argument(
+        "--detect-contacts",
+        action="store_true",
+        help="detect contact labels even if the file has some",
+    )
+    p.add_argument(
+        "--window",
+        type=int,
+        default=64,
+        metavar="W",
+        help="window length for long clips [frames] (default 64)",
+    )
+    p.add_argument(
+        "--overlap",
+        type=int,
+        default=16,
+        metavar="V",
+        help="overlap of consecutive windows [frames] (default 16)",
+    )
+    p.add_argument(
+        "--max-iter",
+        type=int,
+        default=200,
+        metavar="N",
+        help="IPOPT iteration limit per window (default 200)",
+    )
+    p.add_argument(
+        "--no-metrics",
+        action="store_true",
+        help="skip the before/after METRICS.md metrics in the report",
+    )
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.set_defaults(func=_refine)
+
+
+def _check_out(path: str | None, what: str) -> None:
+    if path is not None and Path(path).suffix != ".npz":
+        raise MotionFileError(f"{what} must end in .npz, got {Path(path).name!r}")
+
+
+def _qpos_names(model) -> list[str]:
+    """One name per qpos column: ``<free joint>_x/y/z/qw/qx/qy/qz``, hinge names."""
+    names = [""] * model.nq
+    for j in range(model.njnt):
+        a, name = int(model.jnt_qposadr[j]), model.joint(j).name
+        if int(model.jnt_type[j]) == 0:  # free
+            for k, suffix in enumerate(("x", "y", "z", "qw", "qx", "qy", "qz")):
+                names[a + k] = f"{name}_{suffix}"
+        elif int(model.jnt_type[j]) == 1:  # ball
+            for k, suffix in enumerate(("qw", "qx", "qy", "qz")):
+                names[a + k] = f"{name}_{suffix}"
+        else:
+            names[a] = name
+    return names
+
+
+def _summary(rep: dict) -> str:
+    lines = [
+        f"refine: {rep['species']}, {rep['frames']} frames, stage {rep['stage']}: "
+        f"{rep['status']} in {rep['iterations']} iterations, {rep['solve_time_s']:.2f} s solve "
+        f"({len(rep['windows'])} window(s))",
+        f"  max constraint violation {rep['max_constraint_violation']:.2e}; stance drift "
+        f"{rep['checks']['stance_drift_max_mm']:.3f} mm, penetration "
+        f"{rep['checks']['penetration_max_mm']:.3f} mm",
+        "  cost: " + ", ".join(f"{k} {v:.3g}" for k, v in rep["cost"].items()),
+    ]
+    before, after = rep.get("metrics_before"), rep.get("metrics_after")
+    if before and after:
+        keys = (
+            "penetration_mm",
+            "float_mm",
+            "skate_mm",
+            "jerk",
+            "joint_limit_violation_rad",
+            "root_residual_mg",
+        )
+        lines.append("  metric                       before      after")
+        for k in keys:
+            if k in before and k in after and before[k] is not None and after[k] is not None:
+                lines.append(f"  {k:26s} {before[k]:9.4g}  {after[k]:9.4g}")
+    if "residual_mg" in rep:
+        lines.append(
+            f"  model root residual / m·g: mean {rep['residual_mg']['mean']:.3f}, "
+            f"max {rep['residual_mg']['max']:.3f}"
+        )
+    return "\n".join(lines)
+
+
+def _refine(ns: argparse.Namespace) -> int:
+    from ..fileio import atomic_write, atomic_write_text
+    from ..motion import load_motion
+    from ..refine import RefineOptions, refine
+    from ..refine.solve import _species_model
+
+    _check_out(ns.out, "--out")
+    _check_out(ns.qpos, "--qpos")
+    motion = load_motion(ns.input)
+    contacts = motion.detect_contacts() if ns.detect_contacts else None
+    opts = RefineOptions(
+        dynamics=ns.dynamics,
+        fallback=ns.fallback,
+        window=ns.window,
+        overlap=ns.overlap,
+        max_iter=ns.max_iter,
+        metrics=not ns.no_metrics,
+    )
+    res = refine(motion, opts, contacts=contacts)
+    rep = dict(res.report, input=str(ns.input))
+    text = json.dumps(rep, indent=2, allow_nan=False)
+    qbuf = None
+    if ns.qpos is not None:
+        model = _species_model(motion.species)
+        buf = io.BytesIO()
+        np.savez_compressed(
+            buf,
+            qpos=res.qpos,
+            fps=np.array(res.fps),
+            species=np.array(motion.species),
+            qpos_names=np.array(_qpos_names(model)),
+        )
+        qbuf = buf.getvalue()
+    # everything computed: write the outputs (each atomically)
+    res.motion.save(ns.out)
+    if qbuf is not None:
+        with atomic_write(ns.qpos) as fh:
+            fh.write(qbuf)
+    if ns.report is not None:
+        atomic_write_text(ns.report, text + "\n")
+    print(text if ns.json else _summary(rep))
+    if not res.success:
+        print(
+            f"warning: refinement failed ({res.status}); wrote the input unchanged", file=sys.stderr
+        )
+        return 1
+    return 0

@@ -1,0 +1,41 @@
+"""Refinement: make a (transferred) motion physically plausible before it is tracked.
+
+A trajectory optimisation (CasADi + IPOPT) on the target species' compiled MuJoCo model
+that removes foot sliding, ground penetration, hovering, joint-limit excursions and
+jitter while staying close to the input motion; stage B adds contact forces and
+centroidal dynamics. See :func:`refine` and, for the pieces:
+
+* :mod:`~habitsim.refine.kinematics` — symbolic forward kinematics of an MjModel;
+* :mod:`~habitsim.refine.problem` — the NLP of one window, built apart from solving it;
+* :mod:`~habitsim.refine.windows` — overlapping windows for long clips;
+* :mod:`~habitsim.refine.solve` — :func:`refine` itself;
+* :mod:`~habitsim.refine.report` — the JSON report;
+* :mod:`~habitsim.refine.artefacts` — artefact injection for tests and benchmarks.
+"""
+
+from __future__ import annotations
+
+from .artefacts import ARTEFACTS, inject_artefacts
+from .errors import RefineConvergenceError, RefineError, RefineInputError
+from .kinematics import SymbolicKinematics
+from .problem import RefinementProblem, SolverSettings, build_refinement_problem
+from .solve import RefineOptions, RefineResult, get_problem, refine
+from .windows import Window, plan_windows
+
+__all__ = [
+    "refine",
+    "RefineOptions",
+    "RefineResult",
+    "RefineError",
+    "RefineInputError",
+    "RefineConvergenceError",
+    "SymbolicKinematics",
+    "RefinementProblem",
+    "SolverSettings",
+    "build_refinement_problem",
+    "get_problem",
+    "Window",
+    "plan_windows",
+    "ARTEFACTS",
+    "inject_artefacts",
+]

@@ -1,0 +1,717 @@
+"""Solve the refinement of a clip: :func:`refine`.
+
+``refine(motion)`` maps the motion onto its species' model
+(:func:`habitsim.qpos.motion_to_qpos`), prepares targets, contact labels and an initial
+guess, solves the windows of :func:`~habitsim.refine.windows.plan_windows` in order with
+the cached problem of :func:`~habitsim.refine.problem.build_refinement_problem`,
+assembles the qpos trajectory, checks the result with MuJoCo's own forward kinematics,
+and writes the report (:mod:`habitsim.refine.report`).
+
+Preparation, in this order:
+
+1. **Jitter pre-filter** (``filter_cutoff``): every coordinate of the input qpos (root
+   position, root quaternion, hinges) is smoothed by the zero-phase second-difference
+   filter ``argmin ‖y − x‖² + λ‖Δ²y‖²`` (a banded solve per coordinate, microseconds),
+   with the cutoff scaled to the species' natural frequency √(g/L), so a cat and an
+   elephant are smoothed alike in dimensionless time. A leg's hinges are not smoothed
+   at the corners of its own touchdowns and lift-offs (the foot's velocity legitimately
+   jumps there; smoothing across them makes the foot glide over the ground).
+2. **Ground alignment** (``align_ground``): the targets are shifted vertically by a
+   smooth per-frame offset, the mean height of the toes the labels put in contact
+   (interpolated through flight phases, moving average over 0.25 s, at most 5 % L). A
+   clip that hovers or sinks as a whole is then tracked at the right height instead of
+   being pulled against its stance constraints.
+3. **Initial guess**: the filtered, aligned input with hinges clipped into their ranges
+   and, frame by frame, the feet in contact put on the floor; stage B adds the body
+   weight shared among the feet in contact and the CoM.
+4. **Swing floor**: feet in swing stay at least as high as in the input, up to 2 % L.
+
+Each window is solved first with the Gauss-Newton Hessian (at most
+:data:`GAUSS_NEWTON_MAX_ITER` iterations), and if IPOPT fails with it, again from the
+same start with the exact Hessian; windows whose input leaves the joint ranges by more
+than :data:`EXACT_FIRST_EXCESS_RAD` start with the exact Hessian.
+
+Failure is never silent: a window on which IPOPT does not report success, or a result
+that fails the MuJoCo check (stance drift or penetration beyond ``verify_tol_mm``),
+raises :class:`~habitsim.refine.errors.RefineConvergenceError` — or, with
+``fallback=True``, returns the input unchanged with ``success=False`` and the status in
+the report.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from ..errors import InvalidMotionError
+from ..motion import Motion
+from ..qpos import (
+    QposTrajectory,
+    load_species_model,
+    motion_to_qpos,
+    qpos_joint_positions,
+    qpos_to_motion,
+)
+from ..rotations import quat_mul, quat_normalize
+from .errors import RefineConvergenceError, RefineError, RefineInputError
+from .problem import (
+    FEET,
+    LEG_PREFIXES,
+    ModelInfo,
+    RefinementProblem,
+    SolverSettings,
+    build_refinement_problem,
+)
+from .windows import Window, plan_windows
+
+__all__ = [
+    "RefineOptions",
+    "RefineResult",
+    "refine",
+    "get_problem",
+    "clear_cache",
+    "SUCCESS_STATUSES",
+    "SWING_CLEARANCE_PER_LEG",
+]
+
+#: Swing feet are kept at least as high as in the input up to this share of leg length
+#: (METRICS.md's contact height).
+SWING_CLEARANCE_PER_LEG = 0.02
+#: Iteration limit of the Gauss-Newton attempt per window (it converges in 7–30 when it
+#: does; beyond, the exact-Hessian retry is faster).
+GAUSS_NEWTON_MAX_ITER = 25
+#: A window whose input leaves the joint ranges by more than this [rad] starts with the
+#: exact Hessian: clipping such angles puts the initial guess centimetres off its
+#: contact constraints, a start Gauss-Newton does not recover from.
+EXACT_FIRST_EXCESS_RAD = 0.4
+#: IPOPT return statuses counted as success.
+SUCCESS_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+
+@dataclass(frozen=True)
+class RefineOptions:
+    """Settings of :func:`refine` (weights are those of :mod:`habitsim.refine.problem`).
+
+    Attributes:
+        dynamics: stage B (contact forces + centroidal dynamics) instead of stage A.
+        window: window length W [frames]; overlap: frames shared by consecutive windows.
+        filter_cutoff: cutoff of the jitter pre-filter in units of the species' natural
+            frequency √(g/L) [rad/s] (14 → 8.9 Hz for a dog, 4.9 Hz for an elephant);
+            None switches the filter off.
+        w_track, w_smooth, w_reg, w_root, w_residual, w_force: cost weights.
+        friction: friction coefficient of the pyramid (None: the model's foot / floor).
+        align_ground: shift the targets onto the floor first (module docstring).
+        fallback: on failure return the input with ``success=False`` instead of raising.
+        metrics: compute METRICS.md kinematic and dynamic metrics before / after for the
+            report (off in benchmarks).
+        max_iter, tol, constr_viol_tol: IPOPT settings (constraint tolerance in [m]).
+        verify_tol_mm: largest stance drift / penetration [mm] the MuJoCo check accepts.
+    """
+
+    dynamics: bool = False
+    window: int = 64
+    overlap: int = 16
+    filter_cutoff: float | None = 14.0
+    w_track: float = 1.0
+    w_smooth: float = 1e-5
+    w_reg: float = 3e-2
+    w_root: float = 1e-3
+    w_residual: float = 2e-2
+    w_force: float = 1e-4
+    friction: float | None = None
+    align_ground: bool = True
+    fallback: bool = False
+    metrics: bool = True
+    max_iter: int = 200
+    tol: float = 1e-6
+    constr_viol_tol: float = 1e-6
+    verify_tol_mm: float = 0.1
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name.startswith("w_") and not (np.isfinite(v) and v >= 0):
+                raise RefineInputError(f"{f.name} must be a finite number ≥ 0, got {v!r}")
+        if self.w_track <= 0:
+            raise RefineInputError("w_track must be > 0")
+        if self.filter_cutoff is not None and not (
+            np.isfinite(self.filter_cutoff) and self.filter_cutoff > 0
+        ):
+            raise RefineInputError(f"filter_cutoff must be > 0 or None, got {self.filter_cutoff!r}")
+        if self.friction is not None and not (np.isfinite(self.friction) and self.friction > 0):
+            raise RefineInputError(f"friction must be > 0, got {self.friction!r}")
+        if int(self.max_iter) < 1:
+            raise RefineInputError(f"max_iter must be ≥ 1, got {self.max_iter}")
+        for name in ("tol", "constr_viol_tol", "verify_tol_mm"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise RefineInputError(f"{name} must be > 0, got {v!r}")
+        plan_windows(max(self.window + 1, 1), self.window, self.overlap)  # validates sizes
+
+    def cutoff_hz(self, leg_length: float, gravity: float = 9.81) -> float | None:
+        """The pre-filter's cutoff frequency [Hz] for a leg length [m] (None: off)."""
+        if self.filter_cutoff is None:
+            return None
+        return float(self.filter_cutoff) * float(np.sqrt(gravity / leg_length)) / (2 * np.pi)
+
+    @property
+    def settings(self) -> SolverSettings:
+        """The settings of the first attempt per window: Gauss-Newton, at most
+        :data:`GAUSS_NEWTON_MAX_ITER` iterations (the exact-Hessian retry gets max_iter)."""
+        return SolverSettings(
+            max_iter=min(int(self.max_iter), GAUSS_NEWTON_MAX_ITER),
+            tol=float(self.tol),
+            constr_viol_tol=float(self.constr_viol_tol),
+        )
+
+    @property
+    def weights(self) -> dict[str, float]:
+        return {
+            f.name: float(getattr(self, f.name)) for f in fields(self) if f.name.startswith("w_")
+        }
+
+
+@dataclass(frozen=True)
+class RefineResult:
+    """Outcome of :func:`refine`.
+
+    Attributes:
+        motion: the refined motion (the input itself, with the labels, after a fallback),
+            carrying the contact labels used and ``metadata["refine"]``.
+        qpos: (T, nq) refined qpos trajectory of the species' model.
+        fps: frame rate [Hz].
+        status: IPOPT's status of the last window solved (``Solve_Succeeded`` …), or
+            ``fallback: <status>``.
+        success: False only after a fallback.
+        contacts: (T, 4) the contact labels used (LF, RF, LH, RH).
+        residual_mg: (T,) stage B's root residual force per frame / (m·g), else None.
+        report: the JSON-ready report (:func:`habitsim.refine.report.build_report`).
+    """
+
+    motion: Motion
+    qpos: np.ndarray
+    fps: float
+    status: str
+    success: bool
+    contacts: np.ndarray
+    residual_mg: np.ndarray | None
+    report: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def trajectory(self) -> QposTrajectory:
+        """The qpos as a :class:`~habitsim.qpos.QposTrajectory` (for tracking)."""
+        return QposTrajectory(self.qpos, self.fps, np.zeros(len(self.qpos)), ())
+
+
+# --------------------------------------------------------------------------- caches
+_PROBLEMS: dict[tuple, RefinementProblem] = {}
+
+
+@functools.lru_cache(maxsize=32)
+def _species_model(species: str) -> mujoco.MjModel:
+    try:
+        return load_species_model(species)
+    except InvalidMotionError as e:
+        raise RefineError(str(e)) from e
+
+
+def get_problem(
+    species: str,
+    n_frames: int,
+    dynamics: bool = False,
+    settings: SolverSettings | None = None,
+    model: mujoco.MjModel | None = None,
+) -> RefinementProblem:
+    """The built problem of a species (or model) and window length, cached per process.
+
+    The first call per (species, W, stage, settings) builds it (seconds); later calls
+    return the same object. Default settings: those :func:`refine` uses first
+    (``RefineOptions().settings``).
+    """
+    settings = settings or RefineOptions().settings
+    key = (
+        species if model is None else ("model", id(model)),
+        int(n_frames),
+        bool(dynamics),
+        settings,
+    )
+    pr = _PROBLEMS.get(key)
+    if pr is None:
+        m = _species_model(species) if model is None else model
+        pr = build_refinement_problem(m, int(n_frames), bool(dynamics), settings)
+        pr._model_ref = m  # type: ignore[attr-defined]  # keep id(model) alive
+        _PROBLEMS[key] = pr
+    return pr
+
+
+def clear_cache() -> None:
+    """Forget every built problem."""
+    _PROBLEMS.clear()
+
+
+# --------------------------------------------------------------------------- inputs
+def _check_motion(motion: Any) -> Motion:
+    if not isinstance(motion, Motion):
+        raise RefineInputError(f"refine() needs a habitsim Motion, got {type(motion).__name__}")
+    rp, rot = np.asarray(motion.root_positions), np.asarray(motion.rotations)
+    t = rot.shape[0] if rot.ndim == 3 else -1
+    if rot.ndim != 3 or rot.shape[1:] != (30, 4) or rp.shape != (t, 3):
+        raise RefineInputError(
+            f"motion arrays have wrong shapes: root_positions {rp.shape}, rotations {rot.shape}"
+        )
+    if not (np.all(np.isfinite(rp)) and np.all(np.isfinite(rot))):
+        raise RefineInputError("motion contains NaN or inf")
+    if t < 3:
+        raise RefineInputError(f"refinement needs at least 3 frames, got {t}")
+    if not (np.isfinite(motion.fps) and motion.fps > 0):
+        raise RefineInputError(f"fps must be positive, got {motion.fps}")
+    motion.species_info  # noqa: B018 - raises UnknownSpeciesError with the list
+    return motion
+
+
+def _resolve_contacts(motion: Motion, contacts: np.ndarray | None) -> tuple[np.ndarray, str]:
+    t = motion.num_frames
+    if contacts is None:
+        if motion.contacts is not None:
+            contacts, source = motion.contacts, "input"
+        else:
+            return motion.detect_contacts().astype(bool), "detected"
+    else:
+        source = "given"
+    c = np.asarray(contacts)
+    if c.shape != (t, 4):
+        raise RefineInputError(
+            f"contacts must have shape ({t}, 4) (feet LF, RF, LH, RH), got {c.shape}"
+        )
+    if c.dtype != bool:
+        if not np.issubdtype(c.dtype, np.number) or not np.all(np.isin(c, (0, 1))):
+            raise RefineInputError("contacts must be booleans (or 0/1)")
+    return c.astype(bool), source
+
+
+def _ground_offset(
+    targets: np.ndarray, contacts: np.ndarray, fps: float, toe_idx: list[int]
+) -> np.ndarray:
+    """(T,) smooth vertical offset: mean toe height of the feet in contact."""
+    t = targets.shape[0]
+    toe_z = targets[:, toe_idx, 2]
+    n = contacts.sum(axis=1)
+    have = n > 0
+    if not np.any(have):
+        return np.zeros(t)
+    raw = np.where(have, (toe_z * contacts).sum(axis=1) / np.maximum(n, 1), np.nan)
+    frames = np.arange(t)
+    filled = np.interp(frames, frames[have], raw[have])
+    k = max(1, int(round(0.25 * fps)))
+    if k > 1 and t > 1:
+        pad = np.pad(filled, (k // 2, k - 1 - k // 2), mode="edge")
+        filled = np.convolve(pad, np.ones(k) / k, mode="valid")
+    return filled
+
+
+#: Largest ground-alignment shift, a share of leg length: beyond it a clip is not
+#: hovering or sinking but has legs of the wrong length, which alignment cannot fix.
+MAX_ALIGN_PER_LEG = 0.05
+
+
+def _lowpass(x: np.ndarray, lam: float, weights: np.ndarray | None = None) -> np.ndarray:
+    """Zero-phase smoothing along axis 0: argmin |y − x|² + λ Σ_k w_k (Δ²y)_k².
+
+    Args:
+        x: (T, n) signals.
+        lam: the penalty λ (cutoff: λ = 1 / (2 − 2 cos ω_c)²).
+        weights: optional (T-2,) per-second-difference weights in [0, 1] (0 lets the
+            signal bend there).
+    """
+    from scipy.linalg import solveh_banded
+
+    t = x.shape[0]
+    if t < 3 or lam <= 0:
+        return x.copy()
+    wk = lam * (np.ones(t - 2) if weights is None else np.asarray(weights, float))
+    c = (1.0, -2.0, 1.0)  # row k of D² has c at columns k, k+1, k+2
+    ab = np.zeros((3, t))  # I + λ D²ᵀ W D² in upper banded form: row 2 − j = diagonal j
+    ab[2] = 1.0
+    for i in range(3):
+        ab[2, i : i + t - 2] += wk * c[i] * c[i]
+        if i < 2:
+            ab[1, i + 1 : i + t - 1] += wk * c[i] * c[i + 1]
+    ab[0, 2:] += wk * c[0] * c[2]
+    return solveh_banded(ab, x)
+
+
+def _lowpass_qpos(
+    q: np.ndarray, info: Any, fps: float, f_c: float, contacts: np.ndarray
+) -> np.ndarray:
+    """Contact-aware jitter filter of a qpos trajectory (see :class:`RefineOptions`).
+
+    Root position, root quaternion (then renormalised) and every hinge are smoothed
+    with the second-difference filter of cutoff ``f_c`` [Hz]; a leg's hinges are not
+    smoothed at the corners of its touchdowns and lift-offs (the two second differences
+    around a label change), where a foot's velocity legitimately jumps.
+    """
+    lam = 1.0 / (2.0 - 2.0 * np.cos(2 * np.pi * min(f_c / fps, 0.5))) ** 2
+    out = q.copy()
+    fa = info.free_qposadr
+    out[:, fa : fa + 3] = _lowpass(q[:, fa : fa + 3], lam)
+    out[:, fa + 3 : fa + 7] = quat_normalize(_lowpass(q[:, fa + 3 : fa + 7], lam))
+    names = info.hinge_names
+    axial = [
+        a for a, n in zip(info.hinge_qposadr, names, strict=True) if not n.startswith(LEG_PREFIXES)
+    ]
+    out[:, axial] = _lowpass(q[:, axial], lam)
+    t = len(q)
+    for f, leg in enumerate(FEET):
+        cols = [
+            a for a, n in zip(info.hinge_qposadr, names, strict=True) if n.startswith(f"{leg}_")
+        ]
+        if not cols or t < 3:
+            continue
+        change = np.flatnonzero(contacts[1:, f] != contacts[:-1, f])  # between t and t+1
+        wk = np.ones(t - 2)
+        for c in change:  # second differences centred on c and c+1 (index k ↔ frame k+1)
+            wk[max(c - 1, 0) : min(c + 1, t - 2)] = 0.0
+        out[:, cols] = _lowpass(q[:, cols], lam, wk)
+    return out
+
+
+def _gibbs_quat(g: np.ndarray) -> np.ndarray:
+    return quat_normalize(np.concatenate([np.ones(g.shape[:-1] + (1,)), g], axis=-1))
+
+
+# --------------------------------------------------------------------------- solve
+@dataclass
+class _Prepared:
+    model: mujoco.MjModel
+    qpos_in: np.ndarray
+    targets: np.ndarray
+    qref: np.ndarray
+    href: np.ndarray
+    x0: np.ndarray
+    contacts: np.ndarray
+    contact_source: str
+    glob: dict[str, float]
+    offset: np.ndarray
+    swing_floor: np.ndarray
+
+
+def _prepare(
+    motion: Motion,
+    contacts: np.ndarray | None,
+    opts: RefineOptions,
+    model: mujoco.MjModel,
+    pr: RefinementProblem,
+) -> _Prepared:
+    info, nx, nv = pr.info, pr.nx, pr.nv
+    c, source = _resolve_contacts(motion, contacts)
+    q_raw = motion_to_qpos(motion, model).qpos
+    f_c = opts.cutoff_hz(motion.species_info.leg_length, info.gravity)
+    if f_c is None:
+        q, targets = q_raw, motion.global_positions()
+    else:
+        q = _lowpass_qpos(q_raw, info, motion.fps, f_c, c)
+        targets = qpos_joint_positions(model, q)
+    toe_idx = [motion.skeleton.foot_indices[i] for i in range(4)]
+    offset = np.zeros(len(q))
+    if opts.align_ground:
+        lim = MAX_ALIGN_PER_LEG * motion.species_info.leg_length
+        offset = np.clip(_ground_offset(targets, c, motion.fps, toe_idx), -lim, lim)
+    targets = targets.copy()
+    targets[..., 2] -= offset[:, None]
+    fa = info.free_qposadr
+    qref = q[:, fa + 3 : fa + 7]
+    href = q[:, info.hinge_qposadr]
+    x0 = np.zeros((len(q), nx))
+    x0[:, :3] = q[:, fa : fa + 3]
+    x0[:, 2] -= offset
+    span = np.where(np.isfinite(info.upper - info.lower), info.upper - info.lower, 1.0)
+    margin = np.minimum(1e-6, 1e-3 * span)
+    x0[:, 6:nv] = np.clip(href, info.lower + margin, info.upper - margin)
+    # initial guess only: put the feet in contact on the floor frame by frame (clipping
+    # out-of-range angles and the smooth alignment leave them off it by centimetres)
+    sole0 = np.asarray(pr.frame.map(len(q))(x0[:, :nv].T, qref.T)[1])[2].reshape(len(q), 4)
+    x0[:, 2] -= _stance_height(sole0, c)
+    if nx > nv:  # stage B: weight shared by the feet in contact, spread over the edges
+        share = c / np.maximum(c.sum(axis=1, keepdims=True), 1)
+        x0[:, nv : nv + 16] = np.repeat(share / 4.0, 4, axis=1)
+        x0[:, nv + 16 :] = np.asarray(pr.frame.map(len(q))(x0[:, :nv].T, qref.T)[2]).T
+    sp = motion.species_info
+    glob = {
+        "leg_length": sp.leg_length,
+        "fps": motion.fps,
+        "gravity": info.gravity,
+        "mu": info.friction if opts.friction is None else float(opts.friction),
+        **opts.weights,
+    }
+    # swing feet stay at least as high as in the (unfiltered) input, up to the contact
+    # height of METRICS.md (2 % L): filtering must not turn a lift-off into a low glide.
+    q_al = q_raw.copy()
+    q_al[:, fa + 2] -= offset
+    sole_in = _sole_heights(model, info, q_al)
+    swing_floor = np.clip(sole_in, 0.0, SWING_CLEARANCE_PER_LEG * sp.leg_length)
+    return _Prepared(model, q_raw, targets, qref, href, x0, c, source, glob, offset, swing_floor)
+
+
+def _stance_height(sole: np.ndarray, contacts: np.ndarray) -> np.ndarray:
+    """(T,) mean height of the soles in contact, interpolated through flight frames."""
+    n = contacts.sum(axis=1)
+    have = n > 0
+    if not np.any(have):
+        return np.zeros(len(sole))
+    raw = (sole * contacts).sum(axis=1) / np.maximum(n, 1)
+    frames = np.arange(len(sole))
+    return np.interp(frames, frames[have], raw[have])
+
+
+def _sole_heights(model: mujoco.MjModel, info: Any, qpos: np.ndarray) -> np.ndarray:
+    """(T, 4) height of the lowest point of each foot sphere [m] (MuJoCo FK)."""
+    d = mujoco.MjData(model)
+    out = np.empty((len(qpos), 4))
+    for k, q in enumerate(qpos):
+        d.qpos[:] = q
+        mujoco.mj_kinematics(model, d)
+        out[k] = d.geom_xpos[info.foot_geoms, 2] - info.foot_radius
+    return out
+
+
+def _assemble_qpos(prep: _Prepared, info: Any, x: np.ndarray) -> np.ndarray:
+    q = prep.qpos_in.copy()
+    fa = info.free_qposadr
+    q[:, fa : fa + 3] = x[:, :3]
+    q[:, fa + 3 : fa + 7] = quat_normalize(quat_mul(prep.qref, _gibbs_quat(x[:, 3:6])))
+    q[:, info.hinge_qposadr] = x[:, 6 : 6 + len(info.hinge_qposadr)]
+    return q
+
+
+def _solve_windows(
+    prep: _Prepared,
+    motion: Motion,
+    opts: RefineOptions,
+    plan: list[Window],
+    model_arg: mujoco.MjModel | None,
+    info: ModelInfo,
+) -> tuple[np.ndarray, list[dict], str, float]:
+    x = prep.x0.copy()
+    log: list[dict] = []
+    build_s = 0.0
+    status = "not solved"
+    for win in plan:
+        sl = slice(win.start, win.stop)
+        fixed = np.zeros(win.length, bool)
+        fixed[: win.n_fixed] = True
+        x_start = x[sl].copy()
+        # Gauss-Newton first (fast); if IPOPT fails with it, the exact Hessian (robust
+        # from far-off starts, e.g. inputs well outside the joint ranges)
+        settings = [opts.settings]
+        if opts.settings.hessian == "gauss-newton":
+            exact = replace(opts.settings, hessian="exact", max_iter=int(opts.max_iter))
+            excess = np.maximum(info.lower - prep.href[sl], prep.href[sl] - info.upper).max()
+            settings = [exact] if excess > EXACT_FIRST_EXCESS_RAD else [opts.settings, exact]
+        for k, st_k in enumerate(settings):
+            cached = len(_PROBLEMS)
+            pr = get_problem(motion.species, win.length, opts.dynamics, st_k, model=model_arg)
+            if len(_PROBLEMS) > cached:
+                build_s += pr.build_time_s
+            p = pr.parameters(prep.targets[sl], prep.qref[sl], prep.href[sl], prep.glob)
+            lbx, ubx, lbg, ubg = pr.bounds(prep.contacts[sl], fixed, x_start, prep.swing_floor[sl])
+            t0 = time.perf_counter()
+            sol = pr.solver(x0=pr.pack(x_start), p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+            dt = time.perf_counter() - t0
+            st = pr.solver.stats()
+            status = str(st["return_status"])
+            xw = pr.unpack(np.asarray(sol["x"]).ravel())
+            ok = status in SUCCESS_STATUSES and bool(np.all(np.isfinite(xw)))
+            if k == 0:
+                entry = {
+                    "start": win.start,
+                    "stop": win.stop,
+                    "n_fixed": win.n_fixed,
+                    "status": status,
+                    "hessian": st_k.hessian,
+                    "iterations": 0,
+                    "solve_time_s": 0.0,
+                    "objective": float(sol["f"]),
+                }
+                log.append(entry)
+            else:
+                entry["retry_of"] = entry["status"]
+                entry.update(status=status, hessian=st_k.hessian, objective=float(sol["f"]))
+            entry["iterations"] += int(st["iter_count"])
+            entry["solve_time_s"] += dt
+            if ok:
+                break
+        if not ok:
+            raise _WindowFailed(status, (win.start, win.stop), log, build_s)
+        # committed up to commit_stop; beyond it the solution is the next window's warm start
+        x[sl] = xw
+    return x, log, status, build_s
+
+
+class _WindowFailed(Exception):
+    def __init__(self, status: str, window: tuple[int, int], log: list[dict], build_s: float):
+        self.status, self.window, self.log, self.build_s = status, window, log, build_s
+
+
+def _verify(
+    model: mujoco.MjModel, info: Any, qpos: np.ndarray, contacts: np.ndarray
+) -> dict[str, float]:
+    """MuJoCo-FK checks of a qpos trajectory: stance drift, penetration, limits [mm/rad]."""
+    d = mujoco.MjData(model)
+    toes = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"{leg}_toe") for leg in FEET]
+    sole = np.empty((len(qpos), 4))
+    toe = np.empty((len(qpos), 4, 3))
+    low = np.empty(len(qpos))
+    for k, q in enumerate(qpos):
+        d.qpos[:] = q
+        mujoco.mj_kinematics(model, d)
+        sole[k] = d.geom_xpos[info.foot_geoms, 2] - info.foot_radius
+        toe[k] = d.site_xpos[toes]
+        low[k] = min(d.xpos[1:, 2].min(), d.site_xpos[:, 2].min())
+    drift = 0.0
+    for f in range(4):
+        c = contacts[:, f]
+        k = 0
+        while k < len(c):
+            if not c[k]:
+                k += 1
+                continue
+            e = k
+            while e + 1 < len(c) and c[e + 1]:
+                e += 1
+            seg = toe[k : e + 1, f, :2]
+            drift = max(drift, float(np.linalg.norm(seg - seg[0], axis=1).max()))
+            k = e + 1
+    stance_height = float(np.abs(sole[contacts]).max()) if contacts.any() else 0.0
+    h = qpos[:, info.hinge_qposadr]
+    excess = np.maximum(info.lower - h, 0) + np.maximum(h - info.upper, 0)
+    return {
+        "stance_drift_max_mm": drift * 1000.0,
+        "stance_sole_height_max_mm": stance_height * 1000.0,
+        "penetration_max_mm": float(max(0.0, -sole.min(), -low.min())) * 1000.0,
+        "joint_limit_excess_max_rad": float(excess.max()),
+    }
+
+
+def refine(
+    motion: Motion,
+    options: RefineOptions | None = None,
+    *,
+    contacts: np.ndarray | None = None,
+    dynamics: bool | None = None,
+    fallback: bool | None = None,
+    model: mujoco.MjModel | None = None,
+) -> RefineResult:
+    """Make a motion physically plausible on its species' MuJoCo model.
+
+    Args:
+        motion: the motion (any length ≥ 3 frames).
+        options: settings (default :class:`RefineOptions`).
+        contacts: (T, 4) bool foot contact labels (LF, RF, LH, RH); default the motion's
+            own labels, else :func:`habitsim.contacts.detect_contacts`.
+        dynamics: shortcut for ``options.dynamics`` (stage B).
+        fallback: shortcut for ``options.fallback``.
+        model: a habitsim-named MuJoCo model to use instead of the species' shipped one.
+
+    Returns:
+        The :class:`RefineResult` (refined motion, qpos, status, report).
+
+    Raises:
+        RefineInputError: bad motion (NaN, shapes, < 3 frames), contacts or options.
+        UnknownSpeciesError: the motion's species is not in the catalog.
+        RefineConvergenceError: IPOPT failed on a window (unless ``fallback``).
+        RefineError: the model lacks the habitsim structure.
+    """
+    from .report import build_report
+
+    wall0 = time.perf_counter()
+    opts = options or RefineOptions()
+    if not isinstance(opts, RefineOptions):
+        raise RefineInputError(f"options must be RefineOptions, got {type(opts).__name__}")
+    if dynamics is not None:
+        opts = replace(opts, dynamics=bool(dynamics))
+    if fallback is not None:
+        opts = replace(opts, fallback=bool(fallback))
+    motion = _check_motion(motion)
+    m = _species_model(motion.species) if model is None else model
+    t = motion.num_frames
+    plan = plan_windows(t, opts.window, opts.overlap)
+    pr0 = get_problem(motion.species, plan[0].length, opts.dynamics, opts.settings, model=model)
+    info = pr0.info
+    prep = _prepare(motion, contacts, opts, m, pr0)
+    failure: _WindowFailed | None = None
+    try:
+        x, log, status, build_s = _solve_windows(prep, motion, opts, plan, model, info)
+    except _WindowFailed as e:
+        failure = e
+        x, log, status, build_s = prep.x0, e.log, e.status, e.build_s
+    qpos = _assemble_qpos(prep, info, x) if failure is None else prep.qpos_in.copy()
+    checks = _verify(m, info, qpos, prep.contacts)
+    if (
+        failure is None
+        and max(
+            checks["stance_drift_max_mm"],
+            checks["penetration_max_mm"],
+            checks["stance_sole_height_max_mm"],
+        )
+        > opts.verify_tol_mm
+    ):
+        failure = _WindowFailed("Verification_Failed", (0, t), log, build_s)
+        status = failure.status
+        qpos = prep.qpos_in.copy()
+    success = failure is None
+    if success:
+        out = qpos_to_motion(m, qpos, motion.species, motion.fps)
+        out.contacts = prep.contacts.copy()
+        out.metadata = dict(motion.metadata)
+    else:
+        out = motion.slice(0)
+        out.contacts = prep.contacts.copy()
+        qpos = prep.qpos_in.copy()
+    report = build_report(
+        motion_in=motion,
+        motion_out=out,
+        x=x,
+        prep=prep,
+        opts=opts,
+        plan=plan,
+        log=log,
+        status=status if success else f"fallback: {status}" if opts.fallback else status,
+        success=success,
+        build_s=build_s,
+        checks=checks,
+        model=m,
+        info=info,
+        wall0=wall0,
+    )
+    residual = None
+    if success and opts.dynamics and "residual_mg" in report:
+        residual = np.asarray(report["residual_mg"]["per_frame"])
+    if not success:
+        msg = (
+            f"IPOPT did not converge on frames {failure.window[0]}:{failure.window[1]} "
+            f"of the {t}-frame {motion.species} clip (status {failure.status}); "
+            "use fallback=True (--fallback) to get the input back"
+        )
+        if failure.status == "Verification_Failed":
+            msg = (
+                f"the refined {motion.species} clip failed the MuJoCo check "
+                f"(stance drift {checks['stance_drift_max_mm']:.3g} mm, penetration "
+                f"{checks['penetration_max_mm']:.3g} mm > {opts.verify_tol_mm} mm)"
+            )
+        if not opts.fallback:
+            raise RefineConvergenceError(msg, failure.status, failure.window, report)
+    out.metadata["refine"] = {
+        "status": report["status"],
+        "success": success,
+        "stage": report["stage"],
+        "iterations": report["iterations"],
+        "solve_time_s": report["solve_time_s"],
+    }
+    return RefineResult(
+        out, qpos, motion.fps, report["status"], success, prep.contacts.copy(), residual, report
+    )

@@ -1,0 +1,114 @@
+"""The benchmark report renders in headless Chromium: a non-empty page, no broken images."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from habitsim.evaluation.report import ReportError, write_report
+from habitsim.evaluation.runner import EvalConfig, run_benchmark
+
+from habitsim.dataset import build_dataset
+
+_CHECK = (
+    '<script>window.addEventListener("load",()=>{const a=[...document.images];'
+    "const b=a.filter(i=>!(i.complete&&i.naturalWidth>0)).length;"
+    'document.body.setAttribute("data-check","images="+a.length+" broken="+b);});</script>'
+)
+
+
+def _chromium() -> str | None:
+    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
+def _browser(*args: str) -> subprocess.CompletedProcess:
+    exe = _chromium()
+    assert exe is not None
+    return subprocess.run(
+        [exe, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory) -> Path:
+    data = tmp_path_factory.mktemp("rep_data")
+    build_dataset(
+        data,
+        clips_per_species=12,
+        seed=0,
+        species=["cat", "dog", "horse"],
+        workers=1,
+        progress=False,
+    )
+    out = tmp_path_factory.mktemp("rep_run")
+    cfg = EvalConfig(
+        data=str(data),
+        out=str(out),
+        methods=("direct", "ground_truth"),
+        refine="none",
+        max_clips=1,
+        report_pairs=1,
+    )
+    run_benchmark(cfg, workers=1, progress=False, report=True)
+    return out
+
+
+def test_report_files_are_self_contained(run_dir: Path) -> None:
+    html = (run_dir / "report.html").read_text(encoding="utf-8")
+    md = (run_dir / "report.md").read_text(encoding="utf-8")
+    assert "Table 1" in html and "FID" in html and "| direct |" in md
+    srcs = re.findall(r'<img src="([^"]+)"', html)
+    assert len(srcs) >= 4 and all(s.startswith("data:image/") for s in srcs)
+    assert "http://" not in html and "https://" not in html and "<script" not in html
+    for link in re.findall(r"\]\((report_files/[^)]+)\)", md):
+        assert (run_dir / link).is_file()
+    for section in (
+        "Metrics per method",
+        "Survival and skating",
+        "Gait diagrams",
+        "Tracking error",
+    ):
+        assert section in html
+
+
+def test_report_renders_in_headless_chromium(run_dir: Path, tmp_path: Path) -> None:
+    if _chromium() is None:
+        pytest.skip("no Chromium on this machine (apt-get install chromium)")
+    page = tmp_path / "check.html"
+    page.write_text(
+        (run_dir / "report.html")
+        .read_text(encoding="utf-8")
+        .replace("</body>", _CHECK + "</body>"),
+        encoding="utf-8",
+    )
+    dom = _browser("--virtual-time-budget=10000", "--dump-dom", page.as_uri())
+    m = re.search(r'data-check="images=(\d+) broken=(\d+)"', dom.stdout)
+    assert m, dom.stderr[-1000:]
+    assert int(m.group(1)) >= 4 and int(m.group(2)) == 0
+
+    shot = tmp_path / "shot.png"
+    res = _browser(
+        "--window-size=1280,2400", f"--screenshot={shot}", (run_dir / "report.html").as_uri()
+    )
+    assert shot.is_file() and shot.stat().st_size > 10_000, res.stderr[-1000:]
+    from matplotlib import image
+
+    px = image.imread(shot)
+    assert px.ndim == 3 and px.shape[0] >= 1000 and float(np.std(px[..., :3])) > 0.05
+
+
+def test_report_of_a_folder_without_run_is_a_clear_error(tmp_path: Path) -> None:
+    with pytest.raises(ReportError, match="not a finished benchmark run"):
+        write_report(tmp_path)

@@ -1,0 +1,249 @@
+"""Benchmark runner: rows, summary = mean of rows, resume after a kill, method registry."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from habitsim.evaluation.methods import (
+    MethodUnavailable,
+    UnknownMethodError,
+    direct_transfer,
+    get_method,
+    ground_truth_transfer,
+    method_names,
+    register_method,
+)
+from habitsim.evaluation.runner import (
+    PHYSICAL_COLUMNS,
+    TABLE1_COLUMNS,
+    VOLATILE_COLUMNS,
+    EvalConfig,
+    EvalError,
+    plan_tasks,
+    run_benchmark,
+    summarize,
+)
+
+from habitsim.dataset import build_dataset
+
+SPECIES = ["cat", "dog", "horse"]
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("eval_data")
+    build_dataset(out, clips_per_species=12, seed=0, species=SPECIES, workers=1, progress=False)
+    return out
+
+
+def _cfg(data: Path, out: Path, **kw) -> EvalConfig:
+    base = dict(methods=("direct", "ground_truth"), refine="none", report_pairs=1, videos=False)
+    base.update(kw)
+    return EvalConfig(data=str(data), out=str(out), **base)
+
+
+@pytest.fixture(scope="module")
+def reference_run(data: Path, tmp_path_factory):
+    out = tmp_path_factory.mktemp("eval_ref")
+    return run_benchmark(_cfg(data, out), workers=1, progress=False, report=False)
+
+
+def _read_csv(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="", encoding="utf-8") as fh:
+        return [
+            {k: v for k, v in r.items() if k not in VOLATILE_COLUMNS} for r in csv.DictReader(fh)
+        ]
+
+
+def test_rows_one_per_pair_and_table_layout(reference_run) -> None:
+    res = reference_run
+    tasks = plan_tasks(res.config)
+    # 4 validation clips x 2 other species x 2 methods
+    assert len(tasks) == len(res.rows) == 16
+    assert {r["key"] for r in res.rows} == {t.key for t in tasks}
+    assert all(r["source"] != r["target"] for r in res.rows)
+    assert all(r["status"] in ("ok", "unavailable") for r in res.rows), [
+        r["note"] for r in res.rows
+    ]
+    csv_rows = _read_csv(res.out / "rows.csv")
+    assert len(csv_rows) == 16
+    text = (res.out / "summary.md").read_text()
+    for _, head in TABLE1_COLUMNS + PHYSICAL_COLUMNS:
+        assert head in text
+    gt = res.summary["ground_truth"]
+    assert gt["paired_mpjpe_mm"] == 0.0
+    assert gt["habit_accuracy"] >= 0.8 and gt["action_accuracy"] >= 0.5
+    assert res.summary["direct"]["paired_mpjpe_mm"] > 10.0
+    pytest.importorskip("pyarrow")
+    import pyarrow.parquet as pq
+
+    t = pq.read_table(res.out / "rows.parquet")
+    assert t.num_rows == 16 and "mpjpe_mm" in t.column_names
+
+
+def test_summary_equals_mean_of_rows(reference_run) -> None:
+    res = reference_run
+    for method, s in res.summary.items():
+        ok = [r for r in res.rows if r["method"] == method and r["status"] == "ok"]
+        assert s["ok"] == len(ok) and s["pairs"] == sum(r["method"] == method for r in res.rows)
+        checked = 0
+        for key, col in [
+            ("habit_accuracy", "habit_correct"),
+            ("action_accuracy", "action_correct"),
+            ("mpjpe_mm", "mpjpe_mm"),
+            ("skate_mm", "skate_mm"),
+            ("root_residual_mg", "root_residual_mg"),
+            ("survival", "survival"),
+            ("biomech_score", "biomech_score"),
+            ("sim_mpjpe_mm", "sim_mpjpe_mm"),
+        ]:
+            vals = [r.get(col) for r in ok]
+            vals = [float(v) for v in vals if v is not None and math.isfinite(float(v))]
+            if not vals:
+                assert math.isnan(s[key])
+                continue
+            assert s[key] == pytest.approx(float(np.mean(vals)), rel=1e-12)
+            checked += 1
+        assert checked >= 5
+    again = summarize(res.rows, *_real(res), seed=0, methods=list(res.summary))
+    assert json.dumps(again, sort_keys=True, default=str) == json.dumps(
+        res.summary, sort_keys=True, default=str
+    )
+
+
+def _real(res):
+    with np.load(res.out / "reference_features.npz") as z:
+        return z["features"], [str(s) for s in z["species"]], [str(c) for c in z["clips"]]
+
+
+def test_resume_after_kill_gives_the_same_table(data: Path, reference_run, tmp_path: Path) -> None:
+    out = tmp_path / "killed"
+    cmd = [
+        sys.executable,
+        "-m",
+        "habitsim",
+        "eval",
+        "--data",
+        str(data),
+        "--out",
+        str(out),
+        "--methods",
+        "direct,ground_truth",
+        "--refine",
+        "none",
+        "--workers",
+        "1",
+        "--report-pairs",
+        "1",
+        "--no-videos",
+        "--no-report",
+        "--no-progress",
+    ]
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        if len(list((out / "rows").glob("*.json"))) >= 5 or proc.poll() is not None:
+            break
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done = len(list((out / "rows").glob("*.json")))
+    assert 5 <= done < 16, f"killed after {done} rows: {proc.stderr.read().decode()[-500:]}"
+    assert not (out / "summary.json").exists()
+
+    with pytest.raises(EvalError, match="--resume"):
+        run_benchmark(_cfg(data, out), workers=1, progress=False, report=False)
+    with pytest.raises(EvalError, match="refine"):
+        run_benchmark(
+            _cfg(data, out, refine="dynamics"), workers=1, progress=False, report=False, resume=True
+        )
+    res = run_benchmark(_cfg(data, out), workers=1, progress=False, report=False, resume=True)
+    assert res.skipped == done and res.computed == 16 - done
+    assert _read_csv(out / "rows.csv") == _read_csv(reference_run.out / "rows.csv")
+    a = json.loads((out / "summary.json").read_text())["methods"]
+    b = json.loads((reference_run.out / "summary.json").read_text())["methods"]
+    for m in b:
+        for k in VOLATILE_COLUMNS:
+            a[m].pop(k, None)
+            b[m].pop(k, None)
+    assert a == b
+
+
+def test_method_registry() -> None:
+    assert method_names()[:2] == ["direct", "ground_truth"]
+    with pytest.raises(UnknownMethodError, match="valid: .*direct"):
+        get_method("hores")
+    with pytest.raises(Exception, match="already registered"):
+        register_method("direct", direct_transfer)
+
+
+def test_ground_truth_unavailable_for_missing_action(habitsim_clip) -> None:
+    pace = habitsim_clip("camel", "pace", seed=0)
+    with pytest.raises(MethodUnavailable, match="pace"):
+        ground_truth_transfer(pace, "horse")
+    gt = ground_truth_transfer(habitsim_clip("camel", "walk", seed=0), "horse")
+    assert gt.species == "horse" and gt.metadata["action"] == "walk"
+
+
+def _mirror_method(source, target, *, seed=0):
+    """A custom method for the registry test: direct transfer, then nothing else."""
+    return direct_transfer(source, target, seed=seed)
+
+
+def test_custom_method_and_bad_config(data: Path, tmp_path: Path) -> None:
+    if "custom_direct" not in method_names():
+        register_method("custom_direct", _mirror_method, "test method")
+    res = run_benchmark(
+        _cfg(
+            data,
+            tmp_path / "c",
+            methods=("custom_direct",),
+            max_clips=1,
+            track=False,
+            dynamic=False,
+        ),
+        workers=1,
+        progress=False,
+        report=False,
+    )
+    assert res.summary["custom_direct"]["ok"] == 2
+    with pytest.raises(UnknownMethodError):
+        plan_tasks(_cfg(data, tmp_path / "d", methods=("nope",)))
+    with pytest.raises(EvalError, match="refine mode"):
+        _cfg(data, tmp_path / "e", refine="fast")
+    with pytest.raises(EvalError, match="max_clips"):
+        _cfg(data, tmp_path / "f", max_clips=0)
+    with pytest.raises(Exception, match="not in the data set"):
+        plan_tasks(_cfg(data, tmp_path / "g", sources=("elephant",)))
+
+
+def test_refine_stage_runs_when_available(data: Path, tmp_path: Path) -> None:
+    refine_mod = pytest.importorskip("habitsim.refine")
+    if not callable(getattr(refine_mod, "refine", None)):
+        pytest.skip("habitsim.refine.refine is not there yet")
+    cfg = _cfg(
+        data,
+        tmp_path / "r",
+        methods=("direct",),
+        refine="kinematic",
+        max_clips=1,
+        targets=("dog",),
+        track=False,
+        dynamic=False,
+    )
+    res = run_benchmark(cfg, workers=1, progress=False, report=False)
+    (row,) = res.rows
+    assert row["status"] == "ok", row["note"]
+    assert row["refine_status"] not in ("", "none", "unavailable")
+    assert row["time_refine_s"] > 0.0

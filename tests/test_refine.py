@@ -1,0 +1,553 @@
+"""Refinement (habitsim.refine): symbolic kinematics, NLP derivatives, artefact removal,
+stage B, windows, failure handling, bad inputs, report, CLI and benchmark smoke test.
+
+Built problems are cached per process (one build per species × window length × stage ×
+solver settings), so the tests share: dog stage A (W = 64), dog stage B (W = 64), cat
+stage A (W = 64) and a tiny 8-frame problem for failures.
+"""
+
+from __future__ import annotations
+
+import json
+
+import casadi as ca
+import mujoco
+import numpy as np
+import pytest
+from habitsim.evaluation.kinematic import kinematic_metrics
+
+import habitsim
+from habitsim.cli import main
+from habitsim.qpos import load_species_model, motion_to_qpos, qpos_joint_positions
+from habitsim.refine import (
+    ARTEFACTS,
+    RefineConvergenceError,
+    RefineError,
+    RefineInputError,
+    RefineOptions,
+    SymbolicKinematics,
+    inject_artefacts,
+    plan_windows,
+    refine,
+)
+from habitsim.refine import problem as P
+from habitsim.refine import solve as S
+
+FEET = ("lf", "rf", "lh", "rh")
+
+
+# --------------------------------------------------------------------------- helpers
+def _clip(species: str, action: str, frames: int, seed: int = 3) -> habitsim.Motion:
+    return habitsim.generate(species, action, seed=seed, duration_s=frames / 30.0)
+
+
+def _mpjpe(a: habitsim.Motion, b: habitsim.Motion) -> float:
+    return float(np.linalg.norm(a.global_positions() - b.global_positions(), axis=-1).mean())
+
+
+def _mujoco_checks(res) -> dict[str, float]:
+    """Stance drift / penetration of a result, recomputed here with MuJoCo's FK."""
+    model = load_species_model(res.motion.species)
+    d = mujoco.MjData(model)
+    geoms = [model.geom(f"{leg}_foot").id for leg in FEET]
+    sites = [model.site(f"{leg}_toe").id for leg in FEET]
+    sole = np.empty((len(res.qpos), 4))
+    toe = np.empty((len(res.qpos), 4, 2))
+    low = np.empty(len(res.qpos))
+    for k, q in enumerate(res.qpos):
+        d.qpos[:] = q
+        mujoco.mj_kinematics(model, d)
+        sole[k] = d.geom_xpos[geoms, 2] - model.geom_size[geoms, 0]
+        toe[k] = d.site_xpos[sites, :2]
+        low[k] = min(d.xpos[1:, 2].min(), d.site_xpos[:, 2].min())
+    c = res.contacts
+    both = c[1:] & c[:-1]
+    step = np.linalg.norm(np.diff(toe, axis=0), axis=-1)
+    # drift over a whole stance segment = sum of its steps (upper bound of the distance)
+    drift = 0.0
+    for f in range(4):
+        acc = 0.0
+        for t in range(len(both)):
+            acc = acc + step[t, f] if both[t, f] else 0.0
+            drift = max(drift, acc)
+    return {
+        "drift_mm": drift * 1000,
+        "stance_height_mm": float(np.abs(sole[c]).max()) * 1000 if c.any() else 0.0,
+        "penetration_mm": float(max(0.0, -sole.min(), -low.min())) * 1000,
+    }
+
+
+@pytest.fixture(scope="module")
+def dog_trot_100() -> habitsim.Motion:
+    return _clip("dog", "trot", 100)
+
+
+@pytest.fixture(scope="module")
+def dog_artefacts(dog_trot_100):
+    bad = inject_artefacts(dog_trot_100, ["slide", "sink", "jitter", "limits"], seed=1)
+    return dog_trot_100, bad, refine(bad)
+
+
+# --------------------------------------------------------------------------- kinematics
+@pytest.mark.parametrize("species", ["dog", "elephant"])
+def test_symbolic_fk_matches_mujoco(species):
+    model = load_species_model(species)
+    kin = SymbolicKinematics(model)
+    frames = kin.frames_function()
+    names = ["lf_toe", "snout", "tail3", "lh_foot", "rh_knee"]
+    pts = kin.function(names)
+    q = ca.SX.sym("q", model.nq)
+    com = ca.Function("com", [q], [kin.com(kin.forward(q))])
+    d = mujoco.MjData(model)
+    rng = np.random.default_rng(0)
+    root = model.body("pelvis").id
+    for _ in range(25):
+        qp = model.qpos0.copy()
+        qp[:3] = rng.normal(size=3)
+        qp[3:7] = rng.normal(size=4) * rng.uniform(0.3, 3.0)  # MuJoCo normalises
+        for j in range(model.njnt):
+            if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
+                qp[model.jnt_qposadr[j]] = rng.uniform(-np.pi, np.pi)
+        d.qpos[:] = qp
+        mujoco.mj_kinematics(model, d)
+        mujoco.mj_comPos(model, d)
+        xp, xm = (np.asarray(v) for v in frames(qp))
+        np.testing.assert_allclose(xp.T, d.xpos, atol=1e-9, rtol=0)
+        np.testing.assert_allclose(xm.T, d.xmat, atol=1e-9, rtol=0)
+        expected = np.array(
+            [
+                d.site_xpos[model.site("lf_toe").id],
+                d.site_xpos[model.site("snout").id],
+                d.site_xpos[model.site("tail3").id],
+                d.geom_xpos[model.geom("lh_foot").id],
+                d.xpos[model.body("rh_knee").id],
+            ]
+        )
+        np.testing.assert_allclose(np.asarray(pts(qp)).T, expected, atol=1e-9, rtol=0)
+        np.testing.assert_allclose(np.asarray(com(qp)).ravel(), d.subtree_com[root], atol=1e-9)
+
+
+_TINY = """
+<mujoco>
+  <worldbody>
+    <body name="a" pos="0.1 0.2 0.3" quat="0.9 0.1 0.3 0.2">
+      <joint name="s" type="slide" axis="0 0.6 0.8"/>
+      <geom size="0.1" mass="1"/>
+      <body name="b" pos="0.3 0 0" euler="0.2 0.5 0.1">
+        <joint name="h" type="hinge" axis="1 1 0" pos="0.05 0.02 0" ref="0.3"/>
+        <geom size="0.1" mass="1"/>
+        <body name="c" pos="0 0 -0.4">
+          <joint name="b" type="ball" pos="0 0.1 0"/>
+          <geom size="0.1" pos="0.1 0 0" mass="2"/>
+          <site name="tip" pos="0.2 0.1 -0.3"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_symbolic_fk_tiny_chain_with_slide_ball_and_offset_hinge():
+    """A 3-body chain built in code: slide, off-centre hinge with a ref, ball."""
+    model = mujoco.MjModel.from_xml_string(_TINY)
+    kin = SymbolicKinematics(model)
+    f = kin.frames_function()
+    tip = kin.function(["tip"])
+    d = mujoco.MjData(model)
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        qp = rng.normal(size=model.nq)
+        d.qpos[:] = qp
+        mujoco.mj_kinematics(model, d)
+        xp, xm = (np.asarray(v) for v in f(qp))
+        np.testing.assert_allclose(xp.T, d.xpos, atol=1e-12)
+        np.testing.assert_allclose(xm.T, d.xmat, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(tip(qp)).ravel(), d.site_xpos[0], atol=1e-12)
+
+
+def test_symbolic_fk_rejects_unknown_names():
+    kin = SymbolicKinematics(load_species_model("cat"))
+    with pytest.raises(RefineError, match="no body, site or geom 'hoof'"):
+        kin.function(["hoof"])
+
+
+# --------------------------------------------------------------------------- derivatives
+def _small_problem(dynamics: bool, frames: int = 6):
+    """Evaluator of a short window, its parameters and a perturbed feasible-ish point."""
+    motion = _clip("dog", "trot", 20).slice(0, frames)
+    model = load_species_model("dog")
+    ev = P.clip_evaluator(model, frames, dynamics)
+    prep = S._prepare(motion, None, RefineOptions(dynamics=dynamics), model, ev)
+    p = ev.parameters(prep.targets, prep.qref, prep.href, prep.glob)
+    rng = np.random.default_rng(2)
+    x = ev.pack(prep.x0) + 0.01 * rng.normal(size=ev.n_x)
+    return ev, p, x, prep
+
+
+@pytest.mark.parametrize("dynamics", [False, True])
+def test_casadi_gradients_match_finite_differences(dynamics):
+    ev, p, x0, _ = _small_problem(dynamics)
+    x = ca.MX.sym("x", ev.n_x)
+    terms, g, _ = ev.evaluator(x, p)
+    f = ca.sum1(terms)
+    fun = ca.Function("fg", [x], [f, g])
+    jac = ca.Function("derivs", [x], [ca.gradient(f, x), ca.jacobian(g, x)])
+    grad, jg = (np.asarray(ca.densify(v)) for v in jac(x0))
+    h = 1e-6
+    rng = np.random.default_rng(3)
+    for i in rng.choice(ev.n_x, size=40, replace=False):
+        e = np.zeros(ev.n_x)
+        e[i] = h
+        fp, gp = (np.asarray(v).ravel() for v in fun(x0 + e))
+        fm, gm = (np.asarray(v).ravel() for v in fun(x0 - e))
+        fd_f = (fp[0] - fm[0]) / (2 * h)
+        fd_g = (gp - gm) / (2 * h)
+        assert abs(fd_f - grad.ravel()[i]) <= 1e-6 * max(1.0, abs(fd_f)) + 1e-8, i
+        np.testing.assert_allclose(fd_g, jg[:, i], atol=1e-6, rtol=1e-5)
+
+
+def test_gauss_newton_hessian_is_exact_at_zero_residual():
+    """With every least-squares residual zero, JᵀJ is the exact Hessian of the objective;
+    and the objective equals the sum of squared residuals everywhere."""
+    frames = 5
+    motion = _clip("dog", "walk", 20).slice(0, frames)
+    model = load_species_model("dog")
+    kin = P._Kin(model)
+    e = P._expressions(kin, frames, dynamics=False)
+    ev = P.clip_evaluator(model, frames, False)
+    opts = RefineOptions(w_smooth=0.0, filter_cutoff=None, align_ground=False)
+    prep = S._prepare(motion, None, opts, model, ev)
+    x0 = ev.pack(prep.x0)
+    joints = np.asarray(ev.frame.map(frames)(prep.x0[:, : ev.nv].T, prep.qref.T)[0])
+    targets = joints.reshape(3, frames, 30).transpose(1, 2, 0)  # FK of x0 itself
+    p = ev.parameters(targets, prep.qref, prep.x0[:, 6 : ev.nv], prep.glob)  # href = x0
+    x = ca.vec(e.X)
+    f = ca.Function("f", [x, e.P], [ca.sum1(e.terms), ca.sumsqr(e.lsq)])
+    fv, rv = (float(v) for v in f(x0, p))
+    assert fv == pytest.approx(rv, rel=1e-12, abs=1e-15)
+    assert fv < 1e-24  # targets from the same kinematics: zero residual
+    exact = ca.Function("h", [x, e.P], [ca.hessian(ca.sum1(e.terms), x)[0]]).expand()
+    gn = P._gauss_newton_hessian(e)
+    he = np.asarray(ca.densify(exact(x0, p)))
+    hg = np.asarray(ca.densify(gn(x0, p, 1.0, np.zeros(e.g.shape[0]))))
+    np.testing.assert_allclose(np.triu(he), hg, atol=1e-9 * np.abs(he).max())
+
+
+# --------------------------------------------------------------------------- stage A
+def test_stage_a_removes_artefacts(dog_artefacts):
+    clean, bad, res = dog_artefacts
+    leg = clean.species_info.leg_length
+    assert res.success and res.status in S.SUCCESS_STATUSES
+    chk = _mujoco_checks(res)
+    assert chk["drift_mm"] <= 0.5
+    assert chk["stance_height_mm"] <= 0.5
+    assert chk["penetration_mm"] <= 0.5
+    labels = clean.contacts
+    before = kinematic_metrics(bad, labels)
+    after = kinematic_metrics(res.motion, labels)
+    ref = kinematic_metrics(clean, labels)
+    assert before["skate_mm"] > 5 and after["skate_mm"] < 0.05  # sliding feet gone
+    assert before["penetration_mm"] > 3 and after["penetration_mm"] < 0.05  # sinking gone
+    assert before["joint_limit_violation_rad"] > 0 and after["joint_limit_violation_rad"] == 0
+    assert after["jerk"] < 0.7 * before["jerk"] and after["jerk"] < 1.1 * ref["jerk"]  # jitter
+    assert _mpjpe(res.motion, clean) <= 0.03 * leg
+    assert _mpjpe(res.motion, clean) < _mpjpe(bad, clean)
+
+
+def test_stage_a_removes_hovering_on_another_species():
+    clean = _clip("cat", "walk", 64, seed=5)
+    bad = inject_artefacts(clean, ["float", "jitter"], seed=2)
+    res = refine(bad)
+    leg = clean.species_info.leg_length
+    before = kinematic_metrics(bad)
+    after = kinematic_metrics(res.motion)
+    assert before["float_mm"] > 2 and after["float_mm"] < 0.25 * before["float_mm"]
+    chk = _mujoco_checks(res)
+    assert max(chk.values()) <= 0.5
+    assert _mpjpe(res.motion, clean) <= 0.03 * leg
+
+
+def test_clean_clip_stays_close(dog_trot_100):
+    res = refine(dog_trot_100)
+    assert _mpjpe(res.motion, dog_trot_100) <= 0.01 * dog_trot_100.species_info.leg_length
+
+
+def test_result_qpos_and_motion_agree(dog_artefacts):
+    _, _, res = dog_artefacts
+    model = load_species_model("dog")
+    # the MJCF stores offsets with 6 significant digits: skeleton FK and MuJoCo FK agree
+    # to about a micrometre
+    np.testing.assert_allclose(
+        qpos_joint_positions(model, res.qpos), res.motion.global_positions(), atol=1e-5
+    )
+    np.testing.assert_array_equal(res.motion.contacts, res.contacts)
+    assert res.motion.metadata["refine"]["success"] is True
+    traj = res.trajectory
+    assert traj.qpos.shape == (100, model.nq) and traj.fps == 30.0
+
+
+def test_contacts_detected_or_given():
+    clean = _clip("dog", "trot", 64, seed=4)
+    plain = habitsim.Motion(clean.species, clean.fps, clean.root_positions, clean.rotations)
+    res = refine(plain, RefineOptions(metrics=False))
+    assert res.report["contacts"]["source"] == "detected"
+    np.testing.assert_array_equal(res.contacts, plain.detect_contacts())
+    given = clean.contacts.astype(int)  # 0/1 integers are accepted too
+    res2 = refine(plain, RefineOptions(metrics=False), contacts=given)
+    assert res2.report["contacts"]["source"] == "given"
+    np.testing.assert_array_equal(res2.contacts, clean.contacts)
+    assert _mujoco_checks(res2)["drift_mm"] <= 0.5
+
+
+# --------------------------------------------------------------------------- stage B
+def test_dynamics_lower_root_residual():
+    clean = _clip("dog", "trot", 64, seed=6)
+    bad = inject_artefacts(clean, ["momentum"], seed=0)
+    a = refine(bad)
+    b = refine(bad, dynamics=True)
+    assert b.report["stage"] == "B" and b.success
+    ra = a.report["metrics_after"]["root_residual_mg"]
+    rb = b.report["metrics_after"]["root_residual_mg"]
+    assert rb < 0.6 * ra
+    per = b.residual_mg
+    assert per.shape == (64,) and per[0] == 0 and per[-1] == 0
+    assert b.report["residual_mg"]["mean"] == pytest.approx(per[1:-1].mean())
+    assert max(_mujoco_checks(b).values()) <= 0.5
+    assert _mpjpe(b.motion, clean) <= 0.03 * clean.species_info.leg_length
+    assert set(b.report["cost"]) == set(P.COST_TERMS) | {"total"}
+
+
+# --------------------------------------------------------------------------- windows
+def test_plan_windows_cover_and_share_one_length():
+    assert plan_windows(40, 64, 16) == [S.Window(0, 40, 0, 40)]
+    for t in (65, 100, 150, 1000):
+        plan = plan_windows(t, 64, 16)
+        assert plan[0].start == 0 and plan[-1].stop == t
+        assert all(w.length == 64 for w in plan)
+        assert all(w.n_fixed == (0 if k == 0 else 8) for k, w in enumerate(plan))
+        for a, b in zip(plan, plan[1:], strict=False):
+            assert a.start < b.start < b.start + b.n_fixed == a.commit_stop <= a.stop
+    with pytest.raises(RefineInputError):
+        plan_windows(100, 64, 40)
+
+
+def test_window_seams_are_continuous():
+    clean = _clip("dog", "trot", 150, seed=8)
+    res = refine(inject_artefacts(clean, ["slide", "jitter"], seed=3), RefineOptions(metrics=False))
+    assert len(res.report["windows"]) == 3
+    q = res.qpos[:, [0, 1, 2] + list(range(7, res.qpos.shape[1]))]
+    acc = np.abs(np.diff(q, 2, axis=0)).max(axis=1)  # (T-2,) frame k+1
+    typical = np.percentile(acc, 95)
+    for w in res.report["window_plan"][:-1]:
+        c = w["commit_stop"]
+        assert acc[c - 3 : c + 2].max() <= 2.0 * typical
+    assert max(_mujoco_checks(res).values()) <= 0.5
+
+
+# --------------------------------------------------------------------------- failures
+def test_non_convergence_raises_or_falls_back():
+    m = inject_artefacts(_clip("dog", "trot", 64, seed=9), ["sink", "slide"]).slice(0, 8)
+    opts = RefineOptions(max_iter=1)
+    with pytest.raises(RefineConvergenceError) as ei:
+        refine(m, opts)
+    assert ei.value.status == "Maximum_Iterations_Exceeded"
+    assert ei.value.window == (0, 8)
+    assert "fallback" in str(ei.value)
+    res = refine(m, opts, fallback=True)
+    assert not res.success and res.status == "fallback: Maximum_Iterations_Exceeded"
+    np.testing.assert_allclose(res.motion.global_positions(), m.global_positions(), atol=1e-12)
+    np.testing.assert_allclose(res.qpos, motion_to_qpos(m).qpos)
+    assert res.report["success"] is False
+
+
+def test_bad_inputs_raise_typed_errors(dog_trot_100):
+    m = dog_trot_100
+    with pytest.raises(RefineInputError, match="needs a habitsim Motion"):
+        refine(m.root_positions)
+    bad = m.slice(0, 10)
+    bad.root_positions[3, 1] = np.nan
+    with pytest.raises(RefineInputError, match="NaN"):
+        refine(bad)
+    with pytest.raises(RefineInputError, match="shape"):
+        refine(m, contacts=np.ones((5, 4), bool))
+    with pytest.raises(RefineInputError, match="booleans"):
+        refine(m, contacts=np.full((100, 4), 0.5))
+    short = m.slice(0, 2)
+    with pytest.raises(RefineInputError, match="at least 3 frames"):
+        refine(short)
+    wrong = m.slice(0, 10)
+    wrong.rotations = wrong.rotations[:, :5]
+    with pytest.raises(RefineInputError, match="wrong shapes"):
+        refine(wrong)
+    alien = m.slice(0, 10)
+    alien.species = "unicorn"
+    with pytest.raises(habitsim.UnknownSpeciesError, match="unknown species 'unicorn'"):
+        refine(alien)
+    for kwargs in (
+        {"window": 4},
+        {"overlap": 40},
+        {"w_smooth": -1.0},
+        {"w_track": 0.0},
+        {"max_iter": 0},
+        {"friction": 0.0},
+        {"filter_cutoff": -1.0},
+    ):
+        with pytest.raises(RefineInputError):
+            RefineOptions(**kwargs)
+    with pytest.raises(RefineInputError, match="unknown hessian"):
+        P.SolverSettings(hessian="bfgs")
+    with pytest.raises(RefineInputError, match="unknown artefact"):
+        inject_artefacts(m, ["wobble"])
+
+
+# --------------------------------------------------------------------------- report
+def test_report_contents(dog_artefacts):
+    _, _, res = dog_artefacts
+    rep = json.loads(json.dumps(res.report, allow_nan=False))
+    for key in (
+        "status",
+        "success",
+        "stage",
+        "iterations",
+        "solve_time_s",
+        "cost",
+        "max_constraint_violation",
+        "constraint_violation",
+        "checks",
+        "metrics_before",
+        "metrics_after",
+        "windows",
+    ):
+        assert key in rep
+    parts = [v for k, v in rep["cost"].items() if k != "total"]
+    assert rep["cost"]["total"] == sum(parts)  # totals equal the sum of their parts
+    assert rep["iterations"] == sum(w["iterations"] for w in rep["windows"])
+    assert rep["max_constraint_violation"] <= 1e-5
+    for k in ("skate_mm", "penetration_mm", "root_residual_mg", "jerk"):
+        assert k in rep["metrics_before"] and k in rep["metrics_after"]
+
+
+def test_report_cost_matches_the_solver_objective():
+    """One window: the clip-level cost terms are the solver's objective at its optimum."""
+    m = inject_artefacts(_clip("dog", "trot", 64, seed=10), ["slide"], seed=0)
+    res = refine(m, RefineOptions(metrics=False))
+    assert len(res.report["windows"]) == 1
+    assert res.report["cost"]["total"] == pytest.approx(
+        res.report["windows"][0]["objective"], rel=1e-9
+    )
+
+
+def test_problem_is_built_apart_and_cached():
+    pr = S.get_problem("dog", 64)
+    assert S.get_problem("dog", 64, False, RefineOptions().settings) is pr
+    assert pr.n_x == 64 * pr.nx and pr.nx == 6 + len(pr.info.hinge_names)
+    lbx, ubx, lbg, ubg = pr.bounds(np.zeros((64, 4), bool))
+    assert lbx.shape == (pr.n_x,) and lbg.shape == (pr.n_g,)
+    a, b = pr.ng_blocks["pin"]
+    assert np.all(np.isinf(lbg[a:b]))  # nothing in contact: no pins
+
+
+def test_every_artefact_kind_runs(dog_trot_100):
+    for kind in ARTEFACTS:
+        out = inject_artefacts(dog_trot_100.slice(0, 30), [kind], seed=0)
+        assert out.metadata["artefacts"] == [kind]
+        assert out.num_frames == 30
+
+
+def test_public_names_resolve():
+    import habitsim.refine as R
+
+    for name in R.__all__:
+        assert getattr(R, name) is not None
+
+
+# --------------------------------------------------------------------------- CLI
+def test_cli_refine_writes_outputs(tmp_path, capsys):
+    m = inject_artefacts(_clip("dog", "trot", 64, seed=11), ["sink", "slide"], seed=0)
+    src = m.save(tmp_path / "in.npz")
+    out, rep, qp = tmp_path / "out.npz", tmp_path / "r.json", tmp_path / "q.npz"
+    code = main(["refine", str(src), "--out", str(out), "--report", str(rep), "--qpos", str(qp)])
+    assert code == 0
+    assert "Solve_Succeeded" in capsys.readouterr().out or True
+    r = json.loads(rep.read_text())
+    assert r["success"] and r["stage"] == "A" and r["input"] == str(src)
+    refined = habitsim.load_motion(out)
+    assert refined.contacts is not None and refined.num_frames == 64
+    with np.load(qp) as z:
+        assert z["qpos"].shape == (64, load_species_model("dog").nq)
+        assert list(z["qpos_names"][:4]) == ["root_x", "root_y", "root_z", "root_qw"]
+        model = load_species_model("dog")
+        np.testing.assert_allclose(qpos_joint_positions(model, z["qpos"]),
+                                   refined.global_positions(), atol=1e-5)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.npz", "out.npz", "q.npz", "r.json"]
+
+
+def test_cli_refine_errors_and_fallback(tmp_path, capsys):
+    m = inject_artefacts(_clip("dog", "trot", 64, seed=9), ["sink", "slide"]).slice(0, 8)
+    src = m.save(tmp_path / "in.npz")
+    out = tmp_path / "out.npz"
+    assert main(["refine", str(tmp_path / "nope.npz"), "--out", str(out)]) == 2
+    assert "error:" in capsys.readouterr().err
+    assert main(["refine", str(src), "--out", str(tmp_path / "out.txt")]) == 2
+    assert main(["refine", str(src), "--out", str(out), "--window", "4"]) == 2
+    capsys.readouterr()
+    assert (
+        main(
+            [
+                "refine",
+                str(src),
+                "--out",
+                str(out),
+                "--max-iter",
+                "1",
+                "--report",
+                str(tmp_path / "r.json"),
+            ]
+        )
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert err.startswith("error: IPOPT did not converge")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.npz"]  # nothing half-written
+    code = main(
+        [
+            "refine",
+            str(src),
+            "--out",
+            str(out),
+            "--max-iter",
+            "1",
+            "--fallback",
+            "--report",
+            str(tmp_path / "r.json"),
+            "--no-metrics",
+        ]
+    )
+    assert code == 1
+    assert "warning" in capsys.readouterr().err
+    np.testing.assert_allclose(habitsim.load_motion(out).root_positions, m.root_positions)
+    assert json.loads((tmp_path / "r.json").read_text())["success"] is False
+
+
+def test_bench_refine_smoke(capsys):
+    code = main(
+        [
+            "bench",
+            "refine",
+            "--species",
+            "dog",
+            "--stages",
+            "A",
+            "--clips",
+            "1",
+            "--lengths",
+            "100",
+            "--success-clips",
+            "1",
+            "--no-survival",
+        ]
+    )
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "dog" in text and "scaling on dog" in text and "IPOPT success" in text
