@@ -23,12 +23,7 @@ from habitsim.species import species_names
 SPECIES = ("cat", "dog", "horse")
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
 
 def _fake_text(dim: int = 16) -> dict[str, np.ndarray]:

@@ -30,12 +30,7 @@ from habitsim.models.vqvae import MotionDecoder, MotionEncoder
 from habitsim.skeleton import get_skeleton
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
 
 # ---------------------------------------------------------------------------- shapes
