@@ -478,8 +478,9 @@ def test_cli_refine_writes_outputs(tmp_path, capsys):
         assert z["qpos"].shape == (64, load_species_model("dog").nq)
         assert list(z["qpos_names"][:4]) == ["root_x", "root_y", "root_z", "root_qw"]
         model = load_species_model("dog")
-        np.testing.assert_allclose(qpos_joint_positions(model, z["qpos"]),
-                                   refined.global_positions(), atol=1e-5)
+        np.testing.assert_allclose(
+            qpos_joint_positions(model, z["qpos"]), refined.global_positions(), atol=1e-5
+        )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.npz", "out.npz", "q.npz", "r.json"]
 
 
