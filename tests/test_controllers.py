@@ -147,7 +147,6 @@ def test_pid_servos_from_spec_hold_home(robot) -> None:
     assert abs(res["height"] - 1) < 0.01 < abs(plain["height"] - 1)  # integral removes the sag
 
 
-@pytest.mark.skipif(not DOG_SCENE.is_file(), reason="dog model not built")
 def test_dog_servos_with_stabiliser_hold_home() -> None:
     dog = mujoco.MjModel.from_xml_path(str(DOG_SCENE))  # plain MuJoCo loading
     model = configure_servos(dog)

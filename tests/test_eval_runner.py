@@ -228,10 +228,7 @@ def test_custom_method_and_bad_config(data: Path, tmp_path: Path) -> None:
         plan_tasks(_cfg(data, tmp_path / "g", sources=("elephant",)))
 
 
-def test_refine_stage_runs_when_available(data: Path, tmp_path: Path) -> None:
-    refine_mod = pytest.importorskip("habitsim.refine")
-    if not callable(getattr(refine_mod, "refine", None)):
-        pytest.skip("habitsim.refine.refine is not there yet")
+def test_refine_stage_runs(data: Path, tmp_path: Path) -> None:
     cfg = _cfg(
         data,
         tmp_path / "r",
