@@ -242,6 +242,8 @@ def leg_ik(
     target: np.ndarray,
     girdle_flex: np.ndarray | float | None = None,
     foot_inclination: np.ndarray | float | None = None,
+    distal_band: tuple[float, float] | None = None,
+    max_inclination_change: np.ndarray | float = 0.0,
 ) -> LegIKResult:
     """Analytic IK of one leg for a toe target, vectorised over frames.
 
@@ -256,6 +258,13 @@ def leg_ik(
         girdle_flex: (T,) or scalar girdle flexion [rad]; default: the standing value.
         foot_inclination: (T,) or scalar foot-segment inclination [rad] (module
             docstring); default: the species' standing foot inclination.
+        distal_band: optional (d_min, d_max) [m] band for the proximal-to-distal
+            (shoulder/hip → wrist/hock) distance. Where the demanded distance leaves the
+            band, the foot inclination is turned by the least angle that brings it back
+            (toward the toe–shoulder line to shorten it, away to lengthen it), by at
+            most ``max_inclination_change``: the foot segment takes up the reach, as the
+            fetlock and hock do in a real stance, instead of the trunk bobbing.
+        max_inclination_change: (T,) or scalar bound [rad] of that turn (0: none).
 
     Returns:
         The :class:`LegIKResult`; ``reach_error`` is the honest toe error after clamping
@@ -295,6 +304,9 @@ def leg_ik(
     w = _mtv(frame, np.broadcast_to(np.array([0.0, 0.0, -1.0]), (t, 3)))
     beta_down = np.arctan2(-w[:, 0], -w[:, 2])
     b3 = beta_down - finc
+    if distal_band is not None:
+        b3 = _comply_foot(p[:, [0, 2]], b3, geo.foot, distal_band,
+                          _as_frames(max_inclination_change, t, "max_inclination_change"))
     foot_dir = np.stack([-np.sin(b3), -np.cos(b3)], -1)
     wx = p[:, [0, 2]] - geo.foot * foot_dir  # demanded wrist/hock in plane coords (x, z)
     dist = np.linalg.norm(wx, axis=-1)
@@ -324,6 +336,31 @@ def leg_ik(
         distal_target=distal,
         reach_ratio=dist / hi,
     )
+
+
+def _comply_foot(p: np.ndarray, b3: np.ndarray, foot: float, band: tuple[float, float],
+                 limit: np.ndarray) -> np.ndarray:
+    """Foot angle b3 turned (least angle, at most ``limit``) so |p − foot·u(b3)| is in ``band``.
+
+    In leg-plane coordinates (x, z) a direction of angle b is u(b) = (−sin b, −cos b); the
+    distal joint sits at p − foot·u(b3), at distance² |p|² + foot² − 2·foot·|p|·cos(b3 − θp)
+    from the proximal joint, θp being the angle of p.
+    """
+    lo, hi = band
+    r = np.linalg.norm(p, axis=-1)
+    theta = np.arctan2(-p[:, 0], -p[:, 1])
+    rel = _wrap(b3 - theta)
+    side = np.where(rel >= 0.0, 1.0, -1.0)
+    den = np.maximum(2.0 * foot * r, 1e-12)
+    dist = np.sqrt(np.maximum(r**2 + foot**2 - 2.0 * foot * r * np.cos(rel), 0.0))
+    # angle from the toe-shoulder line giving exactly the band edge (clipped: an edge out
+    # of reach of any foot angle gives the closest one)
+    ang_hi = np.arccos(np.clip((r**2 + foot**2 - hi**2) / den, -1.0, 1.0))
+    ang_lo = np.arccos(np.clip((r**2 + foot**2 - lo**2) / den, -1.0, 1.0))
+    new = np.where(dist > hi, side * np.minimum(np.abs(rel), ang_hi),
+                   np.where(dist < lo, side * np.maximum(np.abs(rel), ang_lo), rel))
+    change = np.clip(new - rel, -limit, limit)
+    return b3 + change
 
 
 def leg_fk(

@@ -12,6 +12,7 @@ from habitsim.evaluation.kinematic import skate_mm
 from habitsim.gait_stats import gait_statistics
 from habitsim.gaits import ACTIONS, LOCOMOTION_ACTIONS, action_gait, available_actions, generate
 from habitsim.rotations import quat_to_matrix
+from habitsim.qpos import load_species_model, motion_to_qpos
 from habitsim.species import load_species, species_names
 
 CASES = [(s, a) for s in species_names() for a in available_actions(s)]
@@ -78,6 +79,40 @@ def test_stationary_and_jump_actions(clips, species: str, action: str) -> None:
     else:  # idle: standing, all feet planted throughout
         assert m.contacts.all()
         assert np.ptp(pelvis_z) < 0.1 * sp.hip_height
+
+
+@pytest.mark.parametrize("species", species_names())
+def test_trunk_moves_like_a_body_not_a_piston(clips, species: str) -> None:
+    """Vertical root motion and joint ranges of the cyclic gaits stay physical.
+
+    Walks: the pelvis rises and falls by < 8 % of hip height with peak vertical
+    acceleration < 1 g; faster symmetric gaits < 2 g (a trot's vertical excursion is a
+    few centimetres; before the compliant-foot generator trots demanded up to 16 g).
+    The flexion hinges stay within 0.35 rad (walks) / 0.55 rad (faster gaits) of the
+    species' ranges (the MJCF limits); the refinement stage removes the rest.
+    """
+    sp = load_species(species)
+    for action in ("walk", "trot", "pace"):
+        if action not in available_actions(species):
+            continue
+        m = clips[(species, action, 0)]
+        z = m.root_positions[:, 2]
+        acc = np.abs(np.diff(z, 2)) * m.fps**2 / 9.81
+        if action == "walk":
+            assert (z.max() - z.min()) / sp.hip_height < 0.08, (action, z.max() - z.min())
+            assert acc.max() < 1.0, (action, acc.max())
+        else:
+            assert acc.max() < 2.0, (action, acc.max())
+        qp = motion_to_qpos(m, load_species_model(species))
+        model = load_species_model(species)
+        for j in range(model.njnt):
+            name = model.joint(j).name
+            if not name.endswith("_flex") or not model.jnt_limited[j]:
+                continue
+            a = qp.qpos[:, model.jnt_qposadr[j]]
+            lo, hi = model.jnt_range[j]
+            tol = 0.35 if action == "walk" else 0.55
+            assert a.min() >= lo - tol and a.max() <= hi + tol, (action, name, a.min(), a.max(), lo, hi)
 
 
 def test_slow_walks_keep_the_centre_of_mass_over_the_support(clips) -> None:

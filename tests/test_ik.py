@@ -53,6 +53,47 @@ def test_ik_reaches_fk_targets_within_1mm(species: str, leg: str) -> None:
     np.testing.assert_allclose(res.toe, toe, atol=1e-9)
 
 
+@pytest.mark.parametrize("leg", LEGS)
+def test_compliant_foot_takes_up_reach_within_its_band(leg: str) -> None:
+    """A toe too far (or too close) for the nominal foot angle is reached by turning the foot."""
+    rng = np.random.default_rng(3)
+    geo = leg_geometry("horse", leg)
+    t = 300
+    root = np.zeros((t, 3))
+    prot = np.eye(3)
+    reach = geo.upper + geo.lower
+    # toes spread fore and aft of the leg at heights from folded to nearly stretched
+    ang = rng.uniform(-0.7, 0.7, t)
+    dist = rng.uniform(0.55, 1.0, t) * (reach + geo.foot)
+    zero = np.zeros(t)
+    shoulder = leg_fk("horse", leg, root, prot, zero, np.full(t, geo.girdle_flex0), zero, zero, zero)
+    shoulder = shoulder + np.array([0.0, 0.0, geo.upper + geo.lower + geo.foot])
+    target = shoulder + np.stack([dist * np.sin(ang), zero, -dist * np.cos(ang)], -1)
+    band = (0.7 * reach, 0.9 * reach)
+    plain = leg_ik("horse", leg, root, prot, target)
+    res = leg_ik("horse", leg, root, prot, target, distal_band=band, max_inclination_change=np.pi)
+    d_plain = np.linalg.norm(plain.distal_target - plain.proximal, axis=-1)
+    d = np.linalg.norm(res.distal_target - res.proximal, axis=-1)
+    # where some foot angle puts the wrist / hock in the band, the compliant solution does
+    toe_d = np.linalg.norm(target - res.proximal, axis=-1)
+    feasible = (toe_d - geo.foot <= band[1] - 1e-6) & (toe_d + geo.foot >= band[0] + 1e-6)
+    outside = (d_plain > band[1] + 1e-6) | (d_plain < band[0] - 1e-6)
+    assert (feasible & outside).sum() > 30
+    inside = feasible & outside
+    assert np.all(d[inside] <= band[1] + 1e-6) and np.all(d[inside] >= band[0] - 1e-6)
+    assert res.reach_error[inside].max() < 1e-6
+    # frames already in the band keep the nominal foot angle (the same solution)
+    keep = ~outside
+    np.testing.assert_allclose(res.foot_flex[keep] + res.lower_flex[keep] + res.upper_flex[keep],
+                               plain.foot_flex[keep] + plain.lower_flex[keep] + plain.upper_flex[keep],
+                               atol=1e-9)
+    # the turn is bounded
+    small = leg_ik("horse", leg, root, prot, target, distal_band=band, max_inclination_change=0.05)
+    turn = np.abs((small.upper_flex + small.lower_flex + small.foot_flex)
+                  - (plain.upper_flex + plain.lower_flex + plain.foot_flex))
+    assert np.all(np.minimum(turn, 2 * np.pi - turn) <= 0.05 + 1e-9)
+
+
 def test_ik_unreachable_target_is_clamped_and_reported() -> None:
     geo = leg_geometry("dog", "LH")
     root = np.zeros((1, 3))

@@ -31,6 +31,8 @@ import numpy as np
 
 #: Median solve-time targets per 100-frame clip [s].
 TARGET_S = {"A": 0.5, "B": 2.0}
+#: Controllers the survival runs may use (unassisted).
+_SURVIVAL_CONTROLLERS = ("servo", "servo+stance", "balance", "mpc")
 #: Target IPOPT success rate on artefact clips.
 TARGET_SUCCESS = 0.98
 _ARTEFACTS = ("slide", "sink", "jitter", "limits")
@@ -62,6 +64,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="100-frame clips per species and stage (default 3)",
     )
     p.add_argument("--no-survival", action="store_true", help="skip the tracking survival")
+    p.add_argument(
+        "--survival-controller",
+        default="balance",
+        choices=_SURVIVAL_CONTROLLERS,
+        help="unassisted controller of the survival runs (default balance: plain servo PD "
+        "falls within about a second whatever the motion, which would compare noise)",
+    )
+    p.add_argument(
+        "--data",
+        metavar="DIR",
+        help="draw the success-rate clips from the test split of this data set (habitsim "
+        "data synth; a random 100-frame window of a random clip, random artefact mix); "
+        "default: freshly generated clips of random species and actions",
+    )
     p.add_argument(
         "--scaling-species",
         default="dog",
@@ -107,6 +123,24 @@ def _clip(
     return inject_artefacts(clean, kinds, seed=seed)
 
 
+def _test_split(data: str) -> list[tuple[str, str, Any]]:
+    """(species, action, motion) of every test-split clip of a data set."""
+    from ..dataset import iter_clips
+
+    return [(e.species, e.action, m) for e, m in iter_clips(data, split="test")]
+
+
+def _test_window(clips: list[tuple[str, str, Any]], rng: np.random.Generator, frames: int,
+                 kinds: tuple[str, ...]) -> tuple[str, str, Any]:
+    """A random ``frames``-long window of a random test clip with artefacts injected."""
+    from ..refine import inject_artefacts
+
+    sp, act, m = clips[int(rng.integers(len(clips)))]
+    start = int(rng.integers(max(m.num_frames - frames, 0) + 1))
+    win = m.slice(start, start + frames)
+    return sp, act, inject_artefacts(win, kinds, seed=int(rng.integers(1 << 30)))
+
+
 def _timed(motion: Any, stage: str) -> dict[str, float | bool]:
     from ..refine import RefineConvergenceError, RefineOptions, refine
 
@@ -131,10 +165,10 @@ def _timed(motion: Any, stage: str) -> dict[str, float | bool]:
     }
 
 
-def _survival(motion: Any) -> float:
+def _survival(motion: Any, controller: str) -> float:
     from ..sim import track
 
-    return float(track(motion, controller="servo").survival)
+    return float(track(motion, controller=controller).survival)
 
 
 def _fmt(v: float, width: int = 7) -> str:
@@ -188,8 +222,9 @@ def _bench_refine(ns: argparse.Namespace) -> int:
             if st == "A":
                 rec["_results"] = [r["result"] for r in runs]
         if not ns.no_survival:
-            before = [_survival(c) for c in clips]
-            after = [_survival(r.motion) for r in rec.get("_results", []) if r is not None]
+            ctl = ns.survival_controller
+            before = [_survival(c, ctl) for c in clips]
+            after = [_survival(r.motion, ctl) for r in rec.get("_results", []) if r is not None]
             rec["survival_before"] = float(np.mean(before))
             rec["survival_after"] = float(np.mean(after)) if after else float("nan")
             row += f" | {rec['survival_before']:.2f} → {_fmt(rec['survival_after'], 4)}"
@@ -197,8 +232,8 @@ def _bench_refine(ns: argparse.Namespace) -> int:
         out["species"][sp] = rec
         print(row, flush=True)
     print(
-        "(! = over the target; survival: unassisted servo tracking, share of the clip "
-        "completed; stage-A refinement)"
+        f"(! = over the target; survival: unassisted {ns.survival_controller} tracking, share "
+        "of the clip completed; stage-A refinement)"
     )
 
     # ---------------------------------------------------------------- scaling
@@ -216,19 +251,26 @@ def _bench_refine(ns: argparse.Namespace) -> int:
 
     # ---------------------------------------------------------------- success
     rng = np.random.default_rng(ns.seed + 7)
+    test_clips = _test_split(ns.data) if ns.data else None
+    source = (f"windows of the {len(test_clips)} test-split clips of {ns.data}" if test_clips
+              else "random species and action")
     print(
         f"\nIPOPT success on {ns.success_clips} random artefact clips per stage "
-        f"(100 frames, random species, action and artefact mix):"
+        f"(100 frames, {source}, random artefact mix):"
     )
     for st in ns.stages:
         ok = tried = 0
         fails = []
         for _ in range(ns.success_clips):
-            sp = str(rng.choice(species))
-            act = str(rng.choice(available_actions(sp)))
             kinds = tuple(a for a in _ARTEFACTS + ("float",) if rng.random() < 0.5) or ("slide",)
+            sp = act = "?"
             try:
-                m = _clip(sp, 100, int(rng.integers(1 << 30)), act, kinds)
+                if test_clips:
+                    sp, act, m = _test_window(test_clips, rng, 100, kinds)
+                else:
+                    sp = str(rng.choice(species))
+                    act = str(rng.choice(available_actions(sp)))
+                    m = _clip(sp, 100, int(rng.integers(1 << 30)), act, kinds)
             except HabitsimError as e:  # an action that cannot be generated at this length
                 fails.append(f"{sp}/{act}: {e}")
                 continue

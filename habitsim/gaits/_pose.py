@@ -13,7 +13,7 @@ import numpy as np
 from scipy.ndimage import maximum_filter1d, uniform_filter1d
 
 from ..body import center_of_mass
-from ..ik import LEGS, LegIKResult, axial_frames, leg_geometry, leg_ik
+from ..ik import LEGS, AxialFrames, LegIKResult, axial_frames, foot_inclination, leg_geometry, leg_ik
 from ..rotations import quat_mul, rot_x, rot_y, rot_z
 from ..skeleton import JOINT_NAMES, fk, get_skeleton, standing_leg_angles
 from ..species import Species
@@ -28,6 +28,9 @@ FOOT_SWEEP_GAIN = {"fore": 0.5, "hind": 0.6}
 SWING_FOOT_FOLD = {"fore": 0.6, "hind": 0.3}
 #: Stance legs keep this share of their maximal upper+lower reach in reserve.
 REACH_MARGIN = 0.03
+#: Largest turn [rad] of the foot segment that takes up a leg's reach before the trunk
+#: has to come down (or up): the compliance of the fetlock / hock in stance.
+FOOT_COMPLIANCE = 0.6
 
 
 @functools.lru_cache(maxsize=64)
@@ -161,6 +164,32 @@ class Solved:
     reach_error: np.ndarray  # (T, 4) [m]
 
 
+def _leg_shape(sp: Species, k: int, plan: LegPlan, frames: AxialFrames,
+               swing_fold: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Girdle flexion and foot inclination (before compliance) of leg ``k``, (T,) each."""
+    geo = leg_geometry(sp, LEGS[k])
+    groot = frames.girdle_root[:, k]
+    prot = frames.parent_rotation[:, k]
+    fwd = prot[:, :, 0].copy()
+    fwd[:, 2] = 0.0
+    fwd /= np.maximum(np.linalg.norm(fwd, axis=-1, keepdims=True), 1e-9)
+    rel = plan.targets[:, k] - groot
+    sweep = np.arctan2(np.sum(rel * fwd, -1), -rel[:, 2])
+    g = plan.sweep_gain
+    gflex = geo.girdle_flex0 - g * GIRDLE_SWEEP_GAIN[geo.limb] * sweep + plan.girdle_extra[:, k]
+    finc = (
+        geo.foot_inclination0
+        + g * FOOT_SWEEP_GAIN[geo.limb] * sweep
+        - SWING_FOOT_FOLD[geo.limb] * swing_fold[:, k]
+        + plan.foot_extra[:, k]
+    )
+    return gflex, finc
+
+
+def _nominal_inclination(sp: Species, k: int, trunk: Trunk, plan: LegPlan, frames: AxialFrames) -> np.ndarray:
+    return _leg_shape(sp, k, plan, frames, np.sin(np.pi * plan.swing_s))[1]
+
+
 def solve(sp: Species, trunk: Trunk, plan: LegPlan) -> Solved:
     """Leg IK on a trunk: girdle and foot modulated by each leg's sweep angle."""
     rot = trunk.rotations()
@@ -168,26 +197,14 @@ def solve(sp: Species, trunk: Trunk, plan: LegPlan) -> Solved:
     swing_fold = np.sin(np.pi * plan.swing_s)
     legs = []
     for k, leg in enumerate(LEGS):
-        geo = leg_geometry(sp, leg)
         groot = frames.girdle_root[:, k]
         prot = frames.parent_rotation[:, k]
         tgt = plan.targets[:, k]
-        fwd = prot[:, :, 0].copy()
-        fwd[:, 2] = 0.0
-        fwd /= np.maximum(np.linalg.norm(fwd, axis=-1, keepdims=True), 1e-9)
-        rel = tgt - groot
-        sweep = np.arctan2(np.sum(rel * fwd, -1), -rel[:, 2])
-        g = plan.sweep_gain
-        gflex = geo.girdle_flex0 - g * GIRDLE_SWEEP_GAIN[geo.limb] * sweep + plan.girdle_extra[:, k]
-        finc = (
-            geo.foot_inclination0
-            + g * FOOT_SWEEP_GAIN[geo.limb] * sweep
-            - SWING_FOOT_FOLD[geo.limb] * swing_fold[:, k]
-            + plan.foot_extra[:, k]
-        )
-        res = leg_ik(sp, leg, groot, prot, tgt, gflex, finc)
+        gflex, finc = _leg_shape(sp, k, plan, frames, swing_fold)
+        res = leg_ik(sp, leg, groot, prot, tgt, gflex, finc,
+                     distal_band=reach_band(sp, k), max_inclination_change=FOOT_COMPLIANCE)
         q = res.quaternions()
-        for n, joint in enumerate(geo.joints[:4]):
+        for n, joint in enumerate(leg_geometry(sp, leg).joints[:4]):
             rot[:, _J[joint]] = q[:, n]
         legs.append(res)
     err = np.stack([r.reach_error for r in legs], axis=1)
@@ -206,16 +223,32 @@ def upper_envelope(x: np.ndarray, window: int) -> np.ndarray:
     return uniform_filter1d(maximum_filter1d(x, w, mode="nearest"), w, mode="nearest")
 
 
+#: Stance legs keep at least this multiple of their minimal reach.
+FOLD_MARGIN = 1.15
+
+
+@functools.lru_cache(maxsize=256)
+def reach_band(sp: Species, k: int) -> tuple[float, float]:
+    """(d_min, d_max) [m] proximal-to-distal distances leg ``k`` may take.
+
+    d_max = max(standing extension, (1 − REACH_MARGIN)·(upper + lower)) (below full
+    extension); d_min = FOLD_MARGIN·|upper − lower| (at most 0.9·(upper + lower)).
+    """
+    geo = leg_geometry(sp, LEGS[k])
+    d_stand = float(standing_info(sp)["d_stand"][k])
+    dmax = min(geo.max_reach * (1 - 1e-9), max(d_stand, geo.max_reach * (1 - REACH_MARGIN)))
+    dmin = min(FOLD_MARGIN * geo.min_reach, 0.9 * geo.max_reach)
+    return dmin, dmax
+
+
 def required_lowering(sp: Species, legs: tuple[LegIKResult, ...]) -> np.ndarray:
     """(T, 4) how far [m] each girdle must come down so its leg keeps its reach reserve.
 
-    A leg may reach max(standing extension, (1 − REACH_MARGIN)·(upper + lower)).
+    A leg may reach d_max of :func:`reach_band`.
     """
-    info = standing_info(sp)
     out = []
-    for k, (leg, res) in enumerate(zip(LEGS, legs, strict=True)):
-        geo = leg_geometry(sp, leg)
-        dmax = min(geo.max_reach * (1 - 1e-9), max(float(info["d_stand"][k]), geo.max_reach * (1 - REACH_MARGIN)))
+    for k, res in enumerate(legs):
+        dmax = reach_band(sp, k)[1]
         v = res.proximal - res.distal_target
         dz = v[:, 2]
         dist = np.linalg.norm(v, axis=-1)
@@ -225,16 +258,11 @@ def required_lowering(sp: Species, legs: tuple[LegIKResult, ...]) -> np.ndarray:
     return np.stack(out, axis=1)
 
 
-#: Stance legs keep at least this multiple of their minimal reach.
-FOLD_MARGIN = 1.15
-
-
 def required_raising(sp: Species, legs: tuple[LegIKResult, ...]) -> np.ndarray:
     """(T, 4) how far [m] each girdle must come up so its leg is not folded past its range."""
     out = []
-    for leg, res in zip(LEGS, legs, strict=True):
-        geo = leg_geometry(sp, leg)
-        dmin = min(FOLD_MARGIN * geo.min_reach, 0.9 * geo.max_reach)
+    for k, res in enumerate(legs):
+        dmin = reach_band(sp, k)[0]
         v = res.proximal - res.distal_target
         dz = v[:, 2]
         dist = np.linalg.norm(v, axis=-1)
@@ -351,6 +379,60 @@ def apply_sway(
             shift *= limit / mag
         tr.root[:, :2] = trunk.root[:, :2] + to_world(shift)
     return tr
+
+
+#: Candidate foot-inclination offsets [rad] searched by :func:`respect_limits`.
+LIMIT_OFFSETS = np.linspace(-0.6, 0.6, 25)
+
+
+def _range_excess(sp: Species, limb: str, res: LegIKResult) -> np.ndarray:
+    """(T,) summed squared excess [rad²] of a leg's flexion angles over the species' ranges."""
+    out = np.zeros(res.upper_flex.shape)
+    for role, a in (("upper", res.upper_flex), ("lower", res.lower_flex), ("foot", res.foot_flex)):
+        lo, hi = sp.joint_limits[f"{limb}_{role}_flex"]
+        out += np.maximum(lo - a, 0.0) ** 2 + np.maximum(a - hi, 0.0) ** 2
+    return out
+
+
+def respect_limits(sp: Species, trunk: Trunk, plan: LegPlan, window: int) -> Solved:
+    """Turn each foot segment (smoothly in time) so the leg's flexion angles stay in range.
+
+    The foot inclination is the leg's one free angle once the toe target is fixed: per
+    frame the offset in :data:`LIMIT_OFFSETS` with the least range excess (ties: the
+    least offset; a reach error forbids an offset) is taken, smoothed over ``window``
+    frames, added to ``plan.foot_extra`` (modified in place) and the pose re-solved.
+    """
+    rot = trunk.rotations()
+    frames = axial_frames(sp, trunk.root, rot)
+    t = trunk.root.shape[0]
+    k_n = LIMIT_OFFSETS.size
+    base = solve(sp, trunk, plan)
+    if all(float(_range_excess(sp, res_limb, res).max()) < 1e-12
+           for res_limb, res in zip(("fore", "fore", "hind", "hind"), base.legs, strict=True)):
+        return base
+    for k, leg in enumerate(LEGS):
+        geo = leg_geometry(sp, leg)
+        res0 = base.legs[k]
+        finc0 = foot_inclination(
+            frames.parent_rotation[:, k], res0.abduction, res0.girdle_flex,
+            res0.upper_flex, res0.lower_flex, res0.foot_flex)
+        rep = lambda a: np.repeat(a, k_n, axis=0)  # noqa: E731
+        cand = rep(finc0) + np.tile(LIMIT_OFFSETS, t)
+        res = leg_ik(sp, leg, rep(frames.girdle_root[:, k]), rep(frames.parent_rotation[:, k]),
+                     rep(plan.targets[:, k]), rep(res0.girdle_flex), cand)
+        cost = (_range_excess(sp, geo.limb, res)
+                + 1e3 * (res.reach_error / sp.leg_length) ** 2
+                + 1e-4 * np.tile(LIMIT_OFFSETS, t) ** 2).reshape(t, k_n)
+        best = LIMIT_OFFSETS[np.argmin(cost, axis=1)]
+        # the offset demanded on top of what the compliance already turned
+        turned = _wrap_angle(finc0 - _nominal_inclination(sp, k, trunk, plan, frames))
+        delta = uniform_filter1d(best + turned, _odd(window), mode="nearest") if window > 1 else best + turned
+        plan.foot_extra[:, k] += delta
+    return solve(sp, trunk, plan)
+
+
+def _wrap_angle(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def min_jerk(s: np.ndarray) -> np.ndarray:

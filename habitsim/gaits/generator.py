@@ -27,7 +27,7 @@ from .stationary import build_idle, build_sit
 __all__ = ["generate", "draw_params", "GENERATOR_VERSION"]
 
 #: Bumped whenever the same inputs would produce a different clip.
-GENERATOR_VERSION = 4
+GENERATOR_VERSION = 5
 _MIN_DUR, _MAX_DUR = 2.0, 6.0
 #: Dimensionless turn rate ω·sqrt(h/g) range of the turn actions.
 TURN_RATE_ND = (0.08, 0.25)

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import GaitError
 from ..species import FEET, Species
-from ._pose import GRAVITY, LegPlan, Solved, Trunk, apply_sway, fix_reach, min_jerk, standing_info
+from ._pose import GRAVITY, LegPlan, Solved, Trunk, apply_sway, fix_reach, min_jerk, respect_limits, standing_info
 from .actions import ASYMMETRIC_GAITS
 
 _IDX = {f: i for i, f in enumerate(FEET)}
@@ -237,8 +237,9 @@ def build_locomotion(
         tr.neck_yaw += 0.5 * bend
         tr.head_yaw += 0.25 * bend
 
-    window = max(3, int(round(0.2 * fps / f)))
+    window = max(3, int(round(0.45 * fps / f)))
     if sway_gain > 0 and g.duty_factor >= 0.5:
         tr = apply_sway(sp, tr, plan, sway_gain, phi)
     tr, sol = fix_reach(sp, tr, plan, window)
+    sol = respect_limits(sp, tr, plan, max(3, int(round(0.1 * fps / f))))
     return tr, sol, plan
