@@ -10,8 +10,11 @@ Cheetah 3's balance controller, in its whole-body form):
        c̈_des = c̈_ref + Kp (c_ref − c) + Kd (ċ_ref − ċ)
        ω̇_des = ω̇_ref + Kp_r e_R + Kd_r (ω_ref − ω)
 
-   with the reference from the motion (:class:`~habitsim.controllers.swing.MotionPlan`,
-   or the current :class:`~habitsim.controllers.base.Reference` alone), ``I_c`` the
+   with ``e_R`` the trunk body's orientation error and ``ω`` its angular velocity (the
+   MPC uses the whole body's centroidal one instead, see
+   :attr:`BalanceController.centroidal_rate`), the reference from the motion
+   (:class:`~habitsim.controllers.swing.MotionPlan`, or the current
+   :class:`~habitsim.controllers.base.Reference` alone), ``I_c`` the
    centroidal inertia of the model at its current pose, gains scaled with the body
    (:class:`BalanceConfig`).
 2. **Stance-force QP** (:class:`StanceQP`) over the ground forces ``f_i`` of the stance
@@ -34,9 +37,11 @@ Cheetah 3's balance controller, in its whole-body form):
 3. **Torques** (joint actuators only; nothing is ever applied to the free joint), in
    order of priority::
 
-       τ = h + M q̈_ref|free + Σ_swing J_own,iᵀ F_i − Σ_stance J_iᵀ f_i + τ_posture
+       τ = h + D q̇ + M q̈_ref|free + Σ_swing J_own,iᵀ F_i − Σ_stance J_iᵀ f_i + τ_posture
 
    ``h`` the bias forces (gravity, Coriolis; ``qfrc_bias``) of the actuated joints;
+   ``D q̇`` the joints' own viscous damping (the model's ``dof_damping``), compensated so
+   the stance forces are the ones the QP planned;
    ``M q̈_ref`` the inertial feed-forward of the reference accelerations of the swinging
    legs and of the joints on no leg chain (neck, head, tail); ``F_i`` the swing feet's
    Cartesian PD (:class:`~habitsim.controllers.swing.SwingLegs`); ``J_i`` the
@@ -99,11 +104,15 @@ OMEGA_CAP = 10.0
 STANCE_SOLVERS = ("daqp", "qpoases", "proxqp", "osqp")
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (k, 3) arrays (numpy's cross is slow on small arrays)."""
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-                     a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+#: Levi-Civita symbol: ``Σ_i r_i × f_i = ε_ijk (rᵀf)_jk``.
+_LEVI_CIVITA = np.zeros((3, 3, 3))
+_LEVI_CIVITA[0, 1, 2] = _LEVI_CIVITA[1, 2, 0] = _LEVI_CIVITA[2, 0, 1] = 1.0
+_LEVI_CIVITA[0, 2, 1] = _LEVI_CIVITA[2, 1, 0] = _LEVI_CIVITA[1, 0, 2] = -1.0
+
+
+def _moment(r: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """(3,) total moment ``Σ_i r_i × f_i`` of (k, 3) forces at (k, 3) lever arms."""
+    return np.einsum("ijk,fj,fk->i", _LEVI_CIVITA, r, f)
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -155,9 +164,10 @@ class BalanceConfig:
         swing_omega: swing-foot PD natural frequency [rad/s] (default 8·sqrt(g/L));
             Cartesian gains ``kp = m_leg ω²``, ``kd = 2 m_leg ω`` per leg, capped at half
             the explicit-integration stability limit of the leg's joints.
-        capture_gain, capture_pos_gain: foothold correction gains (velocity error ×
-            sqrt(h/g); CoM position error).
-        capture_max: bound of the foothold correction [m] (default 0.15·L).
+        capture_gain, capture_pos_gain: foothold stepping-feedback gains (velocity
+            error × sqrt(h/g); CoM position error), on top of the footholds following
+            the body (:meth:`~habitsim.controllers.swing.SwingLegs.correction`).
+        capture_max: bound of the stepping feedback [m] (default 0.15·L).
         seek_depth: a lost-contact foot aims this far below its reference point [m]
             (default 0.03·L).
         posture_body: scale of the joint PD on non-leg joints (1 = kp = τmax/0.15 rad,
@@ -185,7 +195,7 @@ class BalanceConfig:
     regularization: float = 1e-6
     swing_omega: float = 0.0
     capture_gain: float = 1.0
-    capture_pos_gain: float = 0.5
+    capture_pos_gain: float = 0.3
     capture_max: float = 0.0
     seek_depth: float = 0.0
     posture_body: float = 1.0
@@ -367,8 +377,7 @@ class StanceQP:
             self._eval()
             x = self._out[0].copy()
             g = self._out[2]
-            viol = max(float(np.max(x - ubx)), float(np.max(lbx - x)),
-                       float(np.max(g - ubg)), float(np.max(lbg - g)))
+            viol = max((x - ubx).max(), (lbx - x).max(), (g - ubg).max(), (lbg - g).max())
             ok = viol <= 1e-5 * max(fz_max, 1.0)  # False for NaN as well
             if not ok:
                 self.failures += 1
@@ -465,6 +474,9 @@ class BalanceController(Controller):
     """
 
     name = "balance"
+    #: Feed back the whole body's centroidal angular velocity ``I_c⁻¹ h_c`` instead of the
+    #: trunk body's own (see :meth:`_trunk_state`).
+    centroidal_rate = False
 
     def __init__(self, model: mujoco.MjModel, feet: Sequence[str] | None = None, *,
                  plan: MotionPlan | None = None, leg_length: float | None = None,
@@ -524,12 +536,15 @@ class BalanceController(Controller):
         self.last_modes = np.full(nf, STANCE)
         self.last_torque = np.zeros(n)
         self._inertia = np.eye(3)
+        self._inertia_inv = np.eye(3)
         self._ticks = 0
         self._clipped = 0
         # per-tick caches (see _control / _other_torques)
         self._dof = jm.dof_adr
         self._qadr = jm.qpos_adr
         self._limit = jm.torque_limit
+        self._neg_limit = -self._limit
+        self._joint_damping = np.array(model.dof_damping[jm.dof_adr], dtype=float)
         self._limit_ch = self._limit[self._chain]
         self._tpc = jm.torque_per_ctrl
         self._ctrl_idx = jm.ctrl_index
@@ -611,8 +626,13 @@ class BalanceController(Controller):
         self._proj = None
         self._ticks = 0
         self._clipped = 0
+        self._refresh_inertia(model, data)
+
+    def _refresh_inertia(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        """Centroidal inertia ``I_c`` at the current pose and its inverse."""
         self._inertia = centroidal_inertia(model, data, self._bodies,
                                            data.subtree_com[self.legs.trunk])
+        self._inertia_inv = np.linalg.inv(self._inertia)
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -650,12 +670,22 @@ class BalanceController(Controller):
         )
 
     def _trunk_state(self, model: mujoco.MjModel, data: mujoco.MjData):
-        tr, da = self.legs.trunk, self.legs.dadr
+        """(CoM, CoM velocity, trunk rotation, angular velocity), world frame.
+
+        The angular velocity is the trunk body's own (:attr:`centroidal_rate` False: the
+        rate of the orientation error the PD feeds back) or the whole body's average
+        one, ``I_c⁻¹ h_c`` (``h_c`` the angular momentum about the CoM; True).
+        """
+        tr = self.legs.trunk
         mujoco.mj_subtreeVel(model, data)
         com = data.subtree_com[tr].copy()
         com_vel = data.subtree_linvel[tr].copy()
         rot = data.xmat[tr].reshape(3, 3).copy()
-        omega = rot @ data.qvel[da + 3:da + 6]
+        if self.centroidal_rate:
+            omega = self._inertia_inv @ data.subtree_angmom[tr]
+        else:
+            da = self.legs.dadr
+            omega = rot @ data.qvel[da + 3:da + 6]
         return com, com_vel, rot, omega
 
     @staticmethod
@@ -682,8 +712,7 @@ class BalanceController(Controller):
     def _control(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:
         legs, cfg = self.legs, self.config
         if self._ticks % 10 == 0:
-            self._inertia = centroidal_inertia(model, data, self._bodies,
-                                               data.subtree_com[legs.trunk])
+            self._refresh_inertia(model, data)
         self._ticks += 1
         com, com_vel, rot, omega = self._trunk_state(model, data)
         p = legs.positions(data)
@@ -738,16 +767,21 @@ class BalanceController(Controller):
     def last_achieved(self) -> np.ndarray:
         """(6,) wrench about the CoM of :attr:`last_forces` (at the last tick's lever arms)."""
         f = self.last_forces
-        return np.concatenate([f.sum(axis=0), _cross(self._r, f).sum(axis=0)])
+        return np.concatenate([f.sum(axis=0), _moment(self._r, f)])
 
     def _other_torques(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference,
                        jc: np.ndarray, force_sw: np.ndarray, modes: np.ndarray) -> np.ndarray:
         """(base, posture), each (n,): every torque but the stance forces' — ``base`` the
-        bias, inertial feed-forward and swing PD, ``posture`` the joint PD (null-space
-        projected on the legs) and damping. ``jc`` is (nf, 3, n + 1), last column zero."""
+        bias, joint-damping compensation, inertial feed-forward and swing PD,
+        ``posture`` the joint PD (null-space projected on the legs) and damping. ``jc``
+        is (nf, 3, n + 1), last column zero."""
         legs = self.legs
         dof = self._dof
         tau = data.qfrc_bias[dof]  # a copy (fancy index)
+        # the joints' own viscous damping (MJCF ``damping``), which the engine applies on
+        # top of the actuators: uncompensated, a stance leg sweeping back under a fast
+        # trunk brakes it (a horse's trotting leg by ~0.2 m·g per foot)
+        tau += self._joint_damping * data.qvel[dof]
         # inertial feed-forward of the reference joint accelerations of the swinging legs
         # and of the joints outside the legs: M[j, j'] q̈_ref[j'] over those joints only
         key = int((modes == SWING) @ self._bits)
@@ -784,11 +818,11 @@ class BalanceController(Controller):
 
     def _to_ctrl(self, data: mujoco.MjData, tau: np.ndarray) -> np.ndarray:
         jm = self.legs.jmap
-        clipped = np.clip(tau, -self._limit, self._limit)
+        clipped = np.minimum(np.maximum(tau, self._neg_limit), self._limit)
         if (clipped != tau).any():
             self._clipped += 1
         u = np.array(data.ctrl)
-        u[self._ctrl_idx] = np.clip(clipped / self._tpc, jm.ctrl_lo, jm.ctrl_hi)
+        u[self._ctrl_idx] = np.minimum(np.maximum(clipped / self._tpc, jm.ctrl_lo), jm.ctrl_hi)
         self.last_torque = u[self._ctrl_idx] * self._tpc
         return u
 

@@ -73,7 +73,7 @@ def make_controller(name: str, model: mujoco.MjModel, species=None, *,
         **options: passed on — ``pd``: ``kp``, ``kd``, ``joints``, ``dt``; ``balance``:
             :class:`~habitsim.controllers.balance.BalanceConfig` fields, ``solver``,
             ``control_dt``; ``mpc``: those plus ``rate_hz``, ``horizon_s``, ``max_steps``,
-            ``mpc_solver``, ``weights``, ``feedback_scale``.
+            ``mpc_solver``, ``weights``, ``feedback_scale``, ``resolve_on_contact``.
 
     Raises:
         ControllerError: unknown name (the message lists the valid ones), a model the

@@ -18,10 +18,11 @@ named feet (sites, geoms or bodies).
   to stance early (*early touch-down*); a scheduled stance foot that does not touch the
   ground carries no force (*lost contact*, :data:`SEEK`) and reaches down until it does.
 * :class:`SwingLegs` — swing feet follow the motion's own foot path, bent so that it
-  starts where the foot really lifted off and ends at a corrected foothold (reference
-  foothold + a bounded capture-point correction), tracked by a Cartesian PD
-  ``F = Kp (p_des − p) + Kd (v_des − v)`` applied as ``τ = J_legᵀ F``; gravity and bias
-  compensation (``qfrc_bias``) is added by the torque layer for every joint.
+  starts where the foot really lifted off and ends at a corrected foothold (the reference
+  foothold moved with the body, plus a bounded capture-point correction), tracked by a
+  Cartesian PD ``F = Kp (p_des − p) + Kd (v_des − v)`` applied as ``τ = J_legᵀ F``;
+  gravity and bias compensation (``qfrc_bias``) and the joints' damping are added by the
+  torque layer for every joint.
 
 Units: SI (m, s, kg, N, N·m, rad); world frame z up.
 """
@@ -212,6 +213,7 @@ class LegSet:
         kinds = {k for k, _ in self.points}
         self._kind = kinds.pop() if len(kinds) == 1 else "mixed"
         self._ids = np.array([i for _, i in self.points], dtype=int)
+        self._foot_range = np.arange(nf)
         self._body_list = [int(b) for b in self.bodies]
 
     @staticmethod
@@ -253,19 +255,16 @@ class LegSet:
         where the ground really pushes, which for a paw lying on its toe capsule or a
         plantigrade sole is not the foot sphere's centre."""
         nf = self.n_feet
-        touch = np.zeros(nf, dtype=bool)
-        pts = np.full((nf, 3), np.nan)
-        if data.ncon:
-            con = data.contact
-            geoms = con.geom
-            idx = np.maximum(self.geom_lut[geoms[:, 0]], self.geom_lut[geoms[:, 1]])
-            sel = idx >= 0
-            if sel.any():
-                idx = idx[sel]
-                pos = con.pos[sel]
-                for i in set(idx.tolist()):
-                    touch[i] = True
-                    pts[i] = pos[idx == i].mean(axis=0)
+        if not data.ncon:
+            return np.zeros(nf, dtype=bool), np.full((nf, 3), np.nan)
+        con = data.contact
+        geoms = con.geom
+        foot = np.maximum(self.geom_lut[geoms[:, 0]], self.geom_lut[geoms[:, 1]])
+        onehot = (foot[:, None] == self._foot_range).astype(float)  # (ncon, nf); -1: none
+        count = onehot.sum(axis=0)
+        touch = count > 0
+        pts = (onehot.T @ con.pos) / np.maximum(count, 1.0)[:, None]
+        pts[~touch] = np.nan
         return touch, pts
 
 
@@ -310,10 +309,21 @@ class MotionPlan:
         rpy: (T, 3) trunk roll, pitch, yaw (ZYX), yaw unwrapped.
         omega, omega_dot: (T, 3) trunk angular velocity / acceleration, world frame.
         feet, feet_vel: (T, nf, 3) reference foot points.
-        contacts: (T, nf) bool scheduled stance.
-        liftoff, touchdown: (T, nf) int frame of the current swing's lift-off / next
-            touch-down (-1 in stance; touch-down ``T`` when the clip ends in the air).
+        contacts: (T, nf) bool stance labels of the frames.
+        liftoff, touchdown: (T, nf) int first swing frame of the current swing / first
+            stance frame after it (-1 in stance; touch-down ``T`` when the clip ends in
+            the air).
         stride_s: mean time between touch-downs of a foot [s] (NaN if no foot steps twice).
+
+    **Schedule between frames.** The reference the controllers track is interpolated
+    between frames, so a foot labelled swing at frame k−1 and stance at k reaches the
+    ground at frame k, and one labelled stance at k and swing at k+1 leaves it right after
+    frame k. A foot is therefore scheduled in stance at time t when the frames on both
+    sides of t are stance frames (:meth:`contacts_at`), and a swing runs from the last
+    stance frame to the next stance frame. (The nearest-frame rule would put every
+    touch-down half a frame before the reference foot lands and every lift-off half a
+    frame after it leaves: at 30 fps a fast trot's stance would be planned a whole frame
+    too long and its flight phase a frame too short.)
     """
 
     fps: float
@@ -364,8 +374,12 @@ class MotionPlan:
         return out
 
     def contacts_at(self, times: np.ndarray) -> np.ndarray:
-        """(n, nf) bool scheduled stance at ``times``."""
-        return self.contacts[self.frame(np.asarray(times, dtype=float))]
+        """(n, nf) bool scheduled stance at ``times``: the frames on both sides are
+        stance frames (see the class docstring)."""
+        s = np.clip(np.asarray(times, dtype=float) * self.fps, 0.0, self.n_frames - 1)
+        i0 = np.floor(s).astype(int)
+        i1 = np.minimum(np.ceil(s).astype(int), self.n_frames - 1)
+        return self.contacts[i0] & self.contacts[i1]
 
     def feet_at(self, times: np.ndarray) -> np.ndarray:
         """(n, nf, 3) reference foot points at ``times``."""
@@ -384,6 +398,11 @@ class MotionPlan:
         td = np.minimum(self.touchdown, t - 1)
         hold_ = np.where(swing[:, :, None], self.feet[np.maximum(td, 0), np.arange(nf)], np.nan)
         object.__setattr__(self, "_foothold", hold_)
+        # per swing frame: lift-off right after the last stance frame, touch-down at the
+        # next stance frame [s] (NaN in stance)
+        object.__setattr__(self, "_t_lo", np.where(swing, (self.liftoff - 1) / self.fps, np.nan))
+        object.__setattr__(self, "_t_td", np.where(swing, self.touchdown / self.fps, np.nan))
+        object.__setattr__(self, "_feet_idx", np.arange(nf))
 
     def sample(self, t: float, hold: bool = False) -> PlanSample:
         """The plan at time ``t`` [s] (clamped to the clip); ``hold`` freezes the first
@@ -394,25 +413,25 @@ class MotionPlan:
         i1 = min(i0 + 1, nfr - 1)
         a = s - i0
         v = self._pack[i0] * (1.0 - a) + self._pack[i1] * a if a else self._pack[i0].copy()
-        k = min(int(s + 0.5), nfr - 1)
-        contacts = self.contacts[k]
+        c0 = self.contacts[i0]
+        if a:  # stance between two stance frames; a swing's frame is i1 right after lift-off
+            contacts = c0 & self.contacts[i1]
+            k = np.where(c0, i1, i0)
+        else:
+            contacts = c0.copy()
+            k = np.full(c0.size, i0)
         nf = contacts.size
         now = 0.0 if hold else float(t)
-        t_lo = [math.nan] * nf
-        t_td = [math.nan] * nf
-        phase = [math.nan] * nf
-        lo, td = self.liftoff[k], self.touchdown[k]
-        for i in range(nf):
-            if not contacts[i]:
-                a_, b_ = lo[i] / self.fps, td[i] / self.fps
-                t_lo[i], t_td[i] = a_, b_
-                phase[i] = min(max((now - a_) / max(b_ - a_, 1e-6), 0.0), 1.0)
-        t_lo, t_td, phase = np.array(t_lo), np.array(t_td), np.array(phase)
+        feet_idx = self._feet_idx
         swing = ~contacts
-        feet = v[18:18 + 3 * nf].reshape(nf, 3)
-        foothold = feet.copy()
+        t_lo = np.where(swing, self._t_lo[k, feet_idx], np.nan)
+        t_td = np.where(swing, self._t_td[k, feet_idx], np.nan)
+        phase = np.full(nf, np.nan)
         if swing.any():
-            foothold[swing] = self._foothold[k][swing]
+            a_, b_ = t_lo[swing], t_td[swing]
+            phase[swing] = np.clip((now - a_) / np.maximum(b_ - a_, 1e-6), 0.0, 1.0)
+        feet = v[18:18 + 3 * nf].reshape(nf, 3)
+        foothold = np.where(swing[:, None], self._foothold[k, feet_idx], feet)
         if hold:
             v[3:9] = 0.0
             v[12:18] = 0.0
@@ -420,7 +439,7 @@ class MotionPlan:
         return PlanSample(
             t=now, com=v[0:3], com_vel=v[3:6], com_acc=v[6:9], rpy=v[9:12], omega=v[12:15],
             omega_dot=v[15:18], feet=feet, feet_vel=v[18 + 3 * nf:].reshape(nf, 3),
-            contacts=contacts.copy(), phase=phase, t_liftoff=t_lo, t_touchdown=t_td,
+            contacts=contacts, phase=phase, t_liftoff=t_lo, t_touchdown=t_td,
             foothold=foothold,
         )
 
@@ -634,14 +653,15 @@ class SwingLegs:
         kd: (nf,) or scalar Cartesian damping [N·s/m].
         capture_gain: gain on the capture-point offset of the CoM velocity error,
             ``(ċ − ċ_ref)·sqrt(h/g)``.
-        capture_pos_gain: gain on the horizontal CoM position error.
-        capture_max: bound of ``|Δ|`` [m].
+        capture_pos_gain: gain on the horizontal CoM position error beyond following
+            the body (see :meth:`correction`).
+        capture_max: bound of the stepping feedback in ``Δ`` [m].
         seek_depth: how far below its reference point a SEEK foot aims [m].
         seek_speed: downward speed wanted of a SEEK foot [m/s].
     """
 
     def __init__(self, legs: LegSet, kp: float | np.ndarray, kd: float | np.ndarray, *,
-                 capture_gain: float = 1.0, capture_pos_gain: float = 0.5,
+                 capture_gain: float = 1.0, capture_pos_gain: float = 0.3,
                  capture_max: float = 0.1, seek_depth: float = 0.02,
                  seek_speed: float = 0.3) -> None:
         nf = legs.n_feet
@@ -658,15 +678,26 @@ class SwingLegs:
 
     def correction(self, com: np.ndarray, com_vel: np.ndarray, com_ref: np.ndarray,
                    com_vel_ref: np.ndarray, height: float, gravity: float) -> np.ndarray:
-        """(3,) bounded horizontal foothold correction Δ [m] (capture point of the error)."""
+        """(3,) horizontal foothold correction Δ [m]::
+
+            Δ = e + clip(k_v·ė·sqrt(h/g) + k_p·e, capture_max),   e = c − c_ref
+
+        The first term places the foothold relative to the body, as Raibert's heuristic
+        does (relative to the hip): a reference foothold kept in the world while the CoM
+        is off by ``e`` is off by −e relative to the body, which pushes the CoM further
+        away (the stance leg of an inverted pendulum accelerates the CoM away from the
+        foot). The bounded second term is the stepping feedback: the capture point of
+        the velocity error plus a share of the position error, so both decay.
+        """
         w = math.sqrt(max(height, 1e-3) / max(gravity, 1e-9))
         kv, kp = self.capture_gain * w, self.capture_pos_gain
-        dx = kv * float(com_vel[0] - com_vel_ref[0]) + kp * float(com[0] - com_ref[0])
-        dy = kv * float(com_vel[1] - com_vel_ref[1]) + kp * float(com[1] - com_ref[1])
+        ex, ey = float(com[0] - com_ref[0]), float(com[1] - com_ref[1])
+        dx = kv * float(com_vel[0] - com_vel_ref[0]) + kp * ex
+        dy = kv * float(com_vel[1] - com_vel_ref[1]) + kp * ey
         n = math.hypot(dx, dy)
         if n > self.capture_max:
             dx, dy = dx * self.capture_max / n, dy * self.capture_max / n
-        return np.array([dx, dy, 0.0])
+        return np.array([ex + dx, ey + dy, 0.0])
 
     def reset(self) -> None:
         self.d_lo[:] = 0.0

@@ -439,6 +439,12 @@ def _refine(motion: Motion, mode: str) -> tuple[Motion, str]:
         return motion, "unavailable (no dynamics stage)"
     if "fallback" in params:
         kw["fallback"] = True
+    if "options" in params:
+        # the runner measures every metric itself afterwards: skip refine's own before /
+        # after metrics (a MuJoCo inverse-dynamics pass over the clip, twice)
+        from habitsim.refine import RefineOptions  # type: ignore[attr-defined]
+
+        kw["options"] = RefineOptions(metrics=False)
     res = refine(motion, **kw)
     out = res if isinstance(res, Motion) else getattr(res, "motion", None)
     if not isinstance(out, Motion):

@@ -274,3 +274,125 @@ def test_plan_contact_schedule(robot: mujoco.MjModel) -> None:
     auto = plan_from_qpos(robot, qpos, fps)
     assert np.mean(auto.contacts == contacts) > 0.9
     assert SWING == 1
+
+
+# --------------------------------------------------------------------------- trot fixes
+def test_plan_schedule_between_frames(robot: mujoco.MjModel) -> None:
+    """The reference is interpolated between frames: a foot labelled swing at frame k−1 and
+    stance at k lands at frame k, one labelled stance at k and swing at k+1 leaves right
+    after frame k. Between frames a foot is in stance only if both frames are stance."""
+    qpos, fps, contacts = trot_in_place(robot, seconds=2.0, fps=20.0)
+    plan = plan_from_qpos(robot, qpos, fps, contacts)
+    foot = 1
+    c = contacts[:, foot]
+    td = next(k for k in range(1, len(c)) if c[k] and not c[k - 1])  # first touch-down
+    lo = next(k for k in range(td, len(c)) if not c[k])  # next first swing frame
+    mid = (td - 0.5) / fps
+    assert not plan.contacts_at(np.array([mid]))[0, foot]
+    assert not plan.sample(mid).contacts[foot]
+    assert plan.sample(td / fps).contacts[foot]
+    assert plan.contacts_at(np.array([(lo - 1) / fps]))[0, foot]
+    after = (lo - 0.5) / fps
+    s = plan.sample(after)
+    assert not s.contacts[foot] and not plan.contacts_at(np.array([after]))[0, foot]
+    # the swing runs from the last stance frame to the next stance frame
+    assert s.t_liftoff[foot] == pytest.approx((lo - 1) / fps)
+    nxt = next(k for k in range(lo, len(c)) if c[k])
+    assert s.t_touchdown[foot] == pytest.approx(nxt / fps)
+    assert 0.0 < s.phase[foot] < 0.5
+    np.testing.assert_allclose(s.foothold[foot], plan.feet[nxt, foot], atol=1e-12)
+
+
+def test_foothold_follows_the_body(robot: mujoco.MjModel) -> None:
+    """Raibert: the foothold moves with the body (relative to the hip), plus a bounded
+    stepping feedback that makes position and velocity errors decay."""
+    ctl = BalanceController(robot)
+    sw, cfg = ctl.swing, ctl.config
+    com_ref, v0 = np.array([1.0, 2.0, 0.3]), np.zeros(3)
+    e = np.array([0.01, -0.005, 0.0])
+    d = sw.correction(com_ref + e, v0, com_ref, v0, 0.3, 9.81)
+    np.testing.assert_allclose(d, (1.0 + cfg.capture_pos_gain) * e, atol=1e-12)
+    big = np.array([0.0, 1.0, 0.0])  # far off: follows fully, feedback saturated
+    d = sw.correction(com_ref + big, v0, com_ref, v0, 0.3, 9.81)
+    np.testing.assert_allclose(d, big + [0.0, cfg.capture_max, 0.0], atol=1e-12)
+    dv = np.array([0.1, 0.0, 0.0])  # a velocity error: step onto its capture point
+    d = sw.correction(com_ref, dv, com_ref, v0, 0.3, 9.81)
+    np.testing.assert_allclose(d, cfg.capture_gain * dv * np.sqrt(0.3 / 9.81), atol=1e-12)
+
+
+def test_joint_damping_is_compensated(robot: mujoco.MjModel) -> None:
+    """The joints' own viscous damping is added to the torques (else a fast stance leg
+    brakes the trunk and a swing leg lags its path)."""
+    from habitsim.controllers.swing import STANCE
+
+    plain = mujoco.MjModel.from_xml_path(str(ROBOT_XML))
+    plain.dof_damping[:] = 0.0
+    rng = np.random.default_rng(3)
+    out = []
+    for m in (robot, plain):
+        ctl = BalanceController(m)
+        data = mujoco.MjData(m)
+        data.qpos[:] = m.key("home").qpos
+        data.qvel[:] = rng.normal(size=m.nv) if not out else out[0][1]
+        mujoco.mj_forward(m, data)
+        ctl.reset(m, data)
+        nf, n = ctl.legs.n_feet, len(ctl.joint_names)
+        ref = Reference(0.1, data.qpos.copy(), data.qvel.copy(), np.zeros(m.nv), None)
+        tau, _ = ctl._other_torques(m, data, ref, np.zeros((nf, 3, n + 1)),
+                                    np.zeros((nf, 3)), np.full(nf, STANCE))
+        out.append((tau, data.qvel.copy(), ctl._dof))
+    (tau_d, qvel, dof), (tau_p, _, _) = out
+    np.testing.assert_allclose(tau_d - tau_p, robot.dof_damping[dof] * qvel[dof], atol=1e-9)
+    assert np.abs(tau_d - tau_p).max() > 0.0
+
+
+def test_mpc_uses_the_centroidal_angular_velocity() -> None:
+    """The MPC's ω is the whole body's I_c⁻¹ h_c (what the ground forces change); the
+    balance PD keeps the trunk body's own rate (the rate of its orientation error)."""
+    from habitsim.qpos import load_species_model
+
+    dog = load_species_model("dog")
+    data = mujoco.MjData(dog)
+    data.qpos[:] = dog.qpos0
+    data.qpos[2] += 0.5
+    data.qvel[:] = np.random.default_rng(0).normal(size=dog.nv)
+    mujoco.mj_forward(dog, data)
+    mpc, bal = MPCController(dog, leg_length=0.61), BalanceController(dog, leg_length=0.61)
+    for c in (mpc, bal):
+        c.reset(dog, data)
+    _, _, rot, w_mpc = mpc._trunk_state(dog, data)
+    _, _, _, w_bal = bal._trunk_state(dog, data)
+    tr = mpc.legs.trunk
+    np.testing.assert_allclose(w_mpc, np.linalg.solve(mpc._inertia, data.subtree_angmom[tr]),
+                               atol=1e-9)
+    da = mpc.legs.dadr
+    np.testing.assert_allclose(w_bal, rot @ data.qvel[da + 3:da + 6], atol=1e-12)
+    assert np.linalg.norm(w_mpc - w_bal) > 0.1  # the legs and spine move: they differ
+
+
+def test_mpc_solves_again_on_contact_change(robot: mujoco.MjModel) -> None:
+    qpos, fps, contacts = trot_in_place(robot, seconds=1.5)
+    counts = {}
+    for flag in (True, False):
+        ctl = MPCController(robot, resolve_on_contact=flag)
+        follow(robot, ctl, qpos, fps, contacts)
+        counts[flag] = ctl.stats.to_dict()["mpc_solves"]
+    periodic = int(np.ceil((len(qpos) - 1) / fps * 30.0))
+    assert abs(counts[False] - periodic) <= 1
+    assert counts[True] >= counts[False] + 4  # the trot's lift-offs and touch-downs
+
+
+def test_dog_trot_mpc_unassisted() -> None:
+    """The issue's case: a dog's (flying) trot under the MPC, no external force."""
+    from habitsim.gaits import generate
+    from habitsim.qpos import load_species_model, motion_to_qpos
+    from habitsim.sim import track
+
+    dog = load_species_model("dog")
+    motion = generate("dog", "trot", seed=0, duration_s=3.0)
+    ctl = make_controller("mpc", dog, "dog", qpos=motion_to_qpos(motion, dog).qpos,
+                          fps=motion.fps, contacts=motion.contacts)
+    res = track(motion, controller=ctl, model=dog)
+    assert res.survival == 1.0, res.fall_reason
+    assert res.metrics["assist_force_mg"] == 0.0
+    assert res.metrics["sim_mpjpe_per_leg"] < 0.12
