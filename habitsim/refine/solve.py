@@ -101,7 +101,7 @@ class RefineOptions:
         dynamics: stage B (contact forces + centroidal dynamics) instead of stage A.
         window: window length W [frames]; overlap: frames shared by consecutive windows.
         filter_cutoff: cutoff of the jitter pre-filter in units of the species' natural
-            frequency √(g/L) [rad/s] (14 → 8.9 Hz for a dog, 4.9 Hz for an elephant);
+            frequency √(g/L) [rad/s] (10 → 6.4 Hz for a dog, 3.5 Hz for an elephant);
             None switches the filter off.
         w_track, w_smooth, w_reg, w_root, w_residual, w_force: cost weights.
         friction: friction coefficient of the pyramid (None: the model's foot / floor).
@@ -116,7 +116,7 @@ class RefineOptions:
     dynamics: bool = False
     window: int = 64
     overlap: int = 16
-    filter_cutoff: float | None = 14.0
+    filter_cutoff: float | None = 10.0
     w_track: float = 1.0
     w_smooth: float = 1e-5
     w_reg: float = 3e-2
