@@ -164,7 +164,8 @@ class InverseDynamicsFeedforward:
             jac.append(self._jacp.copy())
         jt = np.stack(jac)  # (S, 3, nv)
         # free-joint effect of each cone edge of each stance foot
-        a = np.concatenate([(jt[i].T @ self._edges.T)[self._free_dofs] for i in range(len(jac))], axis=1)
+        a = np.concatenate([(jt[i].T @ self._edges.T)[self._free_dofs] for i in range(len(jac))],
+                           axis=1)
         reg = np.sqrt(_FORCE_REG) * max(float(np.abs(a).max()), 1e-9)
         lam, _ = nnls(np.vstack([a, reg * np.eye(a.shape[1])]),
                       np.concatenate([b, np.zeros(a.shape[1])]), maxiter=50 * a.shape[1])
@@ -202,7 +203,8 @@ class InverseDynamicsFeedforward:
             return z < 0.01 * float(self._model.stat.extent)
         c = np.asarray(ref.contacts, dtype=bool).reshape(-1)
         if c.size != n:
-            raise ControllerError(f"reference has {c.size} contact flags, the feed-forward {n} feet")
+            raise ControllerError(
+                f"reference has {c.size} contact flags, the feed-forward {n} feet")
         return c
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from habitsim.controllers import ControllerError
 from habitsim.controllers.base import Reference
 from habitsim.controllers.feedforward import InverseDynamicsFeedforward
 from habitsim.controllers.servo import ServoController
+
 from habitsim.gaits import generate
 from habitsim.sim import FOOT_GEOMS, _species_model, track
 
@@ -39,7 +39,8 @@ def test_stance_feedforward_holds_a_standing_body_better_than_the_contact_free_o
     model = _species_model("tiger", True)
     err = {}
     for mode, kw in (("ignore", {}), ("stance", {"feet": FOOT_GEOMS, "mu": MU})):
-        ctl = ServoController(model, feedforward=InverseDynamicsFeedforward(model, contacts=mode, **kw))
+        ff = InverseDynamicsFeedforward(model, contacts=mode, **kw)
+        ctl = ServoController(model, feedforward=ff)
         r = track(clip, controller=ctl, model=model)
         assert r.survival == 1.0
         err[mode] = r.metrics["sim_mpjpe_mm"]

@@ -13,7 +13,15 @@ import numpy as np
 from scipy.ndimage import maximum_filter1d, uniform_filter1d
 
 from ..body import center_of_mass
-from ..ik import LEGS, AxialFrames, LegIKResult, axial_frames, foot_inclination, leg_geometry, leg_ik
+from ..ik import (
+    LEGS,
+    AxialFrames,
+    LegIKResult,
+    axial_frames,
+    foot_inclination,
+    leg_geometry,
+    leg_ik,
+)
 from ..rotations import quat_mul, rot_x, rot_y, rot_z
 from ..skeleton import JOINT_NAMES, fk, get_skeleton, standing_leg_angles
 from ..species import Species
@@ -186,7 +194,8 @@ def _leg_shape(sp: Species, k: int, plan: LegPlan, frames: AxialFrames,
     return gflex, finc
 
 
-def _nominal_inclination(sp: Species, k: int, trunk: Trunk, plan: LegPlan, frames: AxialFrames) -> np.ndarray:
+def _nominal_inclination(sp: Species, k: int, plan: LegPlan, frames: AxialFrames) -> np.ndarray:
+    """Foot inclination of leg ``k`` before the reach compliance, (T,)."""
     return _leg_shape(sp, k, plan, frames, np.sin(np.pi * plan.swing_s))[1]
 
 
@@ -418,15 +427,18 @@ def respect_limits(sp: Species, trunk: Trunk, plan: LegPlan, window: int) -> Sol
             res0.upper_flex, res0.lower_flex, res0.foot_flex)
         rep = lambda a: np.repeat(a, k_n, axis=0)  # noqa: E731
         cand = rep(finc0) + np.tile(LIMIT_OFFSETS, t)
-        res = leg_ik(sp, leg, rep(frames.girdle_root[:, k]), rep(frames.parent_rotation[:, k]),
-                     rep(plan.targets[:, k]), rep(res0.girdle_flex), cand)
+        res = leg_ik(sp, leg, rep(frames.girdle_root[:, k]),
+                     rep(frames.parent_rotation[:, k]), rep(plan.targets[:, k]),
+                     rep(res0.girdle_flex), cand)
         cost = (_range_excess(sp, geo.limb, res)
                 + 1e3 * (res.reach_error / sp.leg_length) ** 2
                 + 1e-4 * np.tile(LIMIT_OFFSETS, t) ** 2).reshape(t, k_n)
         best = LIMIT_OFFSETS[np.argmin(cost, axis=1)]
         # the offset demanded on top of what the compliance already turned
-        turned = _wrap_angle(finc0 - _nominal_inclination(sp, k, trunk, plan, frames))
-        delta = uniform_filter1d(best + turned, _odd(window), mode="nearest") if window > 1 else best + turned
+        turned = _wrap_angle(finc0 - _nominal_inclination(sp, k, plan, frames))
+        delta = best + turned
+        if window > 1:
+            delta = uniform_filter1d(delta, _odd(window), mode="nearest")
         plan.foot_extra[:, k] += delta
     return solve(sp, trunk, plan)
 
