@@ -9,8 +9,9 @@ In one run:
   the windows (``solve``), of the wall time of the whole :func:`habitsim.refine.refine`
   call without metrics (``call``) and of its CPU time (``cpu``; on a shared machine the
   fairest of the three). Targets of the issue: stage A ≤ 0.5 s, stage B ≤ 2 s per clip;
-* survival of unassisted ``servo`` tracking (:func:`habitsim.sim.track`) of the same
-  clips before and after stage-A refinement, per species (target: after ≥ before);
+* survival of unassisted tracking (:func:`habitsim.sim.track`; ``--survival-controller``,
+  default ``mpc``) of the same clips before and after stage-A refinement, per species
+  (target: after ≥ before);
 * scaling on ``--scaling-species``: solve time of 100, 300 and 1000 frames (``--lengths``)
   per stage, with the time per frame (linear growth = constant time per frame);
 * IPOPT success rate over ``--success-clips`` clips per stage of random species, action
@@ -66,10 +67,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-survival", action="store_true", help="skip the tracking survival")
     p.add_argument(
         "--survival-controller",
-        default="balance",
+        default="mpc",
         choices=_SURVIVAL_CONTROLLERS,
-        help="unassisted controller of the survival runs (default balance: plain servo PD "
-        "falls within about a second whatever the motion, which would compare noise)",
+        help="unassisted controller of the survival runs (default mpc, the controller that "
+        "keeps most clips up; plain servo PD falls within about a second whatever the "
+        "motion, which would compare noise)",
     )
     p.add_argument(
         "--data",
