@@ -258,3 +258,23 @@ def test_dog_walk_balance_unassisted() -> None:
     assert res.survival == 1.0, res.fall_reason
     assert res.metrics["assist_force_mg"] == 0.0
     assert res.metrics["sim_mpjpe_per_leg"] < 0.1
+
+
+def test_contact_tracker_tells_a_landing_from_a_scuff() -> None:
+    """A swing foot touching the ground counts as an early touch-down only late in its
+    swing and near its swing target; a touch at mid-swing, or far behind the path, is a
+    scuff and the foot keeps swinging (planted half a step short, it would carry the body
+    on a support polygon the plan never had)."""
+    from habitsim.controllers.swing import STANCE, SWING, ContactTracker
+
+    sched = np.array([False, True])
+    touch = np.array([True, True])
+    tr = ContactTracker(2)
+    assert tr.update(0.0, sched, touch, np.array([0.6, np.nan]))[0] == SWING  # mid-swing
+    tr = ContactTracker(2)
+    near = np.array([False, True])
+    assert tr.update(0.0, sched, touch, np.array([0.9, np.nan]), near)[0] == SWING  # far
+    assert tr.update(0.0, sched, touch, np.array([0.9, np.nan]), ~near)[0] == STANCE
+    assert tr.events["early_touchdown"] == 1
+    cfg = BalanceConfig.scaled(25.0, 0.6)
+    assert cfg.early_phase == 0.75 and cfg.early_reach == pytest.approx(0.06)

@@ -65,7 +65,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mpc-hz", type=float, default=30.0, metavar="HZ",
                    help="MPC solves per second (default 30)")
     p.add_argument("--control-hz", type=float, metavar="HZ",
-                   help="control rate of the runner (default: every simulation step)")
+                   help="control rate of the runner (default: every simulation step; mpc: "
+                   "habitsim.sim.MPC_CONTROL_HZ)")
     p.add_argument("--refine", action="store_true",
                    help="refine every clip first (habitsim.refine, slow)")
     p.add_argument("--json", action="store_true", help="one JSON object per run, then a summary")
@@ -89,10 +90,12 @@ def run_one(species: str, motion: Any, controller: str, *, mpc_hz: float = 30.0,
     """Track one clip with one controller; the figures of the run."""
     from ..controllers import make_controller
     from ..qpos import load_species_model, motion_to_qpos
-    from ..sim import track
+    from ..sim import MPC_CONTROL_HZ, track
 
     model = load_species_model(species)
     options: dict[str, Any] = {}
+    if control_hz is None and controller == "mpc":
+        control_hz = MPC_CONTROL_HZ  # as habitsim.sim.track runs "mpc" by name
     if control_hz is not None:
         dt = 1.0 / control_hz
         options["dt" if controller == "pd" else "control_dt"] = dt

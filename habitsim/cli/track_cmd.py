@@ -54,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="external root assistance (a PD wrench on the trunk; reported)")
     p.add_argument("--video", metavar="V.mp4", help="render a video (.mp4 or .gif)")
     p.add_argument("--control-hz", type=float, metavar="HZ",
-                   help="control rate [Hz] (default: every simulation step)")
+                   help="control rate [Hz] (default: every simulation step; mpc: 250 Hz)")
     p.add_argument("--settle", type=float, default=0.0, metavar="S",
                    help="hold the first frame S seconds before the clip (default 0)")
     p.add_argument("--no-stop", action="store_true",
