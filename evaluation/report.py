@@ -349,9 +349,10 @@ def write_report(out: str | Path) -> list[Path]:
 
     page.heading("Summary (Table 1 layout, physical columns added)")
     cols = [("pairs", "pairs"), ("ok", "ok")] + list(TABLE1_COLUMNS) + list(PHYSICAL_COLUMNS)
+    tracking = (cfg["controller"] + ("+assist" if cfg["assist"] else "")) if cfg["track"] else "—"
     page.table(
-        ["method"] + [h for _, h in cols],
-        [[m] + [_fmt(s.get(k)) for k, _ in cols] for m, s in summary.items()],
+        ["method", "controller"] + [h for _, h in cols],
+        [[m, tracking] + [_fmt(s.get(k)) for k, _ in cols] for m, s in summary.items()],
     )
     page.para(
         "Set metrics on the frozen evaluator's features against the real clips of the "

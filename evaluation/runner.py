@@ -892,15 +892,20 @@ def _fmt(v: Any) -> str:
     return f"{v:.3f}"
 
 
-def format_table(summary: dict[str, dict[str, Any]], markdown: bool = True) -> str:
-    """The summary in the paper's Table 1 layout plus the physical columns."""
+def format_table(summary: dict[str, dict[str, Any]], markdown: bool = True,
+                 controller: str | None = None) -> str:
+    """The summary in the paper's Table 1 layout plus the physical columns (and, given the
+    run's tracking ``controller``, a column naming it, so tables of runs with different
+    controllers can be stacked)."""
     cols = [("pairs", "pairs")] + list(TABLE1_COLUMNS) + list(PHYSICAL_COLUMNS)
-    head = ["method"] + [h for _, h in cols]
-    body = [[m] + [_fmt(s.get(k)) for k, _ in cols] for m, s in summary.items()]
+    lead = ["method"] + (["controller"] if controller is not None else [])
+    head = lead + [h for _, h in cols]
+    tag = [controller] if controller is not None else []
+    body = [[m] + tag + [_fmt(s.get(k)) for k, _ in cols] for m, s in summary.items()]
     if markdown:
         lines = [
             "| " + " | ".join(head) + " |",
-            "|" + "|".join(["---"] + ["---:"] * len(cols)) + "|",
+            "|" + "|".join(["---"] * len(lead) + ["---:"] * len(cols)) + "|",
         ]
         lines += ["| " + " | ".join(r) + " |" for r in body]
         return "\n".join(lines)
@@ -911,6 +916,13 @@ def format_table(summary: dict[str, dict[str, Any]], markdown: bool = True) -> s
         return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(cells))
 
     return "\n".join([fmt(head)] + [fmt(r) for r in body])
+
+
+def _controller_label(cfg: EvalConfig) -> str:
+    """The tracking column of a run: the controller (``+assist`` with root assistance)."""
+    if not cfg.track:
+        return "—"
+    return cfg.controller + ("+assist" if cfg.assist else "")
 
 
 def _write_summary(
@@ -948,7 +960,7 @@ def _write_summary(
         f"# habitsim benchmark\n\nData `{cfg.data}`, split `{cfg.split}`, refine "
         f"`{cfg.refine}`, controller `{cfg.controller}`"
         f"{' with root assistance' if cfg.assist else ', unassisted'}.\n\n"
-        + format_table(summary)
+        + format_table(summary, controller=_controller_label(cfg))
         + "\n"
     )
     atomic_write_text(out / "summary.md", text)
@@ -982,11 +994,13 @@ class BenchmarkResult:
 
     @property
     def table_markdown(self) -> str:
-        return format_table(self.summary, markdown=True)
+        return format_table(self.summary, markdown=True,
+                            controller=_controller_label(self.config))
 
     @property
     def table_text(self) -> str:
-        return format_table(self.summary, markdown=False)
+        return format_table(self.summary, markdown=False,
+                            controller=_controller_label(self.config))
 
 
 def _check_out(cfg: EvalConfig, resume: bool, overwrite: bool) -> None:

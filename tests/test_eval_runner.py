@@ -80,6 +80,9 @@ def test_rows_one_per_pair_and_table_layout(reference_run) -> None:
     text = (res.out / "summary.md").read_text()
     for _, head in TABLE1_COLUMNS + PHYSICAL_COLUMNS:
         assert head in text
+    # the tracking controller is a column of the table (runs with different controllers stack)
+    assert "| method | controller |" in text and "| direct | servo |" in text
+    assert res.table_text.splitlines()[1].split()[:2] == ["direct", "servo"]
     gt = res.summary["ground_truth"]
     assert gt["paired_mpjpe_mm"] == 0.0
     assert gt["habit_accuracy"] >= 0.8 and gt["action_accuracy"] >= 0.5

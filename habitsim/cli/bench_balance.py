@@ -197,6 +197,7 @@ def _bench_balance(ns: argparse.Namespace) -> int:
 
     from ..errors import HabitsimError
     from ..gaits import available_actions
+    from ..sim import MPC_CONTROL_HZ
     from ..species import load_species, training_species
 
     if ns.clips < 1 or not ns.duration > 0 or not ns.mpc_hz > 0:
@@ -208,7 +209,8 @@ def _bench_balance(ns: argparse.Namespace) -> int:
         print(f"bench balance: mujoco {mujoco.__version__}, {os.cpu_count()} CPU(s), "
               f"{ns.clips} clip(s) × {ns.duration:g} s per species and action, "
               f"MPC {ns.mpc_hz:g} Hz, control "
-              f"{'every step' if ns.control_hz is None else f'{ns.control_hz:g} Hz'}, "
+              + (f"every step (mpc {MPC_CONTROL_HZ:g} Hz)" if ns.control_hz is None
+                 else f"{ns.control_hz:g} Hz") + ", "
               f"{'refined' if ns.refine else 'synthetic'} clips, no external force")
         head = "  ".join(f"{c + ' surv mpjpe /leg':>19}" for c in controllers)
         print(f"{'species':<9} {'action':<10} {head}")
