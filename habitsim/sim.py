@@ -1107,8 +1107,8 @@ def track(
         model: the model (default: the species' shipped model). Named servo controllers
             configure servos on it unless it has them already.
         control_hz: control rate [Hz] (default: every simulation step; for ``"mpc"`` by
-            name :data:`MPC_CONTROL_HZ` — its torque layer holds a walk or trot as well
-            at 250 Hz as at 500 Hz and runs 1.5× faster).
+            name without assistance :data:`MPC_CONTROL_HZ` — its torque layer holds a walk
+            or trot as well at 250 Hz as at 500 Hz and runs 1.5× faster).
         settle_s: seconds to hold the first frame (from rest) before the clip starts.
         stop_on_fall: stop at the first fall (else simulate to the end; metrics still
             use the survived part only).
@@ -1128,10 +1128,12 @@ def track(
     _check_settle(settle_s)
     clip = _resolve(motion_or_qpos, species, model)
     sim_model = _sim_model(controller, clip, model)
-    if control_hz is None and controller == "mpc":
+    asst = _make_assist(assist, sim_model)
+    if control_hz is None and controller == "mpc" and asst is None:
+        # (a root assist is an explicit wrench held over a control period: its gains are
+        # set for one simulation step, so assisted runs keep the full rate)
         control_hz = MPC_CONTROL_HZ
     every = _control_every(sim_model, control_hz)
-    asst = _make_assist(assist, sim_model)
     fast = controller == "servo" and asst is None and every == 1
     if use_rollout and not fast:
         raise SimulationError("use_rollout needs controller='servo', no assist, full rate")
