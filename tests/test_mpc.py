@@ -384,3 +384,26 @@ def test_mpc_solves_again_on_contact_change(robot: mujoco.MjModel) -> None:
     periodic = int(np.ceil((len(qpos) - 1) / fps * 30.0))
     assert abs(counts[False] - periodic) <= 1
     assert counts[True] >= counts[False] + 4  # the trot's lift-offs and touch-downs
+
+
+def test_mpc_integral_action_on_forward_lag(robot: mujoco.MjModel) -> None:
+    ctl = MPCController(robot, integral_rate=2.0, integral_max=0.1)
+    ctl.integral[:] = 0.0
+    heading = 0.5
+    h = np.array([np.cos(heading), np.sin(heading)])
+    side = np.array([-h[1], h[0]])
+    com = np.zeros(3)
+    ref = np.zeros(3)
+    ref[:2] = 0.02 * h + 0.05 * side  # ahead of the CoM and to its side
+    ctl._integrate(0.0, False, com, ref, heading)  # first call: starts the clock
+    assert np.all(ctl.integral == 0.0)
+    ctl._integrate(0.1, False, com, ref, heading)
+    # only the forward lag is integrated: k_i · dt · e_fwd along the heading
+    np.testing.assert_allclose(ctl.integral, 2.0 * 0.1 * 0.02 * h, atol=1e-12)
+    for k in range(2, 200):  # bounded by integral_max leg lengths
+        ctl._integrate(0.1 * k, False, com, ref, heading)
+    assert np.linalg.norm(ctl.integral) == pytest.approx(0.1 * ctl.config.leg_length)
+    ctl._integrate(30.0, True, com, ref, heading)  # holding: no integration, clock stops
+    assert ctl._t_int is None
+    with pytest.raises(ControllerError):
+        MPCController(robot, integral_rate=-1.0)
