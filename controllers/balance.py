@@ -744,7 +744,8 @@ class BalanceController(Controller):
         r = p_force - com
         # swing feet
         height = max(float(com[2] - p[:, 2].min()), 1e-3)
-        delta = self.swing.correction(com, com_vel, smp.com, smp.com_vel, height, cfg.gravity)
+        delta = self.swing.correction(com, com_vel, smp.com, smp.com_vel, height, cfg.gravity,
+                                      float(smp.rpy[2]))
         p_des, v_des = self.swing.targets(smp, modes, delta)
         force_sw = self.swing.forces(p, v, p_des, v_des)
         force_sw[stance] = 0.0

@@ -555,7 +555,7 @@ class MPCController(BalanceController):
             p = r + com
             height = max(float(com[2] - np.min(p[:, 2])), 1e-3)
             delta = self.swing.correction(com, com_vel, smp.com, smp.com_vel, height,
-                                          self.config.gravity)
+                                          self.config.gravity, float(smp.rpy[2]))
             self._integrate(t, hold, com, smp.com, float(smp.rpy[2]))
             self._solve(model, data, smp, hold, com, com_vel, rot, omega, p, delta)
             self._next = (t if np.isfinite(self._next) else t) + 1.0 / self.rate_hz

@@ -324,6 +324,23 @@ def test_foothold_follows_the_body(robot: mujoco.MjModel) -> None:
     np.testing.assert_allclose(d, cfg.capture_gain * dv * np.sqrt(0.3 / 9.81), atol=1e-12)
 
 
+def test_foothold_feedback_bounded_per_axis(robot: mujoco.MjModel) -> None:
+    """The stepping feedback is bounded forward and sideways separately (along the
+    heading): a saturated forward error leaves the sideways feedback intact."""
+    sw = BalanceController(robot).swing
+    m, w = sw.capture_max, np.sqrt(0.3 / 9.81)
+    com_ref = np.array([1.0, 2.0, 0.3])
+    for yaw in (0.0, 0.7):
+        h, n = np.array([np.cos(yaw), np.sin(yaw), 0.0]), np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+        v_ref = 2.0 * h  # moving along the heading
+        dv = 10.0 * m / w * h + 0.3 * m / w * n  # forward error saturates, sideways not
+        d = sw.correction(com_ref, v_ref + dv, com_ref, v_ref, 0.3, 9.81, yaw)
+        np.testing.assert_allclose(d, m * h + sw.capture_gain * 0.3 * m * n, atol=1e-9)
+        # without heading or reference speed: per world axis
+        d = sw.correction(com_ref, dv, com_ref, np.zeros(3), 0.3, 9.81)
+        assert abs(d[0]) <= m + 1e-12 and abs(d[1]) <= m + 1e-12
+
+
 def test_joint_damping_is_compensated(robot: mujoco.MjModel) -> None:
     """The joints' own viscous damping is added to the torques (else a fast stance leg
     brakes the trunk and a swing leg lags its path)."""
