@@ -47,7 +47,7 @@ __all__ = ["InverseDynamicsFeedforward"]
 
 _CONTACTS = ("ignore", "stance", "include")
 #: Edges of the linearised friction cone per foot (a pyramid).
-_CONE_EDGES = 4
+_CONE_EDGES = 4  # ±x, ±y
 #: Force regulariser of the stance distribution, relative to the squared residual scale.
 _FORCE_REG = 1e-4
 
@@ -117,8 +117,8 @@ class InverseDynamicsFeedforward:
         self.last_qfrc_inverse = np.zeros(model.nv)
         self.foot_forces = np.zeros((self._feet.size, 3))
         self._jacp = np.zeros((3, model.nv))
-        e = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])[:_CONE_EDGES]
-        self._edges = np.column_stack([self.mu * e, np.ones(_CONE_EDGES)])  # (E, 3), unnormalised
+        e = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+        self._edges = np.column_stack([self.mu * e, np.ones(len(e))])  # (E, 3), unnormalised
 
     @property
     def joint_names(self) -> tuple[str, ...]:

@@ -311,7 +311,7 @@ def write_report(out: str | Path) -> list[Path]:
     Raises:
         ReportError: the folder holds no finished run.
     """
-    from .runner import PHYSICAL_COLUMNS, TABLE1_COLUMNS, _fmt
+    from .runner import PHYSICAL_COLUMNS, TABLE1_COLUMNS, _fmt, tracking_label
 
     out = Path(out)
     cfg, summary_doc, rows = _load_run(out)
@@ -349,7 +349,7 @@ def write_report(out: str | Path) -> list[Path]:
 
     page.heading("Summary (Table 1 layout, physical columns added)")
     cols = [("pairs", "pairs"), ("ok", "ok")] + list(TABLE1_COLUMNS) + list(PHYSICAL_COLUMNS)
-    tracking = (cfg["controller"] + ("+assist" if cfg["assist"] else "")) if cfg["track"] else "—"
+    tracking = tracking_label(cfg["controller"], cfg["assist"], cfg["track"])
     page.table(
         ["method", "controller"] + [h for _, h in cols],
         [[m, tracking] + [_fmt(s.get(k)) for k, _ in cols] for m, s in summary.items()],

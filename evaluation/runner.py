@@ -918,11 +918,15 @@ def format_table(summary: dict[str, dict[str, Any]], markdown: bool = True,
     return "\n".join([fmt(head)] + [fmt(r) for r in body])
 
 
-def _controller_label(cfg: EvalConfig) -> str:
+def tracking_label(controller: str, assist: bool, track: bool) -> str:
     """The tracking column of a run: the controller (``+assist`` with root assistance)."""
-    if not cfg.track:
+    if not track:
         return "—"
-    return cfg.controller + ("+assist" if cfg.assist else "")
+    return controller + ("+assist" if assist else "")
+
+
+def _controller_label(cfg: EvalConfig) -> str:
+    return tracking_label(cfg.controller, cfg.assist, cfg.track)
 
 
 def _write_summary(

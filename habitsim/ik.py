@@ -51,6 +51,7 @@ __all__ = [
     "axial_frames",
     "pose_from_targets",
     "PoseIK",
+    "wrap_angle",
 ]
 
 #: Leg names, the order of :data:`habitsim.species.FEET`.
@@ -184,7 +185,8 @@ class LegIKResult:
         )
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
+def wrap_angle(a: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [−π, π)."""
     return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
@@ -327,9 +329,9 @@ def leg_ik(
     return LegIKResult(
         abduction=abd,
         girdle_flex=gflex.copy(),
-        upper_flex=_wrap(b1),
-        lower_flex=_wrap(b2 - b1),
-        foot_flex=_wrap(b3 - b2),
+        upper_flex=wrap_angle(b1),
+        lower_flex=wrap_angle(b2 - b1),
+        foot_flex=wrap_angle(b3 - b2),
         toe=toe,
         reach_error=np.linalg.norm(toe - tgt, axis=-1),
         proximal=shoulder,
@@ -349,7 +351,7 @@ def _comply_foot(p: np.ndarray, b3: np.ndarray, foot: float, band: tuple[float, 
     lo, hi = band
     r = np.linalg.norm(p, axis=-1)
     theta = np.arctan2(-p[:, 0], -p[:, 1])
-    rel = _wrap(b3 - theta)
+    rel = wrap_angle(b3 - theta)
     side = np.where(rel >= 0.0, 1.0, -1.0)
     den = np.maximum(2.0 * foot * r, 1e-12)
     dist = np.sqrt(np.maximum(r**2 + foot**2 - 2.0 * foot * r * np.cos(rel), 0.0))
@@ -406,7 +408,7 @@ def foot_inclination(
     w = _mtv(frame, np.broadcast_to(np.array([0.0, 0.0, -1.0]), (t, 3)))
     beta_down = np.arctan2(-w[:, 0], -w[:, 2])
     b3 = np.asarray(upper_flex) + np.asarray(lower_flex) + np.asarray(foot_flex)
-    return _wrap(beta_down - b3)
+    return wrap_angle(beta_down - b3)
 
 
 @dataclass(frozen=True)

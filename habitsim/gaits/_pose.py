@@ -21,6 +21,7 @@ from ..ik import (
     foot_inclination,
     leg_geometry,
     leg_ik,
+    wrap_angle,
 )
 from ..rotations import quat_mul, rot_x, rot_y, rot_z
 from ..skeleton import JOINT_NAMES, fk, get_skeleton, standing_leg_angles
@@ -403,19 +404,19 @@ def _range_excess(sp: Species, limb: str, res: LegIKResult) -> np.ndarray:
     return out
 
 
-def respect_limits(sp: Species, trunk: Trunk, plan: LegPlan, window: int) -> Solved:
+def respect_limits(sp: Species, trunk: Trunk, plan: LegPlan, base: Solved, window: int) -> Solved:
     """Turn each foot segment (smoothly in time) so the leg's flexion angles stay in range.
 
     The foot inclination is the leg's one free angle once the toe target is fixed: per
     frame the offset in :data:`LIMIT_OFFSETS` with the least range excess (ties: the
     least offset; a reach error forbids an offset) is taken, smoothed over ``window``
     frames, added to ``plan.foot_extra`` (modified in place) and the pose re-solved.
+    ``base`` is the pose already solved for ``trunk`` and ``plan``.
     """
     rot = trunk.rotations()
     frames = axial_frames(sp, trunk.root, rot)
     t = trunk.root.shape[0]
     k_n = LIMIT_OFFSETS.size
-    base = solve(sp, trunk, plan)
     if all(float(_range_excess(sp, res_limb, res).max()) < 1e-12
            for res_limb, res in zip(("fore", "fore", "hind", "hind"), base.legs, strict=True)):
         return base
@@ -435,16 +436,12 @@ def respect_limits(sp: Species, trunk: Trunk, plan: LegPlan, window: int) -> Sol
                 + 1e-4 * np.tile(LIMIT_OFFSETS, t) ** 2).reshape(t, k_n)
         best = LIMIT_OFFSETS[np.argmin(cost, axis=1)]
         # the offset demanded on top of what the compliance already turned
-        turned = _wrap_angle(finc0 - _nominal_inclination(sp, k, plan, frames))
+        turned = wrap_angle(finc0 - _nominal_inclination(sp, k, plan, frames))
         delta = best + turned
         if window > 1:
             delta = uniform_filter1d(delta, _odd(window), mode="nearest")
         plan.foot_extra[:, k] += delta
     return solve(sp, trunk, plan)
-
-
-def _wrap_angle(a: np.ndarray) -> np.ndarray:
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def min_jerk(s: np.ndarray) -> np.ndarray:

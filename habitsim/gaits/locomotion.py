@@ -27,7 +27,17 @@ import numpy as np
 
 from ..errors import GaitError
 from ..species import FEET, Species
-from ._pose import GRAVITY, LegPlan, Solved, Trunk, apply_sway, fix_reach, min_jerk, respect_limits, standing_info
+from ._pose import (
+    GRAVITY,
+    LegPlan,
+    Solved,
+    Trunk,
+    apply_sway,
+    fix_reach,
+    min_jerk,
+    respect_limits,
+    standing_info,
+)
 from .actions import ASYMMETRIC_GAITS
 
 _IDX = {f: i for i, f in enumerate(FEET)}
@@ -241,5 +251,5 @@ def build_locomotion(
     if sway_gain > 0 and g.duty_factor >= 0.5:
         tr = apply_sway(sp, tr, plan, sway_gain, phi)
     tr, sol = fix_reach(sp, tr, plan, window)
-    sol = respect_limits(sp, tr, plan, max(3, int(round(0.1 * fps / f))))
+    sol = respect_limits(sp, tr, plan, sol, max(3, int(round(0.1 * fps / f))))
     return tr, sol, plan
