@@ -335,7 +335,8 @@ def test_plan_windows_cover_and_share_one_length():
 
 def test_window_seams_are_continuous():
     clean = _clip("dog", "trot", 150, seed=8)
-    res = refine(inject_artefacts(clean, ["slide", "jitter"], seed=3), RefineOptions(metrics=False))
+    opts = RefineOptions(metrics=False, window=64, overlap=16)  # three windows, two seams
+    res = refine(inject_artefacts(clean, ["slide", "jitter"], seed=3), opts)
     assert len(res.report["windows"]) == 3
     q = res.qpos[:, [0, 1, 2] + list(range(7, res.qpos.shape[1]))]
     acc = np.abs(np.diff(q, 2, axis=0)).max(axis=1)  # (T-2,) frame k+1
@@ -387,7 +388,7 @@ def test_bad_inputs_raise_typed_errors(dog_trot_100):
         refine(alien)
     for kwargs in (
         {"window": 4},
-        {"overlap": 40},
+        {"overlap": 60},  # more than half the 100-frame window
         {"w_smooth": -1.0},
         {"w_track": 0.0},
         {"max_iter": 0},

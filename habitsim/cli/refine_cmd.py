@@ -39,6 +39,9 @@ from ..errors import MotionFileError
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the top-level ``refine`` command."""
+    from ..refine import RefineOptions
+
+    _DEFAULTS = RefineOptions()
     p = sub.add_parser(
         "refine",
         help="refine a motion (CasADi/IPOPT): no foot sliding, penetration, hovering, "
@@ -72,16 +75,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--window",
         type=int,
-        default=64,
+        default=_DEFAULTS.window,
         metavar="W",
-        help="window length for long clips [frames] (default 64)",
+        help=f"window length for long clips [frames] (default {_DEFAULTS.window})",
     )
     p.add_argument(
         "--overlap",
         type=int,
-        default=16,
+        default=_DEFAULTS.overlap,
         metavar="V",
-        help="overlap of consecutive windows [frames] (default 16)",
+        help=f"overlap of consecutive windows [frames] (default {_DEFAULTS.overlap})",
     )
     p.add_argument(
         "--max-iter",

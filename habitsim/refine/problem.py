@@ -154,7 +154,7 @@ class SolverSettings:
 
     max_iter: int = 200
     tol: float = 1e-6
-    constr_viol_tol: float = 1e-6
+    constr_viol_tol: float = 1e-5
     acceptable: bool = True
     mu_init: float = 1e-3
     hessian: str = "gauss-newton"

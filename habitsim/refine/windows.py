@@ -49,7 +49,7 @@ class Window:
         return self.stop - self.start
 
 
-def plan_windows(n_frames: int, window: int = 64, overlap: int = 16) -> list[Window]:
+def plan_windows(n_frames: int, window: int = 100, overlap: int = 20) -> list[Window]:
     """Windows covering ``n_frames`` frames (see the module docstring).
 
     Args:
