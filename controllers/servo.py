@@ -97,6 +97,26 @@ class ServoMap:
             return np.zeros(len(self.names), dtype=bool)
         return self.vel_ctrl_ids >= 0
 
+    def position_targets(self, qpos: np.ndarray, qvel: np.ndarray | None = None) -> np.ndarray:
+        """Position-target controls ``gear · q_target`` (…, n) of reference positions
+        ``qpos`` (…, nq), clipped to the control range.
+
+        With the reference velocities ``qvel`` (…, nv), servos without a velocity target
+        get a velocity lead, ``q_target = q_ref + (kv/kp)·q̇_ref``: a position actuator's
+        D term acts on −q̇ alone, and ``kp·(q_ref + kv/kp·q̇_ref − q) − kv·q̇ =
+        kp·(q_ref − q) + kv·(q̇_ref − q̇)`` turns it into damping of the velocity ERROR,
+        inside the actuator and under its own force limit. Without the lead a servo
+        brakes every fast reference motion by kv·q̇_ref (a swinging fore leg lags by
+        10–15° and its foot drags on the ground).
+        """
+        q = np.asarray(qpos)[..., self.qpos_adr]
+        if qvel is not None:
+            kp = self.kp
+            rate = np.where(self.has_vel_target | (kp <= 0), 0.0,
+                            self.kv / np.where(kp > 0, kp, 1.0))
+            q = q + rate * np.asarray(qvel)[..., self.dof_adr]
+        return np.clip(self.gear * q, self.ctrl_lo, self.ctrl_hi)
+
     @property
     def torque_limit(self) -> np.ndarray:
         """(n,) largest |torque| [N·m] each servo can give."""
@@ -396,10 +416,12 @@ def servo_map(model: mujoco.MjModel, joints: Sequence[str] | None = None) -> Ser
 
 
 class ServoController(Controller):
-    """Drive in-engine servos: ``ctrl = gear · q_ref`` (clipped to the control range).
+    """Drive in-engine servos: ``ctrl = gear · (q_ref + kv/kp · q̇_ref)`` (clipped to the
+    control range; :meth:`ServoMap.position_targets`), so the D term of a position
+    actuator damps the velocity error instead of braking the reference's own motion.
 
-    Servos that take a velocity target (MuJoCo ≥ 4 pid actuators) also get
-    ``gear · q̇_ref``, so their D term acts on the velocity error.
+    Servos that take a velocity target (MuJoCo ≥ 4 pid actuators) get ``gear · q_ref``
+    and ``gear · q̇_ref`` instead, so their D term acts on the velocity error directly.
 
     PD runs inside MuJoCo (see :func:`configure_servos`). A position actuator cannot add
     a torque, so feed-forward torques (``feedforward``, e.g.
@@ -422,14 +444,17 @@ class ServoController(Controller):
         joints: joint names (default: every actuated hinge/slide joint).
         feedforward: optional callable ``(model, data, ref) -> (n,)`` or a list of them.
         assist: optional :class:`~habitsim.controllers.assist.RootAssist` (default none).
+        velocity_lead: add the velocity lead (default); False gives the plain
+            ``ctrl = gear · q_ref`` whose D term acts on −q̇ only.
     """
 
     name = "servo"
 
     def __init__(self, model: mujoco.MjModel, joints: Sequence[str] | None = None,
-                 feedforward=None, *, assist=None) -> None:
+                 feedforward=None, *, assist=None, velocity_lead: bool = True) -> None:
         super().__init__(assist=assist)
         self.map = servo_map(model, joints)
+        self.velocity_lead = bool(velocity_lead)
         self.feedforward = feedforward
         n = len(self.map.names)
         self.last_feedforward = np.zeros(n)
@@ -459,7 +484,7 @@ class ServoController(Controller):
                       extra: np.ndarray | None) -> np.ndarray:
         m = self.map
         u = np.array(data.ctrl, copy=True)
-        target = np.clip(m.gear * ref.qpos[m.qpos_adr], m.ctrl_lo, m.ctrl_hi)
+        target = m.position_targets(ref.qpos, ref.qvel if self.velocity_lead else None)
         u[m.ctrl_index] = target
         vel_target = None
         if np.any(m.has_vel_target):

@@ -313,12 +313,15 @@ def servo_model(model: mujoco.MjModel) -> mujoco.MjModel:
     return configure_servos(model)
 
 
-def servo_targets(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
-    """(N, nu) controls of in-engine servos for reference positions (N, nq).
+def servo_targets(model: mujoco.MjModel, qpos: np.ndarray,
+                  qvel: np.ndarray | None = None) -> np.ndarray:
+    """(N, nu) controls of in-engine servos for reference positions (N, nq) and, for the
+    velocity lead, velocities (N, nv).
 
-    The law of :class:`habitsim.controllers.servo.ServoController` (``ctrl = gear ·
-    q_ref`` clipped to the control range), vectorised, so the ``mujoco.rollout`` path and
-    the Python loop apply identical controls. Actuators that are not servos keep 0.
+    The law of :class:`habitsim.controllers.servo.ServoController`
+    (:meth:`~habitsim.controllers.servo.ServoMap.position_targets`), vectorised, so the
+    ``mujoco.rollout`` path and the Python loop apply identical controls. Actuators that
+    are not servos keep 0.
 
     Raises:
         SimulationError: the model has no joint position servos.
@@ -332,7 +335,7 @@ def servo_targets(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
         raise SimulationError(f"{e}") from e
     q = np.atleast_2d(qpos)
     u = np.zeros((q.shape[0], model.nu))
-    u[:, sm.actuator_ids] = np.clip(sm.gear * q[:, sm.qpos_adr], sm.ctrl_lo, sm.ctrl_hi)
+    u[:, sm.actuator_ids] = sm.position_targets(q, None if qvel is None else np.atleast_2d(qvel))
     return u
 
 
@@ -946,9 +949,9 @@ def _run_rollout(
     ctrl = np.empty((len(clips), nstep, model.nu))
     x0 = np.empty((len(clips), mujoco.mj_stateSize(model, _FULL)))
     for b, (c, r) in enumerate(zip(clips, refs, strict=True)):
-        u = servo_targets(model, r.qpos)
+        u = servo_targets(model, r.qpos, r.qvel)
         n = len(u)
-        ctrl[b, :n_settle] = u[0]
+        ctrl[b, :n_settle] = servo_targets(model, r.qpos[:1])[0]  # held at rest: no lead
         ctrl[b, n_settle : n_settle + n] = u
         ctrl[b, n_settle + n :] = u[-1]
         d = _init_data(model, c.qpos[0], r.qvel[0] if n_settle == 0 else np.zeros(model.nv))
