@@ -385,7 +385,9 @@ class MPCController(BalanceController):
         feedback_scale: share of the balance PD gains used between MPC solves to track
             the MPC's own prediction.
         integral_rate: gain k_i [1/s] of the integral action on the forward lag of the
-            CoM (see :meth:`_integrate`; 0 turns it off).
+            CoM (see :meth:`_integrate`; 0 turns it off). With 1/s instead of 3/s the
+            camel's flying pace trailed its reference by up to 0.17 L for its first two
+            seconds (sim MPJPE 0.104 L against 0.089 L).
         integral_max: bound of the integral's shift of the reference [leg lengths].
         resolve_on_contact: solve again as soon as the stance set changes (touch-down,
             lift-off, early touch-down, lost contact) instead of waiting for the next
@@ -410,7 +412,7 @@ class MPCController(BalanceController):
                  mpc_solver: str = "osqp", weights: MPCWeights | None = None,
                  feedback_scale: float = 1.0, mpc_tolerance: float = 1e-3,
                  mpc_options: dict | None = None, resolve_on_contact: bool = True,
-                 integral_rate: float = 1.0, integral_max: float = 0.3,
+                 integral_rate: float = 3.0, integral_max: float = 0.3,
                  **kwargs) -> None:
         super().__init__(model, feet, **kwargs)
         if not (np.isfinite(rate_hz) and rate_hz > 0):

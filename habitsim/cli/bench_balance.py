@@ -14,7 +14,9 @@ of each controller; then the stance-QP median solve time, the MPC median solve t
 tracking speed relative to real time with MPC, the share of (species × action) that
 survive the whole clip under ``mpc``, and the issue's targets next to them. ``--refine``
 first runs :func:`habitsim.refine.refine` on every clip (the issue's targets are stated
-for refined motions; it adds ~30 s per clip). ``--json`` prints one JSON object per run
+for refined motions): stage A, or with ``--refine B`` stage B, whose centroidal dynamics
+give the clip a momentum the feet can supply (a fast pace's flight phases become
+ballistic); it adds 1–5 s per clip. ``--json`` prints one JSON object per run
 and a summary object.
 """
 
@@ -67,8 +69,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--control-hz", type=float, metavar="HZ",
                    help="control rate of the runner (default: every simulation step; mpc: "
                    "habitsim.sim.MPC_CONTROL_HZ)")
-    p.add_argument("--refine", action="store_true",
-                   help="refine every clip first (habitsim.refine, slow)")
+    p.add_argument("--refine", nargs="?", const="A", choices=("A", "B"), metavar="STAGE",
+                   help="refine every clip first (habitsim.refine): stage A (kinematic, the "
+                   "default of --refine) or B (centroidal dynamics, --refine B)")
     p.add_argument("--json", action="store_true", help="one JSON object per run, then a summary")
     p.set_defaults(func=_bench_balance)
 
@@ -139,7 +142,8 @@ def _clips(species: str, action: str, ns: argparse.Namespace) -> list[Any]:
         if ns.refine:
             from ..refine import RefineOptions, refine
 
-            r = refine(m, RefineOptions(metrics=False, fallback=True))
+            r = refine(m, RefineOptions(dynamics=ns.refine == "B", metrics=False,
+                                        fallback=True))
             m = r.motion
         out.append(m)
     return out
@@ -211,7 +215,8 @@ def _bench_balance(ns: argparse.Namespace) -> int:
               f"MPC {ns.mpc_hz:g} Hz, control "
               + (f"every step (mpc {MPC_CONTROL_HZ:g} Hz)" if ns.control_hz is None
                  else f"{ns.control_hz:g} Hz") + ", "
-              f"{'refined' if ns.refine else 'synthetic'} clips, no external force")
+              + (f"stage-{ns.refine} refined" if ns.refine else "synthetic")
+              + " clips, no external force")
         head = "  ".join(f"{c + ' surv mpjpe /leg':>19}" for c in controllers)
         print(f"{'species':<9} {'action':<10} {head}")
     rows: list[dict[str, Any]] = []
