@@ -1106,7 +1106,9 @@ def run_benchmark(
     for r in load_rows(out):
         if r.get("status") in ("ok", "unavailable"):
             done[r["key"]] = r
-    pending = [t for t in tasks if t.key not in done]
+    # grouped by target species (stable): a worker keeps only a few built refinement
+    # problems (habitsim.refine.solve.MAX_CACHED_PROBLEMS), one per target and stage
+    pending = sorted((t for t in tasks if t.key not in done), key=lambda t: t.target)
     if log:
         log(
             f"eval: {len(tasks)} pairs ({len(cfg.methods)} methods), {len(tasks) - len(pending)} "

@@ -333,6 +333,18 @@ def test_plan_windows_cover_and_share_one_length():
         plan_windows(100, 64, 40)
 
 
+def test_problem_cache_keeps_the_most_recently_used(monkeypatch):
+    monkeypatch.setattr(S, "MAX_CACHED_PROBLEMS", 2)
+    monkeypatch.setattr(S, "_PROBLEMS", type(S._PROBLEMS)())
+    a = S.get_problem("dog", 4)
+    b = S.get_problem("dog", 5)
+    assert S.get_problem("dog", 4) is a  # a hit refreshes it
+    S.get_problem("dog", 6)  # evicts the least recently used: the 5-frame window
+    assert S.get_problem("dog", 4) is a and len(S._PROBLEMS) == 2
+    built = S._BUILDS
+    assert S.get_problem("dog", 5) is not b and S._BUILDS == built + 1
+
+
 def test_window_seams_are_continuous():
     clean = _clip("dog", "trot", 150, seed=8)
     opts = RefineOptions(metrics=False, window=64, overlap=16)  # three windows, two seams

@@ -265,6 +265,7 @@ def _bench_refine(ns: argparse.Namespace) -> int:
     for st in ns.stages:
         ok = tried = 0
         fails = []
+        drawn = []
         for _ in range(ns.success_clips):
             kinds = tuple(a for a in _ARTEFACTS + ("float",) if rng.random() < 0.5) or ("slide",)
             sp = act = "?"
@@ -278,6 +279,9 @@ def _bench_refine(ns: argparse.Namespace) -> int:
             except HabitsimError as e:  # an action that cannot be generated at this length
                 fails.append(f"{sp}/{act}: {e}")
                 continue
+            drawn.append((sp, act, kinds, m))
+        # solved grouped by species: the process keeps only a few built problems
+        for sp, act, kinds, m in sorted(drawn, key=lambda d: d[0]):
             r = _timed(m, st)
             tried += 1
             ok += bool(r["ok"])

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import functools
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -213,7 +214,13 @@ class RefineResult:
 
 
 # --------------------------------------------------------------------------- caches
-_PROBLEMS: dict[tuple, RefinementProblem] = {}
+#: Most built problems kept per process (least recently used dropped first). A built
+#: 100-frame window holds 0.3 (stage A) to 0.8 GB (stage B, exact Hessian) of CasADi
+#: graphs; unbounded, a run over 17 species with both stages grew past 24 GB.
+MAX_CACHED_PROBLEMS = 6
+
+_PROBLEMS: OrderedDict[tuple, RefinementProblem] = OrderedDict()
+_BUILDS = 0  # problems built so far in this process
 
 
 @functools.lru_cache(maxsize=32)
@@ -234,9 +241,11 @@ def get_problem(
     """The built problem of a species (or model) and window length, cached per process.
 
     The first call per (species, W, stage, settings) builds it (seconds); later calls
-    return the same object. Default settings: those :func:`refine` uses first
-    (``RefineOptions().settings``).
+    return the same object while it is among the :data:`MAX_CACHED_PROBLEMS` most
+    recently used (so process clips grouped by species). Default settings: those
+    :func:`refine` uses first (``RefineOptions().settings``).
     """
+    global _BUILDS
     settings = settings or RefineOptions().settings
     key = (
         species if model is None else ("model", id(model)),
@@ -250,6 +259,11 @@ def get_problem(
         pr = build_refinement_problem(m, int(n_frames), bool(dynamics), settings)
         pr._model_ref = m  # type: ignore[attr-defined]  # keep id(model) alive
         _PROBLEMS[key] = pr
+        _BUILDS += 1
+        while len(_PROBLEMS) > MAX_CACHED_PROBLEMS:
+            _PROBLEMS.popitem(last=False)
+    else:
+        _PROBLEMS.move_to_end(key)
     return pr
 
 
@@ -517,9 +531,9 @@ def _solve_windows(
             excess = np.maximum(info.lower - prep.href[sl], prep.href[sl] - info.upper).max()
             settings = [exact] if excess > EXACT_FIRST_EXCESS_RAD else [opts.settings, exact]
         for k, st_k in enumerate(settings):
-            cached = len(_PROBLEMS)
+            built = _BUILDS
             pr = get_problem(motion.species, win.length, opts.dynamics, st_k, model=model_arg)
-            if len(_PROBLEMS) > cached:
+            if _BUILDS > built:
                 build_s += pr.build_time_s
             p = pr.parameters(prep.targets[sl], prep.qref[sl], prep.href[sl], prep.glob)
             lbx, ubx, lbg, ubg = pr.bounds(prep.contacts[sl], fixed, x_start, prep.swing_floor[sl])
