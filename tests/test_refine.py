@@ -333,6 +333,16 @@ def test_plan_windows_cover_and_share_one_length():
         plan_windows(100, 64, 40)
 
 
+def test_clip_lengths_map_to_two_window_lengths():
+    opts = RefineOptions()
+    lengths = {t: {w.length for w in opts.plan(t)} for t in (40, 64, 72, 97, 100, 171, 1000)}
+    assert lengths == {40: {40}, 64: {64}, 72: {64}, 97: {64}, 100: {100}, 171: {100},
+                       1000: {100}}
+    assert {w.length for w in RefineOptions(short_window=None).plan(72)} == {72}
+    with pytest.raises(RefineInputError):
+        RefineOptions(short_window=4)
+
+
 def test_problem_cache_keeps_the_most_recently_used(monkeypatch):
     monkeypatch.setattr(S, "MAX_CACHED_PROBLEMS", 2)
     monkeypatch.setattr(S, "_PROBLEMS", type(S._PROBLEMS)())

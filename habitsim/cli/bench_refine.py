@@ -180,7 +180,7 @@ def _fmt(v: float, width: int = 7) -> str:
 def _bench_refine(ns: argparse.Namespace) -> int:
     from ..errors import HabitsimError
     from ..gaits import available_actions
-    from ..refine import RefineOptions, plan_windows
+    from ..refine import RefineOptions
     from ..refine.solve import get_problem
     from ..species import species_names
 
@@ -204,7 +204,7 @@ def _bench_refine(ns: argparse.Namespace) -> int:
         for st in ns.stages:
             t0 = time.perf_counter()
             opts = RefineOptions(dynamics=st == "B")
-            get_problem(sp, plan_windows(100, opts.window, opts.overlap)[0].length, opts.dynamics,
+            get_problem(sp, opts.plan(100)[0].length, opts.dynamics,
                         opts.settings)
             build = time.perf_counter() - t0
             runs = [_timed(c, st) for c in clips]

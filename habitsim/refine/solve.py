@@ -103,6 +103,11 @@ class RefineOptions:
         window: window length W [frames]; overlap: frames shared by consecutive windows.
             100 / 20 (3.3 s at 30 fps): every window starts IPOPT afresh, and with 64 / 16
             a 100-frame clip took two windows and 1.4× the time of one.
+        short_window, short_overlap: a clip longer than ``short_window`` but shorter than
+            ``window`` is cut into windows of ``short_window`` frames (None: one window of
+            its own length). Every window length is a problem of its own to build (3–9 s,
+            0.3–0.8 GB), so clips of many lengths would each build one; this way a
+            process needs two lengths (see :meth:`plan`).
         filter_cutoff: cutoff of the jitter pre-filter in units of the species' natural
             frequency √(g/L) [rad/s] (10 → 6.4 Hz for a dog, 3.5 Hz for an elephant);
             None switches the filter off.
@@ -121,6 +126,8 @@ class RefineOptions:
     dynamics: bool = False
     window: int = 100
     overlap: int = 20
+    short_window: int | None = 64
+    short_overlap: int = 16
     filter_cutoff: float | None = 10.0
     w_track: float = 1.0
     w_smooth: float = 1e-5
@@ -157,6 +164,16 @@ class RefineOptions:
             if not (np.isfinite(v) and v > 0):
                 raise RefineInputError(f"{name} must be > 0, got {v!r}")
         plan_windows(max(self.window + 1, 1), self.window, self.overlap)  # validates sizes
+        if self.short_window is not None:
+            plan_windows(self.short_window + 1, self.short_window, self.short_overlap)
+
+    def plan(self, n_frames: int) -> list[Window]:
+        """The windows of an ``n_frames`` clip: of ``window`` frames if it is at least that
+        long, else of ``short_window`` frames if it is longer than that, else one."""
+        sw = self.short_window
+        if sw is not None and sw < n_frames < self.window:
+            return plan_windows(n_frames, sw, self.short_overlap)
+        return plan_windows(n_frames, self.window, self.overlap)
 
     def cutoff_hz(self, leg_length: float, gravity: float = 9.81) -> float | None:
         """The pre-filter's cutoff frequency [Hz] for a leg length [m] (None: off)."""
@@ -657,7 +674,7 @@ def refine(
     motion = _check_motion(motion)
     m = _species_model(motion.species) if model is None else model
     t = motion.num_frames
-    plan = plan_windows(t, opts.window, opts.overlap)
+    plan = opts.plan(t)
     pr0 = get_problem(motion.species, plan[0].length, opts.dynamics, opts.settings, model=model)
     info = pr0.info
     prep = _prepare(motion, contacts, opts, m, pr0)
