@@ -22,6 +22,7 @@ Example::
 from __future__ import annotations
 
 import copy
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -111,11 +112,15 @@ class ServoMap:
         """
         q = np.asarray(qpos)[..., self.qpos_adr]
         if qvel is not None:
-            kp = self.kp
-            rate = np.where(self.has_vel_target | (kp <= 0), 0.0,
-                            self.kv / np.where(kp > 0, kp, 1.0))
-            q = q + rate * np.asarray(qvel)[..., self.dof_adr]
+            q = q + self.lead_rate * np.asarray(qvel)[..., self.dof_adr]
         return np.clip(self.gear * q, self.ctrl_lo, self.ctrl_hi)
+
+    @functools.cached_property
+    def lead_rate(self) -> np.ndarray:
+        """(n,) kv/kp [s] of the velocity lead (0 where a servo takes a velocity target
+        or has no stiffness)."""
+        kp = self.kp
+        return np.where(self.has_vel_target | (kp <= 0), 0.0, self.kv / np.where(kp > 0, kp, 1.0))
 
     @property
     def torque_limit(self) -> np.ndarray:

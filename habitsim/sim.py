@@ -951,7 +951,8 @@ def _run_rollout(
     for b, (c, r) in enumerate(zip(clips, refs, strict=True)):
         u = servo_targets(model, r.qpos, r.qvel)
         n = len(u)
-        ctrl[b, :n_settle] = servo_targets(model, r.qpos[:1])[0]  # held at rest: no lead
+        if n_settle:
+            ctrl[b, :n_settle] = servo_targets(model, r.qpos[:1])[0]  # held at rest: no lead
         ctrl[b, n_settle : n_settle + n] = u
         ctrl[b, n_settle + n :] = u[-1]
         d = _init_data(model, c.qpos[0], r.qvel[0] if n_settle == 0 else np.zeros(model.nv))

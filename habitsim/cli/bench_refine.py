@@ -204,8 +204,7 @@ def _bench_refine(ns: argparse.Namespace) -> int:
         for st in ns.stages:
             t0 = time.perf_counter()
             opts = RefineOptions(dynamics=st == "B")
-            get_problem(sp, opts.plan(100)[0].length, opts.dynamics,
-                        opts.settings)
+            get_problem(sp, opts.plan(100)[0].length, opts.dynamics, opts.settings)
             build = time.perf_counter() - t0
             runs = [_timed(c, st) for c in clips]
             good = [r for r in runs if r["ok"]]
