@@ -44,6 +44,7 @@ __all__ = [
     "HYSTERESIS",
     "detect_contacts",
     "contacts_from_feet",
+    "contacts_by_duty",
     "contact_segments",
     "touchdown_frames",
 ]
@@ -96,6 +97,16 @@ def _fill_and_open(c: np.ndarray) -> np.ndarray:
     return c
 
 
+def _checked_feet(feet: np.ndarray, fps: float, leg_length: float) -> np.ndarray:
+    """``feet`` as float64 (T, F, 3), after checking it and the scalars."""
+    feet = np.asarray(feet, dtype=np.float64)
+    if feet.ndim != 3 or feet.shape[-1] != 3:
+        raise InvalidMotionError(f"feet must have shape (T, F, 3), got {feet.shape}")
+    if not (leg_length > 0 and fps > 0):
+        raise InvalidMotionError("leg_length and fps must be positive")
+    return feet
+
+
 def contacts_from_feet(feet: np.ndarray, fps: float, leg_length: float) -> np.ndarray:
     """Contacts from toe trajectories (the core of :func:`detect_contacts`).
 
@@ -107,11 +118,7 @@ def contacts_from_feet(feet: np.ndarray, fps: float, leg_length: float) -> np.nd
     Returns:
         (T, F) bool contact flags.
     """
-    feet = np.asarray(feet, dtype=np.float64)
-    if feet.ndim != 3 or feet.shape[-1] != 3:
-        raise InvalidMotionError(f"feet must have shape (T, F, 3), got {feet.shape}")
-    if not (leg_length > 0 and fps > 0):
-        raise InvalidMotionError("leg_length and fps must be positive")
+    feet = _checked_feet(feet, fps, leg_length)
     h_thr = CONTACT_HEIGHT_PER_LEG * leg_length
     v_thr = CONTACT_SPEED_PER_LEG * leg_length
     height = feet[..., 2]
@@ -135,6 +142,43 @@ def detect_contacts(motion: Motion) -> np.ndarray:
         (T, 4) bool, feet LF, RF, LH, RH.
     """
     return contacts_from_feet(motion.foot_positions(), motion.fps, motion.species_info.leg_length)
+
+
+def contacts_by_duty(
+    feet: np.ndarray, fps: float, leg_length: float, duty: float | np.ndarray
+) -> np.ndarray:
+    """Stance labels of a gait whose feet never quite rest (a generated motion that skates).
+
+    Each foot is taken to be in stance for the share ``duty`` of the clip (its gait's duty
+    factor): the frames where it is slowest and lowest, ranked by
+    ``speed / √(g·leg) + height / leg``, then cleaned by a 5-frame majority vote and the
+    single-frame rules of :func:`detect_contacts`. A stance foot moves backward relative
+    to the body and sits at the bottom of its path, so the ranking finds the stance
+    phases of a cyclic gait even where no frame meets the resting thresholds; the labels
+    then tell a refinement (:mod:`habitsim.refine`) where to plant the feet.
+
+    Args:
+        feet: (T, F, 3) toe positions [m], z up.
+        fps: frame rate [Hz].
+        leg_length: the normalising hind-leg length [m].
+        duty: duty factor in (0, 1), one for all feet or one per foot (F,).
+
+    Returns:
+        (T, F) bool stance flags.
+    """
+    feet = _checked_feet(feet, fps, leg_length)
+    d = np.broadcast_to(np.asarray(duty, dtype=np.float64), (feet.shape[1],))
+    if np.any(~np.isfinite(d)) or np.any(d <= 0.0) or np.any(d >= 1.0):
+        raise InvalidMotionError(f"duty factors must lie in (0, 1), got {d.tolist()}")
+    score = _toe_speed(feet, fps) / np.sqrt(9.81 * leg_length) + feet[..., 2] / leg_length
+    thr = np.array([np.quantile(score[:, f], d[f]) for f in range(feet.shape[1])])
+    c = score <= thr[None, :]
+    t = c.shape[0]
+    if t >= 5:
+        pad = np.concatenate([c[:1], c[:1], c, c[-1:], c[-1:]], axis=0).astype(np.int8)
+        votes = sum(pad[k : k + t] for k in range(5))
+        c = votes >= 3
+    return _fill_and_open(c)
 
 
 def contact_segments(contacts: np.ndarray) -> list[list[tuple[int, int]]]:

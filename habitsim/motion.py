@@ -32,11 +32,13 @@ from .rotations import quat_fix_continuity
 from .skeleton import JOINT_NAMES, Skeleton, get_skeleton
 from .species import Species, load_species
 
-__all__ = ["Motion", "load_motion", "FORMAT_VERSION", "FEATURE_DIM"]
+__all__ = ["Motion", "load_motion", "mirror_permutation", "FORMAT_VERSION", "FEATURE_DIM"]
 
 FORMAT_VERSION = 1
 #: Per-frame feature size of the paper's representation: J·4 quaternions + J·3 velocities.
 FEATURE_DIM = len(JOINT_NAMES) * 7
+#: Actions that a sagittal reflection turns into one another (:meth:`Motion.mirrored`).
+MIRROR_ACTIONS = {"turn_left": "turn_right", "turn_right": "turn_left"}
 
 
 @dataclass
@@ -138,6 +140,24 @@ class Motion:
             None if self.contacts is None else self.contacts[sl].copy(),
             dict(self.metadata),
         )
+
+    def mirrored(self) -> Motion:
+        """The motion reflected in the body's sagittal plane (world y → −y).
+
+        Left and right limbs swap (``lf_`` ↔ ``rf_``, ``lh_`` ↔ ``rh_``, contacts LF ↔ RF,
+        LH ↔ RH) and every local rotation R becomes M·R·M with M = diag(1, −1, 1), i.e. the
+        quaternion (w, x, y, z) becomes (w, −x, y, −z). The shared skeleton is left/right
+        symmetric, so the joint positions of the result are the reflected positions of the
+        original; a left turn becomes a right turn (``metadata["action"]`` is swapped).
+        """
+        perm = mirror_permutation()
+        q = self.rotations[:, perm] * np.array([1.0, -1.0, 1.0, -1.0])
+        root = self.root_positions * np.array([1.0, -1.0, 1.0])
+        contacts = None if self.contacts is None else self.contacts[:, [1, 0, 3, 2]].copy()
+        meta = dict(self.metadata)
+        if meta.get("action") in MIRROR_ACTIONS:
+            meta["action"] = MIRROR_ACTIONS[meta["action"]]
+        return Motion(self.species, self.fps, root, q, contacts, meta)
 
     # ------------------------------------------------------------------ features
     def features(self) -> np.ndarray:
@@ -261,4 +281,13 @@ def load_motion(path: str | Path) -> Motion:
         rotations=data["rotations"],
         contacts=data.get("contacts"),
         metadata=meta,
+    )
+
+
+def mirror_permutation() -> np.ndarray:
+    """Joint index permutation that swaps each left limb joint with its right twin."""
+    index = {n: i for i, n in enumerate(JOINT_NAMES)}
+    twin = {"lf_": "rf_", "rf_": "lf_", "lh_": "rh_", "rh_": "lh_"}
+    return np.array(
+        [index[twin[n[:3]] + n[3:]] if n[:3] in twin else index[n] for n in JOINT_NAMES]
     )

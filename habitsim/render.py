@@ -159,6 +159,9 @@ def save_video(frames: np.ndarray, fps: float, path: str | Path) -> Path:
                                 codec="libx264", macro_block_size=8) as w:
                 for f in frames:
                     w.append_data(f)
+            umask = os.umask(0)  # mkstemp made it 0600: give it a plain file's permissions
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)
             os.replace(tmp, path)
         finally:
             if os.path.exists(tmp):

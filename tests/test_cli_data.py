@@ -17,7 +17,7 @@ from habitsim.species import species_names
 def test_demo_runs_and_reruns(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "demo_out"
     args = ["demo", "--out", str(out), "--clips-per-species", "1", "--workers", "1",
-            "--no-progress"]
+            "--no-progress", "--data-only"]
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "phase err" in text and str(out) in text
@@ -30,10 +30,38 @@ def test_demo_runs_and_reruns(tmp_path: Path, capsys: pytest.CaptureFixture[str]
 def test_demo_rebuilds_other_configuration(tmp_path: Path) -> None:
     out = tmp_path / "demo_out"
     build_dataset(out, clips_per_species=1, seed=5, species=["cat"], workers=1, progress=False)
-    assert main(["demo", "--out", str(out), "--clips-per-species", "1", "--no-progress"]) == 0
+    assert main(["demo", "--out", str(out), "--clips-per-species", "1", "--no-progress",
+                 "--data-only"]) == 0
     man = load_manifest(out)
     assert man.seed == 0 and len(man.species) == len(species_names())
     assert not list(out.glob("*/cat/*_0001.npz"))
+
+
+def test_demo_pipeline_two_sources_report_and_videos(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    from habitsim.render import render_available
+
+    out = tmp_path / "demo_out"
+    assert main(["demo", "--out", str(out), "--clips-per-species", "1", "--workers", "1",
+                 "--no-progress", "--targets", "tiger"]) == 0
+    text = capsys.readouterr().out
+    rows = json.loads((out / "pipeline.json").read_text())
+    assert [(r["source"], r["target"]) for r in rows] == [
+        ("horse_trot", "tiger"), ("dog_walk_bvh", "tiger")
+    ]
+    for r in rows:
+        assert r["habit_from"] != "tiger" and "tiger" in r["retrieval"]  # held out: retrieved
+        assert r["contacts"] in ("detected", "duty")
+        assert 0.0 <= r["survival_unassisted"] <= 1.0 and r["controller"] == "mpc"
+        assert (out / "pipeline" / f"{r['source']}_to_tiger_refined.npz").is_file()
+        if render_available():
+            assert (out / "pipeline" / r["video"]).stat().st_size > 10_000
+    report = (out / "report.md").read_text()
+    assert "| dog_walk_bvh | tiger |" in report and "## Held-out targets" in report
+    assert "| horse_trot | tiger |" in text  # the summary table is printed
 
 
 def test_demo_on_a_file_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

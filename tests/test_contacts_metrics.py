@@ -19,10 +19,12 @@ from habitsim.cli import main
 from habitsim.contacts import (
     CONTACT_HEIGHT_PER_LEG,
     contact_segments,
+    contacts_by_duty,
     contacts_from_feet,
     detect_contacts,
     touchdown_frames,
 )
+from habitsim.errors import InvalidMotionError
 from habitsim.hinges import (
     HINGE_NAMES,
     compose_hinges,
@@ -362,3 +364,22 @@ def test_cli_stats_bad_files(tmp_path, capsys) -> None:
     bad.write_bytes(b"not a zip file")
     assert main(["motion", "stats", str(bad), "--json"]) == 2
     assert capsys.readouterr().err.startswith("error:")
+
+
+def test_contacts_by_duty_finds_stance_of_a_skating_gait():
+    # A trot whose stance feet slide at a third of the body speed: no frame rests, so the
+    # resting detector finds nothing, but the slow-and-low ranking finds each stance phase.
+    fps, leg, duty, period = 30.0, 0.6, 0.6, 24
+    t = np.arange(120)
+    phase = (t[:, None] / period + np.array([0.0, 0.5, 0.5, 0.0])[None, :]) % 1.0
+    stance = phase < duty
+    body_v = 1.2  # m/s
+    vx = np.where(stance, body_v / 3.0, body_v * (1 + (1 - 1 / 3) * duty / (1 - duty)))
+    x = np.cumsum(vx, axis=0) / fps
+    z = np.where(stance, 0.005, 0.08 * np.sin(np.pi * (phase - duty) / (1 - duty)).clip(0))
+    feet = np.stack([x, np.zeros_like(x), z], axis=-1)
+    assert not contacts_from_feet(feet, fps, leg).any()
+    got = contacts_by_duty(feet, fps, leg, duty)
+    assert (got == stance).mean() > 0.95
+    with pytest.raises(InvalidMotionError, match="duty factors must lie in"):
+        contacts_by_duty(feet, fps, leg, 1.2)

@@ -175,6 +175,24 @@ def test_transfer_cli(tmp_path, capsys, trot):
     assert "direct" in capsys.readouterr().out
 
 
+def test_transfer_cli_bvh_example_with_action(tmp_path, capsys):
+    from importlib import resources
+
+    from habitsim.species import load_species
+
+    bvh = str(resources.files("habitsim.examples") / "dog_walk.bvh")
+    out = tmp_path / "cat.npz"
+    args = ["transfer", bvh, "--from", "dog", "--to", "cat", "--out", str(out)]
+    assert main([*args, "--action", "walk"]) == 0
+    m = load_motion(out)
+    assert m.species == "cat" and m.num_frames == 120 and m.metadata["action"] == "walk"
+    # every foot gets stance phases, at least half the cat's walking duty factor
+    duty = float(np.mean(load_species("cat").gaits["walk"].duty_factor))
+    assert np.all(m.contacts.mean(axis=0) >= 0.5 * duty - 1e-9)
+    assert main([*args, "--action", "moonwalk"]) == 2
+    assert "valid: " in capsys.readouterr().err
+
+
 def test_train_cli_small(tmp_path, capsys):
     from habitsim.dataset import build_dataset
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import shutil
 
 import numpy as np
@@ -18,7 +19,7 @@ from habitsim.models.data import ClipSet, WindowSampler, feature_stats
 from habitsim.models.errors import CheckpointError, TrainingDataError
 from habitsim.models.features import clip_arrays
 from habitsim.models.train import build_untrained, compute_losses, train
-from habitsim.species import species_names
+from habitsim.species import load_species, species_names
 
 SPECIES = ("cat", "dog", "horse")
 
@@ -108,6 +109,25 @@ def test_total_loss_is_the_sum_of_its_parts():
         + t.paired_weight * logs["paired"]
     )
     assert logs["loss"] == pytest.approx(total, rel=1e-5)
+
+
+def test_position_loss_separates_root_path_from_pose():
+    from habitsim.models.features import Q_DIM, canonical_window, clip_arrays
+    from habitsim.models.train import _position_loss
+
+    m = generate("dog", "trot", seed=2, duration_s=1.5)
+    x = torch.from_numpy(canonical_window(clip_arrays(m), 0, 32)[0]).double()[None]
+    valid = torch.ones(1, 32, dtype=torch.bool)
+    assert float(_position_loss(x, x, valid, ["dog"], 30.0, 0.05)) == 0.0
+    # a root-velocity bias moves the path only: the loss is the pelvis path's error alone
+    drift = x.clone()
+    drift[..., Q_DIM] += 0.1  # Froude units, forward
+    h = load_species("dog").hip_height
+    err = 0.1 * math.sqrt(9.81 * h) / 30.0 * torch.arange(32.0).double() / h  # [hip heights]
+    sl1 = torch.where(err < 0.05, 0.5 * err**2 / 0.05, err - 0.025)
+    expect = float((sl1 / 3.0).mean())  # mean over x, y, z of the pelvis; y, z exact
+    got = float(_position_loss(drift, x, valid, ["dog"], 30.0, 0.05))
+    assert got == pytest.approx(expect, rel=1e-6)
 
 
 def test_same_seed_same_weights_and_resume(tiny_data, tmp_path):
@@ -252,6 +272,8 @@ def test_checkpoint_species_mismatch_is_rejected(saved):
         (lambda d: d["config"]["model"].update(variant="best"), "unknown variant"),
         (lambda d: d.pop("species"), "missing key 'species'"),
         (lambda d: d.update(species=["unicorn"]), "unicorn"),
+        (lambda d: d.pop("feature_version"), "motion feature version 1.*retrain"),
+        (lambda d: d.update(feature_version=7), "motion feature version 7"),
     ],
 )
 def test_bad_checkpoint_config_is_rejected(saved, edit, message):

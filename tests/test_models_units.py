@@ -261,6 +261,43 @@ def test_window_positions_match_skeleton_fk():
         np.testing.assert_allclose(pos[i].numpy(), ref @ rot.T, atol=2e-4)
 
 
+def test_root_path_does_not_depend_on_the_decoded_pelvis_yaw():
+    # Velocities live in the window's frame: a wrong pelvis yaw turns the body, not its path.
+    m = generate("horse", "turn_left", seed=3, duration_s=2.0)
+    arr = clip_arrays(m)
+    x = torch.from_numpy(canonical_window(arr, 0, 48)[0]).double()[None]
+    bent = x.clone()
+    half = torch.tensor(0.15, dtype=torch.float64)  # a 0.3 rad yaw error on every pelvis
+    yaw = torch.stack([torch.cos(half), 0 * half, 0 * half, torch.sin(half)])
+    from habitsim.rotations import torch_quat_mul
+
+    bent[0, :, :4] = torch_quat_mul(yaw.expand(48, 4), x[0, :, :4])
+    a = window_positions(x, ["horse"], 30.0)[0, :, 0]
+    b = window_positions(bent, ["horse"], 30.0)[0, :, 0]
+    torch.testing.assert_close(a, b)
+
+
+def test_mirrored_training_clips_pair_with_mirrored_partners(tmp_path):
+    from habitsim.dataset import build_dataset
+    from habitsim.models.data import load_clip_set
+
+    build_dataset(
+        tmp_path, clips_per_species=6, seed=3, species=["cat", "dog"], workers=1, progress=False
+    )
+    plain = load_clip_set(tmp_path, "train")
+    both = load_clip_set(tmp_path, "train", mirror=True)
+    assert len(both.clips) == 2 * len(plain.clips)
+    for i, j in enumerate(range(0, len(both.clips), 2)):
+        a, r = both.clips[j], both.clips[j + 1]
+        assert a.species == r.species == plain.clips[i].species
+        assert both.pair_keys[j + 1] == f"{both.pair_keys[j]}~mirror"
+        # reflected root path, same height
+        np.testing.assert_allclose(r.root[:, 1], -a.root[:, 1], atol=1e-9)
+        np.testing.assert_allclose(r.height, a.height, atol=1e-12)
+    for i, part in enumerate(both.partners()):
+        assert all((both.pair_keys[k] or "").endswith("~mirror") == (i % 2 == 1) for k in part)
+
+
 def test_batched_fk_matches_fk_torch():
     ms = [
         generate(s, "trot" if s != "bear" else "walk", seed=1, duration_s=1.0)

@@ -158,3 +158,20 @@ def test_failed_save_leaves_nothing(tmp_path, monkeypatch) -> None:
 def test_public_api_resolves() -> None:
     for name in habitsim.__all__:
         assert hasattr(habitsim, name), name
+
+
+def test_mirrored_motion_is_the_reflected_motion():
+    from habitsim.gaits import generate
+    from habitsim.motion import mirror_permutation
+
+    m = generate("dog", "turn_left", seed=2, duration_s=1.5).with_contacts()
+    r = m.mirrored()
+    perm = mirror_permutation()
+    assert JOINT_NAMES[perm[JOINT_NAMES.index("lf_elbow")]] == "rf_elbow"
+    assert JOINT_NAMES[perm[JOINT_NAMES.index("spine2")]] == "spine2"
+    expect = m.global_positions()[:, perm] * np.array([1.0, -1.0, 1.0])
+    np.testing.assert_allclose(r.global_positions(), expect, atol=1e-9)
+    np.testing.assert_array_equal(r.contacts, m.contacts[:, [1, 0, 3, 2]])
+    assert r.metadata["action"] == "turn_right" and m.metadata["action"] == "turn_left"
+    # a reflection twice is the identity
+    np.testing.assert_allclose(r.mirrored().rotations, m.rotations, atol=1e-12)

@@ -33,7 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--steps", type=int, default=10, metavar="N", help="timed training steps (default 10)"
     )
-    p.add_argument("--threads", type=int, metavar="N", help="torch CPU threads (default: torch's)")
+    p.add_argument(
+        "--threads", type=int, metavar="N", help="torch CPU threads (default: the preset's)"
+    )
     p.add_argument(
         "--checkpoint",
         type=Path,
@@ -141,8 +143,11 @@ def transfer_latency(checkpoint: str | Path | None = None, repeats: int = 20) ->
 def _bench_train(ns: argparse.Namespace) -> int:
     import torch
 
-    if ns.threads is not None:
-        torch.set_num_threads(ns.threads)
+    from ..models.config import preset
+
+    threads = ns.threads if ns.threads is not None else preset(ns.config).train.threads
+    if threads is not None:
+        torch.set_num_threads(threads)
     tp = training_throughput(ns.config, ns.steps)
     print(f"bench train ({ns.config} config, {torch.get_num_threads()} torch thread(s))")
     print(

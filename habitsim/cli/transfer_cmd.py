@@ -32,6 +32,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "for .npz it relabels the motion)",
     )
     p.add_argument("--out", type=Path, metavar="OUT.npz", help="output motion file")
+    p.add_argument(
+        "--action",
+        metavar="ACTION",
+        help="the source's action (walk, trot, …) when its file does not say (a .bvh): "
+        "it gives the stance labels of the result the target's duty factor where its feet slide",
+    )
     p.add_argument("--bvh", type=Path, metavar="OUT.bvh", help="also write the result as BVH")
     p.add_argument(
         "--method", default="habit", help="transfer method (default: habit; see --list-methods)"
@@ -93,6 +99,12 @@ def _transfer(ns: argparse.Namespace) -> int:
         motion = load_motion(ns.source)
     else:
         raise MotionFileError(f"{ns.source}: source must be .npz or .bvh")
+    if ns.action is not None:
+        from ..gaits import ACTIONS
+
+        if ns.action not in ACTIONS:
+            raise MotionFileError(f"unknown --action {ns.action!r}; valid: {', '.join(ACTIONS)}")
+        motion.metadata["action"] = ns.action
     out = transfer(
         motion,
         to=target,
@@ -105,6 +117,12 @@ def _transfer(ns: argparse.Namespace) -> int:
     info = out.metadata.get("transfer", {})
     if info.get("retrieval"):
         print(info["retrieval"]["explanation"])
+    how = info.get("contacts") or {}
+    if how.get("method") == "duty":
+        print(
+            f"stance labels of {', '.join(how['feet_by_duty'])} from the {target}'s "
+            f"{how['gait']} duty factor {how['duty_factor']} (those feet never rest in the output)"
+        )
     out.save(ns.out)
     msg = (
         f"transferred {ns.source.name} ({motion.species}, {motion.num_frames} frames at "

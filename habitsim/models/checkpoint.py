@@ -26,6 +26,7 @@ import torch
 from ..fileio import atomic_write, atomic_write_text
 from .config import Config
 from .errors import CheckpointError, ConfigError
+from .features import FEATURE_VERSION
 from .model import HabitVQVAE
 
 __all__ = [
@@ -119,6 +120,7 @@ def save_checkpoint(
     doc = {
         "format": CHECKPOINT_FORMAT,
         "format_version": CHECKPOINT_VERSION,
+        "feature_version": FEATURE_VERSION,
         "config": config.to_dict(),
         "species": list(model.species),
         "text": {**meta.get("text", {}), "names": list(model.text_names), "dim": model.text_dim},
@@ -170,6 +172,13 @@ def read_checkpoint_config(path: str | Path) -> tuple[Config, dict[str, Any]]:
         raise CheckpointError(
             f"{cfg_path}: checkpoint format_version {doc.get('format_version')!r}; "
             f"this habitsim reads {CHECKPOINT_VERSION}"
+        )
+    fv = doc.get("feature_version", 1)
+    if fv != FEATURE_VERSION:
+        raise CheckpointError(
+            f"{cfg_path}: trained on motion feature version {fv!r}; this habitsim encodes "
+            f"motions with version {FEATURE_VERSION} (habitsim.models.features), so the "
+            "network would read them wrongly: retrain it with `habitsim train`"
         )
     for key in ("config", "species", "text", "fps", "files"):
         if key not in doc:

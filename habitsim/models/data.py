@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from ..dataset import iter_clips, load_manifest
+from ..motion import MIRROR_ACTIONS
 from .errors import TrainingDataError
 from .features import FEAT_DIM, ClipArrays, canonical_window, clip_arrays
 
@@ -68,9 +69,17 @@ class ClipSet:
 
 
 def load_clip_set(
-    data_dir: str | Path, split: str, species: Iterable[str] | None = None, progress: bool = False
+    data_dir: str | Path,
+    split: str,
+    species: Iterable[str] | None = None,
+    progress: bool = False,
+    mirror: bool = False,
 ) -> ClipSet:
     """Read and pre-process every clip of ``split`` (optionally only some species).
+
+    With ``mirror``, each clip's sagittal reflection (:meth:`~habitsim.motion.Motion.mirrored`)
+    follows it, with the pair key ``KEY~mirror`` (so it pairs with its partners'
+    reflections) and the reflected action.
 
     Raises:
         TrainingDataError: no clips, or clips of different frame rates.
@@ -91,6 +100,11 @@ def load_clip_set(
         clips.append(clip_arrays(m))
         keys.append(entry.pair_key)
         actions.append(entry.action)
+        if mirror:
+            r = m.mirrored()
+            clips.append(clip_arrays(r))
+            keys.append(None if entry.pair_key is None else f"{entry.pair_key}~mirror")
+            actions.append(MIRROR_ACTIONS.get(entry.action, entry.action))
     if not clips:
         raise TrainingDataError(f"{data_dir}: no {split} clips" + (f" of {sel}" if sel else ""))
     fps = {c.fps for c in clips}

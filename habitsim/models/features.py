@@ -6,19 +6,19 @@ Per frame t (``FEAT_DIM`` = J·4 + J·3 + 1 = 211 numbers):
   frame of a clip has w ≥ 0) — the paper's q (Sec. 3.1);
 * ``v_t`` (J·3): global joint velocities, backward differences (x_t − x_{t−1})·fps with
   v_0 = v_1, divided by √(g·h) (h = the species' standing hip height), i.e. in units of
-  the Froude velocity, and expressed in the frame of frame t's pelvis heading (rotated
-  about z by −ψ_t) — the paper's v, made size-free so that one network serves a cat and
-  an elephant (transferred speeds follow the Froude scaling of gaits), and
-  heading-invariant so that a turn reads as a constant forward speed, not as a rotating
-  vector;
+  the Froude velocity — the paper's v, made size-free so that one network serves a cat
+  and an elephant (transferred speeds follow the Froude scaling of gaits);
 * ``h_t`` (1): pelvis height / h. The paper recovers the root from velocities only; a
   height channel keeps long clips from drifting vertically (a habitsim addition).
 
-Windows are *heading-canonical*: the pelvis quaternion is rotated about z by −ψ₀,
-ψ₀ = the pelvis heading at the window's first frame, so every window starts facing +x;
-:func:`uncanonicalize` turns decoded windows back. The root's horizontal path is the
-integral of the pelvis velocity turned back to the world by each frame's decoded heading
-ψ_t (:func:`features_to_motion`, :func:`window_positions`).
+Windows are *heading-canonical*: positions, velocities and the pelvis quaternion are
+turned about z by −ψ₀, ψ₀ = the pelvis heading at the window's first frame, so every
+window starts facing +x; :func:`uncanonicalize` turns decoded windows back. Velocities
+are expressed in that one window frame (feature version 2), not in each frame's own
+heading: the root's horizontal path is then the plain integral of the decoded pelvis
+velocity, and an error of the decoded pelvis yaw no longer turns the whole path
+(with per-frame heading velocities, version 1, it did: on the validation windows the
+decoded yaw's error alone doubled the global MPJPE).
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from ..skeleton import JOINT_NAMES, get_skeleton
 from ..species import load_species
 
 __all__ = [
+    "FEATURE_VERSION",
     "GRAVITY",
     "NUM_JOINTS",
     "Q_DIM",
@@ -54,6 +55,8 @@ __all__ = [
     "species_offsets",
 ]
 
+#: Version of this representation; a checkpoint records the one it was trained on.
+FEATURE_VERSION = 2
 GRAVITY = 9.81  # [m/s²]
 NUM_JOINTS = len(JOINT_NAMES)
 Q_DIM = NUM_JOINTS * 4
@@ -100,7 +103,7 @@ class ClipArrays:
         species: catalog species name.
         fps: frame rate [Hz].
         quats: (T, J, 4) local quaternions, continuous in time, w ≥ 0 at frame 0.
-        velocities: (T, J, 3) global joint velocities / √(g·h), in frame t's heading frame.
+        velocities: (T, J, 3) global joint velocities / √(g·h), world frame.
         height: (T,) pelvis height / h.
         yaw: (T,) pelvis heading [rad].
         root: (T, 3) pelvis positions [m].
@@ -137,7 +140,7 @@ def clip_arrays(motion: Motion) -> ClipArrays:
         species=motion.species,
         fps=float(motion.fps),
         quats=q,
-        velocities=_rotate_z(v, -yaw) / velocity_scale(motion.species),
+        velocities=v / velocity_scale(motion.species),
         height=motion.root_positions[:, 2] / sp.hip_height,
         yaw=yaw,
         root=np.array(motion.root_positions, dtype=np.float64),
@@ -163,7 +166,7 @@ def canonical_window(
     yaw0 = float(clip.yaw[start])
     q = clip.quats[idx].copy()
     q[:, 0] = quat_mul(_yaw_quat(-yaw0), q[:, 0])
-    v = clip.velocities[idx]
+    v = _rotate_z(clip.velocities[idx], -yaw0)
     feats = np.concatenate(
         [q.reshape(length, -1), v.reshape(length, -1), clip.height[idx, None]], axis=1
     )
@@ -173,13 +176,16 @@ def canonical_window(
 def uncanonicalize(feats: np.ndarray, yaw0: float) -> np.ndarray:
     """Turn canonical window features (T, FEAT_DIM) back to heading ``yaw0`` (float64).
 
-    Only the pelvis quaternion changes: velocities are in each frame's own heading frame.
+    The pelvis quaternion and every joint velocity turn; local rotations and the height
+    do not.
     """
     f = np.array(feats, dtype=np.float64, copy=True)
     t = f.shape[0]
     q = f[:, :Q_DIM].reshape(t, NUM_JOINTS, 4)
     q[:, 0] = quat_mul(_yaw_quat(yaw0), q[:, 0])
     f[:, :Q_DIM] = q.reshape(t, -1)
+    v = f[:, Q_DIM:H_INDEX].reshape(t, NUM_JOINTS, 3)
+    f[:, Q_DIM:H_INDEX] = _rotate_z(v, yaw0).reshape(t, -1)
     return f
 
 
@@ -193,8 +199,8 @@ def features_to_motion(
     """Build a Motion on ``species``' skeleton from world-frame features (T, FEAT_DIM).
 
     Rotations are the normalised quaternion part; the pelvis height is h·``h_t``; its
-    horizontal path integrates the pelvis velocity ·√(g·h), turned to the world by each
-    frame's pelvis heading, from ``root_start_xy`` [m].
+    horizontal path integrates the (world-frame) pelvis velocity ·√(g·h) from
+    ``root_start_xy`` [m].
     """
     f = np.asarray(feats, dtype=np.float64)
     t = f.shape[0]
@@ -202,7 +208,7 @@ def features_to_motion(
     q = f[:, :Q_DIM].reshape(t, NUM_JOINTS, 4)
     n = np.linalg.norm(q, axis=-1, keepdims=True)
     q = np.where(n > 1e-6, q / np.maximum(n, 1e-12), np.array([1.0, 0.0, 0.0, 0.0]))
-    v_root = _rotate_z(f[:, Q_DIM : Q_DIM + 3], heading_yaw(q[:, 0])) * velocity_scale(species)
+    v_root = f[:, Q_DIM : Q_DIM + 3] * velocity_scale(species)
     root = np.zeros((t, 3))
     start = (
         np.zeros(2) if root_start_xy is None else np.asarray(root_start_xy, dtype=np.float64)[:2]
@@ -263,13 +269,7 @@ def window_positions(feats: torch.Tensor, species: list[str], fps: float) -> tor
     hip = torch.tensor([load_species(s).hip_height for s in species], dtype=feats.dtype)[
         :, None, None
     ]
-    w, x, y, z = (q[..., 0, :] / q[..., 0, :].norm(dim=-1, keepdim=True).clamp_min(1e-8)).unbind(-1)
-    hx = 1.0 - 2.0 * (y * y + z * z)  # pelvis forward axis on the ground = heading ψ_t
-    hy = 2.0 * (x * y + w * z)
-    hn = torch.sqrt(hx * hx + hy * hy).clamp_min(1e-6)
-    c, s = hx / hn, hy / hn
-    vl = feats[..., Q_DIM : Q_DIM + 2] * scale
-    vr = torch.stack([c * vl[..., 0] - s * vl[..., 1], s * vl[..., 0] + c * vl[..., 1]], dim=-1)
+    vr = feats[..., Q_DIM : Q_DIM + 2] * scale
     xy = torch.cumsum(torch.cat([torch.zeros_like(vr[:, :1]), vr[:, 1:]], dim=1), dim=1)
     root = torch.cat([xy, feats[..., H_INDEX : H_INDEX + 1] * hip], dim=-1)
     return batched_fk(root, q, species_offsets(species, feats.dtype))

@@ -7,7 +7,8 @@ One optimiser (AdamW) trains everything jointly on random heading-canonical wind
       + w_kl·E_q[log q(z|m) − log p_c(z)]          habit posterior vs. its species' flow prior
       + w_pair·L_re(m_B, D(f_A, z_B, g_B))        paired cross-species term (habitsim data),
                                                   z_B ~ p_B drawn from B's prior as at transfer
-      + w_pos·smooth-L1(FK(m̂), FK(m)) / h          optional joint-position term
+      + w_pos·[smooth-L1 of FK pose rel. pelvis      joint-position term (pose and root path
+               + smooth-L1 of the pelvis path] / h   as separate terms)
 
 The −log p_c(z) part of the KL term is the prior's NLL of paper eq. 10; the log q part
 keeps the Gaussian posterior from collapsing onto a point. The learning rate warms up
@@ -137,15 +138,25 @@ def _position_loss(
     fps: float,
     beta: float,
 ) -> torch.Tensor:
+    """Smooth-L1 on forward-kinematics positions [hip heights], as two terms: the pose
+    (every joint relative to the pelvis) plus the pelvis' path (integrated from the
+    decoded velocities). In one term on global positions the integrated drift of the
+    root enters every joint's error, drowns the limbs' gradient, and the limbs were learnt
+    several times slower."""
     pp = window_positions(pred, species, fps)
     with torch.no_grad():
         pt = window_positions(target, species, fps)
     h = torch.tensor([load_species(s).hip_height for s in species], dtype=pred.dtype)[
         :, None, None, None
     ]
-    e = F.smooth_l1_loss(pp / h, pt / h, reduction="none", beta=beta).mean((-1, -2))
-    w = valid.to(e.dtype)
-    return (e * w).sum() / w.sum().clamp_min(1.0)
+    pp, pt = pp / h, pt / h
+    pose = F.smooth_l1_loss(
+        pp[..., 1:, :] - pp[..., :1, :], pt[..., 1:, :] - pt[..., :1, :], reduction="none",
+        beta=beta,
+    ).mean((-1, -2))
+    path = F.smooth_l1_loss(pp[..., 0, :], pt[..., 0, :], reduction="none", beta=beta).mean(-1)
+    w = valid.to(pose.dtype)
+    return ((pose + path) * w).sum() / w.sum().clamp_min(1.0)
 
 
 def _prior_draws(
@@ -441,7 +452,7 @@ def train(
     t0 = time.perf_counter()
     try:
         known = {s.name for s in training_species()}
-        tr = load_clip_set(data_dir, "train", progress=progress)
+        tr = load_clip_set(data_dir, "train", progress=progress, mirror=t.mirror)
         species = sorted(s for s in tr.species if s in known)
         if not species:
             raise TrainingDataError(f"{data_dir}: the train split has no training species")

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..errors import InvalidMotionError
+from ..errors import HabitsimError, InvalidMotionError
 from ..motion import Motion
 from ..rotations import quat_slerp
 from ..species import load_species
@@ -69,6 +69,7 @@ __all__ = [
     "transfer",
     "reconstruct",
     "direct_transfer",
+    "transfer_contacts",
     "resolve_checkpoint",
     "load_model",
     "shipped_checkpoint",
@@ -326,13 +327,68 @@ def _run_network(
     return out, info
 
 
+def _gait_duty(target: str, source: Motion) -> tuple[str, float] | None:
+    """(gait, duty factor) the target species uses for the source's action: the middle of
+    the target's duty-factor range for that gait (the source species' range when the
+    target lacks the gait, e.g. a trot sent to a camel); None for non-cyclic actions or
+    a source without a known action."""
+    from ..gaits import action_gait
+    from ..gaits.actions import ACTIONS
+
+    action = source.metadata.get("action")
+    if action not in ACTIONS:
+        return None
+    for sp in (target, source.species):
+        try:
+            gait = action_gait(sp, str(action))
+        except HabitsimError:
+            continue
+        habit = load_species(sp).gaits.get(gait)
+        if habit is not None:
+            return gait, float(np.mean(habit.duty_factor))
+    return None
+
+
+def transfer_contacts(out: Motion, source: Motion) -> tuple[np.ndarray, dict[str, Any]]:
+    """Foot-contact labels of a transferred motion, and how they were found.
+
+    Contacts are detected on the output (:func:`habitsim.contacts.detect_contacts`).
+    A decoded gait whose stance feet still slide may hold no resting frame at all, and a
+    refinement given no stance plants no foot; so a foot whose detected stance share is
+    under half its gait's duty factor is labelled by :func:`habitsim.contacts.contacts_by_duty`
+    instead (the target's duty factor for the source's gait: the habit, not the source's
+    footfall timing, which differs between species).
+    """
+    from ..contacts import contacts_by_duty
+
+    detected = out.detect_contacts()
+    info: dict[str, Any] = {"method": "detected"}
+    gd = _gait_duty(out.species, source)
+    if gd is None or out.num_frames < 5:
+        return detected, info
+    gait, duty = gd
+    low = detected.mean(axis=0) < 0.5 * duty
+    if not low.any():
+        return detected, info
+    by_duty = contacts_by_duty(
+        out.foot_positions(), out.fps, out.species_info.leg_length, duty
+    )
+    labels = np.where(low[None, :], by_duty, detected)
+    info = {
+        "method": "duty",
+        "gait": gait,
+        "duty_factor": round(duty, 3),
+        "feet_by_duty": [n for n, lo in zip(("LF", "RF", "LH", "RH"), low, strict=True) if lo],
+    }
+    return labels, info
+
+
 def _finish(out: Motion, source: Motion, info: dict[str, Any]) -> Motion:
     out = _resample(out, source.fps)
     meta = {k: v for k, v in source.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
-    meta["transfer"] = info
-    return Motion(
-        out.species, out.fps, out.root_positions, out.rotations, None, meta
-    ).with_contacts()
+    contacts, how = transfer_contacts(out, source)
+    meta["transfer"] = {**info, "contacts": how}
+    return Motion(out.species, out.fps, out.root_positions, out.rotations, contacts, meta)
 
 
 # ---------------------------------------------------------------------------- methods
@@ -425,8 +481,9 @@ def transfer(
 
     Returns:
         A :class:`~habitsim.motion.Motion` on ``to``'s skeleton at the source's frame
-        rate, with detected foot contacts and ``metadata["transfer"]`` (method, habit
-        species, retrieval explanation for held-out targets).
+        rate, with foot contacts (:func:`transfer_contacts`) and ``metadata["transfer"]``
+        (method, habit species, retrieval explanation for held-out targets, how the
+        contacts were found).
 
     Raises:
         UnknownMethodError: the method is not registered (lists the valid ones).

@@ -1,0 +1,1 @@
+"""Example input files shipped with habitsim (see README.md in this folder)."""
