@@ -359,9 +359,11 @@ def transfer_contacts(out: Motion, source: Motion) -> tuple[np.ndarray, dict[str
     instead (the target's duty factor for the source's gait: the habit, not the source's
     footfall timing, which differs between species).
     """
-    from ..contacts import contacts_by_duty
+    from ..contacts import contacts_by_duty, contacts_from_feet
 
-    detected = out.detect_contacts()
+    feet = out.foot_positions()  # one forward-kinematics pass for both labellings
+    leg = out.species_info.leg_length
+    detected = contacts_from_feet(feet, out.fps, leg)
     info: dict[str, Any] = {"method": "detected"}
     gd = _gait_duty(out.species, source)
     if gd is None or out.num_frames < 5:
@@ -370,9 +372,7 @@ def transfer_contacts(out: Motion, source: Motion) -> tuple[np.ndarray, dict[str
     low = detected.mean(axis=0) < 0.5 * duty
     if not low.any():
         return detected, info
-    by_duty = contacts_by_duty(
-        out.foot_positions(), out.fps, out.species_info.leg_length, duty
-    )
+    by_duty = contacts_by_duty(feet, out.fps, leg, duty)
     labels = np.where(low[None, :], by_duty, detected)
     info = {
         "method": "duty",
