@@ -130,6 +130,46 @@ def test_position_loss_separates_root_path_from_pose():
     assert got == pytest.approx(expect, rel=1e-6)
 
 
+def test_root_velocity_weight_adds_the_pelvis_channels_term():
+    from habitsim.models.features import H_INDEX, Q_DIM
+    from habitsim.models.train import _recon_terms
+
+    g = torch.Generator().manual_seed(0)
+    target = torch.randn(2, 8, H_INDEX + 1, generator=g, dtype=torch.float64)
+    valid = torch.ones(2, 8, dtype=torch.bool)
+    pelvis = target.clone()
+    pelvis[..., Q_DIM : Q_DIM + 3] += 1.0  # error on the pelvis velocity only
+    other = target.clone()
+    other[..., Q_DIM + 3 : Q_DIM + 6] += 1.0  # the same error on another joint's velocity
+    base, heavy = _tiny_config(), _tiny_config(**{"train.root_velocity_weight": 2.0})
+    lv_base = float(_recon_terms(pelvis, target, valid, base)[1])
+    lv_heavy = float(_recon_terms(pelvis, target, valid, heavy)[1])
+    # smooth-L1 of 1.0 at beta 0.05 is 0.975 per channel; the extra term averages 3 channels
+    assert lv_heavy - lv_base == pytest.approx(2.0 * (1.0 - 0.025), rel=1e-9)
+    assert float(_recon_terms(other, target, valid, heavy)[1]) == pytest.approx(
+        float(_recon_terms(other, target, valid, base)[1]), rel=1e-12
+    )
+
+
+def test_learning_rate_schedules():
+    from habitsim.models.errors import ConfigError
+    from habitsim.models.train import lr_at
+
+    step_cfg = _tiny_config(
+        steps=100, **{"train.lr": 1e-3, "train.lr_final": 1e-5, "train.warmup_steps": 10}
+    )
+    assert lr_at(0, step_cfg) == pytest.approx(1e-4)  # warm-up
+    assert lr_at(79, step_cfg) == 1e-3 and lr_at(80, step_cfg) == 1e-5  # lr_drop = 0.8
+    cos = step_cfg.replace(**{"train.lr_schedule": "cosine"})
+    rates = [lr_at(i, cos) for i in range(100)]
+    assert rates[10] == pytest.approx(1e-3) and rates[99] == pytest.approx(1e-5)
+    assert rates[:10] == [lr_at(i, step_cfg) for i in range(10)]  # same warm-up
+    assert all(a >= b for a, b in zip(rates[10:], rates[11:], strict=False))  # falls monotonically
+    assert rates[54] == pytest.approx(0.5 * (1e-3 + 1e-5), rel=0.02)  # half-way: the mean
+    with pytest.raises(ConfigError, match="lr_schedule must be one of step, cosine"):
+        step_cfg.replace(**{"train.lr_schedule": "linear"}).validate()
+
+
 def test_same_seed_same_weights_and_resume(tiny_data, tmp_path):
     text = _fake_text()
     cfg = _tiny_config(steps=6)

@@ -24,11 +24,10 @@ from habitsim.models.features import (
 )
 from habitsim.models.habit import AffineCoupling, HabitPosterior, RealNVP
 from habitsim.models.model import HabitVQVAE
-from habitsim.models.quantizer import EMAQuantizer, code_probabilities
+from habitsim.models.quantizer import EMAQuantizer, code_probabilities, residual_quantize
 from habitsim.models.text import morphology_vector, retrieve_neighbour
 from habitsim.models.vqvae import MotionDecoder, MotionEncoder
 from habitsim.skeleton import get_skeleton
-
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -49,16 +48,20 @@ def test_encoder_decoder_shapes_and_rate():
         dec(f, None)
 
 
-def test_model_shapes_every_variant():
+@pytest.mark.parametrize("levels", [1, 3])
+def test_model_shapes_every_variant(levels):
     species = ["cat", "horse"]
     for variant in ("habit", "no_habit", "habit_only", "text_only", "habit_ema"):
-        cfg = preset("small", variant).model
+        cfg = preset("small", variant).replace(**{"model.quantizer.levels": levels}).model
         m = HabitVQVAE(cfg, species, ["cat", "horse", "tiger"], 8)
         x = torch.randn(2, cfg.window, FEAT_DIM)
         f = m.encode(x)
         assert f.shape == (2, cfg.quantizer.code_dim, cfg.window // 4)
         q = m.quantize(f, sample=False, update=False)
         assert q.indices.shape == (2, cfg.window // 4)
+        assert q.level_indices.shape == (2, cfg.window // 4, levels)
+        codebooks = [k for k in m.state_dict() if k.endswith("codebook")]
+        assert len(codebooks) == levels and "quantizer.codebook" in codebooks
         z = m.posterior(x, species)[0] if cfg.use_z else None
         cond = m.condition(species, z)
         assert (cond is None) == (m.cond_dim == 0)
@@ -121,6 +124,42 @@ def test_code_reset_revives_dead_codes():
     q2.initialized.fill_(True)
     q2.ema_update(f, idx, g)
     assert torch.allclose(q2.codebook[1:, 0], torch.arange(7.0) + 100.0)
+
+
+def test_residual_levels_quantize_what_the_previous_left():
+    g = torch.Generator().manual_seed(5)
+    levels = [_quantizer(k=8, d=3) for _ in range(3)]
+    for n, q in enumerate(levels):
+        q.codebook.copy_(torch.randn(8, 3, generator=g) * 0.3**n)
+        q.initialized.fill_(True)
+    f = torch.randn(2, 3, 5, generator=g, requires_grad=True)
+    out = residual_quantize(levels, f, sample=False, update=False)
+    # by hand: nearest code of each residual in turn
+    flat = f.detach().permute(0, 2, 1).reshape(-1, 3)
+    r, total, commit, idx = flat.clone(), torch.zeros_like(flat), 0.0, []
+    for q in levels:
+        k = torch.cdist(r, q.codebook).argmin(-1)
+        e = q.codebook[k]
+        commit += float(((r - e) ** 2).mean())
+        total, r = total + e, r - e
+        idx.append(k)
+    torch.testing.assert_close(out.quantized.detach().permute(0, 2, 1).reshape(-1, 3), total)
+    assert out.level_indices.shape == (2, 5, 3)
+    torch.testing.assert_close(out.level_indices.reshape(-1, 3), torch.stack(idx, -1))
+    assert torch.equal(out.indices, out.level_indices[..., 0])
+    assert float(out.commit_loss.detach()) == pytest.approx(commit, rel=1e-5)
+    # more levels never quantize worse here (each level's codes shrink with the residual)
+    rq = residual_quantize
+    with torch.no_grad():
+        err = [
+            float((rq(levels[:n], f, sample=False, update=False).quantized - f).norm())
+            for n in (1, 2, 3)
+        ]
+    assert err[2] < err[1] < err[0]
+    out.quantized.sum().backward()  # straight-through: the gradient reaches f unchanged
+    torch.testing.assert_close(f.grad, torch.ones_like(f))
+    one = residual_quantize(levels[:1], f, sample=False, update=False)
+    assert torch.equal(one.indices, levels[0](f, sample=False, update=False).indices)
 
 
 def test_soft_quantization_tends_to_nearest_code():

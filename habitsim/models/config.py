@@ -29,6 +29,7 @@ from .errors import ConfigError
 
 __all__ = [
     "VARIANTS",
+    "LR_SCHEDULES",
     "PRESETS",
     "NetConfig",
     "QuantizerConfig",
@@ -48,6 +49,9 @@ VARIANTS: dict[str, tuple[bool, bool, bool]] = {
     "habit_only": (True, False, True),
     "text_only": (False, True, True),
 }
+
+#: Learning-rate schedules of :class:`TrainConfig` (``lr_schedule``).
+LR_SCHEDULES = ("step", "cosine")
 
 
 def _check(cond: bool, msg: str) -> None:
@@ -90,6 +94,10 @@ class QuantizerConfig:
         ema_decay: λ of the exponential moving average of code sums and counts.
         reset_threshold: a code whose EMA usage count falls below this is dead and is
             reset to a random encoder output (``habit_ema`` never resets).
+        levels: codebooks applied in turn, each to what the previous ones left
+            (residual quantization, Guo et al. 2024, MoMask); every level is a K × d_c
+            codebook of the same kind and the decoder gets the sum of their codes.
+            1 = the paper's single codebook.
     """
 
     num_codes: int = 512
@@ -97,6 +105,7 @@ class QuantizerConfig:
     tau: float = 1.0
     ema_decay: float = 0.99
     reset_threshold: float = 1.0
+    levels: int = 1
 
     def validate(self) -> None:
         _check(self.num_codes >= 2, f"quantizer.num_codes must be ≥ 2, got {self.num_codes}")
@@ -107,6 +116,7 @@ class QuantizerConfig:
             f"quantizer.ema_decay must be in (0, 1), got {self.ema_decay}",
         )
         _check(self.reset_threshold >= 0, "quantizer.reset_threshold must be ≥ 0")
+        _check(self.levels >= 1, f"quantizer.levels must be ≥ 1, got {self.levels}")
 
 
 @dataclass(frozen=True)
@@ -217,6 +227,8 @@ class TrainConfig:
         lr, lr_final, lr_drop: AdamW learning rate; it drops to ``lr_final`` after the
             fraction ``lr_drop`` of the steps (the paper: 2e-4 then 1e-5 at one half of
             200 k steps; habitsim's CPU budget of a few thousand steps needs a higher rate).
+        lr_schedule: ``"step"`` (the drop above) or ``"cosine"`` (after the warm-up the rate
+            falls from ``lr`` to ``lr_final`` along a half cosine; ``lr_drop`` is unused).
         warmup_steps: linear warm-up of the learning rate.
         weight_decay: AdamW weight decay.
         alpha: weight of the velocity term of the reconstruction loss (paper: 0.5).
@@ -228,6 +240,9 @@ class TrainConfig:
             has paired clips: decode species A's codes with species B's text embedding and
             a habit latent drawn from B's prior — exactly as at transfer time — and compare
             with B's clip of the same pair). 0 = the paper's pure reconstruction training.
+        root_velocity_weight: extra weight of the smooth-L1 loss on the pelvis velocity
+            channels alone (the root path integrates them, so their error drifts; in the
+            velocity term they are 3 of J·3 channels). 0 = the paper.
         position_weight: weight of a smooth-L1 loss on forward-kinematics joint positions
             [hip heights]: the pelvis' path integrated from the decoded velocities, every
             other joint relative to the pelvis (a habitsim addition; 0 = the paper).
@@ -250,6 +265,7 @@ class TrainConfig:
     lr: float = 1e-3
     lr_final: float = 5e-5
     lr_drop: float = 0.8
+    lr_schedule: str = "step"
     warmup_steps: int = 100
     weight_decay: float = 0.0
     alpha: float = 0.5
@@ -257,6 +273,7 @@ class TrainConfig:
     smooth_l1_beta: float = 0.05
     kl_weight: float = 1e-3
     paired_weight: float = 0.3
+    root_velocity_weight: float = 0.0
     position_weight: float = 1.0
     mirror: bool = True
     val_every: int = 500
@@ -270,7 +287,19 @@ class TrainConfig:
         _check(self.lr > 0 and self.lr_final > 0, "train.lr and train.lr_final must be > 0")
         _check(0.0 <= self.lr_drop <= 1.0, "train.lr_drop must be in [0, 1]")
         _check(self.warmup_steps >= 0, "train.warmup_steps must be ≥ 0")
-        for k in ("weight_decay", "alpha", "beta", "kl_weight", "paired_weight", "position_weight"):
+        _check(
+            self.lr_schedule in LR_SCHEDULES,
+            f"train.lr_schedule must be one of {', '.join(LR_SCHEDULES)}, got {self.lr_schedule!r}",
+        )
+        for k in (
+            "weight_decay",
+            "alpha",
+            "beta",
+            "kl_weight",
+            "paired_weight",
+            "root_velocity_weight",
+            "position_weight",
+        ):
             _check(getattr(self, k) >= 0, f"train.{k} must be ≥ 0")
         _check(self.smooth_l1_beta > 0, "train.smooth_l1_beta must be > 0")
         _check(self.val_every >= 1 and self.checkpoint_every >= 1, "train.*_every must be ≥ 1")

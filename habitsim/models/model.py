@@ -18,7 +18,7 @@ from ..errors import UnknownSpeciesError
 from .config import ModelConfig
 from .features import FEAT_DIM
 from .habit import HabitPosterior, RealNVP, gaussian_log_prob
-from .quantizer import EMAQuantizer, QuantizerOutput
+from .quantizer import EMAQuantizer, QuantizerOutput, residual_quantize
 from .vqvae import MotionDecoder, MotionEncoder
 
 __all__ = ["HabitVQVAE"]
@@ -49,6 +49,10 @@ class HabitVQVAE(nn.Module):
         qc = cfg.quantizer
         self.encoder = MotionEncoder(FEAT_DIM, qc.code_dim, cfg.net)
         self.quantizer = EMAQuantizer(qc, reset=cfg.code_reset)
+        if qc.levels > 1:  # residual levels 2…L (level 1 keeps the single-codebook names)
+            self.residual_quantizers = nn.ModuleList(
+                [EMAQuantizer(qc, reset=cfg.code_reset) for _ in range(qc.levels - 1)]
+            )
         cond = (cfg.habit.z_dim if cfg.use_z else 0) + (cfg.text.proj_dim if cfg.use_g else 0)
         self.cond_dim = cond
         self.decoder = MotionDecoder(qc.code_dim, cond, FEAT_DIM, cfg.net)
@@ -74,7 +78,12 @@ class HabitVQVAE(nn.Module):
         return self.encoder(self.normalize(x).transpose(1, 2))
 
     def quantize(self, f: torch.Tensor, **kw) -> QuantizerOutput:
-        return self.quantizer(f, **kw)
+        """Latents (B, code_dim, T') → codes of every level summed (see
+        :func:`~habitsim.models.quantizer.residual_quantize`)."""
+        levels = [self.quantizer]
+        if self.cfg.quantizer.levels > 1:
+            levels += list(self.residual_quantizers)
+        return residual_quantize(levels, f, **kw)
 
     def decode(self, codes: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
         """Codes (B, code_dim, T') and condition (B, C) → raw windows (B, T'·rate, F)."""

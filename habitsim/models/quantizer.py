@@ -12,6 +12,10 @@
   the batch (and its sum / count restarted from it), instead of keeping its old value.
 * **Commitment loss**: ‖f − sg(e)‖² (mean over elements); the codebook itself learns by
   EMA only, so the paper's embedding term has no gradient to carry here.
+* **Residual levels** (:func:`residual_quantize`, ``QuantizerConfig.levels`` > 1): level
+  l quantizes r_l = f − Σ_{m<l} e_m with its own codebook of the same kind; the decoder
+  gets f + sg(Σ e_l − f) and the commitment loss is Σ_l ‖r_l − sg(e_l)‖² (as in MoMask's
+  residual VQ, Guo et al. 2024).
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ from torch import nn
 
 from .config import QuantizerConfig
 
-__all__ = ["QuantizerOutput", "EMAQuantizer", "code_probabilities"]
+__all__ = ["QuantizerOutput", "EMAQuantizer", "code_probabilities", "residual_quantize"]
 
 
 def _sq_distances(f: torch.Tensor, codebook: torch.Tensor) -> torch.Tensor:
@@ -44,15 +48,17 @@ class QuantizerOutput:
 
     Attributes:
         quantized: (B, D, T') codes with the straight-through gradient.
-        indices: (B, T') chosen code indices.
-        commit_loss: scalar ‖f − sg(e)‖².
-        perplexity: exp(entropy) of the batch's code usage.
+        indices: (B, T') chosen code indices (of the first level).
+        commit_loss: scalar ‖f − sg(e)‖² (summed over the levels).
+        perplexity: exp(entropy) of the batch's code usage (of the first level).
+        level_indices: (B, T', L) the indices of every level.
     """
 
     quantized: torch.Tensor
     indices: torch.Tensor
     commit_loss: torch.Tensor
     perplexity: torch.Tensor
+    level_indices: torch.Tensor | None = None
 
 
 class EMAQuantizer(nn.Module):
@@ -105,10 +111,9 @@ class EMAQuantizer(nn.Module):
             the number of codes reset (0 without reset).
         """
         f = f.detach().to(self.codebook.dtype)
-        onehot = torch.zeros(f.shape[0], self.num_codes, dtype=f.dtype, device=f.device)
-        onehot.scatter_(1, indices.view(-1, 1), 1.0)
-        count = onehot.sum(0)  # (K,)
-        total = onehot.t() @ f  # (K, D)
+        idx = indices.view(-1)
+        count = torch.bincount(idx, minlength=self.num_codes).to(f.dtype)  # (K,) = Aᵀ1
+        total = torch.zeros_like(self.code_sum).index_add_(0, idx, f)  # (K, D) = Aᵀf
         lam = self.decay
         self.code_sum.mul_(lam).add_(total, alpha=1.0 - lam)
         self.code_count.mul_(lam).add_(count, alpha=1.0 - lam)
@@ -187,4 +192,33 @@ class EMAQuantizer(nn.Module):
             indices=idx.view(b, t),
             commit_loss=commit,
             perplexity=perplexity,
+            level_indices=idx.view(b, t, 1),
         )
+
+
+def residual_quantize(levels: list[EMAQuantizer], f: torch.Tensor, **kw) -> QuantizerOutput:
+    """Quantize latents ``f`` (B, D, T') by the codebooks ``levels`` in turn, each on the
+    residual the previous ones left (keyword arguments go to every level's forward).
+
+    With one level this is that level's own output.
+    """
+    if len(levels) == 1:
+        return levels[0](f, **kw)
+    r = f
+    total = torch.zeros_like(f)
+    commit = f.new_zeros(())
+    outs = []
+    for q in levels:
+        o = q(r, **kw)
+        e = o.quantized.detach()  # the codes' values (the straight-through part is f's)
+        total = total + e
+        r = r - e
+        commit = commit + o.commit_loss
+        outs.append(o)
+    return QuantizerOutput(
+        quantized=f + (total - f).detach(),
+        indices=outs[0].indices,
+        commit_loss=commit,
+        perplexity=outs[0].perplexity,
+        level_indices=torch.stack([o.indices for o in outs], dim=-1),
+    )

@@ -88,6 +88,10 @@ def lr_at(step: int, cfg: Config) -> float:
     t = cfg.train
     if t.warmup_steps and step < t.warmup_steps:
         return t.lr * (step + 1) / t.warmup_steps
+    if t.lr_schedule == "cosine":
+        span = max(1, t.steps - 1 - t.warmup_steps)
+        frac = min(1.0, (step - t.warmup_steps) / span)
+        return t.lr_final + 0.5 * (t.lr - t.lr_final) * (1.0 + math.cos(math.pi * frac))
     return t.lr if step < t.lr_drop * t.steps else t.lr_final
 
 
@@ -127,6 +131,10 @@ def _recon_terms(
     lq = _masked_smooth_l1(pred[..., :Q_DIM], target[..., :Q_DIM], valid, b)
     lh = _masked_smooth_l1(pred[..., H_INDEX:], target[..., H_INDEX:], valid, b)
     lv = _masked_smooth_l1(pred[..., Q_DIM:H_INDEX], target[..., Q_DIM:H_INDEX], valid, b)
+    if cfg.train.root_velocity_weight > 0:  # the pelvis' channels, whose error the path integrates
+        lv = lv + cfg.train.root_velocity_weight * _masked_smooth_l1(
+            pred[..., Q_DIM : Q_DIM + 3], target[..., Q_DIM : Q_DIM + 3], valid, b
+        )
     return lq + lh, lv
 
 
@@ -646,8 +654,10 @@ def loaded_summary(ck: LoadedCheckpoint) -> str:
     """One line describing a loaded checkpoint."""
     c = ck.config
     n = sum(p.numel() for p in ck.model.parameters())
+    qc = c.model.quantizer
+    levels = f" × {qc.levels} residual levels" if qc.levels > 1 else ""
     return (
         f"{ck.path}: variant {c.model.variant}, {n / 1e6:.2f} M parameters, "
         f"{len(ck.model.species)} training species, "
-        f"codebook {c.model.quantizer.num_codes}×{c.model.quantizer.code_dim}"
+        f"codebook {qc.num_codes}×{qc.code_dim}{levels}"
     )
