@@ -32,6 +32,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.ndimage import median_filter
 
 from .errors import InvalidMotionError
 
@@ -173,11 +174,8 @@ def contacts_by_duty(
     score = _toe_speed(feet, fps) / np.sqrt(9.81 * leg_length) + feet[..., 2] / leg_length
     thr = np.array([np.quantile(score[:, f], d[f]) for f in range(feet.shape[1])])
     c = score <= thr[None, :]
-    t = c.shape[0]
-    if t >= 5:
-        pad = np.concatenate([c[:1], c[:1], c, c[-1:], c[-1:]], axis=0).astype(np.int8)
-        votes = sum(pad[k : k + t] for k in range(5))
-        c = votes >= 3
+    if c.shape[0] >= 5:  # 5-frame majority vote per foot (a binary median), edges repeated
+        c = median_filter(c, size=(5, 1), mode="nearest")
     return _fill_and_open(c)
 
 

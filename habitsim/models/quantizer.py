@@ -58,7 +58,7 @@ class QuantizerOutput:
     indices: torch.Tensor
     commit_loss: torch.Tensor
     perplexity: torch.Tensor
-    level_indices: torch.Tensor | None = None
+    level_indices: torch.Tensor
 
 
 class EMAQuantizer(nn.Module):

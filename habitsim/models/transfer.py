@@ -47,7 +47,7 @@ import torch
 from ..errors import HabitsimError, InvalidMotionError
 from ..motion import Motion
 from ..rotations import quat_slerp
-from ..species import load_species
+from ..species import FEET, load_species
 from .checkpoint import CONFIG_FILE, LoadedCheckpoint, load_checkpoint
 from .config import VARIANTS
 from .errors import MethodNotAvailableError, TextEncoderError, UnknownMethodError
@@ -378,7 +378,7 @@ def transfer_contacts(out: Motion, source: Motion) -> tuple[np.ndarray, dict[str
         "method": "duty",
         "gait": gait,
         "duty_factor": round(duty, 3),
-        "feet_by_duty": [n for n, lo in zip(("LF", "RF", "LH", "RH"), low, strict=True) if lo],
+        "feet_by_duty": [n for n, lo in zip(FEET, low, strict=True) if lo],
     }
     return labels, info
 
