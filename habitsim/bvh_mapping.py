@@ -32,6 +32,7 @@ downstream).
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import tomllib
@@ -69,6 +70,12 @@ __all__ = [
     "is_habitsim_bvh",
     "retarget",
     "import_bvh",
+    "read_source",
+    "SOURCE_SUFFIXES",
+    "CONFIDENCE_CHECKS",
+    "CONFIDENCE_WARN",
+    "is_helper_name",
+    "describe_hierarchy",
 ]
 
 #: The checks behind a leg's mapping confidence (each scores 0, 0.5 or 1; the mean counts).
@@ -769,60 +776,89 @@ def _resolve_sides(bvh: BVHData, an: _Analysis, frame: FrameConversion) -> None:
 
 
 def load_joint_map(path: str | Path) -> dict[str, Any]:
-    """Read a joint-map TOML file.
+    """Read a joint-map file (JSON or TOML).
 
-    Format::
+    JSON::
 
+        {"extends": "auto", "units": "cm", "up": "y",
+         "map": {"lh_hip": "b_LeftLegUpper", "lh_ilium": null}}
+
+    TOML::
+
+        extends = "auto"    # optional: start from the automatic mapping
         units = "cm"        # optional: m, cm, mm
         up = "y"            # optional: x, y, z with optional sign
         [map]
         pelvis = "Hips"
         lf_shoulder = "LeftArm"
-        ...
+        lh_ilium = ""       # unmapped (JSON: null)
+
+    Without ``extends`` the file is the whole mapping (joints it does not name keep the
+    species' standing pose); with ``extends = "auto"`` it overrides only the joints it
+    names on top of the automatic mapping (:func:`auto_map`).
 
     Args:
-        path: the ``.toml`` file.
+        path: the ``.json`` or ``.toml`` file.
 
     Returns:
-        ``{"map": {habitsim: source}, "units": str | None, "up": str | None}``.
+        ``{"map": {habitsim: source | None}, "units": str | None, "up": str | None,
+        "extends": "auto" | None}``.
 
     Raises:
-        SkeletonMappingError: unreadable TOML, a missing ``[map]`` table, non-string values,
-            unknown keys or unknown habitsim joint names (the message lists the valid ones).
+        SkeletonMappingError: unreadable file, an unknown suffix, a missing ``map`` table,
+            non-string values, unknown keys or unknown habitsim joint names (the message
+            lists the valid ones).
     """
     p = Path(path)
+    kind = p.suffix.lower()
+    if kind not in (".json", ".toml"):
+        raise SkeletonMappingError(
+            f"{p}: unknown joint-map file type {p.suffix!r}; valid: .json, .toml"
+        )
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
+        text = p.read_text(encoding="utf-8")
+        data = json.loads(text) if kind == ".json" else tomllib.loads(text)
     except FileNotFoundError:
         raise SkeletonMappingError(f"{p}: no such joint-map file") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise SkeletonMappingError(f"{p}: cannot read joint-map TOML ({e})") from e
-    unknown = sorted(set(data) - {"map", "units", "up"})
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, ValueError) as e:
+        raise SkeletonMappingError(
+            f"{p}: cannot read joint-map {kind[1:].upper()} ({str(e)[:200]})"
+        ) from e
+    if not isinstance(data, dict):
+        raise SkeletonMappingError(f"{p}: a joint map must be a table/object with a 'map' key")
+    unknown = sorted(set(data) - {"map", "units", "up", "extends"})
     if unknown:
-        raise SkeletonMappingError(f"{p}: unknown keys {unknown}; valid: map, units, up")
+        raise SkeletonMappingError(
+            f"{p}: unknown keys {unknown[:10]}; valid: map, units, up, extends"
+        )
     m = data.get("map")
     if not isinstance(m, dict) or not m:
         raise SkeletonMappingError(
             f'{p}: needs a non-empty [map] table of habitsim_joint = "SourceJoint"'
         )
+    out: dict[str, str | None] = {}
     for k, v in m.items():
-        if not isinstance(v, str):
+        if v is not None and not isinstance(v, str):
             raise SkeletonMappingError(
-                f"{p}: [map] {k} must be a source joint name (string), got {v!r}"
+                f"{p}: [map] {k} must be a source joint name (string), got {v!r:.60}"
             )
+        out[k] = v or None
     bad = sorted(set(m) - set(JOINT_NAMES))
     if bad:
         raise SkeletonMappingError(
-            f"{p}: unknown habitsim joints {bad}; valid: {', '.join(JOINT_NAMES)}"
+            f"{p}: unknown habitsim joints {bad[:10]}; valid: {', '.join(JOINT_NAMES)}"
         )
-    for k in ("units", "up"):
+    for k in ("units", "up", "extends"):
         if k in data and not isinstance(data[k], str):
-            raise SkeletonMappingError(f"{p}: {k} must be a string, got {data[k]!r}")
-    return {"map": dict(m), "units": data.get("units"), "up": data.get("up")}
+            raise SkeletonMappingError(f"{p}: {k} must be a string, got {data[k]!r:.60}")
+    ext = data.get("extends")
+    if ext is not None and ext != "auto":
+        raise SkeletonMappingError(f"{p}: unknown extends {ext!r:.60}; valid: auto")
+    return {"map": out, "units": data.get("units"), "up": data.get("up"), "extends": ext}
 
 
 def validate_joint_map(
-    joint_map: Mapping[str, str], bvh: BVHData, where: str = "joint map"
+    joint_map: Mapping[str, str | None], bvh: BVHData, where: str = "joint map"
 ) -> dict[str, str | None]:
     """Check an explicit habitsim → source mapping against a BVH skeleton.
 
@@ -844,20 +880,22 @@ def validate_joint_map(
         raise SkeletonMappingError(
             f"{where}: unknown habitsim joints {bad}; valid: {', '.join(JOINT_NAMES)}"
         )
-    missing = sorted({v for v in joint_map.values() if v not in bvh.names})
+    missing = sorted({v for v in joint_map.values() if v is not None and v not in bvh.names})
     if missing:
+        names = ", ".join(bvh.names[:80]) + (" …" if len(bvh.names) > 80 else "")
         raise SkeletonMappingError(
-            f"{where}: source joints {missing} are not in {bvh.source}; "
-            f"its joints: {', '.join(bvh.names)}"
+            f"{where}: source joints {missing[:10]} are not in {bvh.source}; its joints: {names}"
         )
     seen: dict[str, str] = {}
     for k, v in joint_map.items():
+        if v is None:
+            continue
         if v in seen:
             raise SkeletonMappingError(
                 f"{where}: source joint {v!r} is mapped to both {seen[v]} and {k}"
             )
         seen[v] = k
-    if "pelvis" not in joint_map:
+    if not joint_map.get("pelvis"):
         raise SkeletonMappingError(
             f'{where}: must map pelvis (the root) to a source joint, e.g. pelvis = "Hips"'
         )
@@ -1324,19 +1362,93 @@ def _source_stance(
         foot_idx.append(f)
         anchor_idx.append(a)
         lengths.append(t.path_length(a, f) * (mapping.frame.scale if mapping.frame else 1.0))
-        pts = _foot_points(t, bvh.index(top))
-        z5 = np.percentile(src[:, pts, 2], 5, axis=0)
-        ok = z5 >= np.median(z5) - 0.1 * lengths[-1]
-        points.append(src[:, [p for p, keep in zip(pts, ok, strict=True) if keep]])
+        points.append(_foot_points(t, bvh.index(top)))
+    # A point that sinks far below the feet's typical lowest point is an unnamed helper.
+    z5 = [np.percentile(src[:, pts, 2], 5, axis=0) for pts in points]
+    ref = float(np.median([z.min() for z in z5]))
+    tol = 0.1 * float(np.mean(lengths))
+    points = [
+        [p for p, z in zip(pts, zs, strict=True) if z >= ref - tol] or pts
+        for pts, zs in zip(points, z5, strict=True)
+    ]
     limb_len = np.array(lengths)
     if np.any(limb_len <= 1e-6):
         mapping.notes.append("a source leg has zero length: feet not planted")
         return None
-    st = label_source_stance(points, bvh.fps, float(limb_len[2:].mean()))
+    st = label_source_stance([src[:, pts] for pts in points], bvh.fps, float(limb_len[2:].mean()))
     return st, foot_idx, anchor_idx, limb_len
 
 
 # ---------------------------------------------------------------------- entry point
+
+def describe_hierarchy(bvh: BVHData, mapping: JointMapping | None = None) -> str:
+    """The source hierarchy as an indented tree, each joint with its proposed habitsim joint.
+
+    Each line: the joint, its bone length in file units, ``[helper]`` for rig helpers that
+    are never limbs, ``[end]`` for End Sites, and ``-> habitsim_joint`` where mapped.
+    """
+    inv = {v: k for k, v in mapping.mapped().items()} if mapping is not None else {}
+    depth = [0] * bvh.num_joints
+    lines = []
+    for j, name in enumerate(bvh.names):
+        p = bvh.parents[j]
+        depth[j] = 0 if p < 0 else depth[p] + 1
+        tags = []
+        if bvh.is_end_site[j]:
+            tags.append("[end]")
+        elif is_helper_name(name):
+            tags.append("[helper]")
+        text = f"{'  ' * depth[j]}{name}  ({float(np.linalg.norm(bvh.offsets[j])):.4g})"
+        if tags:
+            text += " " + " ".join(tags)
+        if name in inv:
+            text += f"  -> {inv[name]}"
+        lines.append(text)
+    return "\n".join(lines)
+
+
+#: File types :func:`read_source` reads (BVH motion capture, glTF skinned animations).
+SOURCE_SUFFIXES: tuple[str, ...] = (".bvh", ".glb", ".gltf")
+
+
+def read_source(
+    path: str | Path,
+    animation: str | int | None = None,
+    fps: float | None = None,
+    strict: bool = True,
+) -> BVHData:
+    """Read a source clip: a BVH file, or one animation of a glTF/GLB skinned model.
+
+    Args:
+        path: a ``.bvh``, ``.glb`` or ``.gltf`` file.
+        animation: glTF only: the animation's name or index (None: the first).
+        fps: glTF only: sampling rate [Hz] (default 30).
+        strict: BVH only: see :func:`habitsim.bvh.parse_bvh`.
+
+    Returns:
+        The clip as :class:`~habitsim.bvh.BVHData`.
+
+    Raises:
+        SkeletonMappingError: an unknown file type (lists the valid ones), or glTF
+            options given for a BVH file.
+        BVHParseError, GLTFError: an unreadable file.
+    """
+    p = Path(path)
+    kind = p.suffix.lower()
+    if kind == ".bvh":
+        if animation is not None or fps is not None:
+            raise SkeletonMappingError(
+                f"{p.name}: animation and fps apply to glTF files only (.glb, .gltf)"
+            )
+        return read_bvh(p, strict=strict)
+    if kind in (".glb", ".gltf"):
+        from .gltf import read_gltf
+
+        return read_gltf(p, animation=animation, fps=30.0 if fps is None else fps)
+    raise SkeletonMappingError(
+        f"{p.name}: unknown source file type {p.suffix!r}; valid: {', '.join(SOURCE_SUFFIXES)}"
+    )
+
 
 
 def import_bvh(
@@ -1347,8 +1459,10 @@ def import_bvh(
     up: str | None = None,
     strict: bool = True,
     plant: bool = True,
+    animation: str | int | None = None,
+    fps: float | None = None,
 ) -> tuple[Motion, JointMapping]:
-    """Read a BVH file and retarget it onto a species' habitsim skeleton.
+    """Read a BVH file (or a glTF/GLB animation) and retarget it onto a species' skeleton.
 
     Args:
         path: the ``.bvh`` file (or an already parsed :class:`~habitsim.bvh.BVHData`).
@@ -1360,6 +1474,8 @@ def import_bvh(
         up: source up axis (``"y"``, ``"z"``, ``"-y"``…); None = detect.
         strict: see :func:`habitsim.bvh.parse_bvh`.
         plant: plant the legs on the source's footholds (see :func:`retarget`).
+        animation, fps: for a glTF/GLB file, the animation and the sampling rate
+            (:func:`read_source`).
 
     Returns:
         ``(motion, mapping)``; print ``mapping`` for the habitsim ← source lines.
@@ -1370,7 +1486,11 @@ def import_bvh(
         SkeletonMappingError: unmappable skeleton or invalid joint map.
     """
     sp = load_species(species)
-    bvh = path if isinstance(path, BVHData) else read_bvh(path, strict=strict)
+    bvh = (
+        path
+        if isinstance(path, BVHData)
+        else read_source(path, animation=animation, fps=fps, strict=strict)
+    )
     plain = (units is None or (isinstance(units, str) and units.lower() == "m")) and (
         up is None or _parse_up(up) == "+z"
     )
@@ -1392,10 +1512,22 @@ def import_bvh(
         method = "explicit"
     else:
         spec = load_joint_map(joint_map)
-        joints = validate_joint_map(spec["map"], bvh, where=str(joint_map))
+        if spec["extends"] == "auto":
+            an = _analyse(bvh)
+            base = dict(an.joints)
+            base.update(spec["map"])
+            joints = validate_joint_map(base, bvh, where=str(joint_map))
+            notes = an.notes + [f"joints set by hand: {', '.join(sorted(spec['map']))}"]
+            geometric = [
+                (lp, rp) for lp, rp in an.geometric_sides
+                if not any(n in spec["map"] for n in _LEG_CHAINS[lp] + _LEG_CHAINS[rp])
+            ]
+            method = f"auto, overridden by map file {joint_map}"
+        else:
+            joints = validate_joint_map(spec["map"], bvh, where=str(joint_map))
+            method = f"map file {joint_map}"
         units = units if units is not None else spec["units"]
         up = up if up is not None else spec["up"]
-        method = f"map file {joint_map}"
 
     frame = detect_frame(bvh, joints, units=units, up=up, species=sp)
     if geometric:

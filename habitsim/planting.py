@@ -65,6 +65,8 @@ _IDX = {n: i for i, n in enumerate(JOINT_NAMES)}
 SMOOTH_S = 0.1
 #: Window of the local floor of a foot [s] (longer than a stance phase of a slow walk).
 FLOOR_WINDOW_S = 1.5
+#: How far one foot's floor may sit above the lowest foot's [hind-leg lengths].
+FLOOR_SPREAD_PER_LEG = 0.1
 #: How far a foot's local floor may rise above its clip floor [hind-leg lengths].
 FLOOR_RISE_PER_LEG = 0.05
 #: Below this many resting frames a foot's floor is taken from all its frames.
@@ -156,6 +158,10 @@ def label_source_stance(
         z = lowest[:, k, 2]
         zr = z[rest[:, k]]
         floors[k] = np.percentile(zr, 10) if zr.size >= _MIN_REST_FRAMES else np.percentile(z, 2)
+    # Feet stand on one ground: a foot point may sit higher than another (a marker on the
+    # wrist, a thick pad) but not by more than FLOOR_SPREAD_PER_LEG; a foot held in the air
+    # for the whole clip does not get a floor of its own.
+    floors = np.minimum(floors, floors.min() + FLOOR_SPREAD_PER_LEG * leg_length)
     # A foot rests at slightly different heights over a clip (the paw's pose, an uneven
     # capture floor): each frame's floor is the lower envelope of the foot's height over
     # about FLOOR_WINDOW_S, but never more than FLOOR_RISE_PER_LEG above the clip floor
