@@ -194,7 +194,7 @@ def run_window(task: WindowTask) -> list[dict[str, Any]]:
     f1 = _import_f1(src)
     base = {
         "clip": task.clip,
-        "start_s": round(task.start_s, 3),
+        "start_s": task.start_s,
         "frames": src.num_frames,
         "fps": src.fps,
         "species": src.species,
@@ -418,7 +418,8 @@ def format_summary(rows: Sequence[dict[str, Any]], targets: Sequence[dict[str, A
         lines.append(
             f"           wall time per stage [s]: transfer {_f(_median(ok, 'time_transfer_s'))},"
             f" refine {_f(_median(ok, 'time_refine_s'))}, track "
-            f"{_f(_median(ok, 'time_track_s'))}, total {_f(_median(ok, 'time_total_s'))}"
+            f"{_f(_median(ok, 'time_track_s'))} (with the check's run of the unrefined "
+            f"clip), total {_f(_median(ok, 'time_total_s'))}"
         )
     reverted = [r for r in rows if r.get("refine_check") == "reverted"]
     for r in reverted:
@@ -527,7 +528,7 @@ def plan(ns: argparse.Namespace) -> tuple[list[WindowTask], list[str]]:
                          f"shorter than one {ns.seconds:g} s window ({frames} frames)")
             continue
         for s in starts:
-            windows.append((f.name, s / m.fps, m.slice(s, s + frames)))
+            windows.append((f.name, round(s / m.fps, 3), m.slice(s, s + frames)))
     if not windows:
         raise BenchRealError(
             f"--data {ns.data}: no clip gives a {ns.seconds:g} s window; " + "; ".join(notes)
