@@ -89,10 +89,10 @@ def test_bad_input(folder: Path, tmp_path: Path, capsys) -> None:
     empty = tmp_path / "empty"
     empty.mkdir()
     (empty / "a.txt").write_text("x")
-    with pytest.raises(BenchRealError, match=r"no source clips \(.bvh files\)"):
+    with pytest.raises(BenchRealError, match=r"no source clips \(.bvh, .glb, .gltf files\)"):
         source_files(empty)
-    with pytest.raises(BenchRealError, match="readable: .bvh"):
-        _read_source(tmp_path / "clip.glb", "dog")
+    with pytest.raises(BenchRealError, match="readable: .bvh, .glb, .gltf"):
+        _read_source(tmp_path / "clip.fbx", "dog")
     out = tmp_path / "never.json"
     base = ["bench", "real", "--workers", "1", "--json", str(out)]
     assert main([*base, "--data", str(empty)]) == 2

@@ -1,7 +1,7 @@
 """``habitsim bench real --data DIR``: real motion capture through the whole pipeline.
 
-Every clip of a folder (BVH; read by :func:`_read_source`, the one place another format
-plugs in) is imported onto ``--species`` (default dog) with
+Every clip of a folder (BVH, glTF/GLB; read by :func:`_read_source`, the one place
+another format plugs in) is imported onto ``--species`` (default dog) with
 :func:`habitsim.bvh_mapping.import_bvh`, resampled to ``--fps`` (default 30, the rate
 the shipped model and the refinement are built for) and cut into windows of
 ``--seconds`` (default 4): consecutive windows from the first frame where the pelvis
@@ -81,7 +81,7 @@ class BenchRealError(HabitsimError, ValueError):
 # ---------------------------------------------------------------------------- sources
 
 
-def _read_bvh(path: Path, species: str) -> Motion:
+def _import(path: Path, species: str) -> Motion:
     from ..bvh_mapping import import_bvh
 
     motion, _ = import_bvh(path, species)
@@ -90,8 +90,12 @@ def _read_bvh(path: Path, species: str) -> Motion:
 
 #: Readers of source clips by file suffix: ``reader(path, species) -> Motion`` on the
 #: species' skeleton, with stance labels and ``metadata["import"]`` when the importer
-#: finds them. (glTF: add ``".glb"`` and ``".gltf"`` here.)
-SOURCE_READERS: dict[str, Callable[[Path, str], Motion]] = {".bvh": _read_bvh}
+#: finds them. A glTF/GLB file gives its first animation.
+SOURCE_READERS: dict[str, Callable[[Path, str], Motion]] = {
+    ".bvh": _import,
+    ".glb": _import,
+    ".gltf": _import,
+}
 
 
 def _read_source(path: str | Path, species: str) -> Motion:
@@ -446,15 +450,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add ``real`` to the ``bench`` command group."""
     p = sub.add_parser(
         "real",
-        help="real motion capture (a folder of BVH clips) through transfer → refine → track",
+        help="real motion capture (BVH or glTF/GLB clips) through transfer → refine → track",
         description=(
-            "Import every BVH clip of DIR onto --species, cut it into windows of --seconds, "
-            "and run each window × target × method through the pipeline (transfer, "
+            "Import every BVH or glTF/GLB clip (its first animation) of DIR onto --species, "
+            "cut it into windows of --seconds, and run each window × target × method through the pipeline (transfer, "
             "refinement stage A, unassisted tracking); print one line per run, a summary "
             "and the issue's targets. Exit code 1 when a target is MISSED, 2 on bad input."
         ),
     )
-    p.add_argument("--data", required=True, metavar="DIR", help="folder of .bvh clips")
+    p.add_argument("--data", required=True, metavar="DIR",
+                   help="folder of .bvh, .glb or .gltf clips")
     p.add_argument("--targets", default=",".join(DEFAULT_TARGETS), metavar="A,B",
                    help=f"target species (default {','.join(DEFAULT_TARGETS)})")
     p.add_argument("--methods", default=",".join(DEFAULT_METHODS), metavar="M,N",
