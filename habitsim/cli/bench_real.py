@@ -455,7 +455,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             "Import every BVH or glTF/GLB clip (its first animation) of DIR onto --species, "
             "cut it into windows of --seconds, and run each window × target × method "
             "through the pipeline (transfer, refinement stage A, unassisted tracking); "
-            "print one line per run, a summary and the issue's targets. Exit code 1 when a target is MISSED, 2 on bad input."
+            "print one line per run, a summary and the issue's targets. Exit code 1 when "
+            "a target is MISSED, 2 on bad input."
         ),
     )
     p.add_argument("--data", required=True, metavar="DIR",
