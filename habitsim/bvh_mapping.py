@@ -91,7 +91,11 @@ CONFIDENCE_CHECKS = (
 CONFIDENCE_WARN = 0.67
 
 #: Known length units of BVH files and their size in metres.
-UNIT_SCALES: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+UNIT_SCALES: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
+#: The units the detection chooses among. Inches are given explicitly (``units="in"``):
+#: a leg of N inches is a plausible leg in centimetres too, and nothing in a file tells
+#: the two apart.
+DETECTED_UNITS: tuple[str, ...] = ("m", "cm", "mm")
 
 _FORE_SEGS = ("scapula", "shoulder", "elbow", "wrist", "toe")
 _HIND_SEGS = ("ilium", "hip", "knee", "hock", "toe")
@@ -1015,11 +1019,13 @@ def detect_frame(
         if leg is None or leg <= 0:
             ext = pos[0].max(axis=0) - pos[0].min(axis=0)
             leg = float(ext.max()) / 2.0
-        plausible = [u for u, s in UNIT_SCALES.items() if 0.02 <= leg * s <= 4.0]
+        plausible = [u for u in DETECTED_UNITS if 0.02 <= leg * UNIT_SCALES[u] <= 4.0]
         if len(plausible) == 1:
             uname = plausible[0]
         else:
-            uname = min(UNIT_SCALES, key=lambda u: abs(math.log(leg * UNIT_SCALES[u] / target)))
+            uname = min(
+                DETECTED_UNITS, key=lambda u: abs(math.log(leg * UNIT_SCALES[u] / target))
+            )
         scale = UNIT_SCALES[uname]
 
     # Up.

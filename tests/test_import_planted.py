@@ -36,7 +36,7 @@ for _s, _S in (("l", "L"), ("r", "R")):
 CM = 100.0
 
 
-def _foreign_rig(motion) -> BVHData:
+def _foreign_rig(motion, CM: float = CM) -> BVHData:  # noqa: N803 - the unit factor
     """The motion as a foreign rig: other names, 6 channels, cm, z up, helpers."""
     h = parse_bvh(bvh_text(motion))
     starts = h.channel_start
@@ -53,7 +53,8 @@ def _foreign_rig(motion) -> BVHData:
         if h.is_end_site[j]:
             parent = h.names[h.parents[j]]
             if parent.endswith("_toe"):  # a toe nub pointing into the ground instead
-                add(RENAME[parent] + "_Nub", RENAME[parent], [5.0, 0.0, -25.0], np.zeros((f, 6)))
+                add(RENAME[parent] + "_Nub", RENAME[parent], [0.05 * CM, 0.0, -0.25 * CM],
+                    np.zeros((f, 6)))
             else:
                 add(RENAME[parent] + "_End", RENAME[parent], h.offsets[j] * CM)
             continue
@@ -66,16 +67,17 @@ def _foreign_rig(motion) -> BVHData:
             vals[:, 3 + k] = h.frames[:, cols[c]]
         parent = "Rig_Root" if h.parents[j] < 0 else RENAME[h.names[h.parents[j]]]
         add(RENAME[name], parent, h.offsets[j] * CM, vals)
+        u = CM / 100.0  # helper sizes below are in cm
         if name == "pelvis":  # a sided helper chain longer than a leg
             prev = "Hips_jnt"
             for k in range(1, 6):
-                add(f"L_TailHelper0{k}", prev, [-15.0, 3.0, 0.0], np.zeros((f, 6)))
+                add(f"L_TailHelper0{k}", prev, [-15.0 * u, 3.0 * u, 0.0], np.zeros((f, 6)))
                 prev = f"L_TailHelper0{k}"
-            add(prev + "_End", prev, [-15.0, 0.0, 0.0])
+            add(prev + "_End", prev, [-15.0 * u, 0.0, 0.0])
         if name.endswith("f_shoulder"):
             side = RENAME[name][0]
-            add(f"{side}_Armor01", RENAME[name], [0.0, 5.0, 5.0], np.zeros((f, 6)))
-            add(f"{side}_Armor01_End", f"{side}_Armor01", [0.0, 5.0, 0.0])
+            add(f"{side}_Armor01", RENAME[name], [0.0, 5.0 * u, 5.0 * u], np.zeros((f, 6)))
+            add(f"{side}_Armor01_End", f"{side}_Armor01", [0.0, 5.0 * u, 0.0])
 
     kids: dict[str | None, list[dict]] = {}
     for n in nodes:
@@ -163,6 +165,15 @@ def test_planted_feet_on_the_ground(rig):
     # the metric's contacts on the imported clip agree with the source's labels
     f1 = np.asarray(motion.metadata["import"]["contact_f1"])
     assert np.all(f1 >= 0.85), f1
+
+
+def test_inches_given_explicitly(walk, rig):
+    inch = _foreign_rig(walk, CM=100.0 / 2.54)
+    m_in, map_in = import_bvh(inch, "dog", units="in")
+    m_cm, _ = import_bvh(rig, "dog")
+    assert map_in.frame.units == "in" and map_in.frame.scale == 0.0254
+    np.testing.assert_allclose(m_in.global_positions(), m_cm.global_positions(), atol=1e-5)
+    np.testing.assert_array_equal(m_in.contacts, m_cm.contacts)
 
 
 def test_unplanted_import_hovers_or_sinks(rig):

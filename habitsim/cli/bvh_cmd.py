@@ -42,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--units",
-        choices=("cm", "m", "mm"),
+        choices=("cm", "m", "mm", "in"),
         default=None,
         help="length unit of the file (default: detect)",
     )
