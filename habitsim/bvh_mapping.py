@@ -1138,6 +1138,34 @@ def _shortest_arc(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
+def _aim(bone: np.ndarray, d: np.ndarray, side: np.ndarray | None = None) -> np.ndarray:
+    """Quaternions (F, 4) turning unit ``bone`` (3,) onto unit ``d`` (F, 3), in the parent's
+    frame, with the joint's lateral axis (+y) kept as close as it can be to ``side``
+    ((F, 3), default the parent's own +y).
+
+    Aiming a chain bone by bone with shortest arcs leaves each bone's twist to chance,
+    and along the spine the twists add up: a chest rolled by tens of degrees hangs the
+    fore legs sideways. Keeping every joint's lateral axis on its parent's (or, for the
+    chest, on the source's shoulder line) keeps the rolls the source has and no others.
+    Where ``d`` is (nearly) along the lateral reference, the shortest arc is used.
+    """
+    f = d.shape[0]
+    ref = np.broadcast_to(np.array([0.0, 1.0, 0.0]), (f, 3)) if side is None else side
+
+    def frame(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        y = y - np.sum(y * x, axis=-1, keepdims=True) * x
+        n = np.linalg.norm(y, axis=-1, keepdims=True)
+        ok = (n[:, 0] > 1e-3) & (np.linalg.norm(x, axis=-1) > 0.5)
+        y = y / np.where(ok[:, None], n, 1.0)
+        return np.stack([x, y, np.cross(x, y)], axis=-1), ok
+
+    a, ok_a = frame(np.broadcast_to(bone, (f, 3)), np.broadcast_to([0.0, 1.0, 0.0], (f, 3)))
+    b, ok_b = frame(d, ref)
+    ok = ok_a & ok_b
+    m = np.where(ok[:, None, None], b @ np.swapaxes(a, -1, -2), np.eye(3))
+    return np.where(ok[:, None], matrix_to_quat(m), _shortest_arc(bone, d))
+
+
 def _driven() -> list[tuple[str, str, tuple[str, ...], int]]:
     """(joint, child, chain, index of joint in chain) for every bone-driving joint."""
     out = []
@@ -1228,8 +1256,11 @@ def retarget(
                 ok = n[:, 0] > 1e-9
                 d_local = np.einsum("fba,fb->fa", g[:, p], d / np.where(ok[:, None], n, 1.0))
                 bone = skel.offsets[_IDX[child]]
-                arc = _shortest_arc(bone / np.linalg.norm(bone), d_local)
-                q[:, j] = np.where(ok[:, None], arc, stand_q[j])
+                side = None
+                if name == "spine3" and "lf_shoulder" in j2s and "rf_shoulder" in j2s:
+                    side = np.einsum("fba,fb->fa", g[:, p], s("lf_shoulder") - s("rf_shoulder"))
+                rot = _aim(bone / np.linalg.norm(bone), d_local, side)
+                q[:, j] = np.where(ok[:, None], rot, stand_q[j])
         else:  # pragma: no cover - every non-root, non-end joint drives a bone
             q[:, j] = stand_q[j]
         g[:, j] = g[:, p] @ quat_to_matrix(q[:, j])

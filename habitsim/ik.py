@@ -37,7 +37,7 @@ import numpy as np
 
 from .errors import IKError
 from .rotations import quat_mul, quat_to_matrix, rot_x, rot_y
-from .skeleton import JOINT_NAMES, get_skeleton, standing_leg_angles
+from .skeleton import ABDUCTION_SIGN, JOINT_NAMES, get_skeleton, standing_leg_angles
 from .species import FEET, Species, load_species
 
 __all__ = [
@@ -246,6 +246,7 @@ def leg_ik(
     foot_inclination: np.ndarray | float | None = None,
     distal_band: tuple[float, float] | None = None,
     max_inclination_change: np.ndarray | float = 0.0,
+    abduction_range: tuple[float, float] | None = None,
 ) -> LegIKResult:
     """Analytic IK of one leg for a toe target, vectorised over frames.
 
@@ -267,6 +268,11 @@ def leg_ik(
             most ``max_inclination_change``: the foot segment takes up the reach, as the
             fetlock and hock do in a real stance, instead of the trunk bobbing.
         max_inclination_change: (T,) or scalar bound [rad] of that turn (0: none).
+        abduction_range: optional (lo, hi) bounds [rad] of the abduction as the R_x angle
+            of the shoulder / hip. A toe target close to the girdle's height (a paw
+            tucked up in swing) otherwise asks for an abduction of up to 90° to put it in
+            the leg plane; clamped, the leg stays in its range and the toe lands at the
+            target's projection on the leg plane (``reach_error`` reports the miss).
 
     Returns:
         The :class:`LegIKResult`; ``reach_error`` is the honest toe error after clamping
@@ -301,8 +307,20 @@ def leg_ik(
     shoulder = root + _mv(g, np.array([0.0, 0.0, -geo.girdle]))
     d = _mtv(g, tgt - shoulder)  # target in the girdle frame
     abd = np.arctan2(d[:, 1], -d[:, 2])
+    clamped = np.zeros(t, dtype=bool)
+    if abduction_range is not None:
+        free = abd
+        abd = np.clip(abd, min(abduction_range), max(abduction_range))
+        clamped = abd != free
     frame = g @ _rx(abd)  # leg-plane frame: the chain rotates about its +y
     p = _mtv(frame, tgt - shoulder)
+    if np.any(clamped):
+        # the target is off the leg plane: aim at the plane's point at the target's
+        # height (the miss is horizontal, a foot on the ground stays on it)
+        f20, f22 = frame[:, 2, 0], frame[:, 2, 2]
+        ok = clamped & (np.abs(f22) > 1e-3)
+        pz = (tgt[:, 2] - shoulder[:, 2] - f20 * p[:, 0]) / np.where(ok, f22, 1.0)
+        p[:, 2] = np.where(ok, pz, p[:, 2])
     w = _mtv(frame, np.broadcast_to(np.array([0.0, 0.0, -1.0]), (t, 3)))
     beta_down = np.arctan2(-w[:, 0], -w[:, 2])
     b3 = beta_down - finc
@@ -456,6 +474,16 @@ def axial_frames(species: str | Species, root_positions: np.ndarray, rotations: 
     return AxialFrames(girdle_root=roots, parent_rotation=parents)
 
 
+def _abduction_range(sp: Species, leg: str) -> tuple[float, float]:
+    """The R_x-angle range of a leg's shoulder / hip abduction from the species' limits."""
+    from .hinges import hinge_limits
+
+    geo = leg_geometry(sp, leg)
+    lo, hi = hinge_limits(sp)[f"{geo.joints[1]}_abd"]
+    sign = ABDUCTION_SIGN[geo.prefix[0]]
+    return (sign * lo, sign * hi)
+
+
 @dataclass(frozen=True)
 class PoseIK:
     """Result of :func:`pose_from_targets`.
@@ -480,6 +508,7 @@ def pose_from_targets(
     toe_targets: np.ndarray,
     girdle_flex: np.ndarray | None = None,
     foot_inclination: np.ndarray | None = None,
+    limit_abduction: bool = False,
 ) -> PoseIK:
     """Solve all four legs for toe targets on a posed trunk.
 
@@ -491,6 +520,8 @@ def pose_from_targets(
         toe_targets: (T, 4, 3) world toe targets, legs LF, RF, LH, RH [m].
         girdle_flex: optional (T, 4) girdle flexion [rad] (default: standing).
         foot_inclination: optional (T, 4) foot inclination [rad] (default: standing).
+        limit_abduction: keep each shoulder / hip abduction within the species' joint
+            range (:func:`leg_ik`'s ``abduction_range``).
 
     Returns:
         A :class:`PoseIK` with the completed rotations and per-leg reach errors.
@@ -510,6 +541,7 @@ def pose_from_targets(
     frames = axial_frames(sp, root, rot)
     legs = []
     for k, leg in enumerate(LEGS):
+        rng = _abduction_range(sp, leg) if limit_abduction else None
         res = leg_ik(
             sp,
             leg,
@@ -518,6 +550,7 @@ def pose_from_targets(
             tg[:, k],
             None if girdle_flex is None else girdle_flex[:, k],
             None if foot_inclination is None else foot_inclination[:, k],
+            abduction_range=rng,
         )
         geo = leg_geometry(sp, leg)
         q = res.quaternions()
