@@ -42,7 +42,7 @@ from scipy.optimize import nnls
 
 from habitsim.errors import InvalidMotionError
 from habitsim.motion import Motion
-from habitsim.qpos import load_species_model, motion_to_qpos
+from habitsim.qpos import motion_to_qpos, species_model
 
 __all__ = [
     "DYNAMIC_KEYS",
@@ -190,7 +190,7 @@ def dynamic_metrics(
     Returns:
         ``root_residual_mg``, ``root_residual_torque_mgl``, ``torque_saturation``.
     """
-    model = load_species_model(motion.species) if model is None else model
+    model = species_model(motion.species) if model is None else model
     traj = motion_to_qpos(motion, model)
     if contacts is None:
         contacts = motion.contacts if motion.contacts is not None else motion.detect_contacts()

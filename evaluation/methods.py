@@ -214,6 +214,8 @@ def direct_transfer(source: Motion, target: str, *, seed: int = 0) -> Motion:
     meta = dict(source.metadata)
     meta.update(method="direct", source_species=source.species, species=tgt.name)
     labels = None if source.contacts is None else source.contacts.copy()
+    if labels is not None:  # the stance labels are the source's, frame for frame
+        meta["transfer"] = {"method": "direct", "contacts": {"method": "source"}}
     return Motion(
         tgt.name, source.fps, source.root_positions * k, source.rotations.copy(), labels, meta
     )
@@ -237,7 +239,12 @@ def ground_truth_transfer(source: Motion, target: str, *, seed: int = 0) -> Moti
         out = generate(target, like=source)
     except GaitError as e:
         raise MethodUnavailable(f"no paired ground truth: {e}") from None
-    out.metadata = {**out.metadata, "method": "ground_truth", "source_species": source.species}
+    out.metadata = {
+        **out.metadata,
+        "method": "ground_truth",
+        "source_species": source.species,
+        "transfer": {"method": "ground_truth", "contacts": {"method": "planned"}},
+    }
     return out
 
 

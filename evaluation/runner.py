@@ -10,7 +10,10 @@ Usage (CLI: ``habitsim eval``)::
 
 Pairs: every clip of the ``split`` (default ``val``) × every target species (default:
 the data set's training species), the source's own species left out. For each pair and
-method, :func:`evaluate_pair` (run by an executor, in any process or machine):
+method, :func:`evaluate_pair` (run by an executor, in any process or machine) runs the
+clip through :func:`habitsim.pipeline.run_clip` (transfer → refine → track, the stance
+labels passed from stage to stage; its refinement check is off here, so the rows measure
+the refinement as it is) and measures:
 
 1. **transfer** with the method (:mod:`habitsim.evaluation.methods`); a method that
    cannot serve the pair gives a row with ``status = "unavailable"``;
@@ -22,15 +25,16 @@ method, :func:`evaluate_pair` (run by an executor, in any process or machine):
    biomechanical consistency (:mod:`habitsim.evaluation.biomech`) against the target's
    gait table, from foot contacts detected on the geometry (every method alike);
 3. **refine** with :func:`habitsim.refine.refine` (``--refine kinematic|dynamics``,
-   with ``fallback``: a failed solve keeps the input and says so in ``refine_status``)
-   when that package provides it — else ``refine_status = "unavailable"`` and the
-   transferred motion goes on unrefined. Stance phases come from the method's contact
-   labels when it sets them (``direct``: the source's; ``ground_truth``: the planned
-   stance), else refinement detects them;
+   with ``fallback``: a failed solve keeps the input and says so in ``refine_status``).
+   Stance phases are the transfer's labels (``direct``: the source's; ``ground_truth``:
+   the planned stance; the learned methods:
+   :func:`habitsim.models.transfer.transfer_contacts`), found by the transfer stage
+   when a method sets none;
 4. kinematic (:mod:`~habitsim.evaluation.kinematic`) and dynamic
    (:mod:`~habitsim.evaluation.dynamic`) plausibility of the reference that is tracked
    (the refined motion, or the transferred one);
-5. **track** it with :func:`habitsim.sim.track` (unassisted by default): the simulated
+5. **track** it with :func:`habitsim.sim.track` (unassisted by default; the reference
+   contact labels are the refined ones): the simulated
    metrics of METRICS.md, and the biomechanical score of the simulated motion from its
    simulated foot contacts (``sim_biomech_score``; NaN when the transferred motion is
    no gait, e.g. a sit).
@@ -419,52 +423,6 @@ def _call_with_supported(fn: Callable[..., Any], *args: Any, **kw: Any) -> Any:
     return fn(*args, **{k: v for k, v in kw.items() if k in params})
 
 
-def _refine(motion: Motion, mode: str) -> tuple[Motion, str]:
-    """Refine with :func:`habitsim.refine.refine` if available: (motion, status)."""
-    if mode == "none":
-        return motion, "none"
-    try:
-        from habitsim.refine import refine  # type: ignore[attr-defined]
-    except ImportError:
-        return motion, "unavailable"
-    params = inspect.signature(refine).parameters
-    kw: dict[str, Any] = {}
-    if "dynamics" in params:
-        kw["dynamics"] = mode == "dynamics"
-    elif "mode" in params:
-        kw["mode"] = mode
-    elif "stage" in params:
-        kw["stage"] = "B" if mode == "dynamics" else "A"
-    elif mode == "dynamics":
-        return motion, "unavailable (no dynamics stage)"
-    if "fallback" in params:
-        kw["fallback"] = True
-    if "options" in params:
-        # the runner measures every metric itself afterwards: skip refine's own before /
-        # after metrics (a MuJoCo inverse-dynamics pass over the clip, twice)
-        from habitsim.refine import RefineOptions  # type: ignore[attr-defined]
-
-        kw["options"] = RefineOptions(metrics=False)
-    res = refine(motion, **kw)
-    out = res if isinstance(res, Motion) else getattr(res, "motion", None)
-    if not isinstance(out, Motion):
-        raise HabitsimError(
-            f"habitsim.refine.refine returned {type(res).__name__} without a motion"
-        )
-    status = getattr(res, "status", None)
-    if status is None and isinstance(getattr(res, "report", None), dict):
-        status = res.report.get("status")
-    return out, str(status if status is not None else "ok")
-
-
-def _track(motion: Motion, task: PairTask) -> Any:
-    from habitsim.sim import track  # raises ImportError when absent
-
-    return _call_with_supported(
-        track, motion, controller=task.controller, assist=task.assist, seed=task.seed
-    )
-
-
 def _row_base(task: PairTask) -> dict[str, Any]:
     return {
         "key": task.key,
@@ -493,8 +451,9 @@ def evaluate_pair(task: PairTask) -> dict[str, Any]:
     Never raises for a failure inside the pair: the row's ``status`` says what happened.
     """
     from habitsim.motion import load_motion
+    from habitsim.pipeline import run_clip
 
-    from .methods import MethodUnavailable, ground_truth_transfer, run_method
+    from .methods import MethodUnavailable, ground_truth_transfer
 
     t0 = time.perf_counter()
     c0 = time.process_time()
@@ -502,12 +461,25 @@ def evaluate_pair(task: PairTask) -> dict[str, Any]:
     try:
         src = load_motion(task.clip_path)
         try:
-            out = run_method(task.method, src, task.target, seed=task.seed)
+            # transfer → refine → track: the one pipeline (habitsim.pipeline); the
+            # refinement check is off so the rows measure the refinement as it is
+            run = run_clip(
+                src,
+                task.target,
+                method=task.method,
+                refine=task.refine,
+                controller=task.controller,
+                assist=task.assist,
+                seed=task.seed,
+                track=task.track,
+                guard=False,
+            )
         except MethodUnavailable as e:
             row.update(status="unavailable", note=str(e))
             return row
-        t1 = time.perf_counter()
-        row["time_transfer_s"] = t1 - t0
+        out = run.transferred.motion
+        ref = run.refined.motion
+        row["time_transfer_s"] = run.times["transfer"]
         row.update(_paper_metrics(task, src, out))
         try:
             gt = out if task.method == "ground_truth" else ground_truth_transfer(src, task.target)
@@ -523,30 +495,20 @@ def evaluate_pair(task: PairTask) -> dict[str, Any]:
 
         row.update(biomech_metrics(out, use_labels=False).to_dict())
 
-        t2 = time.perf_counter()
-        ref, row["refine_status"] = _refine(out, task.refine)
-        row["time_refine_s"] = time.perf_counter() - t2
-        from .kinematic import kinematic_metrics
+        row["refine_status"] = run.refined.status
+        row["time_refine_s"] = run.times["refine"]
+        from .kinematic import KINEMATIC_KEYS
 
-        row.update(kinematic_metrics(ref))
+        row.update({k: run.refined.metrics[k] for k in KINEMATIC_KEYS})
         if task.dynamic:
             from .dynamic import dynamic_metrics
 
-            row.update(dynamic_metrics(ref))
-        sim_res = None
+            row.update(dynamic_metrics(ref, run.model, run.refined.contacts))
+        sim_res = run.track_result
         if task.track:
-            t3 = time.perf_counter()
-            try:
-                sim_res = _track(ref, task)
-            except ImportError:
-                row["track_status"] = "unavailable"
-            except HabitsimError as e:
-                row["track_status"] = f"error: {e}"
-            except Exception as e:  # noqa: BLE001 - a tracker bug must not stop the run
-                row["track_status"] = f"error: {type(e).__name__}: {e}"
-            row["time_track_s"] = time.perf_counter() - t3
+            row["track_status"] = run.tracked.status
+            row["time_track_s"] = run.times["track"]
             if sim_res is not None:
-                row["track_status"] = "fell" if getattr(sim_res, "failed", False) else "ok"
                 row.update(
                     {
                         k: (float(v) if isinstance(v, bool | int | float) else v)

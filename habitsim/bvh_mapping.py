@@ -32,6 +32,7 @@ downstream).
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import tomllib
@@ -45,6 +46,14 @@ import numpy as np
 from .bvh import BVHData, read_bvh
 from .errors import SkeletonMappingError
 from .motion import Motion
+from .planting import (
+    FOOT_ANCHORS,
+    SourceStance,
+    contact_f1,
+    label_source_stance,
+    plant_legs,
+    smooth_path,
+)
 from .rotations import matrix_to_quat, quat_fix_continuity, quat_identity, quat_to_matrix
 from .skeleton import JOINT_NAMES, PARENTS, get_skeleton
 from .species import Species, load_species
@@ -61,10 +70,32 @@ __all__ = [
     "is_habitsim_bvh",
     "retarget",
     "import_bvh",
+    "read_source",
+    "SOURCE_SUFFIXES",
+    "CONFIDENCE_CHECKS",
+    "CONFIDENCE_WARN",
+    "is_helper_name",
+    "describe_hierarchy",
 ]
 
+#: The checks behind a leg's mapping confidence (each scores 0, 0.5 or 1; the mean counts).
+CONFIDENCE_CHECKS = (
+    "names: the chain's joint names say fore / hind as the leg it was mapped to (0.5: no "
+    "cue; 1 for a hand-made map)",
+    "symmetry: its left/right partner has the same number of joints and a length within "
+    "10 % (0.5: within 25 %)",
+    "ground: the foot rests on the ground (floor within 10 % of leg length of the lowest "
+    "foot's) and has stance frames",
+)
+#: Legs whose confidence is below this are reported as warnings.
+CONFIDENCE_WARN = 0.67
+
 #: Known length units of BVH files and their size in metres.
-UNIT_SCALES: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+UNIT_SCALES: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
+#: The units the detection chooses among. Inches are given explicitly (``units="in"``):
+#: a leg of N inches is a plausible leg in centimetres too, and nothing in a file tells
+#: the two apart.
+DETECTED_UNITS: tuple[str, ...] = ("m", "cm", "mm")
 
 _FORE_SEGS = ("scapula", "shoulder", "elbow", "wrist", "toe")
 _HIND_SEGS = ("ilium", "hip", "knee", "hock", "toe")
@@ -116,6 +147,29 @@ _HIND_WORDS = (
     "tibia",
     "toe",
 )
+#: Name tokens of rig helpers that are never part of a limb: tails, armour plates, 3ds Max
+#: biped nubs and footstep trackers, IK poles and targets, twist and roll bones.
+_HELPER_TOKENS = frozenset(
+    {
+        "tail",
+        "armor",
+        "armour",
+        "nub",
+        "footstep",
+        "footsteps",
+        "helper",
+        "ik",
+        "pole",
+        "target",
+        "twist",
+        "roll",
+        "dummy",
+        "ctrl",
+        "control",
+        "prop",
+        "weapon",
+    }
+)
 _NOT_LIMB = (
     "ear",
     "eye",
@@ -157,6 +211,20 @@ def name_cues(name: str) -> tuple[str | None, str]:
         else:
             rest.append(low)
     return side, "".join(rest)
+
+
+def is_helper_name(name: str) -> bool:
+    """True if a joint name marks a rig helper that is never a limb bone.
+
+    Tails, armour plates, biped nubs and footstep trackers, IK poles and targets, twist
+    and roll bones (:data:`_HELPER_TOKENS`): ``Dog_LeftTail001``, ``Bip01_L_Toe0Nub``,
+    ``Bip01_Footsteps``, ``LeftLegIKTarget``, ``forearm_twist.L``.
+    """
+    toks = [t.lower() for t in _TOKEN_RE.findall(name)]
+    if any(t in _HELPER_TOKENS for t in toks):
+        return True
+    low = name.lower()
+    return any(w in low for w in _HELPER_TOKENS if len(w) >= 5) or "tail" in low
 
 
 def _fore_vote(core: str) -> int:
@@ -236,6 +304,11 @@ class JointMapping:
         root_scale: factor applied to the source root translation (species hip height /
             source hip height) [-].
         notes: human-readable remarks (guesses made, fallbacks taken).
+        confidence: per leg (``lf``, ``rf``, ``lh``, ``rh``) a score in [0, 1] that the
+            chain mapped to it is that leg (:data:`CONFIDENCE_CHECKS`); empty until the
+            motion has been retargeted.
+        warnings: what a user should check by hand (a leg below
+            :data:`CONFIDENCE_WARN`, legs that do not mirror each other).
     """
 
     joints: dict[str, str | None]
@@ -243,6 +316,8 @@ class JointMapping:
     frame: FrameConversion | None = None
     root_scale: float = 1.0
     notes: list[str] = field(default_factory=list)
+    confidence: dict[str, float] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
 
     def mapped(self) -> dict[str, str]:
         """Only the mapped habitsim joints: habitsim name → source name."""
@@ -260,7 +335,11 @@ class JointMapping:
         if self.frame is not None:
             head.append(f"  frame: {self.frame.describe()}; root scale {self.root_scale:.4g}")
         body = ["  " + s for s in self.lines()]
+        if self.confidence:
+            body.append("  leg confidence: " + ", ".join(
+                f"{k} {v:.2f}" for k, v in self.confidence.items()))
         tail = ["  note: " + n for n in self.notes]
+        tail += ["  WARNING: " + w for w in self.warnings]
         return "\n".join(head + body + tail)
 
     def to_dict(self) -> dict[str, Any]:
@@ -270,6 +349,8 @@ class JointMapping:
             "joints": self.mapped(),
             "root_scale": self.root_scale,
             "notes": list(self.notes),
+            "confidence": dict(self.confidence),
+            "warnings": list(self.warnings),
         }
         if self.frame is not None:
             d.update(
@@ -302,6 +383,7 @@ class _Tree:
             self.depth[j] = 0 if p < 0 else self.depth[p] + 1
         self.cues = [name_cues(n) for n in bvh.names]
         self.blen = np.linalg.norm(bvh.offsets, axis=1)
+        self.helper = [is_helper_name(n) for n in bvh.names]
 
     def ancestors(self, j: int) -> list[int]:
         out = []
@@ -322,11 +404,32 @@ class _Tree:
         return out
 
     def is_pure(self, j: int) -> bool:
-        while self.kids[j]:
-            if len(self.kids[j]) > 1:
+        """True if the subtree of j is one chain (rig helpers hanging off it aside)."""
+        while True:
+            kids = [c for c in self.kids[j] if not self.helper[c]]
+            if not kids:
+                return True
+            if len(kids) > 1:
                 return False
-            j = self.kids[j][0]
-        return True
+            j = kids[0]
+
+    def leg_path(self, j: int) -> list[int]:
+        """The limb chain from j down: rig helpers skipped, the deepest real child taken.
+
+        A trailing End Site is kept only when it hangs directly from the last real joint
+        (it is then the toe tip); an End Site below a helper (a biped nub) is not.
+        """
+        out = [j]
+        while True:
+            kids = [c for c in self.kids[j] if not self.helper[c]]
+            real = [c for c in kids if not self.bvh.is_end_site[c]]
+            if real:
+                j = max(real, key=lambda c: self.height[c])  # first on ties
+                out.append(j)
+                continue
+            if kids and not self.bvh.is_end_site[j]:
+                out.append(kids[0])
+            return out
 
     def path(self, a: int, b: int) -> list[int]:
         """Joints from a to b through the tree (both included)."""
@@ -381,9 +484,9 @@ def _sided_limbs(t: _Tree) -> list[_Limb]:
         p = t.parents[j]
         if p >= 0 and t.cues[p][0] is not None:
             continue
-        if any(w in core for w in _NOT_LIMB):
+        if any(w in core for w in _NOT_LIMB) or t.helper[j]:
             continue
-        chain = t.deepest_path(j)
+        chain = t.leg_path(j)
         if len(chain) < 3:
             continue
         vote = sum(_fore_vote(t.cues[c][1]) for c in chain if not t.bvh.is_end_site[c])
@@ -398,11 +501,11 @@ def _unsided_limbs(t: _Tree) -> list[tuple[_Limb, _Limb]]:
         cands = []
         for c in t.kids[p]:
             core = t.cues[c][1]
-            if t.bvh.is_end_site[c] or not t.is_pure(c) or t.height[c] < 2:
+            if t.bvh.is_end_site[c] or t.helper[c] or not t.is_pure(c) or t.height[c] < 2:
                 continue
             if any(w in core for w in ("tail", "neck", "head", "spine", "chest") + _NOT_LIMB):
                 continue
-            chain = t.deepest_path(c)
+            chain = t.leg_path(c)
             cands.append(_Limb(c, chain, None, sum(_fore_vote(t.cues[k][1]) for k in chain)))
         used: set[int] = set()
         for a in range(len(cands)):
@@ -435,9 +538,9 @@ def _leg_roles(t: _Tree, chain: list[int], fore: bool) -> list[int | None]:
     else:
 
         def upper(c: str) -> bool:
-            return any(w in c for w in ("upleg", "thigh", "upperleg", "femur")) or c.startswith(
-                "hip"
-            )
+            return any(
+                w in c for w in ("upleg", "thigh", "upperleg", "legupper", "femur")
+            ) or c.startswith("hip")
 
         girdle_words = ("pelvis", "ilium", "hipbone")
     u = next((k for k in range(min(3, len(chain))) if upper(cores[k])), None)
@@ -450,7 +553,14 @@ def _leg_roles(t: _Tree, chain: list[int], fore: bool) -> list[int | None]:
         )
     roles: list[int | None] = [chain[u - 1] if u >= 1 else None]
     roles += [chain[u], chain[u + 1], chain[u + 2]]
-    roles.append(chain[u + 3] if len(chain) > u + 3 else None)
+    # The toe is the chain's last real joint (joints between the foot and it, such as a
+    # biped's ankle-to-toe segment, are spanned by the foot bone); an End Site is the toe
+    # only when no real joint follows the foot.
+    real = [c for c in chain if not t.bvh.is_end_site[c]]
+    if len(real) > u + 3:
+        roles.append(real[-1])
+    else:
+        roles.append(chain[u + 3] if len(chain) > u + 3 else None)
     return roles
 
 
@@ -467,10 +577,15 @@ def _analyse(bvh: BVHData) -> _Analysis:
     t = _Tree(bvh)
     notes: list[str] = []
     limbs = _sided_limbs(t)
-    lefts = sorted((lb for lb in limbs if lb.side == "l"), key=lambda lb: -t.chain_length(lb.chain))
-    rights = sorted(
-        (lb for lb in limbs if lb.side == "r"), key=lambda lb: -t.chain_length(lb.chain)
-    )
+
+    def rank(lb: _Limb) -> tuple[bool, float]:
+        # Chains named like limbs first (a long unnamed chain never outranks a named leg),
+        # then the longest.
+        named = any(_fore_vote(t.cues[c][1]) != 0 for c in lb.chain)
+        return (not named, -t.chain_length(lb.chain))
+
+    lefts = sorted((lb for lb in limbs if lb.side == "l"), key=rank)
+    rights = sorted((lb for lb in limbs if lb.side == "r"), key=rank)
     pairs: list[tuple[_Limb, _Limb]]
     geometric = False
     if len(lefts) >= 2 and len(rights) >= 2:
@@ -665,60 +780,89 @@ def _resolve_sides(bvh: BVHData, an: _Analysis, frame: FrameConversion) -> None:
 
 
 def load_joint_map(path: str | Path) -> dict[str, Any]:
-    """Read a joint-map TOML file.
+    """Read a joint-map file (JSON or TOML).
 
-    Format::
+    JSON::
 
+        {"extends": "auto", "units": "cm", "up": "y",
+         "map": {"lh_hip": "b_LeftLegUpper", "lh_ilium": null}}
+
+    TOML::
+
+        extends = "auto"    # optional: start from the automatic mapping
         units = "cm"        # optional: m, cm, mm
         up = "y"            # optional: x, y, z with optional sign
         [map]
         pelvis = "Hips"
         lf_shoulder = "LeftArm"
-        ...
+        lh_ilium = ""       # unmapped (JSON: null)
+
+    Without ``extends`` the file is the whole mapping (joints it does not name keep the
+    species' standing pose); with ``extends = "auto"`` it overrides only the joints it
+    names on top of the automatic mapping (:func:`auto_map`).
 
     Args:
-        path: the ``.toml`` file.
+        path: the ``.json`` or ``.toml`` file.
 
     Returns:
-        ``{"map": {habitsim: source}, "units": str | None, "up": str | None}``.
+        ``{"map": {habitsim: source | None}, "units": str | None, "up": str | None,
+        "extends": "auto" | None}``.
 
     Raises:
-        SkeletonMappingError: unreadable TOML, a missing ``[map]`` table, non-string values,
-            unknown keys or unknown habitsim joint names (the message lists the valid ones).
+        SkeletonMappingError: unreadable file, an unknown suffix, a missing ``map`` table,
+            non-string values, unknown keys or unknown habitsim joint names (the message
+            lists the valid ones).
     """
     p = Path(path)
+    kind = p.suffix.lower()
+    if kind not in (".json", ".toml"):
+        raise SkeletonMappingError(
+            f"{p}: unknown joint-map file type {p.suffix!r}; valid: .json, .toml"
+        )
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
+        text = p.read_text(encoding="utf-8")
+        data = json.loads(text) if kind == ".json" else tomllib.loads(text)
     except FileNotFoundError:
         raise SkeletonMappingError(f"{p}: no such joint-map file") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise SkeletonMappingError(f"{p}: cannot read joint-map TOML ({e})") from e
-    unknown = sorted(set(data) - {"map", "units", "up"})
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, ValueError) as e:
+        raise SkeletonMappingError(
+            f"{p}: cannot read joint-map {kind[1:].upper()} ({str(e)[:200]})"
+        ) from e
+    if not isinstance(data, dict):
+        raise SkeletonMappingError(f"{p}: a joint map must be a table/object with a 'map' key")
+    unknown = sorted(set(data) - {"map", "units", "up", "extends"})
     if unknown:
-        raise SkeletonMappingError(f"{p}: unknown keys {unknown}; valid: map, units, up")
+        raise SkeletonMappingError(
+            f"{p}: unknown keys {unknown[:10]}; valid: map, units, up, extends"
+        )
     m = data.get("map")
     if not isinstance(m, dict) or not m:
         raise SkeletonMappingError(
             f'{p}: needs a non-empty [map] table of habitsim_joint = "SourceJoint"'
         )
+    out: dict[str, str | None] = {}
     for k, v in m.items():
-        if not isinstance(v, str):
+        if v is not None and not isinstance(v, str):
             raise SkeletonMappingError(
-                f"{p}: [map] {k} must be a source joint name (string), got {v!r}"
+                f"{p}: [map] {k} must be a source joint name (string), got {v!r:.60}"
             )
+        out[k] = v or None
     bad = sorted(set(m) - set(JOINT_NAMES))
     if bad:
         raise SkeletonMappingError(
-            f"{p}: unknown habitsim joints {bad}; valid: {', '.join(JOINT_NAMES)}"
+            f"{p}: unknown habitsim joints {bad[:10]}; valid: {', '.join(JOINT_NAMES)}"
         )
-    for k in ("units", "up"):
+    for k in ("units", "up", "extends"):
         if k in data and not isinstance(data[k], str):
-            raise SkeletonMappingError(f"{p}: {k} must be a string, got {data[k]!r}")
-    return {"map": dict(m), "units": data.get("units"), "up": data.get("up")}
+            raise SkeletonMappingError(f"{p}: {k} must be a string, got {data[k]!r:.60}")
+    ext = data.get("extends")
+    if ext is not None and ext != "auto":
+        raise SkeletonMappingError(f"{p}: unknown extends {ext!r:.60}; valid: auto")
+    return {"map": out, "units": data.get("units"), "up": data.get("up"), "extends": ext}
 
 
 def validate_joint_map(
-    joint_map: Mapping[str, str], bvh: BVHData, where: str = "joint map"
+    joint_map: Mapping[str, str | None], bvh: BVHData, where: str = "joint map"
 ) -> dict[str, str | None]:
     """Check an explicit habitsim → source mapping against a BVH skeleton.
 
@@ -740,20 +884,22 @@ def validate_joint_map(
         raise SkeletonMappingError(
             f"{where}: unknown habitsim joints {bad}; valid: {', '.join(JOINT_NAMES)}"
         )
-    missing = sorted({v for v in joint_map.values() if v not in bvh.names})
+    missing = sorted({v for v in joint_map.values() if v is not None and v not in bvh.names})
     if missing:
+        names = ", ".join(bvh.names[:80]) + (" …" if len(bvh.names) > 80 else "")
         raise SkeletonMappingError(
-            f"{where}: source joints {missing} are not in {bvh.source}; "
-            f"its joints: {', '.join(bvh.names)}"
+            f"{where}: source joints {missing[:10]} are not in {bvh.source}; its joints: {names}"
         )
     seen: dict[str, str] = {}
     for k, v in joint_map.items():
+        if v is None:
+            continue
         if v in seen:
             raise SkeletonMappingError(
                 f"{where}: source joint {v!r} is mapped to both {seen[v]} and {k}"
             )
         seen[v] = k
-    if "pelvis" not in joint_map:
+    if not joint_map.get("pelvis"):
         raise SkeletonMappingError(
             f'{where}: must map pelvis (the root) to a source joint, e.g. pelvis = "Hips"'
         )
@@ -873,11 +1019,13 @@ def detect_frame(
         if leg is None or leg <= 0:
             ext = pos[0].max(axis=0) - pos[0].min(axis=0)
             leg = float(ext.max()) / 2.0
-        plausible = [u for u, s in UNIT_SCALES.items() if 0.02 <= leg * s <= 4.0]
+        plausible = [u for u in DETECTED_UNITS if 0.02 <= leg * UNIT_SCALES[u] <= 4.0]
         if len(plausible) == 1:
             uname = plausible[0]
         else:
-            uname = min(UNIT_SCALES, key=lambda u: abs(math.log(leg * UNIT_SCALES[u] / target)))
+            uname = min(
+                DETECTED_UNITS, key=lambda u: abs(math.log(leg * UNIT_SCALES[u] / target))
+            )
         scale = UNIT_SCALES[uname]
 
     # Up.
@@ -1000,16 +1148,23 @@ def _driven() -> list[tuple[str, str, tuple[str, ...], int]]:
     return out
 
 
-def retarget(bvh: BVHData, mapping: JointMapping, species: str | Species) -> Motion:
+def retarget(
+    bvh: BVHData, mapping: JointMapping, species: str | Species, plant: bool = True
+) -> Motion:
     """Retarget a BVH motion onto a species' skeleton (see the module docstring).
 
     Args:
         bvh: the source file.
         mapping: the joint mapping with its ``frame`` set; ``root_scale`` is filled in.
         species: the target species.
+        plant: solve the legs onto the source's footholds (:mod:`habitsim.planting`); when
+            False the legs keep the bone directions of the source.
 
     Returns:
-        The retargeted :class:`~habitsim.motion.Motion` (fps from the frame time).
+        The retargeted :class:`~habitsim.motion.Motion` (fps from the frame time), with
+        the source's stance labels as ``contacts`` and ``metadata["import"]`` saying how
+        they were found (foot joints, floors, duty factors), how well the imported feet
+        agree with them (``contact_f1`` per foot) and how the feet were planted.
 
     Raises:
         SkeletonMappingError: no frame conversion or no pelvis in the mapping.
@@ -1079,11 +1234,19 @@ def retarget(bvh: BVHData, mapping: JointMapping, species: str | Species) -> Mot
             q[:, j] = stand_q[j]
         g[:, j] = g[:, p] @ quat_to_matrix(q[:, j])
 
+    # Stance of the source's own feet, and the ground they stand on.
+    t = _Tree(bvh)
+    stance = _source_stance(bvh, t, j2s, src, mapping)
     # Root translation scaled by the hip-height ratio, heights above the source's ground.
     feet = [bvh.index(j2s[n]) for n in ("lf_toe", "rf_toe", "lh_toe", "rh_toe") if n in j2s]
     if not feet:
         feet = _leg_ends(j2s, bvh)
-    ground = float(np.median(src[:, feet, 2].min(axis=1))) if feet else float(hips[:, 2].min())
+    if stance is not None:
+        ground = stance[0].ground
+    elif feet:
+        ground = float(np.median(src[:, feet, 2].min(axis=1)))
+    else:
+        ground = float(hips[:, 2].min())
     hip_src = [bvh.index(j2s[n]) for n in ("lh_hip", "rh_hip") if n in j2s]
     if hip_src:
         h_src = float(np.median(src[:, hip_src, 2].mean(axis=1))) - ground
@@ -1102,10 +1265,196 @@ def retarget(bvh: BVHData, mapping: JointMapping, species: str | Species) -> Mot
 
     q = quat_fix_continuity(q, axis=0)
     meta = {"source": "bvh", "bvh_file": Path(bvh.source).name, "mapping": mapping.to_dict()}
-    return Motion(sp.name, bvh.fps, root, q, metadata=meta)
+    motion = Motion(sp.name, bvh.fps, root, q, metadata=meta)
+    if stance is None:
+        return motion
+    st, foot_idx, anchor_idx, limb_len = stance
+    report: dict[str, Any] = {
+        "contacts": {
+            "method": "source foot path",
+            "foot_joints": [bvh.names[i] for i in foot_idx],
+            "floors_m": [round(float(f - st.ground), 5) for f in st.floors],
+            "source_leg_length_m": round(st.leg_length, 5),
+            "duty": [round(float(d), 4) for d in st.duty],
+        }
+    }
+    if plant:
+        feet_src = smooth_path(src[:, foot_idx], bvh.fps)
+        feet_src[..., 2] = st.heights
+        target_len = np.array([sp.fore_leg_length] * 2 + [sp.hind_leg_length] * 2)
+        motion, pr = plant_legs(motion, feet_src, src[:, anchor_idx], st.contacts,
+                                target_len / limb_len)
+        report["planted"] = pr.to_dict(sp.leg_length)
+    else:
+        motion = motion.with_contacts(st.contacts)
+    f1 = contact_f1(motion.detect_contacts(), st.contacts)
+    report["contact_f1"] = [round(float(v), 4) for v in f1]
+    _limb_confidence(t, j2s, st, limb_len, mapping)
+    report["confidence"] = dict(mapping.confidence)
+    report["warnings"] = list(mapping.warnings)
+    motion.metadata["import"] = report
+    motion.metadata["mapping"] = mapping.to_dict()
+    return motion
+
+
+def _limb_confidence(
+    t: _Tree, j2s: Mapping[str, str], st: SourceStance, limb_len: np.ndarray,
+    mapping: JointMapping,
+) -> None:
+    """Fill ``mapping.confidence`` and ``mapping.warnings`` (see :data:`CONFIDENCE_CHECKS`)."""
+    by_hand = mapping.method != "auto"
+    counts = {p: sum(1 for n in _LEG_CHAINS[p] if n in j2s) for p in _LEG_CHAINS}
+    floors = st.floors - st.ground
+    for k, prefix in enumerate(("lf", "rf", "lh", "rh")):
+        fore = prefix[1] == "f"
+        if by_hand:
+            name = 1.0
+        else:
+            vote = sum(_fore_vote(t.cues[t.bvh.index(j2s[n])][1])
+                       for n in _LEG_CHAINS[prefix] if n in j2s)
+            name = 0.5 if vote == 0 else float((vote > 0) == fore)
+        partner = ("r" if prefix[0] == "l" else "l") + prefix[1]
+        kp = ("lf", "rf", "lh", "rh").index(partner)
+        ratio = min(limb_len[k], limb_len[kp]) / max(limb_len[k], limb_len[kp])
+        same = counts[prefix] == counts[partner]
+        sym = 1.0 if same and ratio >= 0.9 else (0.5 if ratio >= 0.75 else 0.0)
+        grounded = floors[k] <= 0.1 * st.leg_length
+        resting = st.contacts[:, k].any()
+        ground = 1.0 if grounded and resting else (0.5 if grounded or resting else 0.0)
+        score = round((name + sym + ground) / 3.0, 3)
+        mapping.confidence[prefix] = score
+        if score < CONFIDENCE_WARN:
+            src = " > ".join(j2s[n] for n in _LEG_CHAINS[prefix] if n in j2s)
+            mapping.warnings.append(
+                f"{prefix} leg ({src}) mapped with low confidence {score:.2f} (names "
+                f"{name:g}, symmetry {sym:g}, ground {ground:g}); check it with "
+                "'habitsim data inspect-bvh' and fix it with --map"
+            )
+
+
+def _foot_points(t: _Tree, top: int) -> list[int]:
+    """The foot's joints: ``top`` (wrist / hock) and every real joint below it.
+
+    Rig helpers are skipped, and so is a point that sinks far below the foot's others
+    (an unnamed helper pointing into the ground).
+    """
+    out, todo = [], [top]
+    while todo:
+        j = todo.pop()
+        out.append(j)
+        todo += [c for c in t.kids[j] if not t.helper[c]]
+    return out
+
+
+def _source_stance(
+    bvh: BVHData, t: _Tree, j2s: Mapping[str, str], src: np.ndarray, mapping: JointMapping
+) -> tuple[SourceStance, list[int], list[int], np.ndarray] | None:
+    """Stance labels of the source's own feet, its toe joints, anchors and limb lengths.
+
+    None (with a note) when a leg lacks a mapped foot or shoulder / hip joint.
+    """
+    foot_idx, anchor_idx, lengths, points = [], [], [], []
+    for prefix, anchor in zip(("lf", "rf", "lh", "rh"), FOOT_ANCHORS, strict=True):
+        chain = _LEG_CHAINS[prefix]
+        toe = next((j2s[n] for n in reversed(chain[2:]) if n in j2s), None)
+        top = next((j2s[n] for n in reversed(chain[2:4]) if n in j2s), None)
+        if toe is None or top is None or anchor not in j2s:
+            mapping.notes.append(
+                f"{prefix} leg has no mapped foot or {anchor.split('_')[1]} joint: feet not "
+                "labelled or planted from the source"
+            )
+            return None
+        a, f = bvh.index(j2s[anchor]), bvh.index(toe)
+        foot_idx.append(f)
+        anchor_idx.append(a)
+        lengths.append(t.path_length(a, f) * (mapping.frame.scale if mapping.frame else 1.0))
+        points.append(_foot_points(t, bvh.index(top)))
+    # A point that sinks far below the feet's typical lowest point is an unnamed helper.
+    z5 = [np.percentile(src[:, pts, 2], 5, axis=0) for pts in points]
+    ref = float(np.median([z.min() for z in z5]))
+    tol = 0.1 * float(np.mean(lengths))
+    points = [
+        [p for p, z in zip(pts, zs, strict=True) if z >= ref - tol] or pts
+        for pts, zs in zip(points, z5, strict=True)
+    ]
+    limb_len = np.array(lengths)
+    if np.any(limb_len <= 1e-6):
+        mapping.notes.append("a source leg has zero length: feet not planted")
+        return None
+    st = label_source_stance([src[:, pts] for pts in points], bvh.fps, float(limb_len[2:].mean()))
+    return st, foot_idx, anchor_idx, limb_len
 
 
 # ---------------------------------------------------------------------- entry point
+
+def describe_hierarchy(bvh: BVHData, mapping: JointMapping | None = None) -> str:
+    """The source hierarchy as an indented tree, each joint with its proposed habitsim joint.
+
+    Each line: the joint, its bone length in file units, ``[helper]`` for rig helpers that
+    are never limbs, ``[end]`` for End Sites, and ``-> habitsim_joint`` where mapped.
+    """
+    inv = {v: k for k, v in mapping.mapped().items()} if mapping is not None else {}
+    depth = [0] * bvh.num_joints
+    lines = []
+    for j, name in enumerate(bvh.names):
+        p = bvh.parents[j]
+        depth[j] = 0 if p < 0 else depth[p] + 1
+        tags = []
+        if bvh.is_end_site[j]:
+            tags.append("[end]")
+        elif is_helper_name(name):
+            tags.append("[helper]")
+        text = f"{'  ' * depth[j]}{name}  ({float(np.linalg.norm(bvh.offsets[j])):.4g})"
+        if tags:
+            text += " " + " ".join(tags)
+        if name in inv:
+            text += f"  -> {inv[name]}"
+        lines.append(text)
+    return "\n".join(lines)
+
+
+#: File types :func:`read_source` reads (BVH motion capture, glTF skinned animations).
+SOURCE_SUFFIXES: tuple[str, ...] = (".bvh", ".glb", ".gltf")
+
+
+def read_source(
+    path: str | Path,
+    animation: str | int | None = None,
+    fps: float | None = None,
+    strict: bool = True,
+) -> BVHData:
+    """Read a source clip: a BVH file, or one animation of a glTF/GLB skinned model.
+
+    Args:
+        path: a ``.bvh``, ``.glb`` or ``.gltf`` file.
+        animation: glTF only: the animation's name or index (None: the first).
+        fps: glTF only: sampling rate [Hz] (default 30).
+        strict: BVH only: see :func:`habitsim.bvh.parse_bvh`.
+
+    Returns:
+        The clip as :class:`~habitsim.bvh.BVHData`.
+
+    Raises:
+        SkeletonMappingError: an unknown file type (lists the valid ones), or glTF
+            options given for a BVH file.
+        BVHParseError, GLTFError: an unreadable file.
+    """
+    p = Path(path)
+    kind = p.suffix.lower()
+    if kind == ".bvh":
+        if animation is not None or fps is not None:
+            raise SkeletonMappingError(
+                f"{p.name}: animation and fps apply to glTF files only (.glb, .gltf)"
+            )
+        return read_bvh(p, strict=strict)
+    if kind in (".glb", ".gltf"):
+        from .gltf import read_gltf
+
+        return read_gltf(p, animation=animation, fps=30.0 if fps is None else fps)
+    raise SkeletonMappingError(
+        f"{p.name}: unknown source file type {p.suffix!r}; valid: {', '.join(SOURCE_SUFFIXES)}"
+    )
+
 
 
 def import_bvh(
@@ -1115,8 +1464,11 @@ def import_bvh(
     units: str | float | None = None,
     up: str | None = None,
     strict: bool = True,
+    plant: bool = True,
+    animation: str | int | None = None,
+    fps: float | None = None,
 ) -> tuple[Motion, JointMapping]:
-    """Read a BVH file and retarget it onto a species' habitsim skeleton.
+    """Read a BVH file (or a glTF/GLB animation) and retarget it onto a species' skeleton.
 
     Args:
         path: the ``.bvh`` file (or an already parsed :class:`~habitsim.bvh.BVHData`).
@@ -1127,6 +1479,9 @@ def import_bvh(
             None = detect (a TOML's ``units`` applies when this is None).
         up: source up axis (``"y"``, ``"z"``, ``"-y"``…); None = detect.
         strict: see :func:`habitsim.bvh.parse_bvh`.
+        plant: plant the legs on the source's footholds (see :func:`retarget`).
+        animation, fps: for a glTF/GLB file, the animation and the sampling rate
+            (:func:`read_source`).
 
     Returns:
         ``(motion, mapping)``; print ``mapping`` for the habitsim ← source lines.
@@ -1137,7 +1492,11 @@ def import_bvh(
         SkeletonMappingError: unmappable skeleton or invalid joint map.
     """
     sp = load_species(species)
-    bvh = path if isinstance(path, BVHData) else read_bvh(path, strict=strict)
+    bvh = (
+        path
+        if isinstance(path, BVHData)
+        else read_source(path, animation=animation, fps=fps, strict=strict)
+    )
     plain = (units is None or (isinstance(units, str) and units.lower() == "m")) and (
         up is None or _parse_up(up) == "+z"
     )
@@ -1159,16 +1518,28 @@ def import_bvh(
         method = "explicit"
     else:
         spec = load_joint_map(joint_map)
-        joints = validate_joint_map(spec["map"], bvh, where=str(joint_map))
+        if spec["extends"] == "auto":
+            an = _analyse(bvh)
+            base = dict(an.joints)
+            base.update(spec["map"])
+            joints = validate_joint_map(base, bvh, where=str(joint_map))
+            notes = an.notes + [f"joints set by hand: {', '.join(sorted(spec['map']))}"]
+            geometric = [
+                (lp, rp) for lp, rp in an.geometric_sides
+                if not any(n in spec["map"] for n in _LEG_CHAINS[lp] + _LEG_CHAINS[rp])
+            ]
+            method = f"auto, overridden by map file {joint_map}"
+        else:
+            joints = validate_joint_map(spec["map"], bvh, where=str(joint_map))
+            method = f"map file {joint_map}"
         units = units if units is not None else spec["units"]
         up = up if up is not None else spec["up"]
-        method = f"map file {joint_map}"
 
     frame = detect_frame(bvh, joints, units=units, up=up, species=sp)
     if geometric:
         an2 = _Analysis(joints, geometric, notes)
         _resolve_sides(bvh, an2, frame)
     mapping = JointMapping(joints, method, frame, 1.0, list(notes))
-    motion = retarget(bvh, mapping, sp)
+    motion = retarget(bvh, mapping, sp, plant=plant)
     motion.metadata["mapping"] = mapping.to_dict()
     return motion, mapping

@@ -48,6 +48,8 @@ __all__ = [
     "contacts_by_duty",
     "contact_segments",
     "touchdown_frames",
+    "drop_short_runs",
+    "warp_contacts",
 ]
 
 #: Toe height threshold as a fraction of the hind-leg length (METRICS.md: 2 %).
@@ -220,3 +222,66 @@ def touchdown_frames(contacts: np.ndarray) -> list[np.ndarray]:
         raise InvalidMotionError(f"contacts must have shape (T, F), got {c.shape}")
     td = c[1:] & ~c[:-1]
     return [np.flatnonzero(td[:, f]) + 1 for f in range(c.shape[1])]
+
+
+def drop_short_runs(contacts: np.ndarray, min_frames: int = 2) -> np.ndarray:
+    """Contact labels without runs shorter than ``min_frames``.
+
+    First every swing gap shorter than ``min_frames`` between two stance phases of a foot
+    is filled, then every stance run shorter than ``min_frames`` is removed (swing), so a
+    flicker neither splits a stance phase nor makes a stance of its own. With
+    ``min_frames = 2`` this is the single-frame cleanup of :func:`detect_contacts`, also at
+    the clip's ends.
+
+    Args:
+        contacts: (T, F) bool contact flags.
+        min_frames: shortest run kept [frames], ≥ 1.
+
+    Returns:
+        (T, F) bool, a new array.
+    """
+    c = np.asarray(contacts, dtype=bool)
+    if c.ndim != 2:
+        raise InvalidMotionError(f"contacts must have shape (T, F), got {c.shape}")
+    if int(min_frames) < 1:
+        raise InvalidMotionError(f"min_frames must be >= 1, got {min_frames}")
+    out = c.copy()
+    t = c.shape[0]
+    for f, runs in enumerate(contact_segments(~out)):
+        for a, b in runs:
+            if a > 0 and b < t and b - a < min_frames:  # a gap between two stance phases
+                out[a:b, f] = True
+    for f, runs in enumerate(contact_segments(out)):
+        for a, b in runs:
+            if b - a < min_frames:
+                out[a:b, f] = False
+    return out
+
+
+def warp_contacts(contacts: np.ndarray, n_frames: int) -> np.ndarray:
+    """Contact labels carried to a clip of another length in normalised time.
+
+    Frame ``i`` of the ``n_frames`` result takes the label of the source frame nearest to
+    ``i · (T − 1) / (n_frames − 1)``: the same footfall schedule over the same share of
+    the clip (a time warp when a stage changes the clip's length or cadence).
+
+    Args:
+        contacts: (T, F) bool contact flags.
+        n_frames: frames of the result, ≥ 1.
+
+    Returns:
+        (n_frames, F) bool (a copy when the lengths match).
+    """
+    c = np.asarray(contacts, dtype=bool)
+    if c.ndim != 2 or c.shape[0] < 1:
+        raise InvalidMotionError(f"contacts must have shape (T, F) with T >= 1, got {c.shape}")
+    n = int(n_frames)
+    if n < 1:
+        raise InvalidMotionError(f"n_frames must be >= 1, got {n_frames}")
+    t = c.shape[0]
+    if n == t:
+        return c.copy()
+    if n == 1 or t == 1:
+        return np.repeat(c[:1], n, axis=0)
+    src = np.rint(np.arange(n) * (t - 1) / (n - 1)).astype(int)
+    return c[np.clip(src, 0, t - 1)]

@@ -41,6 +41,11 @@ class BVHParseError(HabitsimError, ValueError):
     """A BVH file that is truncated, malformed or has inconsistent channel counts."""
 
 
+class GLTFError(HabitsimError, ValueError):
+    """A glTF / GLB file that cannot be read as a skinned animation: missing, corrupt or
+    truncated, without a skin or an animation, or an unknown animation name."""
+
+
 class SkeletonMappingError(HabitsimError, ValueError):
     """A source skeleton that cannot be mapped onto the habitsim quadruped topology."""
 

@@ -28,11 +28,18 @@ import numpy as np
 
 from .errors import InvalidMotionError, MotionFileError
 from .fileio import atomic_write
-from .rotations import quat_fix_continuity
+from .rotations import quat_fix_continuity, quat_slerp
 from .skeleton import JOINT_NAMES, Skeleton, get_skeleton
 from .species import Species, load_species
 
-__all__ = ["Motion", "load_motion", "mirror_permutation", "FORMAT_VERSION", "FEATURE_DIM"]
+__all__ = [
+    "Motion",
+    "load_motion",
+    "resample_motion",
+    "mirror_permutation",
+    "FORMAT_VERSION",
+    "FEATURE_DIM",
+]
 
 FORMAT_VERSION = 1
 #: Per-frame feature size of the paper's representation: J·4 quaternions + J·3 velocities.
@@ -239,6 +246,42 @@ class Motion:
 
 
 _REQUIRED = ("format_version", "species", "fps", "root_positions", "rotations", "joint_names")
+
+
+def resample_motion(motion: Motion, fps: float) -> Motion:
+    """The motion at another frame rate, over the same duration.
+
+    Rotations are slerped, the root interpolated linearly and contact labels taken from
+    the nearest frame; ``(T − 1) / fps_old · fps`` is rounded to whole frames. The same
+    motion object is returned when the rates match.
+
+    Args:
+        motion: the motion.
+        fps: the new frame rate [Hz], > 0.
+
+    Returns:
+        A new :class:`Motion` (metadata copied).
+    """
+    if not (np.isfinite(fps) and fps > 0):
+        raise InvalidMotionError(f"fps must be > 0, got {fps!r}")
+    if abs(motion.fps - fps) < 1e-9:
+        return motion
+    n = motion.num_frames
+    dur = (n - 1) / motion.fps
+    m = max(1, int(round(dur * fps)) + 1)
+    t = np.arange(m) / fps * motion.fps  # fractional source frame
+    i0 = np.clip(np.floor(t).astype(int), 0, n - 1)
+    i1 = np.minimum(i0 + 1, n - 1)
+    a = (t - i0)[:, None]
+    root = motion.root_positions[i0] * (1 - a) + motion.root_positions[i1] * a
+    j = motion.rotations.shape[1]
+    rot = quat_slerp(motion.rotations[i0], motion.rotations[i1], np.broadcast_to(a, (m, j)))
+    contacts = (
+        None
+        if motion.contacts is None
+        else motion.contacts[np.clip(np.round(t).astype(int), 0, n - 1)]
+    )
+    return Motion(motion.species, float(fps), root, rot, contacts, dict(motion.metadata))
 
 
 def load_motion(path: str | Path) -> Motion:

@@ -21,7 +21,6 @@ Option:
 
 from __future__ import annotations
 
-import functools
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -42,9 +41,9 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 @pytest.fixture(scope="session")
 def habitsim_species_model() -> Callable[[str], Any]:
-    from .qpos import load_species_model
+    from .qpos import species_model
 
-    return functools.lru_cache(maxsize=None)(load_species_model)
+    return species_model
 
 
 @pytest.fixture(scope="session")

@@ -13,6 +13,7 @@ positive", so ``qpos = ABDUCTION_SIGN[side] · abd``.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import mujoco
@@ -27,6 +28,7 @@ from .skeleton import ABDUCTION_SIGN, JOINT_NAMES
 __all__ = [
     "QposTrajectory",
     "load_species_model",
+    "species_model",
     "motion_to_qpos",
     "qpos_to_motion",
     "qpos_joint_positions",
@@ -61,6 +63,38 @@ def load_species_model(species: str) -> mujoco.MjModel:
             f"no MJCF model for species {species!r} at {path}; run `habitsim models build`"
         )
     return mujoco.MjModel.from_xml_path(str(path))
+
+
+def species_model(species: str, servos: bool = False) -> mujoco.MjModel:
+    """The shipped model of a catalog species, compiled once per process.
+
+    The one model cache of habitsim: tracking (:mod:`habitsim.sim`), the pipeline
+    (:mod:`habitsim.pipeline`, which hands it to refinement), the dynamic metrics and the
+    benchmarks share it, so a species is compiled once however many stages use it.
+    The instance is shared: never modify it (copy it first; :func:`load_species_model`
+    compiles a fresh one).
+
+    Args:
+        species: catalog species name.
+        servos: the variant whose joint motors are in-engine position servos
+            (:func:`habitsim.sim.servo_model`).
+
+    Raises:
+        UnknownSpeciesError: unknown species.
+        InvalidMotionError: no MJCF model for it.
+    """
+    from .species import load_species
+
+    return _compiled(load_species(species).name, bool(servos))
+
+
+@functools.lru_cache(maxsize=64)
+def _compiled(species: str, servos: bool) -> mujoco.MjModel:
+    if servos:
+        from .controllers.servo import configure_servos
+
+        return configure_servos(_compiled(species, False))
+    return load_species_model(species)
 
 
 def _free_joint(model: mujoco.MjModel) -> int:

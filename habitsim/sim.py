@@ -26,7 +26,6 @@ Units: SI (m, s, rad, N, N·m); times in [s] from the clip's first frame.
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -40,7 +39,7 @@ import numpy as np
 from .contacts import contacts_from_feet
 from .errors import HabitsimError, InvalidMotionError, unknown_choice
 from .motion import Motion
-from .qpos import QposTrajectory, load_species_model, motion_to_qpos, qpos_to_motion
+from .qpos import QposTrajectory, motion_to_qpos, qpos_to_motion, species_model
 from .species import load_species
 
 __all__ = [
@@ -692,13 +691,27 @@ class _Clip:
     leg_length: float
 
 
+def _check_contacts(contacts: Any, n_frames: int) -> np.ndarray:
+    """Explicit reference contact labels as (T, 4) bool."""
+    c = np.asarray(contacts)
+    if c.shape != (n_frames, 4):
+        raise SimulationError(
+            f"contacts must have shape ({n_frames}, 4) (feet LF, RF, LH, RH), got {c.shape}"
+        )
+    if c.dtype != bool and not np.isin(c, (0, 1)).all():
+        raise SimulationError("contacts must be booleans (or 0/1)")
+    return c.astype(bool)
+
+
 def _resolve(
     motion_or_qpos: Motion | QposTrajectory | np.ndarray,
     species: str | None,
     model: mujoco.MjModel | None,
     fps: float | None = None,
+    contacts: np.ndarray | None = None,
 ) -> _Clip:
-    """Reference qpos, contacts and sizes of one input clip."""
+    """Reference qpos, contacts and sizes of one input clip (explicit ``contacts`` labels
+    win over a motion's own and over detection)."""
     if isinstance(motion_or_qpos, Motion):
         motion = motion_or_qpos
         if species is not None and load_species(species).name != motion.species:
@@ -710,7 +723,12 @@ def _resolve(
             traj = motion_to_qpos(motion, base)
         except InvalidMotionError as e:
             raise SimulationError(f"the motion does not fit the model: {e}") from e
-        contacts = motion.contacts if motion.contacts is not None else motion.detect_contacts()
+        if contacts is not None:
+            contacts = _check_contacts(contacts, motion.num_frames)
+        elif motion.contacts is not None:
+            contacts = motion.contacts
+        else:
+            contacts = motion.detect_contacts()
         sp = motion.species_info
         return _Clip(sp.name, base, _check_qpos(base, traj.qpos), motion.fps,
                      np.asarray(contacts, bool), sp.leg_length)
@@ -727,7 +745,10 @@ def _resolve(
             q, f = motion_or_qpos, fps
         q = _check_qpos(base, q)
         leg = sp.leg_length if sp is not None else _model_leg_length(base)
-        contacts = contacts_from_feet(_foot_points(base, q), f, leg)
+        if contacts is not None:
+            contacts = _check_contacts(contacts, len(q))
+        else:
+            contacts = contacts_from_feet(_foot_points(base, q), f, leg)
         name = sp.name if sp is not None else "model"
         return _Clip(name, base, q, float(f), contacts, leg)
     raise SimulationError(
@@ -757,11 +778,10 @@ def _foot_points(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
     return out
 
 
-@functools.lru_cache(maxsize=64)
 def _species_model(species: str, servos: bool) -> mujoco.MjModel:
-    """The shipped model of a species (compiled once per process; never mutated here)."""
-    base = load_species_model(species)
-    return servo_model(base) if servos else base
+    """The shipped model of a species (:func:`habitsim.qpos.species_model`, the shared
+    per-process cache; never mutated here)."""
+    return species_model(species, servos)
 
 
 def _has_servos(model: mujoco.MjModel) -> bool:
@@ -1084,6 +1104,7 @@ def track(
     stop_on_fall: bool = True,
     seed: int | None = None,
     use_rollout: bool | None = None,
+    contacts: np.ndarray | None = None,
 ) -> TrackResult:
     """Track a reference motion in MuJoCo with a controller.
 
@@ -1119,18 +1140,23 @@ def track(
         seed: accepted for a uniform signature; every stage here is deterministic.
         use_rollout: force (True) or forbid (False) the ``mujoco.rollout`` path; by
             default it is used for ``"servo"`` without assistance at the full rate.
+        contacts: (T, 4) bool reference contact labels (LF, RF, LH, RH): the contact
+            schedule of ``balance`` / ``mpc`` and the reference of ``contact_f1``.
+            Default: a Motion's own labels, else contacts detected on the reference
+            (for a qpos trajectory always detected). Pass the labels an earlier stage
+            decided (refinement's) so they are not detected again.
 
     Returns:
         The :class:`TrackResult` (metrics in :attr:`TrackResult.metrics`).
 
     Raises:
         SimulationError: unknown controller or assist, bad rates, a reference that does
-            not fit the model (joints, nq) or is not finite.
+            not fit the model (joints, nq) or is not finite, contacts of the wrong shape.
         UnknownSpeciesError: unknown species.
     """
     del seed
     _check_settle(settle_s)
-    clip = _resolve(motion_or_qpos, species, model)
+    clip = _resolve(motion_or_qpos, species, model, contacts=contacts)
     sim_model = _sim_model(controller, clip, model)
     asst = _make_assist(assist, sim_model)
     if control_hz is None and controller == "mpc" and asst is None:

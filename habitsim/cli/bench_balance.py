@@ -92,10 +92,10 @@ def run_one(species: str, motion: Any, controller: str, *, mpc_hz: float = 30.0,
             control_hz: float | None = None) -> dict[str, Any]:
     """Track one clip with one controller; the figures of the run."""
     from ..controllers import make_controller
-    from ..qpos import load_species_model, motion_to_qpos
+    from ..qpos import motion_to_qpos, species_model
     from ..sim import MPC_CONTROL_HZ, track
 
-    model = load_species_model(species)
+    model = species_model(species)
     options: dict[str, Any] = {}
     if control_hz is None and controller == "mpc":
         control_hz = MPC_CONTROL_HZ  # as habitsim.sim.track runs "mpc" by name

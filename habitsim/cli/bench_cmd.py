@@ -27,7 +27,9 @@ import numpy as np
 from ..dataset import DatasetBuild, build_dataset, iter_clips
 
 #: Modules of ``habitsim.cli`` that may add more ``bench`` sub-commands.
-_EXTRA: tuple[str, ...] = ("bench_sim", "bench_refine", "bench_balance", "bench_train")
+_EXTRA: tuple[str, ...] = (
+    "bench_sim", "bench_refine", "bench_balance", "bench_train", "bench_real"
+)
 #: Build-time target of the default data set [s] (on 2 cores).
 TARGET_BUILD_S = 120.0
 _DEFAULT_CLIPS = 40

@@ -109,10 +109,10 @@ def _steps(result: Any) -> int:
 
 def bench_species(species: str, ns: argparse.Namespace, threads: int) -> dict[str, Any]:
     """All figures of one species (see the module docstring)."""
-    from ..qpos import load_species_model
-    from ..sim import servo_model, track, track_many
+    from ..qpos import species_model
+    from ..sim import track, track_many
 
-    model = servo_model(load_species_model(species))
+    model = species_model(species, servos=True)
     out: dict[str, Any] = {"species": species, "threads": threads}
     batch = _clips(species, max(ns.batch, 1), ns, seed0=100)
     clip = batch[0]

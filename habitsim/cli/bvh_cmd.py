@@ -1,4 +1,4 @@
-"""``habitsim data import-bvh`` and ``habitsim data export-bvh``.
+"""``habitsim data import-bvh``, ``inspect-bvh`` and ``export-bvh``.
 
 Outputs are written only when the whole command succeeds (atomic writes), so a failed
 import never leaves a partial ``.npz`` behind.
@@ -7,6 +7,7 @@ import never leaves a partial ``.npz`` behind.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ..errors import MotionFileError
@@ -24,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "printed as 'habitsim joint <- source joint' lines."
         ),
     )
-    p.add_argument("file", type=Path, help="the .bvh file")
+    p.add_argument("file", type=Path, help="the .bvh, .glb or .gltf file")
     p.add_argument(
         "--species", required=True, help="target catalog species (see 'habitsim species list')"
     )
@@ -34,11 +35,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=Path,
         default=None,
         dest="joint_map",
-        help='joint-map TOML: [map] habitsim_joint = "SourceJoint"',
+        help=(
+            'joint-map JSON or TOML: {"map": {"habitsim_joint": "SourceJoint"}}; with '
+            '"extends": "auto" it overrides only the joints it names (see inspect-bvh)'
+        ),
     )
     p.add_argument(
         "--units",
-        choices=("cm", "m", "mm"),
+        choices=("cm", "m", "mm", "in"),
         default=None,
         help="length unit of the file (default: detect)",
     )
@@ -48,12 +52,37 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="up axis of the file (default: detect)",
     )
+    _gltf_options(p)
+    p.add_argument(
+        "--no-plant",
+        action="store_true",
+        help="keep the source's leg bone directions instead of planting the feet on the "
+        "source's footholds",
+    )
     p.add_argument(
         "--lenient",
         action="store_true",
         help="accept a truncated file (keep its complete frames) instead of failing",
     )
     p.set_defaults(func=_import)
+
+    i = sub.add_parser(
+        "inspect-bvh",
+        help="print a BVH/glTF hierarchy with the proposed mapping",
+        description=(
+            "Print the source hierarchy (bone lengths in file units, rig helpers marked) with "
+            "the habitsim joint proposed for each source joint, the detected units and axes, "
+            "each leg's mapping confidence and warnings, the stance found on the source's "
+            "own feet, and a JSON joint map to edit and pass to import-bvh --map."
+        ),
+    )
+    i.add_argument("file", type=Path, help="the .bvh, .glb or .gltf file")
+    i.add_argument("--species", default="dog",
+                   help="species to size the detection against (default dog)")
+    i.add_argument("--map", type=Path, default=None, dest="joint_map",
+                   help="a joint-map file to check instead of the automatic mapping")
+    _gltf_options(i)
+    i.set_defaults(func=_inspect)
 
     e = sub.add_parser(
         "export-bvh",
@@ -69,6 +98,54 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.set_defaults(func=_export)
 
 
+def _gltf_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--animation", default=None, metavar="NAME|INDEX",
+                   help="glTF/GLB: the animation to import (default: the first)")
+    p.add_argument("--fps", type=float, default=None,
+                   help="glTF/GLB: sampling rate in Hz (default 30)")
+
+
+def _animation(value: str | None) -> str | int | None:
+    if value is None:
+        return None
+    try:
+        return int(value)
+    except ValueError:
+        return value
+
+
+def _inspect(ns: argparse.Namespace) -> int:
+    import json
+
+    from ..bvh_mapping import describe_hierarchy, import_bvh, read_source
+    from ..species import load_species
+
+    sp = load_species(ns.species)
+    src = read_source(ns.file, animation=_animation(ns.animation), fps=ns.fps)
+    print(f"{ns.file.name}: {src.num_joints} joints, {src.num_frames} frames at {src.fps:g} fps")
+    try:
+        motion, mapping = import_bvh(src, sp, joint_map=ns.joint_map)
+    except Exception:
+        print(describe_hierarchy(src))
+        raise
+    print(describe_hierarchy(src, mapping))
+    print()
+    print(mapping)
+    imp = motion.metadata.get("import", {})
+    if imp:
+        c = imp["contacts"]
+        print(
+            "stance on the source's own feet (LF RF LH RH): duty "
+            + " ".join(f"{d:.2f}" for d in c["duty"])
+            + "; foot joints " + ", ".join(c["foot_joints"])
+        )
+    template = {"extends": "auto", "map": mapping.mapped()}
+    print()
+    print("joint map to edit (save as map.json, pass --map map.json; null unmaps a joint):")
+    print(json.dumps(template, indent=1))
+    return 0
+
+
 def _import(ns: argparse.Namespace) -> int:
     from ..bvh_mapping import import_bvh
     from ..species import load_species
@@ -77,9 +154,12 @@ def _import(ns: argparse.Namespace) -> int:
     if ns.out.suffix != ".npz":
         raise MotionFileError(f"--out must end in .npz, got {ns.out.name!r}")
     motion, mapping = import_bvh(
-        ns.file, sp, joint_map=ns.joint_map, units=ns.units, up=ns.up, strict=not ns.lenient
+        ns.file, sp, joint_map=ns.joint_map, units=ns.units, up=ns.up, strict=not ns.lenient,
+        plant=not ns.no_plant, animation=_animation(ns.animation), fps=ns.fps,
     )
     print(mapping)
+    for w in mapping.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     motion.save(ns.out)
     print(
         f"imported {ns.file.name}: {motion.num_frames} frames at {motion.fps:g} fps "

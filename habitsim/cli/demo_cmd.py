@@ -8,7 +8,8 @@
 2. Two sources — a synthetic horse trot and the shipped BVH example (a dog walk,
    imported with :func:`habitsim.bvh_mapping.import_bvh`) — transferred to a cat, a bear
    and the held-out tiger with the shipped ``habit`` model, refined (CasADi/IPOPT),
-   tracked in MuJoCo unassisted (``mpc``) and with measured root assistance, each
+   tracked in MuJoCo unassisted (``mpc``) and with measured root assistance (one call of
+   :func:`habitsim.pipeline.run_clip` per pair, the stance labels passed along), each
    unassisted run rendered to MP4 (where an OpenGL backend exists), and a summary table
    printed and written to ``DIR/pipeline.json`` and the report ``DIR/report.md``.
 """
@@ -122,10 +123,8 @@ def _sources(seed: int) -> list[tuple[str, Motion]]:
 def _pipeline(ns: argparse.Namespace) -> None:
     """Transfer → refine → track → render for two sources and a few targets; a report."""
     from ..fileio import atomic_write_text
-    from ..models import transfer
-    from ..refine import refine
+    from ..pipeline import run_clip, track_reference
     from ..render import RenderError, render_available, render_video
-    from ..sim import track
     from ..species import load_species
 
     out = Path(ns.out) / "pipeline"
@@ -148,32 +147,38 @@ def _pipeline(ns: argparse.Namespace) -> None:
         src.save(out / f"{name}.npz")
         for tgt in targets:
             t1 = time.perf_counter()
-            moved = transfer(src, to=tgt, method="habit", seed=ns.seed)
+            # transfer → refine (stage A) → track unassisted, labels passed along;
+            # a refinement that makes the clip track worse is reported and not kept
+            run = run_clip(src, tgt, method="habit", refine="A", controller=ns.controller,
+                           seed=ns.seed)
+            moved, ref = run.transferred.motion, run.refine_result
             info = moved.metadata.get("transfer", {})
             moved.save(out / f"{name}_to_{tgt}.npz")
-            ref = refine(moved, fallback=True)
             ref.motion.save(out / f"{name}_to_{tgt}_refined.npz")
-            plain = track(ref.motion, controller=ns.controller)
-            helped = track(ref.motion, controller="servo", assist="root")
+            plain = run.track_result
+            helped = track_reference(run, controller="servo", assist="root")
             video = None
-            if videos:
+            if videos and plain is not None:
                 video = out / f"{name}_to_{tgt}_{ns.controller}.mp4"
                 try:
                     render_video(plain.model, plain.qpos, plain.fps, str(video))
                 except RenderError as e:
                     print(f"  video of {name} → {tgt} skipped: {e}")
                     video = None
-            pm, hm = plain.metrics, helped.metrics
+            pm = {} if plain is None else plain.metrics
+            hm = helped.metrics
             retrieval = info.get("retrieval") or {}
             rows.append({
                 "source": name,
                 "target": tgt,
                 "habit_from": info.get("habit_species", tgt),
                 "retrieval": retrieval.get("explanation"),
-                "contacts": (info.get("contacts") or {}).get("method"),
-                "refine_status": ref.status,
-                "skate_mm_before": ref.report.get("metrics_before", {}).get("skate_mm"),
-                "skate_mm_after": ref.report.get("metrics_after", {}).get("skate_mm"),
+                "contacts": run.transferred.contacts_method,
+                "refine_status": run.refined.status,
+                "refine_check": run.refine_verdict,
+                "refine_note": run.refine_note,
+                "skate_mm_before": run.transferred.metrics.get("skate_mm"),
+                "skate_mm_after": run.refined.metrics.get("skate_mm"),
                 "controller": ns.controller,
                 "survival_unassisted": pm.get("survival"),
                 "sim_mpjpe_per_leg_unassisted": pm.get("sim_mpjpe_per_leg"),
@@ -181,6 +186,7 @@ def _pipeline(ns: argparse.Namespace) -> None:
                 "sim_mpjpe_per_leg_assisted": hm.get("sim_mpjpe_per_leg"),
                 "assist_force_mg": hm.get("assist_force_mg"),
                 "video": None if video is None else video.name,
+                "seconds_per_stage": {k: round(v, 2) for k, v in run.times.items()},
                 "seconds": round(time.perf_counter() - t1, 1),
             })
     atomic_write_text(Path(ns.out) / "pipeline.json", json.dumps(rows, indent=2) + "\n")
@@ -197,14 +203,15 @@ def _fmt(v: object, nd: int = 3) -> str:
 
 def _table(rows: list[dict]) -> str:
     """The summary table (Markdown pipe table, readable as plain text)."""
-    head = ("source", "target", "habit of", "contacts", "refine", "skate mm before→after",
+    head = ("source", "target", "habit of", "contacts", "refine", "check",
+            "skate mm before→after",
             "survival (unassisted)", "MPJPE/leg", "survival (assisted)", "MPJPE/leg",
             "assist m·g", "s")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         cells = [
             r["source"], r["target"], str(r["habit_from"]), str(r["contacts"]),
-            str(r["refine_status"]),
+            str(r["refine_status"]), str(r["refine_check"]),
             f"{_fmt(r['skate_mm_before'], 2)}→{_fmt(r['skate_mm_after'], 2)}",
             _fmt(r["survival_unassisted"], 2), _fmt(r["sim_mpjpe_per_leg_unassisted"]),
             _fmt(r["survival_assisted"], 2), _fmt(r["sim_mpjpe_per_leg_assisted"]),
@@ -230,12 +237,23 @@ def _report(rows: list[dict], table: str, ns: argparse.Namespace) -> str:
         "",
         "Columns: *habit of* = the species whose habit prior gave z_c (a held-out target "
         "borrows its nearest training species'); *contacts* = how the transfer's stance "
-        "labels were found (`detected` from resting feet, `duty` from the target's duty "
-        "factor where feet slide); *skate* = METRICS.md `skate_mm` before and after "
-        "refinement; *survival* = share of the clip before a fall; *MPJPE/leg* = simulated "
-        "vs reference joint positions / leg length; *assist m·g* = mean assisting force.",
+        "labels were found (`source`: the source's footfalls, `detected` from resting "
+        "feet, `duty` from the target's duty factor where feet slide); *skate* = "
+        "METRICS.md `skate_mm` before and after refinement; *check* = the refinement "
+        "check (`kept`, or `reverted` when the refined clip tracked worse); *survival* = "
+        "share of the clip before a fall; *MPJPE/leg* = simulated vs reference joint "
+        "positions / leg length; *assist m·g* = mean assisting force.",
+        "",
+        "## Refinement check",
+        "",
+        "The refined clip is tracked against the unrefined one; a refinement that makes "
+        "the clip track worse (lower survival, or equal survival and a clearly higher "
+        "sim MPJPE) is not kept, and said so here.",
         "",
     ]
+    out += [f"* {r['source']} → {r['target']}: {r['refine_check']}: {r['refine_note']}"
+            for r in rows]
+    out.append("")
     held = [r for r in rows if r["retrieval"]]
     if held:
         out += ["## Held-out targets", ""]

@@ -185,8 +185,8 @@ def _summary(rep: dict) -> str:
 def _refine(ns: argparse.Namespace) -> int:
     from ..fileio import atomic_write, atomic_write_text
     from ..motion import load_motion
+    from ..qpos import species_model
     from ..refine import RefineOptions, refine
-    from ..refine.solve import _species_model
 
     _check_out(ns.out, "--out")
     _check_out(ns.qpos, "--qpos")
@@ -205,7 +205,7 @@ def _refine(ns: argparse.Namespace) -> int:
     text = json.dumps(rep, indent=2, allow_nan=False)
     qbuf = None
     if ns.qpos is not None:
-        model = _species_model(motion.species)
+        model = species_model(motion.species)
         buf = io.BytesIO()
         np.savez_compressed(
             buf,

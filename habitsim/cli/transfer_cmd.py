@@ -86,10 +86,10 @@ def _transfer(ns: argparse.Namespace) -> int:
         raise MotionFileError(f"--bvh must end in .bvh, got {ns.bvh.name!r}")
     target = load_species(ns.to).name
     suffix = ns.source.suffix.lower()
-    if suffix == ".bvh":
+    if suffix in (".bvh", ".glb", ".gltf"):
         if ns.from_species is None:
             raise MotionFileError(
-                "a .bvh source needs --from SPECIES (the skeleton to import it onto)"
+                f"a {suffix} source needs --from SPECIES (the skeleton to import it onto)"
             )
         from ..bvh_mapping import import_bvh
 
@@ -98,7 +98,7 @@ def _transfer(ns: argparse.Namespace) -> int:
     elif suffix == ".npz":
         motion = load_motion(ns.source)
     else:
-        raise MotionFileError(f"{ns.source}: source must be .npz or .bvh")
+        raise MotionFileError(f"{ns.source}: source must be .npz, .bvh, .glb or .gltf")
     if ns.action is not None:
         from ..gaits import ACTIONS
 

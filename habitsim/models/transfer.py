@@ -45,8 +45,7 @@ import numpy as np
 import torch
 
 from ..errors import HabitsimError, InvalidMotionError
-from ..motion import Motion
-from ..rotations import quat_slerp
+from ..motion import Motion, resample_motion
 from ..species import FEET, load_species
 from .checkpoint import CONFIG_FILE, LoadedCheckpoint, load_checkpoint
 from .config import VARIANTS
@@ -182,26 +181,8 @@ def load_model(checkpoint: str | Path | None = None, variant: str = "habit") -> 
 
 
 def _resample(motion: Motion, fps: float) -> Motion:
-    """The motion at another frame rate (slerp rotations, linear root, nearest contacts)."""
-    if abs(motion.fps - fps) < 1e-9:
-        return motion
-    n = motion.num_frames
-    dur = (n - 1) / motion.fps
-    m = max(1, int(round(dur * fps)) + 1)
-    t = np.arange(m) / fps * motion.fps  # fractional source frame
-    i0 = np.clip(np.floor(t).astype(int), 0, n - 1)
-    i1 = np.minimum(i0 + 1, n - 1)
-    a = (t - i0)[:, None]
-    root = motion.root_positions[i0] * (1 - a) + motion.root_positions[i1] * a
-    rot = quat_slerp(
-        motion.rotations[i0], motion.rotations[i1], np.broadcast_to(a, (m, NUM_JOINTS))
-    )
-    contacts = (
-        None
-        if motion.contacts is None
-        else motion.contacts[np.clip(np.round(t).astype(int), 0, n - 1)]
-    )
-    return Motion(motion.species, fps, root, rot, contacts, dict(motion.metadata))
+    """The motion at another frame rate (:func:`habitsim.motion.resample_motion`)."""
+    return resample_motion(motion, fps)
 
 
 def _window_starts(n: int, window: int) -> list[int]:
@@ -352,19 +333,43 @@ def _gait_duty(target: str, source: Motion) -> tuple[str, float] | None:
 def transfer_contacts(out: Motion, source: Motion) -> tuple[np.ndarray, dict[str, Any]]:
     """Foot-contact labels of a transferred motion, and how they were found.
 
-    Contacts are detected on the output (:func:`habitsim.contacts.detect_contacts`).
-    A decoded gait whose stance feet still slide may hold no resting frame at all, and a
-    refinement given no stance plants no foot; so a foot whose detected stance share is
-    under half its gait's duty factor is labelled by :func:`habitsim.contacts.contacts_by_duty`
-    instead (the target's duty factor for the source's gait: the habit, not the source's
-    footfall timing, which differs between species).
-    """
-    from ..contacts import contacts_by_duty, contacts_from_feet
+    In this order:
 
+    1. ``source``: the source carries stance labels (``source.contacts``; a synthetic
+       clip's planned stance, an import's labels found on the source skeleton): the
+       transferred motion keeps the source's footfall schedule, carried over in
+       normalised time when the transfer changed the clip's length
+       (:func:`habitsim.contacts.warp_contacts`; a frame-rate round trip through the
+       model can add or drop a frame), then cleaned of runs shorter than 2 frames
+       (:func:`habitsim.contacts.drop_short_runs`).
+    2. ``detected``: no source labels: contacts detected on the output's resting feet
+       (:func:`habitsim.contacts.detect_contacts`).
+    3. ``duty``: a decoded gait whose stance feet still slide may hold no resting frame
+       at all, and a refinement given no stance plants no foot; so a foot whose detected
+       stance share is under half its gait's duty factor is labelled by
+       :func:`habitsim.contacts.contacts_by_duty` instead (the target's duty factor for
+       the source's gait).
+
+    Returns:
+        ``(labels, info)``: (T, 4) bool labels of ``out`` and ``info["method"]`` (one of
+        ``source``, ``detected``, ``duty``) with the details of that method.
+    """
+    from ..contacts import contacts_by_duty, contacts_from_feet, drop_short_runs, warp_contacts
+
+    if source.contacts is not None:
+        src = np.asarray(source.contacts, dtype=bool)
+        labels = drop_short_runs(warp_contacts(src, out.num_frames), 2)
+        info: dict[str, Any] = {
+            "method": "source",
+            "source_frames": int(src.shape[0]),
+            "time_warped": bool(src.shape[0] != out.num_frames),
+        }
+        return labels, info
     feet = out.foot_positions()  # one forward-kinematics pass for both labellings
     leg = out.species_info.leg_length
     detected = contacts_from_feet(feet, out.fps, leg)
-    info: dict[str, Any] = {"method": "detected"}
+    why = "the source has no stance labels"
+    info = {"method": "detected", "reason": why}
     gd = _gait_duty(out.species, source)
     if gd is None or out.num_frames < 5:
         return detected, info
@@ -376,6 +381,7 @@ def transfer_contacts(out: Motion, source: Motion) -> tuple[np.ndarray, dict[str
     labels = np.where(low[None, :], by_duty, detected)
     info = {
         "method": "duty",
+        "reason": why,
         "gait": gait,
         "duty_factor": round(duty, 3),
         "feet_by_duty": [n for n, lo in zip(FEET, low, strict=True) if lo],
@@ -396,7 +402,8 @@ def _finish(out: Motion, source: Motion, info: dict[str, Any]) -> Motion:
 
 def direct_transfer(motion: Motion, to: str, **_: Any) -> Motion:
     """The ``direct`` baseline: the source's local rotations on the target skeleton, the
-    root path scaled by the hip-height ratio h_target / h_source."""
+    root path scaled by the hip-height ratio h_target / h_source; stance labels by
+    :func:`transfer_contacts` (the source's, frame for frame, when it has them)."""
     tgt = load_species(to).name
     ratio = load_species(tgt).hip_height / load_species(motion.species).hip_height
     info = {
@@ -406,15 +413,10 @@ def direct_transfer(motion: Motion, to: str, **_: Any) -> Motion:
         "hip_height_ratio": round(ratio, 4),
     }
     meta = {k: v for k, v in motion.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
-    meta["transfer"] = info
-    return Motion(
-        tgt,
-        motion.fps,
-        motion.root_positions * ratio,
-        motion.rotations.copy(),
-        None if motion.contacts is None else motion.contacts.copy(),
-        meta,
-    )
+    out = Motion(tgt, motion.fps, motion.root_positions * ratio, motion.rotations.copy())
+    contacts, how = transfer_contacts(out, motion)
+    meta["transfer"] = {**info, "contacts": how}
+    return Motion(out.species, out.fps, out.root_positions, out.rotations, contacts, meta)
 
 
 def _network_method(variant: str) -> Callable[..., Motion]:

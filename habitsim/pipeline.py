@@ -1,0 +1,431 @@
+"""One clip through the whole pipeline: source → transfer → refine → track → metrics.
+
+:func:`run_clip` is the one place where the stages are chained; the demo
+(``habitsim demo``), the evaluation (``habitsim eval``, :mod:`habitsim.evaluation.runner`)
+and the benchmarks (``habitsim bench real``) all call it per clip. It returns a
+:class:`ClipRun` holding, per stage, the motion, its qpos on the target's MuJoCo model,
+its stance labels and how they were found, the wall time and the stage's metrics.
+
+Stance labels travel, they are never found twice:
+
+* **transfer** labels its output (:func:`habitsim.models.transfer.transfer_contacts`:
+  the source's footfalls when the source has labels, else detected on resting feet, else
+  the duty-factor guess; a method that returns labels of its own keeps them);
+* **refine** plants exactly those labels (``refine(..., contacts=...)``) and returns them;
+* **track** gets the refined labels as its reference contact schedule (the ``balance`` /
+  ``mpc`` controllers' plan and the reference of ``contact_f1``:
+  ``track(..., contacts=...)``).
+
+The target species' model is the shared compiled one (:func:`habitsim.qpos.species_model`),
+handed to refinement and used by tracking, so a species is compiled once per process.
+
+Refinement never makes a clip worse unnoticed: with ``guard=True`` (default) and a
+successful refinement, the unrefined transfer is tracked too; when the refined clip
+tracks worse (lower survival, or equal survival and a sim MPJPE more than
+:data:`WORSE_MPJPE_RATIO` × the input's plus :data:`WORSE_MPJPE_MARGIN_PER_LEG`), the
+pipeline keeps the unrefined clip as the tracked reference, says so in
+:attr:`ClipRun.refine_verdict` (``reverted``) and :attr:`ClipRun.refine_note`, and keeps
+both results.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .errors import HabitsimError, unknown_choice
+from .motion import Motion
+from .species import load_species
+
+if TYPE_CHECKING:  # pragma: no cover
+    import mujoco
+
+    from .refine import RefineOptions, RefineResult
+    from .sim import TrackResult
+
+__all__ = [
+    "PipelineError",
+    "REFINE_MODES",
+    "REFINE_ALIASES",
+    "WORSE_MPJPE_RATIO",
+    "WORSE_MPJPE_MARGIN_PER_LEG",
+    "Stage",
+    "ClipRun",
+    "run_clip",
+    "track_reference",
+    "stance_toe_height",
+    "refine_mode",
+]
+
+#: Refinement modes of :func:`run_clip`: none, stage A (kinematic), stage B (dynamics).
+REFINE_MODES = ("none", "A", "B")
+#: Other names accepted for the modes (the evaluation's ``--refine`` values).
+REFINE_ALIASES = {"kinematic": "A", "dynamics": "B", "a": "A", "b": "B"}
+#: The refined clip "tracks clearly worse" at equal survival when its sim MPJPE exceeds
+#: the input's times this ratio …
+WORSE_MPJPE_RATIO = 1.10
+#: … plus this share of leg length.
+WORSE_MPJPE_MARGIN_PER_LEG = 0.005
+
+
+class PipelineError(HabitsimError, ValueError):
+    """Bad pipeline options: an unknown refinement mode, a source that is no Motion."""
+
+
+def refine_mode(mode: str) -> str:
+    """The canonical refinement mode (``none``, ``A`` or ``B``) of a name or alias.
+
+    Raises:
+        PipelineError: an unknown mode (the message lists the valid ones).
+    """
+    m = REFINE_ALIASES.get(str(mode), str(mode))
+    if m not in REFINE_MODES:
+        raise PipelineError(
+            unknown_choice("refine mode", mode, (*REFINE_MODES, *REFINE_ALIASES))
+        )
+    return m
+
+
+@dataclass
+class Stage:
+    """One stage's output.
+
+    Attributes:
+        name: ``source``, ``transfer``, ``refine`` or ``track``.
+        motion: the stage's motion (tracking: the simulated frames; None when the stage
+            did not run).
+        contacts: (T, 4) bool stance labels, feet LF, RF, LH, RH (tracking: the simulated
+            foot contacts); None when the stage has none.
+        contacts_method: how the labels were found: ``source`` (the source's footfalls),
+            ``detected``, ``duty``, ``method`` (the transfer method's own labels),
+            ``labels`` (the source motion's own), ``simulated``, or ``none``.
+        wall_time_s: the stage's wall time [s] (0 for the source).
+        metrics: the stage's metrics (kinematic plausibility and stance toe height for
+            motions; the simulated metrics for tracking).
+        status: ``ok``, or what happened (refinement's IPOPT status, ``fell``,
+            ``error: …``, ``off``).
+        species: the species of the motion.
+    """
+
+    name: str
+    motion: Motion | None
+    contacts: np.ndarray | None
+    contacts_method: str
+    wall_time_s: float = 0.0
+    metrics: dict[str, Any] = field(default_factory=dict)
+    status: str = "ok"
+    species: str = ""
+    _qpos: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def qpos(self) -> np.ndarray | None:
+        """(T, nq) the motion's qpos on its species' shipped model (computed once)."""
+        if self._qpos is None and self.motion is not None:
+            from .qpos import motion_to_qpos, species_model
+
+            self._qpos = motion_to_qpos(self.motion, species_model(self.motion.species)).qpos
+        return self._qpos
+
+
+@dataclass
+class ClipRun:
+    """One clip through :func:`run_clip`.
+
+    Attributes:
+        target: target species; method: transfer method; refine: ``none``/``A``/``B``;
+        controller: tracking controller; assist: root assistance; seed: the seed.
+        model: the target species' compiled MuJoCo model (the shared instance of
+            :func:`habitsim.qpos.species_model`; do not modify).
+        source, transferred, refined, tracked: the stages (:class:`Stage`). ``refined``
+            is the transferred stage's motion again when ``refine == "none"``;
+            ``tracked`` is the run of the kept reference (see ``refine_verdict``).
+        refine_result: :func:`habitsim.refine.refine`'s result (None without refinement).
+        track_result: the kept :class:`~habitsim.sim.TrackResult` (None untracked).
+        input_track_result: the tracking of the unrefined transfer, when the refinement
+            was checked (``guard``).
+        refine_verdict: ``kept`` (refined clip tracked no worse), ``reverted`` (it
+            tracked worse: the unrefined transfer is the tracked reference), ``fallback``
+            (refinement failed and returned its input), ``unchecked`` (not compared:
+            no tracking or ``guard=False``), ``none`` (no refinement).
+        refine_note: one line for reports saying what the verdict rests on.
+    """
+
+    target: str
+    method: str
+    refine: str
+    controller: str
+    assist: bool | str
+    seed: int
+    model: mujoco.MjModel
+    source: Stage
+    transferred: Stage
+    refined: Stage
+    tracked: Stage
+    refine_result: RefineResult | None = None
+    track_result: TrackResult | None = None
+    input_track_result: TrackResult | None = None
+    refine_verdict: str = "none"
+    refine_note: str = ""
+
+    @property
+    def stages(self) -> dict[str, Stage]:
+        """Stage name → stage, in pipeline order."""
+        return {s.name: s for s in (self.source, self.transferred, self.refined, self.tracked)}
+
+    @property
+    def times(self) -> dict[str, float]:
+        """Wall time per stage [s] (``track`` includes the check's second run)."""
+        return {k: s.wall_time_s for k, s in self.stages.items() if k != "source"}
+
+    @property
+    def metrics(self) -> dict[str, dict[str, Any]]:
+        """Metrics per stage."""
+        return {k: s.metrics for k, s in self.stages.items()}
+
+    @property
+    def reference(self) -> Motion:
+        """The motion that was (or would be) tracked: the refined one unless reverted."""
+        if self.refine_verdict == "reverted":
+            assert self.transferred.motion is not None
+            return self.transferred.motion
+        assert self.refined.motion is not None
+        return self.refined.motion
+
+    @property
+    def reference_contacts(self) -> np.ndarray | None:
+        """The stance labels of :attr:`reference` (the tracking's contact schedule)."""
+        if self.refine_verdict == "reverted":
+            return self.transferred.contacts
+        return self.refined.contacts
+
+
+# ---------------------------------------------------------------------------- metrics
+
+
+def stance_toe_height(motion: Motion, contacts: np.ndarray | None) -> float:
+    """Median height of the toes the labels put in stance / leg length (NaN without any)."""
+    if contacts is None:
+        return math.nan
+    c = np.asarray(contacts, dtype=bool)
+    if not c.any():
+        return math.nan
+    z = motion.foot_positions()[..., 2]
+    return float(np.median(z[c]) / motion.species_info.leg_length)
+
+
+def _motion_metrics(motion: Motion, contacts: np.ndarray | None) -> dict[str, Any]:
+    """METRICS.md kinematic metrics (literal contact definition), the skating under the
+    stage's own labels, and the stance toe height."""
+    from .evaluation.kinematic import kinematic_metrics, skate_mm
+
+    out: dict[str, Any] = dict(kinematic_metrics(motion))
+    out["stance_toe_height_per_leg"] = stance_toe_height(motion, contacts)
+    out["skate_labelled_mm"] = (
+        math.nan if contacts is None else float(skate_mm(motion, np.asarray(contacts, bool)))
+    )
+    return out
+
+
+def _contacts_method(out: Motion, had_labels: bool) -> str:
+    how = ((out.metadata or {}).get("transfer") or {}).get("contacts") or {}
+    if isinstance(how, dict) and how.get("method"):
+        return str(how["method"])
+    return "method" if had_labels else "none"
+
+
+# ---------------------------------------------------------------------------- stages
+
+
+def _transfer(source: Motion, target: str, method: str, seed: int) -> Stage:
+    from .evaluation.methods import run_method
+
+    t0 = time.perf_counter()
+    out = run_method(method, source, target, seed=seed)
+    contacts = None if out.contacts is None else np.asarray(out.contacts, dtype=bool)
+    how = _contacts_method(out, contacts is not None)
+    if contacts is None:  # the method gave no labels: the transfer stage finds them, once
+        from .models.transfer import transfer_contacts
+
+        contacts, info = transfer_contacts(out, source)
+        how = str(info["method"])
+    wall = time.perf_counter() - t0
+    return Stage("transfer", out, contacts, how, wall, _motion_metrics(out, contacts),
+                 species=out.species)
+
+
+def _refine(
+    stage: Stage, mode: str, model: mujoco.MjModel, options: RefineOptions | None
+) -> tuple[Stage, RefineResult | None]:
+    if mode == "none":
+        return (
+            Stage("refine", stage.motion, stage.contacts, stage.contacts_method, 0.0,
+                  dict(stage.metrics), "none", stage.species, stage._qpos),
+            None,
+        )
+    from dataclasses import replace
+
+    from .refine import RefineOptions, refine
+
+    opts = options or RefineOptions(metrics=False)
+    opts = replace(opts, dynamics=mode == "B", fallback=True)
+    t0 = time.perf_counter()
+    res = refine(stage.motion, opts, contacts=stage.contacts, model=model)
+    wall = time.perf_counter() - t0
+    contacts = np.asarray(res.contacts, dtype=bool)
+    st = Stage("refine", res.motion, contacts, stage.contacts_method, wall,
+               _motion_metrics(res.motion, contacts), str(res.status), stage.species,
+               np.asarray(res.qpos))
+    return st, res
+
+
+def _run_track(motion: Motion, contacts: np.ndarray | None, controller: str,
+               assist: bool | str, seed: int) -> tuple[TrackResult | None, str, float]:
+    """(result, status, wall time); a tracking failure is a status, not an exception."""
+    from .sim import track
+
+    t0 = time.perf_counter()
+    try:
+        res = track(motion, controller=controller, assist=assist, seed=seed, contacts=contacts)
+    except HabitsimError as e:
+        return None, f"error: {e}", time.perf_counter() - t0
+    except Exception as e:  # noqa: BLE001 - a tracker bug is recorded, the caller goes on
+        return None, f"error: {type(e).__name__}: {e}", time.perf_counter() - t0
+    return res, ("fell" if res.failed else "ok"), time.perf_counter() - t0
+
+
+def _worse(refined: TrackResult, plain: TrackResult) -> str | None:
+    """Why the refined clip tracks worse than its input, or None."""
+    sr, sp = float(refined.survival), float(plain.survival)
+    if sr < sp - 1e-9:
+        return f"survival {sr:.2f} < {sp:.2f} unrefined"
+    er = float(refined.metrics.get("sim_mpjpe_per_leg", math.nan))
+    ep = float(plain.metrics.get("sim_mpjpe_per_leg", math.nan))
+    if abs(sr - sp) <= 1e-9 and math.isfinite(er) and math.isfinite(ep):
+        if er > ep * WORSE_MPJPE_RATIO + WORSE_MPJPE_MARGIN_PER_LEG:
+            return (f"equal survival {sr:.2f}, sim MPJPE {er:.3f} > {ep:.3f} leg lengths "
+                    "unrefined")
+    return None
+
+
+def _sim_stage(res: TrackResult | None, status: str, wall: float, species: str) -> Stage:
+    if res is None:
+        return Stage("track", None, None, "none", wall, {}, status, species)
+    st = Stage("track", res.motion(), np.asarray(res.contacts, bool), "simulated", wall,
+               dict(res.metrics), status, species, np.asarray(res.qpos))
+    return st
+
+
+# ---------------------------------------------------------------------------- entry point
+
+
+def run_clip(
+    source: Motion,
+    target: str,
+    *,
+    method: str = "habit",
+    refine: str = "A",
+    controller: str = "mpc",
+    assist: bool | str = False,
+    seed: int = 0,
+    track: bool = True,
+    guard: bool = True,
+    refine_options: RefineOptions | None = None,
+) -> ClipRun:
+    """Run one clip through transfer → refine → track, with the metrics of every stage.
+
+    Args:
+        source: the source motion (its ``contacts`` are the source's stance labels).
+        target: target species.
+        method: transfer method (:func:`habitsim.evaluation.methods.method_names`:
+            ``habit``, ``direct``, ``ground_truth``, …).
+        refine: ``none``, ``A`` (kinematic) or ``B`` (dynamics); ``kinematic`` and
+            ``dynamics`` are accepted too. A failed solve keeps its input (fallback) and
+            says so in ``refined.status``.
+        controller: tracking controller (:data:`habitsim.sim.CONTROLLERS`).
+        assist: root assistance while tracking (``False``, ``"root"``/``True``).
+        seed: seed of the transfer (and the tracking's, which is deterministic).
+        track: run the MuJoCo tracking (``tracked.status == "off"`` when not).
+        guard: check that refinement does not make the clip track worse (module
+            docstring); costs a second tracking run after a successful refinement.
+        refine_options: :class:`~habitsim.refine.RefineOptions` (default: its defaults
+            without its own before/after metrics; ``dynamics`` and ``fallback`` are set
+            here).
+
+    Returns:
+        The :class:`ClipRun`.
+
+    Raises:
+        PipelineError: bad options. UnknownSpeciesError: unknown target.
+        UnknownMethodError / MethodUnavailable: the method is unknown / cannot serve the
+        pair (from :mod:`habitsim.evaluation.methods`). RefineInputError: a motion the
+        refinement cannot take. Tracking failures are results (``tracked.status``).
+    """
+    from .qpos import species_model
+
+    if not isinstance(source, Motion):
+        raise PipelineError(f"run_clip needs a habitsim Motion, got {type(source).__name__}")
+    mode = refine_mode(refine)
+    tgt = load_species(target).name
+    model = species_model(tgt)
+    src_how = "labels" if source.contacts is not None else "none"
+    src = Stage("source", source, source.contacts, src_how, 0.0,
+                _motion_metrics(source, source.contacts), species=source.species)
+    moved = _transfer(source, tgt, method, seed)
+    refined, rres = _refine(moved, mode, model, refine_options)
+    run = ClipRun(tgt, method, mode, controller, assist, int(seed), model, src, moved,
+                  refined, Stage("track", None, None, "none", 0.0, {}, "off", tgt),
+                  refine_result=rres)
+    if mode == "none":
+        run.refine_verdict, run.refine_note = "none", "no refinement"
+    elif rres is not None and not rres.success:
+        run.refine_verdict = "fallback"
+        run.refine_note = f"refinement failed ({rres.status}); the transfer goes on unrefined"
+    else:
+        run.refine_verdict = "unchecked"
+        run.refine_note = "refinement not checked in simulation"
+    if not track:
+        return run
+    assert refined.motion is not None
+    res, status, wall = _run_track(refined.motion, refined.contacts, controller, assist, seed)
+    run.track_result = res
+    run.tracked = _sim_stage(res, status, wall, tgt)
+    if guard and run.refine_verdict == "unchecked" and res is not None:
+        assert moved.motion is not None
+        plain, pstatus, pwall = _run_track(moved.motion, moved.contacts, controller, assist,
+                                           seed)
+        run.input_track_result = plain
+        if plain is None:
+            run.refine_verdict = "kept"
+            run.refine_note = f"kept the refined clip (the unrefined one: {pstatus})"
+            run.tracked.wall_time_s += pwall
+        else:
+            why = _worse(res, plain)
+            if why is None:
+                run.refine_verdict = "kept"
+                run.refine_note = (
+                    f"refined clip tracks no worse (survival {res.survival:.2f} vs "
+                    f"{plain.survival:.2f} unrefined)"
+                )
+                run.tracked.wall_time_s += pwall
+            else:
+                run.refine_verdict = "reverted"
+                run.refine_note = (
+                    f"refinement made the clip track worse ({why}): kept the unrefined transfer"
+                )
+                run.track_result = plain
+                run.tracked = _sim_stage(plain, pstatus, wall + pwall, tgt)
+    return run
+
+
+def track_reference(run: ClipRun, *, controller: str, assist: bool | str = False,
+                    seed: int | None = None) -> TrackResult:
+    """Track a run's kept reference again (another controller, with assistance), with the
+    same reference contact labels."""
+    from .sim import track
+
+    return track(run.reference, controller=controller, assist=assist,
+                 seed=run.seed if seed is None else seed, contacts=run.reference_contacts)

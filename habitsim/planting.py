@@ -1,0 +1,325 @@
+"""Stance labels of a source skeleton's own feet, and legs planted where the source's were.
+
+An imported or retargeted clip is only as good as its feet: a paw that hovers 5 cm above
+the ground, or sinks into it, makes every later stage (transfer, refinement, tracking)
+start from a motion that no animal could make. This module does the two steps that keep
+the feet on the ground through a change of skeleton.
+
+1. :func:`label_source_stance` labels each foot's stance on the *source* skeleton, from
+   its own foot path, size-normalised by its own leg length. Foot points of motion
+   capture sit at a marker or joint, not at the sole, so each foot gets its own *floor*
+   (its height when planted: a low percentile of its height over the frames where it
+   rests); heights are measured above that floor. The labelling itself is
+   :func:`habitsim.contacts.contacts_from_feet` (the project's one contact rule: height
+   below 2 % and horizontal speed below 0.3 leg lengths per second, with hysteresis), on
+   a foot path smoothed by a Savitzky–Golay filter of about 0.1 s (marker noise at 120 fps
+   otherwise breaks the speed test).
+2. :func:`plant_legs` solves the target's legs by analytic IK (:func:`habitsim.ik.
+   pose_from_targets`, in the target species' own posture) onto toe targets that follow
+   the source feet: each foot's offset from its shoulder / hip joint is scaled by the
+   ratio of the two limbs' lengths, its height above its floor likewise; during a stance
+   run the foothold is fixed (the run's median) and the toe is on the ground (z = 0); in
+   swing the difference between the footholds and the scaled path is blended in (a
+   smoothstep), so there are no jumps at lift-off or touch-down. Where a stance foot
+   cannot reach its foothold (the target's legs are shorter relative to the source's
+   stride), the pelvis is lowered by the shortfall and the legs are solved again.
+
+Everything is vectorised over frames; a 10 s clip at 120 fps takes a few tens of ms.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import (
+    gaussian_filter1d,
+    maximum_filter1d,
+    minimum_filter1d,
+    uniform_filter1d,
+)
+from scipy.signal import savgol_filter
+
+from .contacts import contact_segments, contacts_from_feet
+from .errors import InvalidMotionError
+from .ik import pose_from_targets
+from .motion import Motion
+from .skeleton import JOINT_NAMES
+from .species import Species, load_species
+
+__all__ = [
+    "FOOT_ANCHORS",
+    "SourceStance",
+    "label_source_stance",
+    "smooth_path",
+    "PlantReport",
+    "plant_legs",
+    "contact_f1",
+]
+
+#: The habitsim joint each foot's offset is measured from (its shoulder / hip joint).
+FOOT_ANCHORS: tuple[str, ...] = ("lf_shoulder", "rf_shoulder", "lh_hip", "rh_hip")
+_IDX = {n: i for i, n in enumerate(JOINT_NAMES)}
+#: Smoothing window of the foot path before labelling [s].
+SMOOTH_S = 0.1
+#: Window of the local floor of a foot [s] (longer than a stance phase of a slow walk).
+FLOOR_WINDOW_S = 1.5
+#: How far one foot's floor may sit above the lowest foot's [hind-leg lengths].
+FLOOR_SPREAD_PER_LEG = 0.1
+#: How far a foot's local floor may rise above its clip floor [hind-leg lengths].
+FLOOR_RISE_PER_LEG = 0.05
+#: Below this many resting frames a foot's floor is taken from all its frames.
+_MIN_REST_FRAMES = 3
+
+
+@dataclass(frozen=True)
+class SourceStance:
+    """Stance of a source skeleton's feet, found on the source itself.
+
+    Attributes:
+        contacts: (T, 4) bool stance labels, feet LF, RF, LH, RH.
+        heights: (T, 4) height of each foot's lowest point above its floor [m] (smoothed).
+        floors: (4,) height of each foot's lowest point when planted, in the source
+            frame [m].
+        ground: height of the ground plane in the source frame [m] (the lowest floor).
+        leg_length: the normalising length used (the source's hind-leg length) [m].
+    """
+
+    contacts: np.ndarray
+    heights: np.ndarray
+    floors: np.ndarray
+    ground: float
+    leg_length: float
+
+    @property
+    def duty(self) -> np.ndarray:
+        """(4,) share of frames each foot is in stance."""
+        return self.contacts.mean(axis=0)
+
+
+def smooth_path(x: np.ndarray, fps: float) -> np.ndarray:
+    """A path (T, ...) smoothed along time by a Savitzky–Golay filter of about 0.1 s."""
+    x = np.asarray(x, dtype=np.float64)
+    t = x.shape[0]
+    win = max(5, int(round(SMOOTH_S * fps)) | 1)  # odd
+    if t < win:
+        win = t if t % 2 else t - 1
+    if win < 5:
+        return x.copy()
+    return savgol_filter(x, win, 2, axis=0, mode="interp")
+
+
+def label_source_stance(
+    points: Sequence[np.ndarray], fps: float, leg_length: float
+) -> SourceStance:
+    """Stance labels of a source's feet from their own paths (see the module docstring).
+
+    Args:
+        points: four arrays (T, P, 3), one per foot (LF, RF, LH, RH): the positions of
+            the foot's joints (wrist / hock and the real joints below it) in metres, z up;
+            the ground height need not be known. In each frame the foot's lowest point
+            gives its height and its horizontal speed, so a paw that rolls over its toes
+            is measured where it touches the ground.
+        fps: frame rate [Hz].
+        leg_length: the source's own hind-leg length [m] (thresholds scale with it).
+
+    Returns:
+        The :class:`SourceStance`.
+
+    Raises:
+        InvalidMotionError: bad shapes, non-finite values or non-positive sizes.
+    """
+    if len(points) != 4:
+        raise InvalidMotionError(f"points must hold 4 feet, got {len(points)}")
+    if not (np.isfinite(fps) and fps > 0 and np.isfinite(leg_length) and leg_length > 0):
+        raise InvalidMotionError(
+            f"fps and leg_length must be positive and finite, got {fps}, {leg_length}"
+        )
+    t = None
+    low = []
+    for k, p in enumerate(points):
+        p = np.asarray(p, dtype=np.float64)
+        if p.ndim != 3 or p.shape[1] < 1 or p.shape[2] != 3 or (t is not None and len(p) != t):
+            raise InvalidMotionError(f"foot {k} points must have shape (T, P, 3), got {p.shape}")
+        if not np.all(np.isfinite(p)):
+            raise InvalidMotionError(f"foot {k} points contain NaN or inf")
+        t = len(p)
+        sm = smooth_path(p, fps)
+        vel = np.gradient(sm[..., :2], axis=0) * fps if t >= 2 else np.zeros_like(sm[..., :2])
+        arg = np.argmin(sm[..., 2], axis=1)
+        rows = np.arange(t)
+        low.append(np.concatenate([vel[rows, arg], sm[rows, arg, 2:3]], axis=-1))
+    lowest = np.stack(low, axis=1)  # (T, 4, 3): horizontal velocity, lowest height
+    speed = np.linalg.norm(lowest[..., :2], axis=-1)
+    rest = speed < 0.3 * leg_length
+    floors = np.empty(4)
+    for k in range(4):
+        z = lowest[:, k, 2]
+        zr = z[rest[:, k]]
+        floors[k] = np.percentile(zr, 10) if zr.size >= _MIN_REST_FRAMES else np.percentile(z, 2)
+    # Feet stand on one ground: a foot point may sit higher than another (a marker on the
+    # wrist, a thick pad) but not by more than FLOOR_SPREAD_PER_LEG; a foot held in the air
+    # for the whole clip does not get a floor of its own.
+    floors = np.minimum(floors, floors.min() + FLOOR_SPREAD_PER_LEG * leg_length)
+    # A foot rests at slightly different heights over a clip (the paw's pose, an uneven
+    # capture floor): each frame's floor is the lower envelope of the foot's height over
+    # about FLOOR_WINDOW_S, but never more than FLOOR_RISE_PER_LEG above the clip floor
+    # (a paw held up stays in the air).
+    size = max(3, int(round(FLOOR_WINDOW_S * fps)) | 1)
+    env = minimum_filter1d(lowest[..., 2], size=size, axis=0, mode="nearest")
+    env = uniform_filter1d(env, size=size, axis=0, mode="nearest")
+    local = np.clip(env, floors, floors + FLOOR_RISE_PER_LEG * leg_length)
+    heights = lowest[..., 2] - np.minimum(local, lowest[..., 2].max(axis=0))
+    # The contact rule of habitsim.contacts on a path with this speed and height: a path
+    # that is the running integral of the lowest point's velocity.
+    path = np.zeros((t, 4, 3))
+    if t >= 2:
+        path[1:, :, :2] = np.cumsum(0.5 * (lowest[1:, :, :2] + lowest[:-1, :, :2]), axis=0) / fps
+    path[..., 2] = heights
+    contacts = contacts_from_feet(path, fps, leg_length)
+    return SourceStance(contacts, heights, floors, float(floors.min()), float(leg_length))
+
+
+def contact_f1(pred: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """(F,) F1 score per foot of predicted contact flags against reference flags.
+
+    A foot with no contact in either sequence scores 1 (they agree); one with contacts in
+    only one of them scores 0.
+    """
+    p = np.asarray(pred, dtype=bool)
+    r = np.asarray(ref, dtype=bool)
+    if p.shape != r.shape or p.ndim != 2:
+        raise InvalidMotionError(f"contact arrays must match as (T, F), got {p.shape}, {r.shape}")
+    tp = (p & r).sum(axis=0)
+    den = p.sum(axis=0) + r.sum(axis=0)
+    return np.where(den > 0, 2.0 * tp / np.maximum(den, 1), 1.0)
+
+
+@dataclass(frozen=True)
+class PlantReport:
+    """What :func:`plant_legs` did.
+
+    Attributes:
+        reach_error: (T, 4) distance of each toe from its target after IK [m].
+        pelvis_drop: (T,) how far the pelvis was lowered so stance feet reach [m].
+        stance_toe_height: (4,) median height of each toe over its stance frames [m].
+        min_toe_height: lowest toe height over the clip [m] (negative: under the ground).
+    """
+
+    reach_error: np.ndarray
+    pelvis_drop: np.ndarray
+    stance_toe_height: np.ndarray
+    min_toe_height: float
+
+    def to_dict(self, leg_length: float) -> dict[str, object]:
+        """JSON-ready summary, lengths also per leg length of the target."""
+        return {
+            "stance_toe_height_per_leg": [round(float(h) / leg_length, 5)
+                                          for h in self.stance_toe_height],
+            "min_toe_height_per_leg": round(self.min_toe_height / leg_length, 5),
+            "max_pelvis_drop_per_leg": round(float(self.pelvis_drop.max()) / leg_length, 5),
+            "max_reach_error_per_leg": round(float(self.reach_error.max()) / leg_length, 5),
+        }
+
+
+def _smoothstep(n: int) -> np.ndarray:
+    s = (np.arange(n) + 1.0) / (n + 1.0)
+    return s * s * (3.0 - 2.0 * s)
+
+
+def _planted_targets(raw: np.ndarray, contacts: np.ndarray) -> np.ndarray:
+    """Toe targets (T, 4, 3): stance runs fixed on the ground, swing blended in between."""
+    out = raw.copy()
+    out[..., 2] = np.maximum(out[..., 2], 0.0)
+    t = raw.shape[0]
+    for k, runs in enumerate(contact_segments(contacts)):
+        if not runs:
+            continue
+        holds = [np.median(raw[a:b + 1, k, :2], axis=0) for a, b in runs]
+        for (a, b), h in zip(runs, holds, strict=True):
+            out[a:b + 1, k, :2] = h
+            out[a:b + 1, k, 2] = 0.0
+        # swing phases: before the first, between runs, after the last
+        bounds = [(-1, runs[0][0], None, 0)]
+        bounds += [(runs[i][1], runs[i + 1][0], i, i + 1) for i in range(len(runs) - 1)]
+        bounds.append((runs[-1][1], t, len(runs) - 1, None))
+        for lo, hi, ip, inx in bounds:
+            n = hi - lo - 1
+            if n <= 0:
+                continue
+            d0 = None if ip is None else holds[ip] - raw[lo, k, :2]
+            d1 = None if inx is None else holds[inx] - raw[hi, k, :2]
+            d0 = d1 if d0 is None else d0
+            d1 = d0 if d1 is None else d1
+            w = _smoothstep(n)[:, None]
+            out[lo + 1:hi, k, :2] = raw[lo + 1:hi, k, :2] + (1.0 - w) * d0 + w * d1
+    return out
+
+
+def plant_legs(
+    motion: Motion,
+    source_feet: np.ndarray,
+    source_anchors: np.ndarray,
+    contacts: np.ndarray,
+    limb_scale: np.ndarray,
+    iterations: int = 3,
+) -> tuple[Motion, PlantReport]:
+    """Solve a motion's legs so its toes are planted where the source's feet were.
+
+    Args:
+        motion: the retargeted motion (trunk, neck, tail as wanted; legs are re-solved).
+        source_feet: (T, 4, 3) source foot points in the motion's frame, heights above
+            each foot's floor (so a planted foot reads z ≈ 0) [m].
+        source_anchors: (T, 4, 3) the source's shoulder / hip joints in the same frame
+            (the same horizontal scaling as ``source_feet``) [m].
+        contacts: (T, 4) bool stance labels.
+        limb_scale: (4,) target limb length / source limb length per foot.
+        iterations: pelvis-lowering passes for stance feet out of reach.
+
+    Returns:
+        ``(planted motion with ``contacts`` set, report)``.
+
+    Raises:
+        InvalidMotionError: shapes that do not match the motion.
+    """
+    sp: Species = load_species(motion.species)
+    t = motion.num_frames
+    for name, a in (("source_feet", source_feet), ("source_anchors", source_anchors)):
+        if np.shape(a) != (t, 4, 3):
+            raise InvalidMotionError(f"{name} must have shape ({t}, 4, 3), got {np.shape(a)}")
+    c = np.asarray(contacts, dtype=bool)
+    if c.shape != (t, 4):
+        raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
+    scale = np.asarray(limb_scale, dtype=np.float64).reshape(1, 4, 1)
+    root = motion.root_positions.copy()
+    rot = motion.rotations
+    leg = sp.leg_length
+    anchors_t = motion.global_positions()[:, [_IDX[n] for n in FOOT_ANCHORS]]
+    rel = (np.asarray(source_feet) - np.asarray(source_anchors)) * scale
+    raw = np.empty((t, 4, 3))
+    raw[..., :2] = anchors_t[..., :2] + rel[..., :2]
+    raw[..., 2] = np.asarray(source_feet)[..., 2] * scale[..., 0]
+    # The anchors move with the pelvis; their path only depends on the trunk, which the
+    # lowering below shifts vertically, so the horizontal targets stay valid.
+    targets = _planted_targets(raw, c)
+    drop = np.zeros(t)
+    sigma = max(1.0, 0.05 * motion.fps)
+    pose = pose_from_targets(sp, root, rot, targets)
+    for _ in range(iterations):
+        short = np.where(c, pose.reach_error, 0.0).max(axis=1)
+        if short.max() <= 0.002 * leg:
+            break
+        need = gaussian_filter1d(maximum_filter1d(short, size=int(2 * sigma) | 1), sigma)
+        drop += np.maximum(need, short)
+        root = motion.root_positions.copy()
+        root[:, 2] -= drop
+        pose = pose_from_targets(sp, root, rot, targets)
+    out = Motion(motion.species, motion.fps, root, pose.rotations, c.copy(),
+                 dict(motion.metadata))
+    toes = out.foot_positions()[..., 2]
+    stance_h = np.array([np.median(toes[c[:, k], k]) if c[:, k].any() else np.nan
+                         for k in range(4)])
+    report = PlantReport(pose.reach_error, drop, stance_h, float(toes.min()))
+    return out, report
+

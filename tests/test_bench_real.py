@@ -1,0 +1,107 @@
+"""``habitsim bench real`` on a small BVH folder the test writes itself."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from habitsim.bvh import write_bvh
+from habitsim.cli import main
+from habitsim.cli.bench_real import (
+    BenchRealError,
+    _read_source,
+    evaluate_targets,
+    exit_code,
+    source_files,
+)
+from habitsim.gaits import generate
+
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("bvh")
+    write_bvh(generate("dog", "walk", seed=3, duration_s=3.0), d / "walk.bvh")
+    (d / "notes.txt").write_text("not a clip")
+    return d
+
+
+def test_bench_real_rows_and_json(folder: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "rows.json"
+    args = ["bench", "real", "--data", str(folder), "--targets", "cat", "--methods", "direct",
+            "--seconds", "2", "--refine", "A", "--controller", "servo", "--workers", "1",
+            "--json", str(out)]
+    code = main(args)
+    text = capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    (row,) = doc["rows"]
+    assert row["status"] == "ok", row["note"]
+    assert (row["clip"], row["target"], row["method"], row["frames"]) == ("walk.bvh", "cat",
+                                                                         "direct", 60)
+    assert row["import_contact_f1"] is None  # the importer reports none (yet): "-"
+    for k in ("skate_mm_before", "skate_mm_after", "jerk_before", "jerk_after",
+              "penetration_mm_before", "penetration_mm_after", "survival",
+              "sim_mpjpe_per_leg", "time_transfer_s", "time_refine_s", "time_track_s"):
+        assert isinstance(row[k], float), k
+    assert row["refine_check"] in ("kept", "reverted", "fallback")
+    names = [t["name"] for t in doc["targets"]]
+    assert len(names) == 5 and doc["targets"][1]["verdict"] == "n/a"  # servo, not mpc
+    assert "targets:" in text and "walk@" in text
+    assert code == exit_code(doc["targets"])
+
+
+def test_bench_real_no_track_no_refine_meets_what_applies(folder: Path, capsys) -> None:
+    args = ["bench", "real", "--data", str(folder), "--targets", "cat", "--methods", "direct",
+            "--seconds", "2", "--refine", "none", "--no-track", "--workers", "1"]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "n/a" in text and "MISSED" not in text
+
+
+def _row(method: str, survival: float, **kw) -> dict:
+    r = {"status": "ok", "method": method, "survival": survival, "sim_mpjpe_per_leg": 0.05,
+         "skate_mm_before": 20.0, "skate_mm_after": 0.5, "jerk_before": 100.0,
+         "jerk_after": 50.0, "penetration_mm_before": 5.0, "penetration_mm_after": 0.0,
+         "time_transfer_s": 0.5, "time_refine_s": 1.0, "time_track_s": 2.0}
+    r.update(kw)
+    return r
+
+
+def test_targets_and_exit_code() -> None:
+    rows = [_row("habit", 1.0), _row("direct", 0.5)]
+    t = evaluate_targets(rows, seconds=4)
+    assert [x["verdict"] for x in t] == ["met"] * 5 and exit_code(t) == 0
+    rows = [_row("habit", 0.4, skate_mm_after=3.0), _row("direct", 1.0)]
+    t = evaluate_targets(rows, seconds=4)
+    v = {x["name"].split(":")[0].split(" ")[0]: x["verdict"] for x in t}
+    assert v["refinement"] == "MISSED" and v["habit"] == "MISSED" and exit_code(t) == 1
+    slow = [_row("habit", 1.0, time_refine_s=20.0)]
+    assert evaluate_targets(slow, seconds=4)[-1]["verdict"] == "MISSED"
+    assert evaluate_targets(slow, seconds=10)[-1]["verdict"] == "met"  # 25 s per 10 s window
+    t = evaluate_targets(rows, seconds=4, refine="none", tracked=False)
+    assert [x["verdict"] for x in t][:4] == ["n/a"] * 4
+
+
+def test_bad_input(folder: Path, tmp_path: Path, capsys) -> None:
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    (empty / "a.txt").write_text("x")
+    with pytest.raises(BenchRealError, match=r"no source clips \(.bvh, .glb, .gltf files\)"):
+        source_files(empty)
+    with pytest.raises(BenchRealError, match="readable: .bvh, .glb, .gltf"):
+        _read_source(tmp_path / "clip.fbx", "dog")
+    out = tmp_path / "never.json"
+    base = ["bench", "real", "--workers", "1", "--json", str(out)]
+    assert main([*base, "--data", str(empty)]) == 2
+    assert "no source clips" in capsys.readouterr().err
+    assert main([*base, "--data", str(folder), "--seconds", "10"]) == 2
+    err = capsys.readouterr().err
+    assert "walk.bvh" in err and "shorter than one 10 s window" in err
+    assert main([*base, "--data", str(folder), "--targets", "cat,hores"]) == 2
+    assert "unknown species 'hores'" in capsys.readouterr().err
+    assert main([*base, "--data", str(folder), "--methods", "nope"]) == 2
+    assert "valid:" in capsys.readouterr().err
+    assert not out.exists()

@@ -1,0 +1,272 @@
+"""Import of foreign rigs: helper chains, per-leg confidence, source stance, planted feet.
+
+The rigs are written here from a synthetic dog walk whose stance is known: the joints get
+other names, 6-channel joints, centimetres, z up, an extra root, and rig helpers that a
+motion-capture rig carries (a long sided tail helper, armour plates, toe nubs pointing into
+the ground, a footstep tracker).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import habitsim
+from habitsim.bvh import BVHData, bvh_text, parse_bvh
+from habitsim.bvh_mapping import import_bvh, is_helper_name, load_joint_map, read_source
+from habitsim.cli import main
+from habitsim.errors import SkeletonMappingError
+from habitsim.planting import contact_f1, label_source_stance
+
+RENAME = {
+    "pelvis": "Hips_jnt", "spine1": "SpineA", "spine2": "SpineB", "spine3": "Chest",
+    "neck": "NeckA", "head": "Skull", "snout": "Nose",
+    "tail1": "TailBase", "tail2": "TailMid", "tail3": "TailTip",
+}
+for _s, _S in (("l", "L"), ("r", "R")):
+    RENAME.update({
+        f"{_s}f_scapula": f"{_S}_Collar", f"{_s}f_shoulder": f"{_S}_UpperArm",
+        f"{_s}f_elbow": f"{_S}_LowerArm", f"{_s}f_wrist": f"{_S}_Paw",
+        f"{_s}f_toe": f"{_S}_Digits",
+        f"{_s}h_ilium": f"{_S}_Ilium", f"{_s}h_hip": f"{_S}_Thigh", f"{_s}h_knee": f"{_S}_Shin",
+        f"{_s}h_hock": f"{_S}_Hock", f"{_s}h_toe": f"{_S}_Toes",
+    })
+CM = 100.0
+
+
+def _foreign_rig(motion, CM: float = CM) -> BVHData:  # noqa: N803 - the unit factor
+    """The motion as a foreign rig: other names, 6 channels, cm, z up, helpers."""
+    h = parse_bvh(bvh_text(motion))
+    starts = h.channel_start
+    f = h.num_frames
+    nodes: list[dict] = []  # name, parent name, offset (cm), values (F, 6) or None
+
+    def add(name, parent, offset, values=None):
+        nodes.append({"name": name, "parent": parent, "offset": np.asarray(offset, float),
+                      "values": values})
+
+    add("Rig_Root", None, [0, 0, 0], np.zeros((f, 6)))
+    add("Rig_Footsteps", "Rig_Root", [0, 0, 0], np.zeros((f, 6)))
+    for j, name in enumerate(h.names):
+        if h.is_end_site[j]:
+            parent = h.names[h.parents[j]]
+            if parent.endswith("_toe"):  # a toe nub pointing into the ground instead
+                add(RENAME[parent] + "_Nub", RENAME[parent], [0.05 * CM, 0.0, -0.25 * CM],
+                    np.zeros((f, 6)))
+            else:
+                add(RENAME[parent] + "_End", RENAME[parent], h.offsets[j] * CM)
+            continue
+        ch = h.channels[j]
+        vals = np.zeros((f, 6))
+        cols = {c: starts[j] + k for k, c in enumerate(ch)}
+        for k, c in enumerate(("Xposition", "Yposition", "Zposition")):
+            vals[:, k] = h.frames[:, cols[c]] * CM if c in cols else h.offsets[j, k] * CM
+        for k, c in enumerate(("Zrotation", "Xrotation", "Yrotation")):
+            vals[:, 3 + k] = h.frames[:, cols[c]]
+        parent = "Rig_Root" if h.parents[j] < 0 else RENAME[h.names[h.parents[j]]]
+        add(RENAME[name], parent, h.offsets[j] * CM, vals)
+        u = CM / 100.0  # helper sizes below are in cm
+        if name == "pelvis":  # a sided helper chain longer than a leg
+            prev = "Hips_jnt"
+            for k in range(1, 6):
+                add(f"L_TailHelper0{k}", prev, [-15.0 * u, 3.0 * u, 0.0], np.zeros((f, 6)))
+                prev = f"L_TailHelper0{k}"
+            add(prev + "_End", prev, [-15.0 * u, 0.0, 0.0])
+        if name.endswith("f_shoulder"):
+            side = RENAME[name][0]
+            add(f"{side}_Armor01", RENAME[name], [0.0, 5.0 * u, 5.0 * u], np.zeros((f, 6)))
+            add(f"{side}_Armor01_End", f"{side}_Armor01", [0.0, 5.0 * u, 0.0])
+
+    kids: dict[str | None, list[dict]] = {}
+    for n in nodes:
+        kids.setdefault(n["parent"], []).append(n)
+    lines, columns = ["HIERARCHY"], []
+
+    def emit(n, depth):
+        pad = "  " * depth
+        if n["values"] is None:
+            lines.append(f"{pad}End Site")
+            lines.append(f"{pad}{{")
+            lines.append(f"{pad}  OFFSET " + " ".join(f"{v:.6f}" for v in n["offset"]))
+            lines.append(f"{pad}}}")
+            return
+        lines.append(f"{pad}{'ROOT' if n['parent'] is None else 'JOINT'} {n['name']}")
+        lines.append(f"{pad}{{")
+        lines.append(f"{pad}  OFFSET " + " ".join(f"{v:.6f}" for v in n["offset"]))
+        lines.append(f"{pad}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation "
+                     "Yrotation")
+        columns.append(n["values"])
+        for c in kids.get(n["name"], []):
+            emit(c, depth + 1)
+        lines.append(f"{pad}}}")
+
+    emit(kids[None][0], 0)
+    data = np.concatenate(columns, axis=1)
+    lines += ["MOTION", f"Frames: {f}", f"Frame Time: {1.0 / motion.fps:.8f}"]
+    lines += [" ".join(f"{v:.6f}" for v in row) for row in data]
+    return parse_bvh("\n".join(lines) + "\n", source="foreign_rig.bvh")
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return habitsim.generate("dog", "walk", seed=3, duration_s=3.0)
+
+
+@pytest.fixture(scope="module")
+def rig(walk):
+    return _foreign_rig(walk)
+
+
+def test_helper_names():
+    for n in ("Dog_LeftTail001", "Bip01_L_Toe0Nub", "Bip01_Footsteps", "Dog_LeftArmor002",
+              "LeftLegIKTarget", "forearm_twist.L", "L_TailHelper01"):
+        assert is_helper_name(n), n
+    for n in ("b_LeftLegUpper", "LeftUpLeg", "L_Toes", "b__LeftFinger", "RightAnkle", "Hips"):
+        assert not is_helper_name(n), n
+
+
+def test_foreign_rig_maps_legs_not_helpers(rig):
+    motion, mapping = import_bvh(rig, "dog")
+    j = mapping.joints
+    assert (mapping.frame.units, mapping.frame.up) == ("cm", "+z")
+    assert j["pelvis"] == "Hips_jnt"
+    assert [j[f"lh_{s}"] for s in ("ilium", "hip", "knee", "hock", "toe")] == [
+        "L_Ilium", "L_Thigh", "L_Shin", "L_Hock", "L_Toes"]
+    assert [j[f"rf_{s}"] for s in ("scapula", "shoulder", "elbow", "wrist", "toe")] == [
+        "R_Collar", "R_UpperArm", "R_LowerArm", "R_Paw", "R_Digits"]
+    assert not any(v and ("Helper" in v or "Nub" in v or "Armor" in v) for v in j.values())
+    assert set(mapping.confidence) == {"lf", "rf", "lh", "rh"}
+    assert min(mapping.confidence.values()) >= 0.67 and mapping.warnings == []
+
+
+def test_source_stance_matches_the_known_footfalls(walk, rig):
+    motion, _ = import_bvh(rig, "dog")
+    imp = motion.metadata["import"]
+    assert imp["contacts"]["method"] == "source foot path"
+    # the labels found on the foreign rig's own feet are the walk's own stance
+    f1 = contact_f1(motion.contacts, walk.contacts)
+    assert np.all(f1 >= 0.85), f1
+    assert np.allclose(imp["contacts"]["duty"], motion.contacts.mean(axis=0), atol=1e-3)
+
+
+def test_planted_feet_on_the_ground(rig):
+    motion, _ = import_bvh(rig, "cat")  # another size: the legs are re-solved for the cat
+    leg = motion.species_info.leg_length
+    toes = motion.foot_positions()[..., 2]
+    c = motion.contacts
+    assert toes.min() >= -1e-6  # no toe under the ground
+    assert np.all(np.abs(toes[c]) <= 0.01 * leg)  # stance toes within 1 % of leg length
+    # stance feet stay put: horizontal slide within a stance run
+    feet = motion.foot_positions()[..., :2]
+    slide = np.linalg.norm(np.diff(feet, axis=0), axis=-1)[c[1:] & c[:-1]]
+    assert slide.max() <= 0.005 * leg
+    # the metric's contacts on the imported clip agree with the source's labels
+    f1 = np.asarray(motion.metadata["import"]["contact_f1"])
+    assert np.all(f1 >= 0.85), f1
+
+
+def test_inches_given_explicitly(walk, rig):
+    inch = _foreign_rig(walk, CM=100.0 / 2.54)
+    m_in, map_in = import_bvh(inch, "dog", units="in")
+    m_cm, _ = import_bvh(rig, "dog")
+    assert map_in.frame.units == "in" and map_in.frame.scale == 0.0254
+    np.testing.assert_allclose(m_in.global_positions(), m_cm.global_positions(), atol=1e-5)
+    np.testing.assert_array_equal(m_in.contacts, m_cm.contacts)
+
+
+def test_unplanted_import_hovers_or_sinks(rig):
+    # The reason planting exists: bone directions alone put a cat's toes off the ground.
+    motion, _ = import_bvh(rig, "cat", plant=False)
+    leg = motion.species_info.leg_length
+    toes = motion.foot_positions()[..., 2]
+    assert np.abs(np.median(toes[motion.contacts])) > 0.01 * leg or toes.min() < -0.01 * leg
+
+
+def test_map_file_overrides_joints_and_warns(rig, tmp_path):
+    bad = {"extends": "auto", "map": {
+        "lh_hip": "L_TailHelper01", "lh_knee": "L_TailHelper02", "lh_hock": "L_TailHelper03",
+        "lh_toe": "L_TailHelper04", "lh_ilium": None}}
+    p = tmp_path / "map.json"
+    p.write_text(json.dumps(bad))
+    spec = load_joint_map(p)
+    assert spec["extends"] == "auto" and spec["map"]["lh_ilium"] is None
+    motion, mapping = import_bvh(rig, "dog", joint_map=p)
+    assert mapping.joints["lh_hip"] == "L_TailHelper01"
+    assert mapping.joints["rh_hip"] == "R_Thigh"  # the rest still comes from the auto map
+    assert mapping.joints["lh_ilium"] is None
+    assert mapping.confidence["lh"] < 0.67
+    assert any(w.startswith("lh leg") for w in mapping.warnings)
+    assert motion.metadata["import"]["warnings"] == mapping.warnings
+
+
+@pytest.mark.parametrize(
+    "content, fragment",
+    [
+        ('{"map": {"paw": "L_Paw"}}', "unknown habitsim joints ['paw']"),
+        ('{"extends": "manual", "map": {"pelvis": "Hips_jnt"}}', "unknown extends"),
+        ('{"map": {"pelvis": 3}}', "must be a source joint name"),
+        ('{"map": {"pelvis": "Hips_jnt"}, "scale": 2}', "unknown keys ['scale']"),
+        ("[1, 2]", "must be a table/object"),
+        ("{oops", "cannot read joint-map JSON"),
+        ('{"extends": "auto", "map": {"lh_hip": "NoSuchJoint"}}', "source joints ['NoSuchJoint']"),
+    ],
+)
+def test_bad_json_map(rig, tmp_path, content, fragment):
+    p = tmp_path / "bad.json"
+    p.write_text(content)
+    with pytest.raises(SkeletonMappingError) as ei:
+        import_bvh(rig, "dog", joint_map=p)
+    assert fragment in str(ei.value)
+    assert len(str(ei.value)) < 2000
+
+
+def test_unknown_source_type(tmp_path):
+    p = tmp_path / "clip.fbx"
+    p.write_text("x")
+    with pytest.raises(SkeletonMappingError, match=r"valid: \.bvh, \.glb, \.gltf"):
+        read_source(p)
+
+
+def test_label_source_stance_floor_and_hold():
+    # One foot: planted at a 3 cm marker height, lifted 10 cm in the middle; another held
+    # still in the air for the whole clip never counts as stance.
+    fps, leg, t = 60.0, 0.6, 120
+    x = np.linspace(0.0, 1.2, t)
+    pts = []
+    z = np.full(t, 0.03)
+    z[40:80] += 0.1 * np.sin(np.linspace(0, np.pi, 40))
+    xf = np.where(np.arange(t) < 40, 0.2, np.where(np.arange(t) >= 80, 0.7, x))
+    pts.append(np.stack([xf, np.zeros(t), z], -1)[:, None])
+    pts.append(np.stack([x * 0 + 0.3, np.zeros(t), np.full(t, 0.2)], -1)[:, None])
+    pts.append(np.stack([x * 0, np.zeros(t), np.full(t, 0.03)], -1)[:, None])
+    pts.append(np.stack([x * 0, np.zeros(t), np.full(t, 0.03)], -1)[:, None])
+    st = label_source_stance(pts, fps, leg)
+    assert st.contacts[:35, 0].all() and st.contacts[85:, 0].all()
+    assert not st.contacts[45:75, 0].any()
+    assert not st.contacts[:, 1].any()  # held in the air: 17 cm above the lowest floor
+    assert st.contacts[:, 2].all() and st.contacts[:, 3].all()
+
+
+def test_cli_inspect_and_import_with_warning(rig, tmp_path, capsys):
+    p = tmp_path / "rig.bvh"
+    p.write_text(rig.to_text())
+    assert main(["data", "inspect-bvh", str(p)]) == 0
+    out = capsys.readouterr().out
+    assert "L_TailHelper01  (15.3) [helper]" in out
+    assert "L_Thigh" in out and "-> lh_hip" in out
+    assert '"extends": "auto"' in out
+    m = tmp_path / "m.json"
+    m.write_text(json.dumps({"extends": "auto", "map": {"lh_hip": "L_TailHelper01",
+                                                          "lh_knee": "L_TailHelper02",
+                                                          "lh_hock": "L_TailHelper03",
+                                                          "lh_toe": "L_TailHelper04"}}))
+    out_npz = tmp_path / "o.npz"
+    rc = main(["data", "import-bvh", str(p), "--species", "dog", "--out", str(out_npz),
+               "--map", str(m)])
+    assert rc == 0 and out_npz.is_file()
+    err = capsys.readouterr().err
+    assert "warning: lh leg" in err
+    back = habitsim.load_motion(out_npz)
+    assert back.contacts is not None and back.metadata["import"]["warnings"]

@@ -1,0 +1,147 @@
+"""One pipeline path: transfer keeps the source's footfalls, the labels travel from stage
+to stage, refinement that makes a clip track worse is reported and not kept, one model
+cache."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from habitsim.contacts import drop_short_runs, warp_contacts
+from habitsim.gaits import generate
+from habitsim.models import transfer
+from habitsim.models.transfer import transfer_contacts
+from habitsim.motion import resample_motion
+from habitsim.pipeline import PipelineError, refine_mode, run_clip, stance_toe_height
+
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
+
+
+@pytest.fixture(scope="module")
+def trot():
+    return generate("horse", "trot", seed=5, duration_s=3.0)
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return generate("dog", "walk", seed=2, duration_s=2.0)
+
+
+# ---------------------------------------------------------------------------- contacts
+
+
+def test_drop_short_runs_and_warp() -> None:
+    c = np.array([[1, 1, 0, 1, 1, 0, 0, 1, 0, 0, 1]], bool).T
+    out = drop_short_runs(c, 2)[:, 0].astype(int).tolist()
+    # the one-frame gap is filled, the lone stance frames are removed (also at the end)
+    assert out == [1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0]
+    lab = np.zeros((10, 4), bool)
+    lab[2:6] = True
+    np.testing.assert_array_equal(warp_contacts(lab, 10), lab)
+    w = warp_contacts(lab, 19)  # twice the frames over the same span
+    assert w.shape == (19, 4) and w[:, 0].sum() == 8 and w[4:11, 0].all()
+
+
+def test_transfer_keeps_the_source_footfalls(trot) -> None:
+    assert trot.contacts is not None
+    for method in ("habit", "direct"):
+        out = transfer(trot, to="cat", method=method, seed=0)
+        assert out.metadata["transfer"]["contacts"]["method"] == "source"
+        np.testing.assert_array_equal(
+            out.contacts, drop_short_runs(warp_contacts(trot.contacts, out.num_frames))
+        )
+
+
+def test_transfer_contacts_time_warped_when_the_length_changes(trot) -> None:
+    slower = resample_motion(trot.with_contacts(trot.contacts), trot.fps * 1.5)
+    slower.contacts = None  # an output of another length, labelled from the source
+    labels, info = transfer_contacts(slower, trot)
+    assert info == {"method": "source", "source_frames": trot.num_frames, "time_warped": True}
+    assert labels.shape == (slower.num_frames, 4)
+    np.testing.assert_array_equal(labels, drop_short_runs(warp_contacts(trot.contacts,
+                                                                        slower.num_frames)))
+    # the same footfall schedule: the stance share of every foot is kept
+    np.testing.assert_allclose(labels.mean(0), trot.contacts.mean(0), atol=0.03)
+
+
+def test_transfer_without_source_labels_falls_back_and_says_so(trot) -> None:
+    bare = trot.slice(0)
+    bare.contacts = None
+    for method in ("habit", "direct"):
+        out = transfer(bare, to="cat", method=method, seed=0)
+        how = out.metadata["transfer"]["contacts"]
+        assert how["method"] in ("detected", "duty") and "no stance labels" in how["reason"]
+        assert out.contacts is not None and out.contacts.shape == (out.num_frames, 4)
+
+
+# ---------------------------------------------------------------------------- pipeline
+
+
+def test_refine_modes() -> None:
+    assert [refine_mode(m) for m in ("none", "A", "B", "kinematic", "dynamics")] == [
+        "none", "A", "B", "A", "B"
+    ]
+    with pytest.raises(PipelineError, match="valid: .*A"):
+        refine_mode("fast")
+    with pytest.raises(PipelineError, match="Motion"):
+        run_clip("not a motion", "cat")  # type: ignore[arg-type]
+
+
+def test_labels_travel_without_refinement(walk) -> None:
+    run = run_clip(walk, "cat", method="direct", refine="none", track=False)
+    assert run.transferred.contacts_method == "source"
+    np.testing.assert_array_equal(run.transferred.contacts, walk.contacts)
+    assert run.refined.contacts is run.transferred.contacts and run.refined.status == "none"
+    assert run.refine_verdict == "none" and run.tracked.status == "off"
+    assert set(run.times) == {"transfer", "refine", "track"}
+    assert run.transferred.qpos.shape == (walk.num_frames, run.model.nq)
+    assert run.source.contacts_method == "labels"
+    assert run.source.metrics["stance_toe_height_per_leg"] == pytest.approx(
+        stance_toe_height(walk, walk.contacts)
+    )
+
+
+def test_refined_labels_reach_tracking_and_a_worse_refinement_is_reverted(
+    walk, monkeypatch
+) -> None:
+    import habitsim.pipeline as pl
+
+    run = run_clip(walk, "cat", method="direct", refine="A", controller="servo")
+    assert run.refined.status != "none" and run.refine_result is not None
+    np.testing.assert_array_equal(run.refined.contacts, run.transferred.contacts)
+    # tracking got the refined labels as its reference schedule, detected nothing itself
+    np.testing.assert_array_equal(run.track_result.reference_contacts, run.refined.contacts)
+    assert run.refine_verdict in ("kept", "reverted", "fallback")
+    assert run.tracked.metrics["survival"] == run.track_result.survival
+    if run.refine_verdict == "fallback":
+        pytest.skip("the refinement fell back on this clip")
+    monkeypatch.setattr(pl, "_worse", lambda refined, plain: "survival 0.10 < 1.00 unrefined")
+    bad = run_clip(walk, "cat", method="direct", refine="A", controller="servo")
+    assert bad.refine_verdict == "reverted" and "kept the unrefined" in bad.refine_note
+    assert bad.track_result is bad.input_track_result and bad.reference is bad.transferred.motion
+    np.testing.assert_array_equal(bad.track_result.reference_contacts,
+                                  bad.transferred.contacts)
+
+
+def test_worse_rule() -> None:
+    from habitsim.pipeline import _worse
+
+    def res(s: float, e: float) -> SimpleNamespace:
+        return SimpleNamespace(survival=s, metrics={"sim_mpjpe_per_leg": e})
+
+    assert "survival" in _worse(res(0.5, 0.01), res(1.0, 0.2))
+    assert "MPJPE" in _worse(res(1.0, 0.20), res(1.0, 0.10))
+    assert _worse(res(1.0, 0.105), res(1.0, 0.10)) is None  # not clearly higher
+    assert _worse(res(1.0, 0.5), res(0.5, 0.01)) is None  # survives longer
+
+
+def test_one_model_cache_and_explicit_track_contacts(walk) -> None:
+    from habitsim.qpos import species_model
+    from habitsim.sim import SimulationError, _species_model, track
+
+    assert species_model("dog") is species_model("dog", False) is _species_model("dog", False)
+    assert species_model("dog", servos=True) is _species_model("dog", True)
+    with pytest.raises(SimulationError, match=r"contacts must have shape \(60, 4\)"):
+        track(walk.slice(0, 60), contacts=np.ones((10, 4), bool))
