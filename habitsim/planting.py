@@ -41,11 +41,11 @@ from scipy.ndimage import (
 )
 from scipy.signal import savgol_filter
 
-from .contacts import contact_segments, contacts_from_feet
+from .contacts import CONTACT_HEIGHT_PER_LEG, contact_segments, contacts_from_feet
 from .errors import InvalidMotionError
-from .ik import pose_from_targets
+from .ik import axial_frames, foot_inclination, pose_from_targets
 from .motion import Motion
-from .skeleton import JOINT_NAMES
+from .skeleton import ABDUCTION_SIGN, JOINT_NAMES
 from .species import Species, load_species
 
 __all__ = [
@@ -55,12 +55,16 @@ __all__ = [
     "smooth_path",
     "PlantReport",
     "plant_legs",
+    "plant_motion",
+    "leg_pose_angles",
     "contact_f1",
 ]
 
 #: The habitsim joint each foot's offset is measured from (its shoulder / hip joint).
 FOOT_ANCHORS: tuple[str, ...] = ("lf_shoulder", "rf_shoulder", "lh_hip", "rh_hip")
 _IDX = {n: i for i, n in enumerate(JOINT_NAMES)}
+_FORE = ("scapula", "shoulder", "elbow", "wrist")
+_HIND = ("ilium", "hip", "knee", "hock")
 #: Smoothing window of the foot path before labelling [s].
 SMOOTH_S = 0.1
 #: Window of the local floor of a foot [s] (longer than a stance phase of a slow walk).
@@ -283,7 +287,6 @@ def plant_legs(
     Raises:
         InvalidMotionError: shapes that do not match the motion.
     """
-    sp: Species = load_species(motion.species)
     t = motion.num_frames
     for name, a in (("source_feet", source_feet), ("source_anchors", source_anchors)):
         if np.shape(a) != (t, 4, 3):
@@ -292,9 +295,6 @@ def plant_legs(
     if c.shape != (t, 4):
         raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
     scale = np.asarray(limb_scale, dtype=np.float64).reshape(1, 4, 1)
-    root = motion.root_positions.copy()
-    rot = motion.rotations
-    leg = sp.leg_length
     anchors_t = motion.global_positions()[:, [_IDX[n] for n in FOOT_ANCHORS]]
     rel = (np.asarray(source_feet) - np.asarray(source_anchors)) * scale
     raw = np.empty((t, 4, 3))
@@ -303,9 +303,26 @@ def plant_legs(
     # The anchors move with the pelvis; their path only depends on the trunk, which the
     # lowering below shifts vertically, so the horizontal targets stay valid.
     targets = _planted_targets(raw, c)
+    return _solve_planted(motion, targets, c, None, None, iterations)
+
+
+def _solve_planted(
+    motion: Motion,
+    targets: np.ndarray,
+    c: np.ndarray,
+    girdle_flex: np.ndarray | None,
+    foot_inclination: np.ndarray | None,
+    iterations: int,
+) -> tuple[Motion, PlantReport]:
+    """Leg IK onto toe targets; the pelvis lowered where a stance foot is out of reach."""
+    sp: Species = load_species(motion.species)
+    t = motion.num_frames
+    root = motion.root_positions.copy()
+    rot = motion.rotations
+    leg = sp.leg_length
     drop = np.zeros(t)
     sigma = max(1.0, 0.05 * motion.fps)
-    pose = pose_from_targets(sp, root, rot, targets)
+    pose = pose_from_targets(sp, root, rot, targets, girdle_flex, foot_inclination)
     for _ in range(iterations):
         short = np.where(c, pose.reach_error, 0.0).max(axis=1)
         if short.max() <= 0.002 * leg:
@@ -314,7 +331,7 @@ def plant_legs(
         drop += np.maximum(need, short)
         root = motion.root_positions.copy()
         root[:, 2] -= drop
-        pose = pose_from_targets(sp, root, rot, targets)
+        pose = pose_from_targets(sp, root, rot, targets, girdle_flex, foot_inclination)
     out = Motion(motion.species, motion.fps, root, pose.rotations, c.copy(),
                  dict(motion.metadata))
     toes = out.foot_positions()[..., 2]
@@ -322,4 +339,77 @@ def plant_legs(
                          for k in range(4)])
     report = PlantReport(pose.reach_error, drop, stance_h, float(toes.min()))
     return out, report
+
+
+def leg_pose_angles(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """(T, 4) girdle flexion and (T, 4) foot inclination [rad] of a motion's legs.
+
+    The two leg angles :func:`habitsim.ik.leg_ik` takes besides the toe target, read off
+    the motion (feet LF, RF, LH, RH), so re-solving a leg for a moved toe keeps the
+    motion's own girdle and foot carriage.
+    """
+    from .hinges import hinge_angles
+
+    h = hinge_angles(motion)
+    frames = axial_frames(motion.species, motion.root_positions, motion.rotations)
+    girdle = np.empty((motion.num_frames, 4))
+    incl = np.empty((motion.num_frames, 4))
+    for k, (prefix, segs) in enumerate(zip(
+        ("lf", "rf", "lh", "rh"), [_FORE] * 2 + [_HIND] * 2, strict=True
+    )):
+        g, up, lo, ft = (f"{prefix}_{s}" for s in segs)
+        girdle[:, k] = h[f"{g}_flex"]
+        abd = h[f"{up}_abd"] * ABDUCTION_SIGN[prefix[0]]
+        incl[:, k] = foot_inclination(frames.parent_rotation[:, k], abd, girdle[:, k],
+                                      h[f"{up}_flex"], h[f"{lo}_flex"], h[f"{ft}_flex"])
+    return girdle, incl
+
+
+def plant_motion(
+    motion: Motion,
+    contacts: np.ndarray,
+    swing_floor: np.ndarray | None = None,
+    iterations: int = 3,
+) -> tuple[Motion, PlantReport]:
+    """Plant a motion's own feet on its stance labels, by leg IK.
+
+    Each stance run of a foot is held at one foothold (the median of the run's toe
+    positions) on the ground; in swing the differences to the neighbouring footholds are
+    blended in (so lift-off and touch-down do not jump), and the toe is lifted to at
+    least ``swing_floor``, held over the foothold wherever that floor is below
+    :data:`habitsim.contacts.CONTACT_HEIGHT_PER_LEG` (a foot rises before it moves). The
+    legs are re-solved with the motion's own girdle flexion and foot inclination; the
+    pelvis is lowered where a stance foot is out of reach. Used on transferred motions
+    before refinement, so the optimisation starts from planted feet.
+
+    Args:
+        motion: the motion (its trunk, neck and tail are kept).
+        contacts: (T, 4) bool stance labels.
+        swing_floor: optional (T, 4) lowest toe height [m] in swing (NaN: none).
+        iterations: pelvis-lowering passes.
+
+    Returns:
+        ``(planted motion with ``contacts`` set, report)``.
+    """
+    t = motion.num_frames
+    c = np.asarray(contacts, dtype=bool)
+    if c.shape != (t, 4):
+        raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
+    raw = motion.foot_positions()
+    targets = _planted_targets(raw, c)
+    if swing_floor is not None:
+        fl = np.asarray(swing_floor, dtype=np.float64)
+        if fl.shape != (t, 4):
+            raise InvalidMotionError(f"swing_floor must have shape ({t}, 4), got {fl.shape}")
+        fl = np.where(c | ~np.isfinite(fl), 0.0, fl)
+        targets[..., 2] = np.maximum(targets[..., 2], fl)
+        low = ~c & (fl < CONTACT_HEIGHT_PER_LEG * motion.species_info.leg_length) & (fl > 0)
+        for k in range(4):
+            stance = np.flatnonzero(c[:, k])
+            frames = np.flatnonzero(low[:, k])
+            if len(stance) and len(frames):
+                near = stance[np.abs(frames[:, None] - stance[None, :]).argmin(axis=1)]
+                targets[frames, k, :2] = targets[near, k, :2]
+    girdle, incl = leg_pose_angles(motion)
+    return _solve_planted(motion, targets, c, girdle, incl, iterations)
 

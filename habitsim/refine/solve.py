@@ -67,12 +67,13 @@ import numpy as np
 from ..contacts import CONTACT_HEIGHT_PER_LEG as _CONTACT_HEIGHT_PER_LEG
 from ..errors import InvalidMotionError
 from ..motion import Motion
+from ..planting import plant_motion
 from ..qpos import (
     QposTrajectory,
-    load_species_model,
     motion_to_qpos,
     qpos_joint_positions,
     qpos_to_motion,
+    species_model,
 )
 from ..rotations import quat_mul, quat_normalize
 from .errors import RefineConvergenceError, RefineError, RefineInputError
@@ -168,6 +169,9 @@ class RefineOptions:
         align_ground: shift the targets onto the floor first (module docstring).
         clean_contacts: clean the contact labels before planting them
             (:func:`clean_contact_labels`).
+        preplant: before the optimisation, plant the input's feet on the labels and lift
+            them to the swing clearance by leg IK (:func:`_preplant`): the solve starts
+            from, and tracks, feet that are already where the constraints want them.
         swing_clearance: lowest toe height of a moving swing foot, share of leg length
             (:func:`swing_clearance`; at least METRICS.md's contact height, 2 %); None
             switches the clearance profile off (swing feet only stay above the floor).
@@ -203,6 +207,7 @@ class RefineOptions:
     friction: float | None = None
     align_ground: bool = True
     clean_contacts: bool = True
+    preplant: bool = True
     swing_clearance: float | None = SWING_CLEARANCE_PER_LEG
     guard: int = 2
     fallback: bool = False
@@ -319,7 +324,7 @@ _BUILDS = 0  # problems built so far in this process
 @functools.lru_cache(maxsize=32)
 def _species_model(species: str) -> mujoco.MjModel:
     try:
-        return load_species_model(species)
+        return species_model(species)
     except InvalidMotionError as e:
         raise RefineError(str(e)) from e
 
@@ -735,6 +740,28 @@ def _prepare(
     )
 
 
+def _preplant(
+    motion: Motion, contacts: np.ndarray | None, opts: RefineOptions
+) -> tuple[Motion, np.ndarray, dict[str, Any]]:
+    """The input with its feet planted on its (cleaned) labels and lifted to the swing
+    clearance by leg IK (:func:`habitsim.planting.plant_motion`), the labels, and the
+    label fields of :class:`_Prepared` (source, input labels, cleaning). The optimisation
+    then starts from, and tracks, a motion whose feet already rest where they are
+    labelled to and clear the ground where they move."""
+    c_in, source = _resolve_contacts(motion, contacts)
+    sp = motion.species_info
+    c, cleaning = c_in, None
+    if opts.clean_contacts:
+        c, cleaning = clean_contact_labels(c_in, motion.foot_positions(), motion.fps,
+                                           sp.leg_length)
+    floor = None
+    if opts.swing_clearance is not None:
+        floor = swing_clearance(c, motion.fps, sp.leg_length, opts.swing_clearance)[0]
+    planted, _ = plant_motion(motion, c, floor)
+    fields_ = {"contact_source": source, "contacts_input": c_in, "cleaning": cleaning}
+    return planted, c, fields_
+
+
 def _stance_height(sole: np.ndarray, contacts: np.ndarray) -> np.ndarray:
     """(T,) mean height of the soles in contact, interpolated through flight frames."""
     n = contacts.sum(axis=1)
@@ -984,19 +1011,25 @@ def refine(
     if fallback is not None:
         opts = replace(opts, fallback=bool(fallback))
     motion = _check_motion(motion)
+    motion_in = motion
     m = _species_model(motion.species) if model is None else model
     t = motion.num_frames
     plan = opts.plan(t)
     pr0 = get_problem(motion.species, plan[0].length, opts.dynamics, opts.settings, model=model)
     info = pr0.info
+    pre = None
+    if opts.preplant:
+        motion, contacts, pre = _preplant(motion, contacts, opts)
     prep = _prepare(motion, contacts, opts, m, pr0)
+    if pre is not None:  # how the labels came and were cleaned, as given by the caller
+        prep = replace(prep, **pre)
     guard: list[dict[str, Any]] = []
     build_total = 0.0
     previous = None
     while True:
         attempt = _solve_checked(prep, motion, opts, plan, model, info, m)
         build_total += attempt[-1]
-        verdict = compare_metrics(motion, attempt[6]) if attempt[3] is None else None
+        verdict = compare_metrics(motion_in, attempt[6]) if attempt[3] is None else None
         if verdict is None and previous is not None:  # a guard retry failed: keep the last
             attempt, verdict, opts = previous
             guard[-1]["status"] = "failed"
@@ -1022,7 +1055,7 @@ def refine(
     build_s = build_total
     success = failure is None
     report = build_report(
-        motion_in=motion,
+        motion_in=motion_in,
         motion_out=out,
         x=x,
         prep=prep,
