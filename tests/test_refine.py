@@ -14,7 +14,7 @@ import casadi as ca
 import mujoco
 import numpy as np
 import pytest
-from habitsim.evaluation.kinematic import kinematic_metrics
+from habitsim.evaluation.kinematic import jerk, kinematic_metrics, penetration_mm, skate_mm
 
 import habitsim
 from habitsim.cli import main
@@ -216,7 +216,9 @@ def test_gauss_newton_hessian_is_exact_at_zero_residual():
     kin = P._Kin(model)
     e = P._expressions(kin, frames, dynamics=False)
     ev = P.clip_evaluator(model, frames, False)
-    opts = RefineOptions(w_smooth=0.0, filter_cutoff=None, align_ground=False)
+    opts = RefineOptions(
+        w_smooth=0.0, w_jerk=0.0, w_hinge_jerk=0.0, filter_cutoff=None, align_ground=False
+    )
     prep = S._prepare(motion, None, opts, model, ev)
     x0 = ev.pack(prep.x0)
     joints = np.asarray(ev.frame.map(frames)(prep.x0[:, : ev.nv].T, prep.qref.T)[0])
@@ -493,8 +495,10 @@ def test_cli_refine_writes_outputs(tmp_path, capsys):
     out, rep, qp = tmp_path / "out.npz", tmp_path / "r.json", tmp_path / "q.npz"
     code = main(["refine", str(src), "--out", str(out), "--report", str(rep), "--qpos", str(qp)])
     assert code == 0
-    assert "Solve_Succeeded" in capsys.readouterr().out or True
+    printed = capsys.readouterr().out
     r = json.loads(rep.read_text())
+    assert r["status"] in S.SUCCESS_STATUSES and f"stage A: {r['status']}" in printed
+    assert "skate_mm" in printed and "jerk" in printed  # the before/after metric table
     assert r["success"] and r["stage"] == "A" and r["input"] == str(src)
     refined = habitsim.load_motion(out)
     assert refined.contacts is not None and refined.num_frames == 64
@@ -591,3 +595,104 @@ def test_bench_refine_draws_success_clips_from_the_test_split(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "test-split clips of" in text and "stage A: 2/2" in text
     assert "unassisted servo tracking" in text
+
+
+# --------------------------------------------------------------------------- metrics
+def _shortened_stance(contacts: np.ndarray) -> np.ndarray:
+    """Labels keeping only the middle half of every stance run."""
+    c = contacts.copy()
+    for f in range(4):
+        for a, b in S._runs(c[:, f]):
+            k = (b - a) // 4
+            c[a : a + k, f] = False
+            c[b - k : b, f] = False
+    return c
+
+
+def test_swing_feet_clear_the_metric_contact_height():
+    """Feet labelled swing that the input drags along the ground (a sliding trot whose
+    stance labels cover only half of each stance) used to stay as low as the input, under
+    METRICS.md's contact height (2 % L) while moving: skate_mm of the result ≈ 12 mm.
+    Now a swing foot either rises vertically at its foothold or clears 2.5 % L."""
+    clean = _clip("dog", "trot", 64)
+    bad = inject_artefacts(clean, ["slide", "jitter"], seed=1)
+    labels = _shortened_stance(clean.contacts)
+    res = refine(bad, RefineOptions(metrics=False), contacts=labels)
+    assert skate_mm(bad) > 5  # the literal metric, not the labels
+    assert skate_mm(res.motion) <= 1.0
+    assert penetration_mm(res.motion) <= 1.0
+    assert jerk(res.motion) <= jerk(bad)
+    v = res.report["verdict"]
+    assert v["ok"] and v["worse"] == []
+    assert v["after"]["skate_mm"] == pytest.approx(skate_mm(res.motion))
+    # where the toes are: every swing frame clears its profile, moving ones 2.5 % L
+    leg = clean.species_info.leg_length
+    toes = res.motion.foot_positions()
+    floor, pins = S.swing_clearance(res.contacts, 30.0, leg)
+    swing = ~res.contacts
+    assert np.all(toes[..., 2][swing] >= floor[swing] - 1e-4)
+    step = np.linalg.norm(np.diff(toes[..., :2], axis=0), axis=-1)
+    low = (toes[1:, :, 2] < 0.02 * leg) & (toes[:-1, :, 2] < 0.02 * leg)
+    assert step[low].max(initial=0.0) <= 1e-3
+
+
+def test_jittery_input_is_not_made_jerkier(dog_artefacts):
+    clean, bad, res = dog_artefacts
+    v = res.report["verdict"]
+    assert v["after"]["jerk"] <= v["before"]["jerk"]
+    assert v["after"]["penetration_mm"] <= 1.0 and v["after"]["skate_mm"] <= 1.0
+    assert v["before"]["jerk"] == pytest.approx(jerk(bad))
+    assert res.report["metrics_after"]["jerk"] == pytest.approx(v["after"]["jerk"])
+
+
+def test_swing_clearance_profile():
+    c = np.ones((12, 4), bool)
+    c[3:9, 0] = False  # a 6-frame swing of LF
+    c[5, 1] = False  # a 1-frame swing of RF
+    leg = 0.6
+    floor, pins = S.swing_clearance(c, 30.0, leg)
+    np.testing.assert_allclose(floor[3:9, 0], 0.025 * leg)  # one-frame ramp at 30 fps
+    assert np.isnan(floor[c]).all()
+    assert not pins[2:9, 0].any() and pins[:2, 0].all() and pins[9:, 0].all()
+    assert floor[5, 1] == pytest.approx(0.025 * leg)
+    floor, pins = S.swing_clearance(np.repeat(c, 4, axis=0), 120.0, leg)
+    # 120 fps: the floor ramps over 4 frames; the 3 frames under 2 % L are pinned
+    np.testing.assert_allclose(floor[12:16, 0] / leg, [0.00625, 0.0125, 0.01875, 0.025])
+    assert pins[11:14, 0].all() and not pins[14, 0]
+    # a 4-frame swing would be pinned throughout: its middle frames get the full height
+    np.testing.assert_allclose(floor[20:24, 1] / leg, [0.00625, 0.025, 0.025, 0.00625])
+    assert pins[19, 1] and pins[20:22, 1].tolist() == [False, False] and pins[23, 1]
+    with pytest.raises(RefineInputError, match="swing_clearance"):
+        RefineOptions(swing_clearance=0.01)
+
+
+def test_contact_labels_are_cleaned():
+    t, leg = 30, 0.6
+    toes = np.zeros((t, 4, 3))
+    toes[:, :, 0] = np.linspace(0, 3, t)[:, None]  # feet move forward 0.1 m per frame …
+    c = np.zeros((t, 4), bool)
+    c[5:15, 0] = True
+    toes[5:15, 0, 0] = 1.0  # … except where LF rests
+    c[20, 0] = True  # a one-frame stance blip
+    c[5:15, 1] = True  # RF labelled stance but the input drags it: trimmed to its middle
+    c[5:10, 2] = c[11:15, 2] = True  # LH: a one-frame gap in a resting stance
+    toes[5:15, 2, 0] = 2.0
+    out, changes = S.clean_contact_labels(c, toes, 30.0, leg)
+    assert out[5:15, 0].all() and not out[20, 0]
+    assert changes["LF"] == {"trimmed": 0, "filled": 0, "dropped": 1}
+    assert out[:, 1].sum() < 10 and changes["RF"]["trimmed"] >= 6
+    assert out[5:15, 2].all() and changes["LH"]["filled"] == 1
+    assert changes["frames_changed"] == int((out != c).sum())
+
+
+def test_refine_reports_cleaned_labels():
+    clean = _clip("dog", "trot", 64, seed=4)
+    labels = clean.contacts.copy()
+    a, b = max(S._runs(~labels[:, 0]), key=lambda r: r[1] - r[0])
+    blip = (a + b) // 2
+    labels[blip, 0] = True  # a stance frame in the middle of a swing
+    res = refine(clean, RefineOptions(metrics=False), contacts=labels)
+    cl = res.report["contacts"]["cleaning"]
+    assert cl["frames_changed"] >= 1 and cl["LF"]["dropped"] >= 1
+    assert not res.contacts[blip, 0]
+    assert res.report["verdict"]["ok"]

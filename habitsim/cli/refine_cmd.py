@@ -13,7 +13,9 @@ writes
   ``metadata["refine"]``);
 * ``--report``: the JSON report of :mod:`habitsim.refine.report` (status, iterations,
   solve time, each cost term, constraint violations, MuJoCo checks, METRICS.md kinematic
-  and dynamic metrics before / after);
+  and dynamic metrics before / after, the cleaned contact labels, and the ``verdict``:
+  skate / jerk / penetration before and after and whether the result is worse on any;
+  the summary prints it, and a result worse than its input gets a warning on stderr);
 * ``--qpos``: the refined qpos trajectory of the species' model (``.npz`` with ``qpos``
   (T, nq), ``fps``, ``species`` and ``qpos_names``, one per column: ``root_x`` …
   ``root_qz`` for the free joint, then the hinge names).
@@ -147,6 +149,31 @@ def _summary(rep: dict) -> str:
         for k in keys:
             if k in before and k in after and before[k] is not None and after[k] is not None:
                 lines.append(f"  {k:26s} {before[k]:9.4g}  {after[k]:9.4g}")
+    cl = (rep.get("contacts") or {}).get("cleaning")
+    if cl and cl.get("frames_changed"):
+        parts = [
+            f"{foot} " + ", ".join(f"{v} {k}" for k, v in ch.items() if v)
+            for foot, ch in cl.items()
+            if isinstance(ch, dict) and any(ch.values())
+        ]
+        lines.append(
+            f"  contact labels cleaned: {cl['frames_changed']} frame(s) changed ("
+            + "; ".join(parts)
+            + ")"
+        )
+    for g in rep.get("guard") or []:
+        lines.append(
+            f"  guard: first result worse on {', '.join(g['worse'])}; solved again with "
+            "smoother weights"
+        )
+    v = rep.get("verdict")
+    if v:
+        keys = ("skate_mm", "jerk", "penetration_mm")
+        lines.append(
+            "  verdict: "
+            + ", ".join(f"{k} {v['before'][k]:.4g} → {v['after'][k]:.4g}" for k in keys)
+            + (" — not worse than the input" if v["ok"] else f" — WORSE on {', '.join(v['worse'])}")
+        )
     if "residual_mg" in rep:
         lines.append(
             f"  model root residual / m·g: mean {rep['residual_mg']['mean']:.3f}, "
@@ -201,4 +228,10 @@ def _refine(ns: argparse.Namespace) -> int:
             f"warning: refinement failed ({res.status}); wrote the input unchanged", file=sys.stderr
         )
         return 1
+    verdict = res.report.get("verdict")
+    if verdict and not verdict["ok"]:
+        print(
+            f"warning: the refined clip is worse than the input on {', '.join(verdict['worse'])}",
+            file=sys.stderr,
+        )
     return 0

@@ -39,9 +39,17 @@ window length and species):
 * ``smooth``  = w_smooth · mean over interior frames of the pelvis' squared second
   differences (position, and rotation-matrix entries × L/√2) · fps⁴ / g², i.e. trunk
   accelerations in units of g. Hinge jitter is removed *before* the solve by the
-  contact-aware second-difference pre-filter of :mod:`habitsim.refine.solve` (the same
-  quadratic penalty, solved in closed form per hinge); keeping 34 hinges coupled across
-  frames inside the NLP doubled the cost of every KKT factorisation;
+  contact-aware second-difference pre-filter of :mod:`habitsim.refine.solve`;
+* ``jerk``    = w_jerk · mean over frames of the pelvis' squared third differences
+  (position, rotation-matrix entries × L/√2) · fps³ in units of g·√(g/L);
+* ``hinge_jerk`` = w_hinge_jerk · mean over frames and hinges of the squared third
+  differences of the hinge angles × L/2 (a displacement at half a leg length), same unit.
+  Planting feet the input lets slide and lifting swing feet over the contact height bend
+  the input's paths, and inputs far outside the joint ranges are clipped; without these
+  two terms the bends came out as kinks (a transferred trot went from METRICS.md's jerk
+  of 143 to 1193 m/s³). Both are linear or nearly so; a jerk of the 30 joint positions
+  themselves made every KKT factorisation about 5× slower and IPOPT's Gauss-Newton
+  iterations stall. The hinge term couples 4 frames and costs about 1.5× per iteration;
 * ``regularisation`` = w_reg · mean of (θ − θ̂)² over frames and hinges
   + w_root · mean ‖g‖² (stay near the input angles and root orientation);
 * stage B ``residual`` = w_residual · mean over interior frames of
@@ -62,14 +70,20 @@ pyramid: quadratic cones are ~100× slower in IPOPT).
 Constraints (rows of g, in this order):
 
 * ``sole``  (4 per frame): height of the lowest point of each foot sphere
-  (geom centre z − radius) ≥ 0, = 0 when the foot is in contact, and in swing at
-  least the input's height up to 2 % L (bounds, see :meth:`RefinementProblem.bounds`);
+  (geom centre z − radius) ≥ 0, = 0 when the foot is in contact (optionally at least
+  a given swing floor in swing; bounds, see :meth:`RefinementProblem.bounds`);
 * ``ground`` (per frame, every habitsim joint except the toes): height ≥ 0 (the toe
   sites lie on the foot spheres, so the sole rows cover them);
+* ``clearance`` (4 per frame): height of each toe site — the point METRICS.md's
+  ``skate_mm`` and ``penetration_mm`` measure — at least the swing clearance profile
+  of :mod:`habitsim.refine.solve` in swing (free in stance and where no profile is
+  given);
 * ``pin``   (8 per frame pair t, t+1): horizontal toe-site displacement = 0 when the
-  foot is in contact in both frames (free otherwise). Pinning the toe (a material point
-  on the sphere's surface) while the sphere's lowest point stays on the floor lets the
-  foot roll on its sphere the way a pad does, with no sliding of the toe;
+  foot is in contact in both frames, and in the pairs the swing profile pins (a swing
+  foot below the metric's contact height rises vertically); free otherwise. Pinning the
+  toe (a material point on the sphere's surface) while the sphere's lowest point stays
+  on the floor lets the foot roll on its sphere the way a pad does, with no sliding of
+  the toe;
 * ``com``   (stage B, 3 per frame): c − CoM(FK) = 0, the CoM from the model's body
   masses and inertial frames.
 
@@ -96,6 +110,7 @@ __all__ = [
     "GROUND_JOINTS",
     "GLOBAL_PARAMS",
     "COST_TERMS",
+    "STAGE_A_TERMS",
     "SolverSettings",
     "RefinementProblem",
     "ModelInfo",
@@ -114,13 +129,25 @@ GLOBAL_PARAMS = (
     "mu",
     "w_track",
     "w_smooth",
+    "w_jerk",
+    "w_hinge_jerk",
     "w_reg",
     "w_root",
     "w_residual",
     "w_force",
 )
-#: Cost term names (stage A has the first three, stage B all five).
-COST_TERMS = ("track", "smooth", "regularisation", "residual", "force")
+#: Cost term names (stage A has the first five, stage B all seven).
+COST_TERMS = (
+    "track",
+    "smooth",
+    "jerk",
+    "hinge_jerk",
+    "regularisation",
+    "residual",
+    "force",
+)
+#: Number of cost terms of stage A (the first ones of :data:`COST_TERMS`).
+STAGE_A_TERMS = 5
 _TOES = tuple(f"{leg}_toe" for leg in FEET)
 #: Name prefixes of the legs' hinges (the pre-filter treats them contact-aware).
 LEG_PREFIXES = tuple(f"{leg}_" for leg in FEET)
@@ -291,7 +318,7 @@ class RefinementProblem:
         settings: the IPOPT settings.
         solver: ``nlpsol`` (inputs x0, p, lbx, ubx, lbg, ubg, ...); None for an
             evaluation-only problem (:func:`clip_evaluator`).
-        evaluator: Function ``(x, p) → (terms (5,), g (n_g,), residual (6, W))``: the cost
+        evaluator: Function ``(x, p) → (terms (7,), g (n_g,), residual (6, W))``: the cost
             terms in :data:`COST_TERMS` order (their sum is the objective; the stage-B
             terms are 0 in stage A), the constraint rows, and the root residual wrench
             per frame as [F/(m·g); τ/(m·g·L)] (0 at the first and last frame and in
@@ -374,6 +401,8 @@ class RefinementProblem:
         fixed: np.ndarray | None = None,
         fixed_values: np.ndarray | None = None,
         swing_floor: np.ndarray | None = None,
+        clearance: np.ndarray | None = None,
+        pins: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Variable and constraint bounds of a window.
 
@@ -384,6 +413,11 @@ class RefinementProblem:
             fixed_values: (W, nx) values for the fixed frames.
             swing_floor: optional (W, 4) lowest allowed sole height [m] of feet in swing
                 (default 0: on or above the floor).
+            clearance: optional (W, 4) lowest allowed toe height [m] of feet in swing
+                (NaN or −inf: none; default none).
+            pins: optional (W-1, 4) bool frame pairs whose horizontal toe displacement is
+                held at 0 (default: the foot in contact in both frames; given pins are
+                added to those).
 
         Returns:
             lbx, ubx, lbg, ubg.
@@ -420,8 +454,22 @@ class RefinementProblem:
             lbg[a:b] = np.where(c, 0.0, np.maximum(np.asarray(swing_floor, float), 0.0)).reshape(-1)
         a, b = self.ng_blocks["ground"]
         ubg[a:b] = np.inf
+        a, b = self.ng_blocks["clearance"]
+        ubg[a:b] = np.inf
+        if clearance is None:
+            lbg[a:b] = -np.inf
+        else:
+            cl = np.asarray(clearance, float)
+            if cl.shape != (w, 4):
+                raise RefineInputError(f"clearance must have shape ({w}, 4), got {cl.shape}")
+            lbg[a:b] = np.where(c | ~np.isfinite(cl), -np.inf, cl).reshape(-1)
         a, b = self.ng_blocks["pin"]
         both = c[1:] & c[:-1]  # (W-1, 4)
+        if pins is not None:
+            pn = np.asarray(pins, bool)
+            if pn.shape != (w - 1, 4):
+                raise RefineInputError(f"pins must have shape ({w - 1}, 4), got {pn.shape}")
+            both = both | pn
         free = np.repeat(~both, 2, axis=1)  # x and y rows per foot
         lbg[a:b] = np.where(free, -np.inf, 0.0).reshape(-1)
         ubg[a:b] = np.where(free, np.inf, 0.0).reshape(-1)
@@ -429,7 +477,7 @@ class RefinementProblem:
             # rows of fixed frames only are constants (zero Jacobian rows make the KKT
             # matrix singular): the previous window has satisfied them, drop them
             fx = np.asarray(fixed, bool)
-            per_frame = {"sole": 4, "ground": len(GROUND_JOINTS), "com": 3}
+            per_frame = {"sole": 4, "ground": len(GROUND_JOINTS), "clearance": 4, "com": 3}
             for name, k in per_frame.items():
                 if name in self.ng_blocks:
                     a, b = self.ng_blocks[name]
@@ -532,6 +580,27 @@ def _expressions(kin: _Kin, w: int, dynamics: bool) -> _Exprs:
 
     acc = ca.vertcat(d2(X[:3, :]), d2(R) * (L / np.sqrt(2.0))) * fps**2 / grav
     smooth = gp["w_smooth"] * ca.sumsqr(acc) / (w - 2)
+    # jerk of the pelvis (position, rotation entries × L/√2) in units of g·√(g/L)
+    if w >= 4:
+        trunk = ca.vertcat(X[:3, :], R * (L / np.sqrt(2.0)))
+        t_jerk = (trunk[:, 3:] - 3 * trunk[:, 2:-1] + 3 * trunk[:, 1:-2] - trunk[:, :-3]) * (
+            fps**3 * ca.sqrt(L) / grav**1.5
+        )
+        jerk = gp["w_jerk"] * ca.sumsqr(t_jerk) / (w - 3)
+        jerk_lsq = [ca.sqrt(gp["w_jerk"] / (w - 3)) * ca.vec(t_jerk)]
+    else:
+        jerk, jerk_lsq = ca.MX(0), []
+    # jerk of the hinges, as displacements at half a leg length, same unit: linear, so
+    # its Gauss-Newton Hessian is exact and a constant band over 4 frames
+    if w >= 4:
+        hx = X[6:nv, :] * (L / 2.0)
+        h_jerk = (hx[:, 3:] - 3 * hx[:, 2:-1] + 3 * hx[:, 1:-2] - hx[:, :-3]) * (
+            fps**3 * ca.sqrt(L) / grav**1.5
+        )
+        hinge = gp["w_hinge_jerk"] * ca.sumsqr(h_jerk) / ((w - 3) * nh)
+        hinge_lsq = [ca.sqrt(gp["w_hinge_jerk"] / ((w - 3) * nh)) * ca.vec(h_jerk)]
+    else:
+        hinge, hinge_lsq = ca.MX(0), []
     reg = (
         gp["w_reg"] * ca.sumsqr(X[6:nv, :] - href) / (w * nh)
         + gp["w_root"] * ca.sumsqr(X[3:6, :]) / w
@@ -539,6 +608,8 @@ def _expressions(kin: _Kin, w: int, dynamics: bool) -> _Exprs:
     lsq = [
         ca.sqrt(gp["w_track"] / (L**2 * w * nj)) * ca.vec(Jf - tgt),
         ca.sqrt(gp["w_smooth"] / (w - 2)) * ca.vec(acc),
+        *jerk_lsq,
+        *hinge_lsq,
         ca.sqrt(gp["w_reg"] / (w * nh)) * ca.vec(X[6:nv, :] - href),
         ca.sqrt(gp["w_root"] / w) * ca.vec(X[3:6, :]),
     ]
@@ -586,15 +657,17 @@ def _expressions(kin: _Kin, w: int, dynamics: bool) -> _Exprs:
         com_rows = [("com", ca.vec(com - C))]
     else:
         com_rows = []
-    terms = ca.vertcat(track, smooth, reg, *extra)
+    terms = ca.vertcat(track, smooth, jerk, hinge, reg, *extra)
 
     # ------------------------------------------------------------ path constraints
     sole_z = ca.reshape(S[2, :], 4, w)
     gz = ca.reshape(J[2, :], nj, w)[list(GROUND_JOINTS), :]
     toes = ca.vertcat(*[ca.vertcat(Jf[3 * i, :], Jf[3 * i + 1, :]) for i in _TOE_IDX])  # (8, W)
+    toe_z = ca.vertcat(*[Jf[3 * i + 2, :] for i in _TOE_IDX])  # (4, W)
     blocks_e = [
         ("sole", ca.vec(sole_z)),
         ("ground", ca.vec(gz)),
+        ("clearance", ca.vec(toe_z)),
         ("pin", ca.vec(toes[:, 1:] - toes[:, :-1])),
     ] + com_rows
     blocks, start = {}, 0

@@ -30,10 +30,25 @@ Keys (all values JSON types; lengths in mm where the key says so):
                                 ``joint_limit_excess_max_rad`` (after a window failure: of
                                 the input; after ``Verification_Failed``: of the rejected
                                 result)
-``contacts``                    ``source`` (input / detected / given), per-foot stance share
+``contacts``                    ``source`` (input / detected / given), per-foot
+                                ``stance_share`` of the labels planted and
+                                ``stance_share_input`` of the labels given,
+                                ``cleaning`` (what :func:`~.solve.clean_contact_labels`
+                                changed, None when off), ``swing_clearance_mm``
 ``metrics_before/after``        METRICS.md kinematic metrics (and dynamic ones when
                                 :mod:`habitsim.evaluation.dynamic` is available) of the
-                                input and of the result (when ``options.metrics``)
+                                input and of the result (when ``options.metrics``), by
+                                the metrics' literal definitions (contact = toe height
+                                < 2 % L), not by the refinement's labels
+``verdict``                     always (None after a failure): ``before`` / ``after``
+                                ``skate_mm``, ``jerk`` and ``penetration_mm`` (the
+                                metric functions), ``worse`` (the keys the result makes
+                                worse beyond ``tolerance``: mm, relative for the jerk)
+                                and ``ok`` (nothing worse)
+``guard``                       the solves redone with smoother weights because the
+                                result was worse (``options.guard``): per retry the
+                                ``worse`` keys, the ``after`` values, ``iterations`` and
+                                ``solve_time_s`` of the discarded attempt, ``status``
 ``ground_offset_mm``            mean and largest ground-alignment shift
 ``residual_mg``                 stage B: the model's root residual force / (m·g): mean, max
                                 and ``per_frame`` (0 at the first and last frame)
@@ -49,7 +64,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from .problem import COST_TERMS, RefinementProblem, clip_evaluator
+from .problem import COST_TERMS, STAGE_A_TERMS, RefinementProblem, clip_evaluator
+from .solve import WORSE_TOLERANCE
 
 __all__ = ["build_report", "clean_json"]
 
@@ -101,7 +117,7 @@ def _metrics(motion: Any, contacts: np.ndarray, model: mujoco.MjModel) -> dict[s
 
 
 def _cost(values: np.ndarray, dynamics: bool) -> dict[str, float]:
-    names = COST_TERMS if dynamics else COST_TERMS[:3]
+    names = COST_TERMS if dynamics else COST_TERMS[:STAGE_A_TERMS]
     out = {n: float(values[i]) for i, n in enumerate(names)}
     out["total"] = float(sum(out.values()))
     return out
@@ -123,6 +139,8 @@ def build_report(
     model: mujoco.MjModel,
     info: Any,
     wall0: float,
+    verdict: dict[str, Any] | None = None,
+    guard: list[dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
     """Assemble the report of one :func:`~habitsim.refine.refine` call (module docstring)."""
     t = motion_in.num_frames
@@ -130,7 +148,9 @@ def build_report(
     p = ev.parameters(prep.targets, prep.qref, prep.href, prep.glob)
     terms, g, res = (np.asarray(v) for v in ev.evaluator(ev.pack(x), p))
     terms0 = np.asarray(ev.evaluator(ev.pack(prep.x0), p)[0]).ravel()
-    lbx, ubx, lbg, ubg = ev.bounds(prep.contacts, swing_floor=prep.swing_floor)
+    lbx, ubx, lbg, ubg = ev.bounds(
+        prep.contacts, swing_floor=prep.swing_floor, clearance=prep.clearance, pins=prep.pins
+    )
     g = g.ravel()
     viol_rows = np.maximum(np.maximum(lbg - g, g - ubg), 0.0)
     violation = {
@@ -163,6 +183,11 @@ def build_report(
         "contacts": {
             "source": prep.contact_source,
             "stance_share": prep.contacts.mean(axis=0).tolist(),
+            "stance_share_input": prep.contacts_input.mean(axis=0).tolist(),
+            "cleaning": prep.cleaning,
+            "swing_clearance_mm": None
+            if opts.swing_clearance is None
+            else float(opts.swing_clearance * motion_in.species_info.leg_length * 1000.0),
         },
         "ground_offset_mm": {
             "mean": float(prep.offset.mean() * 1000.0),
@@ -180,5 +205,16 @@ def build_report(
     if opts.metrics:
         report["metrics_before"] = _metrics(motion_in, prep.contacts, model)
         report["metrics_after"] = _metrics(motion_out, prep.contacts, model)
+    report["guard"] = list(guard or [])
+    if verdict is not None:
+        report["verdict"] = {
+            "worse": list(verdict["worse"]),
+            "ok": bool(verdict["ok"]),
+            "before": verdict["before"],
+            "after": verdict["after"],
+            "tolerance": dict(WORSE_TOLERANCE),
+        }
+    else:
+        report["verdict"] = None
     report["wall_time_s"] = time.perf_counter() - wall0
     return clean_json(report)

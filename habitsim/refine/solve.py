@@ -24,7 +24,22 @@ Preparation, in this order:
 3. **Initial guess**: the filtered, aligned input with hinges clipped into their ranges
    and, frame by frame, the feet in contact put on the floor; stage B adds the body
    weight shared among the feet in contact and the CoM.
-4. **Swing floor**: feet in swing stay at least as high as in the input, up to 2 % L.
+4. **Contact-label cleaning** (``clean_contacts``, :func:`clean_contact_labels`): stance
+   runs are trimmed at their ends where the input's toe has moved more than
+   :data:`STANCE_SLIP_PER_LEG` × L from where it rests, one-frame swing gaps whose two
+   stance runs rest at the same place are filled, and stance runs shorter than
+   :data:`MIN_RUN_S` are dropped. Planting a label the input does not follow bends the
+   whole leg for its duration and kinks it at the lift-off; the report lists the
+   changes (``contacts.cleaning``).
+5. **Swing clearance** (:func:`swing_clearance`): METRICS.md counts a foot as in contact
+   whenever its toe is below :data:`CONTACT_HEIGHT_PER_LEG` × L, labelled or not, so a
+   swing foot skimming the ground while it moves reads as skating. Each swing phase
+   gets a minimum toe height that rises linearly from the ground at the lift-off (and
+   falls to it at the touch-down) over :data:`SWING_RAMP_S` to ``swing_clearance`` × L
+   (2.5 %: the contact height plus a margin); the swing frames whose minimum is still
+   below the contact height are pinned horizontally to the foothold they leave or
+   reach. A foot therefore either rests (planted) or rises vertically, or clears the
+   contact height while it moves: it never slides where the metric looks.
 
 Each window is solved first with the Gauss-Newton Hessian (at most
 :data:`GAUSS_NEWTON_MAX_ITER` iterations), and if IPOPT fails with it, again from the
@@ -49,14 +64,16 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from ..contacts import CONTACT_HEIGHT_PER_LEG as _CONTACT_HEIGHT_PER_LEG
 from ..errors import InvalidMotionError
 from ..motion import Motion
+from ..planting import plant_motion
 from ..qpos import (
     QposTrajectory,
-    load_species_model,
     motion_to_qpos,
     qpos_joint_positions,
     qpos_to_motion,
+    species_model,
 )
 from ..rotations import quat_mul, quat_normalize
 from .errors import RefineConvergenceError, RefineError, RefineInputError
@@ -78,11 +95,42 @@ __all__ = [
     "clear_cache",
     "SUCCESS_STATUSES",
     "SWING_CLEARANCE_PER_LEG",
+    "SWING_RAMP_S",
+    "STANCE_SLIP_PER_LEG",
+    "MIN_RUN_S",
+    "WORSE_TOLERANCE",
+    "VERDICT_METRICS",
+    "compare_metrics",
+    "clean_contact_labels",
+    "swing_clearance",
 ]
 
-#: Swing feet are kept at least as high as in the input up to this share of leg length
-#: (METRICS.md's contact height).
-SWING_CLEARANCE_PER_LEG = 0.02
+#: METRICS.md's contact height of ``skate_mm`` (toe height, share of leg length).
+CONTACT_HEIGHT_PER_LEG = _CONTACT_HEIGHT_PER_LEG
+#: Default lowest toe height of a moving swing foot, share of leg length: the contact
+#: height plus a margin of 0.5 % L.
+SWING_CLEARANCE_PER_LEG = 0.025
+#: Time over which a swing foot's minimum height rises from the ground to the clearance
+#: [s] (one frame at 30 fps; four at 120 fps, three of them pinned and rising vertically).
+SWING_RAMP_S = 1.0 / 30.0
+#: A stance frame whose input toe lies further than this share of leg length
+#: (horizontally) from where the stance run rests is relabelled swing if it is at an end
+#: of the run.
+STANCE_SLIP_PER_LEG = 0.15
+#: Shortest stance run kept and longest swing gap filled [s] (at least 2 resp. 1 frames).
+MIN_RUN_S = 0.04
+#: How much worse than the input a metric of the result may be before the report's
+#: verdict calls it worse: absolute [mm] for the lengths, relative for the jerk.
+WORSE_TOLERANCE = {"skate_mm": 0.05, "penetration_mm": 0.05, "jerk": 1e-3}
+#: The metrics of the verdict (:func:`compare_metrics`).
+VERDICT_METRICS = ("skate_mm", "jerk", "penetration_mm")
+#: The weights a guard retry multiplies by :data:`GUARD_FACTOR`; one that is 0 (the jerk
+#: terms by default) is switched on at its :data:`GUARD_START` value instead. The jerk
+#: terms are off in the first solve: they cost 3–5× its time (the Gauss-Newton attempt
+#: needs more iterations than its cap), and most clips come out no jerkier without them.
+GUARD_WEIGHTS = ("w_smooth", "w_jerk", "w_hinge_jerk")
+GUARD_FACTOR = 10.0
+GUARD_START = {"w_smooth": 1e-5, "w_jerk": 1e-5, "w_hinge_jerk": 1e-5}
 #: Iteration limit of the Gauss-Newton attempt per window (it converges in 7–30 when it
 #: does; beyond, the exact-Hessian retry is faster).
 GAUSS_NEWTON_MAX_ITER = 25
@@ -92,6 +140,11 @@ GAUSS_NEWTON_MAX_ITER = 25
 EXACT_FIRST_EXCESS_RAD = 0.4
 #: IPOPT return statuses counted as success.
 SUCCESS_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+
+def _escalate(name: str, value: float) -> float:
+    """A guard retry's weight: × GUARD_FACTOR, or the GUARD_START value if it was 0."""
+    return value * GUARD_FACTOR if value > 0 else GUARD_START[name]
 
 
 @dataclass(frozen=True)
@@ -111,9 +164,23 @@ class RefineOptions:
         filter_cutoff: cutoff of the jitter pre-filter in units of the species' natural
             frequency √(g/L) [rad/s] (10 → 6.4 Hz for a dog, 3.5 Hz for an elephant);
             None switches the filter off.
-        w_track, w_smooth, w_reg, w_root, w_residual, w_force: cost weights.
+        w_track, w_smooth, w_jerk, w_hinge_jerk, w_reg, w_root, w_residual, w_force: cost weights.
         friction: friction coefficient of the pyramid (None: the model's foot / floor).
         align_ground: shift the targets onto the floor first (module docstring).
+        clean_contacts: clean the contact labels before planting them
+            (:func:`clean_contact_labels`).
+        preplant: before the optimisation, plant the input's feet on the labels and lift
+            them to the swing clearance by leg IK (:func:`_preplant`): the solve starts
+            from, and tracks, feet that are already where the constraints want them.
+        swing_clearance: lowest toe height of a moving swing foot, share of leg length
+            (:func:`swing_clearance`; at least METRICS.md's contact height, 2 %); None
+            switches the clearance profile off (swing feet only stay above the floor).
+        guard: when the result is worse than the input on a metric of the verdict
+            (:func:`compare_metrics`; in practice the jerk), solve again with
+            ``w_smooth``, ``w_jerk`` and ``w_hinge_jerk`` × :data:`GUARD_FACTOR` (the
+            jerk weights, 0 by default, switched on at :data:`GUARD_START`), at most
+            this many times (0: never); the report's ``guard`` lists the retries and its
+            ``verdict`` says whether the result is still worse.
         fallback: on failure return the input with ``success=False`` instead of raising.
         metrics: compute METRICS.md kinematic and dynamic metrics before / after for the
             report (off in benchmarks).
@@ -131,12 +198,18 @@ class RefineOptions:
     filter_cutoff: float | None = 10.0
     w_track: float = 1.0
     w_smooth: float = 1e-5
+    w_jerk: float = 0.0
+    w_hinge_jerk: float = 0.0
     w_reg: float = 3e-2
     w_root: float = 1e-3
     w_residual: float = 2e-2
     w_force: float = 1e-4
     friction: float | None = None
     align_ground: bool = True
+    clean_contacts: bool = True
+    preplant: bool = True
+    swing_clearance: float | None = SWING_CLEARANCE_PER_LEG
+    guard: int = 2
     fallback: bool = False
     metrics: bool = True
     max_iter: int = 200
@@ -155,8 +228,16 @@ class RefineOptions:
             np.isfinite(self.filter_cutoff) and self.filter_cutoff > 0
         ):
             raise RefineInputError(f"filter_cutoff must be > 0 or None, got {self.filter_cutoff!r}")
+        sc = self.swing_clearance
+        if sc is not None and not (np.isfinite(sc) and CONTACT_HEIGHT_PER_LEG <= sc <= 0.5):
+            raise RefineInputError(
+                f"swing_clearance must be in [{CONTACT_HEIGHT_PER_LEG}, 0.5] (share of leg "
+                f"length) or None, got {sc!r}"
+            )
         if self.friction is not None and not (np.isfinite(self.friction) and self.friction > 0):
             raise RefineInputError(f"friction must be > 0, got {self.friction!r}")
+        if int(self.guard) < 0:
+            raise RefineInputError(f"guard must be ≥ 0, got {self.guard!r}")
         if int(self.max_iter) < 1:
             raise RefineInputError(f"max_iter must be ≥ 1, got {self.max_iter}")
         for name in ("tol", "constr_viol_tol", "verify_tol_mm"):
@@ -243,7 +324,7 @@ _BUILDS = 0  # problems built so far in this process
 @functools.lru_cache(maxsize=32)
 def _species_model(species: str) -> mujoco.MjModel:
     try:
-        return load_species_model(species)
+        return species_model(species)
     except InvalidMotionError as e:
         raise RefineError(str(e)) from e
 
@@ -349,6 +430,147 @@ def _ground_offset(
     return filled
 
 
+def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of the runs of True in a 1-D bool array (stop exclusive)."""
+    f = np.concatenate([[False], np.asarray(flags, bool), [False]])
+    edges = np.flatnonzero(f[1:] != f[:-1])
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def clean_contact_labels(
+    contacts: np.ndarray,
+    toes: np.ndarray,
+    fps: float,
+    leg_length: float,
+    slip_per_leg: float = STANCE_SLIP_PER_LEG,
+    min_run_s: float = MIN_RUN_S,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Contact labels made consistent with the motion before they are planted.
+
+    Per foot, in this order:
+
+    1. *trim*: the frames at either end of a stance run whose toe lies horizontally
+       further than ``slip_per_leg`` × L from where the run rests (the median of its toe
+       positions) become swing — the input moves that foot, so planting it there would
+       drag the leg;
+    2. *fill*: a swing gap of at most ``min_run_s`` (at least one frame) between two
+       stance runs that rest within ``slip_per_leg`` × L of each other becomes stance (the
+       foot did not step);
+    3. *drop*: a stance run shorter than ``min_run_s`` (at least two frames) that does
+       not touch the clip's first or last frame becomes swing (a blip, not a step).
+
+    Args:
+        contacts: (T, 4) bool labels (LF, RF, LH, RH).
+        toes: (T, 4, ≥2) toe positions of the motion [m] (x, y used).
+        fps: frame rate [Hz].
+        leg_length: the species' hind-leg length L [m].
+
+    Returns:
+        The cleaned (T, 4) labels and what changed: ``frames_changed`` (total), and per
+        foot (``LF`` …) the frames ``trimmed``, the gaps ``filled`` and the stance runs
+        ``dropped``.
+    """
+    c = np.asarray(contacts, bool).copy()
+    xy = np.asarray(toes, float)[..., :2]
+    t = len(c)
+    tol = float(slip_per_leg) * float(leg_length)
+    max_gap = max(1, int(round(min_run_s * fps)))
+    min_stance = max(2, int(round(min_run_s * fps)))
+    changes: dict[str, Any] = {}
+    names = ("LF", "RF", "LH", "RH")
+    for f in range(c.shape[1]):
+        trimmed = filled = dropped = 0
+        col = c[:, f]
+        for a, b in _runs(col):
+            anchor = np.median(xy[a:b, f], axis=0)
+            far = np.linalg.norm(xy[a:b, f] - anchor, axis=1) > tol
+            lo, hi = a, b
+            while lo < hi and far[lo - a]:
+                lo += 1
+            while hi > lo and far[hi - 1 - a]:
+                hi -= 1
+            col[a:lo] = False
+            col[hi:b] = False
+            trimmed += (lo - a) + (b - hi)
+        runs = _runs(col)
+        for (a0, b0), (a1, b1) in zip(runs, runs[1:], strict=False):
+            if b0 < a1 and a1 - b0 <= max_gap:
+                p0 = np.median(xy[a0:b0, f], axis=0)
+                p1 = np.median(xy[a1:b1, f], axis=0)
+                if np.linalg.norm(p1 - p0) <= tol:
+                    col[b0:a1] = True
+                    filled += 1
+        for a, b in _runs(col):
+            if b - a < min_stance and a > 0 and b < t:
+                col[a:b] = False
+                dropped += 1
+        c[:, f] = col
+        changes[names[f] if f < 4 else str(f)] = {
+            "trimmed": trimmed,
+            "filled": filled,
+            "dropped": dropped,
+        }
+    changes = {
+        "frames_changed": int((c != np.asarray(contacts, bool)).sum()),
+        **changes,
+    }
+    return c, changes
+
+
+def swing_clearance(
+    contacts: np.ndarray,
+    fps: float,
+    leg_length: float,
+    clearance_per_leg: float = SWING_CLEARANCE_PER_LEG,
+    ramp_s: float = SWING_RAMP_S,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The swing clearance profile of contact labels (module docstring, step 5).
+
+    A swing frame k frames from the nearest stance frame must hold its toe at least
+    ``clearance_per_leg`` × L × min(1, k / r) high, r = max(1, round(ramp_s · fps));
+    the swing frames whose minimum is below METRICS.md's contact height are pinned
+    horizontally to the neighbouring foothold (a swing run whose every frame would be
+    pinned gets the full clearance in its middle frame(s), so the foot can move there).
+
+    Args:
+        contacts: (T, 4) bool labels.
+        fps: frame rate [Hz].
+        leg_length: L [m].
+        clearance_per_leg: the full clearance, share of L (≥ the contact height).
+        ramp_s: rise time from the ground to the full clearance [s].
+
+    Returns:
+        ``floor`` (T, 4): lowest toe height [m] in swing, NaN in stance; ``pins``
+        (T-1, 4) bool: frame pairs (t, t+1) whose horizontal toe displacement must be 0
+        (every pair of stance or pinned swing frames).
+    """
+    c = np.asarray(contacts, bool)
+    t, nf = c.shape
+    full = float(clearance_per_leg) * float(leg_length)
+    h_c = CONTACT_HEIGHT_PER_LEG * float(leg_length)
+    r = max(1, int(round(ramp_s * fps)))
+    frames = np.arange(t)
+    floor = np.full((t, nf), np.nan)
+    rest = c.copy()
+    for f in range(nf):
+        stance = np.flatnonzero(c[:, f])
+        for a, b in _runs(~c[:, f]):
+            k = frames[a:b]
+            if len(stance):
+                d = np.abs(k[:, None] - stance[None, :]).min(axis=1).astype(float)
+            else:
+                d = np.full(len(k), np.inf)
+            h = full * np.minimum(1.0, d / r)
+            low = h < h_c
+            if low.all():
+                top = d == d.max()
+                h[top], low[top] = full, False
+            floor[a:b, f] = h
+            rest[a:b, f] = low
+    pins = rest[1:] & rest[:-1]
+    return floor, pins
+
+
 #: Largest ground-alignment shift, a share of leg length: beyond it a clip is not
 #: hovering or sinking but has legs of the wrong length, which alignment cannot fix.
 MAX_ALIGN_PER_LEG = 0.05
@@ -432,7 +654,11 @@ class _Prepared:
     contact_source: str
     glob: dict[str, float]
     offset: np.ndarray
-    swing_floor: np.ndarray
+    swing_floor: np.ndarray | None
+    clearance: np.ndarray | None
+    pins: np.ndarray
+    contacts_input: np.ndarray
+    cleaning: dict[str, Any] | None
 
 
 def _prepare(
@@ -443,7 +669,8 @@ def _prepare(
     pr: RefinementProblem,
 ) -> _Prepared:
     info, nx, nv = pr.info, pr.nx, pr.nv
-    c, source = _resolve_contacts(motion, contacts)
+    c_in, source = _resolve_contacts(motion, contacts)
+    c = c_in
     q_raw = motion_to_qpos(motion, model).qpos
     f_c = opts.cutoff_hz(motion.species_info.leg_length, info.gravity)
     if f_c is None:
@@ -452,6 +679,13 @@ def _prepare(
         q = _lowpass_qpos(q_raw, info, motion.fps, f_c, c)
         targets = qpos_joint_positions(model, q)
     toe_idx = [motion.skeleton.foot_indices[i] for i in range(4)]
+    sp = motion.species_info
+    cleaning = None
+    if opts.clean_contacts:
+        c, cleaning = clean_contact_labels(c_in, targets[:, toe_idx], motion.fps, sp.leg_length)
+        if cleaning["frames_changed"] and f_c is not None:  # corners moved: filter again
+            q = _lowpass_qpos(q_raw, info, motion.fps, f_c, c)
+            targets = qpos_joint_positions(model, q)
     offset = np.zeros(len(q))
     if opts.align_ground:
         lim = MAX_ALIGN_PER_LEG * motion.species_info.leg_length
@@ -475,7 +709,6 @@ def _prepare(
         share = c / np.maximum(c.sum(axis=1, keepdims=True), 1)
         x0[:, nv : nv + 16] = np.repeat(share / 4.0, 4, axis=1)
         x0[:, nv + 16 :] = np.asarray(pr.frame.map(len(q))(x0[:, :nv].T, qref.T)[2]).T
-    sp = motion.species_info
     glob = {
         "leg_length": sp.leg_length,
         "fps": motion.fps,
@@ -483,13 +716,50 @@ def _prepare(
         "mu": info.friction if opts.friction is None else float(opts.friction),
         **opts.weights,
     }
-    # swing feet stay at least as high as in the (unfiltered) input, up to the contact
-    # height of METRICS.md (2 % L): filtering must not turn a lift-off into a low glide.
-    q_al = q_raw.copy()
-    q_al[:, fa + 2] -= offset
-    sole_in = _sole_heights(model, info, q_al)
-    swing_floor = np.clip(sole_in, 0.0, SWING_CLEARANCE_PER_LEG * sp.leg_length)
-    return _Prepared(model, q_raw, targets, qref, href, x0, c, source, glob, offset, swing_floor)
+    # swing feet clear METRICS.md's contact height wherever they move (module docstring)
+    if opts.swing_clearance is None:
+        clearance, pins = None, c[1:] & c[:-1]
+    else:
+        clearance, pins = swing_clearance(c, motion.fps, sp.leg_length, opts.swing_clearance)
+    return _Prepared(
+        model,
+        q_raw,
+        targets,
+        qref,
+        href,
+        x0,
+        c,
+        source,
+        glob,
+        offset,
+        None,
+        clearance,
+        pins,
+        c_in,
+        cleaning,
+    )
+
+
+def _preplant(
+    motion: Motion, contacts: np.ndarray | None, opts: RefineOptions
+) -> tuple[Motion, np.ndarray, dict[str, Any]]:
+    """The input with its feet planted on its (cleaned) labels and lifted to the swing
+    clearance by leg IK (:func:`habitsim.planting.plant_motion`), the labels, and the
+    label fields of :class:`_Prepared` (source, input labels, cleaning). The optimisation
+    then starts from, and tracks, a motion whose feet already rest where they are
+    labelled to and clear the ground where they move."""
+    c_in, source = _resolve_contacts(motion, contacts)
+    sp = motion.species_info
+    c, cleaning = c_in, None
+    if opts.clean_contacts:
+        c, cleaning = clean_contact_labels(c_in, motion.foot_positions(), motion.fps,
+                                           sp.leg_length)
+    floor = None
+    if opts.swing_clearance is not None:
+        floor = swing_clearance(c, motion.fps, sp.leg_length, opts.swing_clearance)[0]
+    planted, _ = plant_motion(motion, c, floor)
+    fields_ = {"contact_source": source, "contacts_input": c_in, "cleaning": cleaning}
+    return planted, c, fields_
 
 
 def _stance_height(sole: np.ndarray, contacts: np.ndarray) -> np.ndarray:
@@ -501,17 +771,6 @@ def _stance_height(sole: np.ndarray, contacts: np.ndarray) -> np.ndarray:
     raw = (sole * contacts).sum(axis=1) / np.maximum(n, 1)
     frames = np.arange(len(sole))
     return np.interp(frames, frames[have], raw[have])
-
-
-def _sole_heights(model: mujoco.MjModel, info: Any, qpos: np.ndarray) -> np.ndarray:
-    """(T, 4) height of the lowest point of each foot sphere [m] (MuJoCo FK)."""
-    d = mujoco.MjData(model)
-    out = np.empty((len(qpos), 4))
-    for k, q in enumerate(qpos):
-        d.qpos[:] = q
-        mujoco.mj_kinematics(model, d)
-        out[k] = d.geom_xpos[info.foot_geoms, 2] - info.foot_radius
-    return out
 
 
 def _assemble_qpos(prep: _Prepared, info: Any, x: np.ndarray) -> np.ndarray:
@@ -553,7 +812,13 @@ def _solve_windows(
             if _BUILDS > built:
                 build_s += pr.build_time_s
             p = pr.parameters(prep.targets[sl], prep.qref[sl], prep.href[sl], prep.glob)
-            lbx, ubx, lbg, ubg = pr.bounds(prep.contacts[sl], fixed, x_start, prep.swing_floor[sl])
+            lbx, ubx, lbg, ubg = pr.bounds(
+                prep.contacts[sl],
+                fixed,
+                x_start,
+                clearance=None if prep.clearance is None else prep.clearance[sl],
+                pins=prep.pins[win.start : win.stop - 1],
+            )
             t0 = time.perf_counter()
             sol = pr.solver(x0=pr.pack(x_start), p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
             dt = time.perf_counter() - t0
@@ -585,6 +850,80 @@ def _solve_windows(
         # committed up to commit_stop; beyond it the solution is the next window's warm start
         x[sl] = xw
     return x, log, status, build_s
+
+
+def _solve_checked(
+    prep: _Prepared,
+    motion: Motion,
+    opts: RefineOptions,
+    plan: list[Window],
+    model_arg: mujoco.MjModel | None,
+    info: ModelInfo,
+    m: mujoco.MjModel,
+) -> tuple:
+    """Solve every window, assemble, check with MuJoCo; the output motion is the input
+    (with the labels) after a failure."""
+    t = motion.num_frames
+    failure: _WindowFailed | None = None
+    try:
+        x, log, status, build_s = _solve_windows(prep, motion, opts, plan, model_arg, info)
+    except _WindowFailed as e:
+        failure = e
+        x, log, status, build_s = prep.x0, e.log, e.status, e.build_s
+    qpos = _assemble_qpos(prep, info, x) if failure is None else prep.qpos_in.copy()
+    checks = _verify(m, info, qpos, prep.contacts)
+    if (
+        failure is None
+        and max(
+            checks["stance_drift_max_mm"],
+            checks["penetration_max_mm"],
+            checks["stance_sole_height_max_mm"],
+        )
+        > opts.verify_tol_mm
+    ):
+        failure = _WindowFailed("Verification_Failed", (0, t), log, build_s)
+        status = failure.status
+    if failure is None:
+        out = qpos_to_motion(m, qpos, motion.species, motion.fps)
+        out.contacts = prep.contacts.copy()
+        out.metadata = dict(motion.metadata)
+    else:
+        out = motion.slice(0)
+        out.contacts = prep.contacts.copy()
+        qpos = prep.qpos_in.copy()
+    return x, log, status, failure, checks, qpos, out, build_s
+
+
+def compare_metrics(motion_in: Motion, motion_out: Motion) -> dict[str, Any]:
+    """METRICS.md's ``skate_mm``, ``jerk`` and ``penetration_mm`` (the functions of
+    :mod:`habitsim.evaluation.kinematic`, literal definitions) of the input and of the
+    result, and which of them the result makes worse (beyond :data:`WORSE_TOLERANCE`).
+
+    Returns:
+        ``before`` / ``after`` (key → value), ``worse`` (keys, in
+        :data:`VERDICT_METRICS` order) and ``ok`` (nothing worse).
+    """
+    from ..evaluation.kinematic import jerk, penetration_mm, skate_mm
+
+    out: dict[str, Any] = {"before": {}, "after": {}}
+    for tag, mo in (("before", motion_in), ("after", motion_out)):
+        pos = mo.global_positions()
+        out[tag] = {
+            "skate_mm": skate_mm(mo, positions=pos),
+            "jerk": jerk(mo, positions=pos),
+            "penetration_mm": penetration_mm(mo, positions=pos),
+        }
+    worse = []
+    for k in VERDICT_METRICS:
+        b, a = out["before"][k], out["after"][k]
+        if not (np.isfinite(a) and np.isfinite(b)):
+            continue
+        tol = WORSE_TOLERANCE[k] * (abs(b) if k == "jerk" else 1.0)
+        if a > b + tol:
+            worse.append(k)
+    out["worse"] = worse
+    out["ok"] = not worse
+    return out
 
 
 class _WindowFailed(Exception):
@@ -672,43 +1011,51 @@ def refine(
     if fallback is not None:
         opts = replace(opts, fallback=bool(fallback))
     motion = _check_motion(motion)
+    motion_in = motion
     m = _species_model(motion.species) if model is None else model
     t = motion.num_frames
     plan = opts.plan(t)
     pr0 = get_problem(motion.species, plan[0].length, opts.dynamics, opts.settings, model=model)
     info = pr0.info
+    pre = None
+    if opts.preplant:
+        motion, contacts, pre = _preplant(motion, contacts, opts)
     prep = _prepare(motion, contacts, opts, m, pr0)
-    failure: _WindowFailed | None = None
-    try:
-        x, log, status, build_s = _solve_windows(prep, motion, opts, plan, model, info)
-    except _WindowFailed as e:
-        failure = e
-        x, log, status, build_s = prep.x0, e.log, e.status, e.build_s
-    qpos = _assemble_qpos(prep, info, x) if failure is None else prep.qpos_in.copy()
-    checks = _verify(m, info, qpos, prep.contacts)
-    if (
-        failure is None
-        and max(
-            checks["stance_drift_max_mm"],
-            checks["penetration_max_mm"],
-            checks["stance_sole_height_max_mm"],
+    if pre is not None:  # how the labels came and were cleaned, as given by the caller
+        prep = replace(prep, **pre)
+    guard: list[dict[str, Any]] = []
+    build_total = 0.0
+    previous = None
+    while True:
+        attempt = _solve_checked(prep, motion, opts, plan, model, info, m)
+        build_total += attempt[-1]
+        verdict = compare_metrics(motion_in, attempt[6]) if attempt[3] is None else None
+        if verdict is None and previous is not None:  # a guard retry failed: keep the last
+            attempt, verdict, opts = previous
+            guard[-1]["status"] = "failed"
+            break
+        if verdict is None or verdict["ok"] or len(guard) >= int(opts.guard):
+            break
+        # worse than the input (in practice: jerkier): again with smoother weights
+        log0 = attempt[1]
+        guard.append(
+            {
+                "worse": verdict["worse"],
+                "after": verdict["after"],
+                "iterations": int(sum(e["iterations"] for e in log0)),
+                "solve_time_s": float(sum(e["solve_time_s"] for e in log0)),
+                "status": "retried",
+            }
         )
-        > opts.verify_tol_mm
-    ):
-        failure = _WindowFailed("Verification_Failed", (0, t), log, build_s)
-        status = failure.status
-        qpos = prep.qpos_in.copy()
+        previous = (attempt, verdict, opts)
+        opts = replace(opts, **{k: _escalate(k, getattr(opts, k)) for k in GUARD_WEIGHTS})
+        prep.glob.update(opts.weights)
+    x, log, status, failure, checks, qpos, out, _ = attempt
+    prep.glob.update(opts.weights)
+    build_s = build_total
     success = failure is None
-    if success:
-        out = qpos_to_motion(m, qpos, motion.species, motion.fps)
-        out.contacts = prep.contacts.copy()
-        out.metadata = dict(motion.metadata)
-    else:
-        out = motion.slice(0)
-        out.contacts = prep.contacts.copy()
-        qpos = prep.qpos_in.copy()
     report = build_report(
-        motion_in=motion,
+        motion_in=motion_in,
         motion_out=out,
         x=x,
         prep=prep,
@@ -722,6 +1069,8 @@ def refine(
         model=m,
         info=info,
         wall0=wall0,
+        verdict=verdict,
+        guard=guard,
     )
     residual = None
     if success and opts.dynamics and "residual_mg" in report:
