@@ -237,14 +237,16 @@ def _planted_targets(raw: np.ndarray, contacts: np.ndarray) -> np.ndarray:
     out = raw.copy()
     out[..., 2] = np.maximum(out[..., 2], 0.0)
     t = raw.shape[0]
-    for k, runs in enumerate(contact_segments(contacts)):
-        if not runs:
+    for k, segs in enumerate(contact_segments(contacts)):
+        if not segs:
             continue
+        runs = [(a, b - 1) for a, b in segs]  # inclusive last stance frame
         holds = [np.median(raw[a:b + 1, k, :2], axis=0) for a, b in runs]
         for (a, b), h in zip(runs, holds, strict=True):
             out[a:b + 1, k, :2] = h
             out[a:b + 1, k, 2] = 0.0
-        # swing phases: before the first, between runs, after the last
+        # swing phases (lo, hi exclusive of both): before the first run, between runs,
+        # after the last
         bounds = [(-1, runs[0][0], None, 0)]
         bounds += [(runs[i][1], runs[i + 1][0], i, i + 1) for i in range(len(runs) - 1)]
         bounds.append((runs[-1][1], t, len(runs) - 1, None))

@@ -270,3 +270,33 @@ def test_cli_inspect_and_import_with_warning(rig, tmp_path, capsys):
     assert "warning: lh leg" in err
     back = habitsim.load_motion(out_npz)
     assert back.contacts is not None and back.metadata["import"]["warnings"]
+
+
+def test_plant_motion_plants_own_feet_and_lifts_swing():
+    from habitsim.motion import Motion
+    from habitsim.planting import leg_pose_angles, plant_motion
+
+    m = habitsim.generate("cat", "trot", seed=1, duration_s=2.0)
+    leg = m.species_info.leg_length
+    # the legs' own angles re-solve the motion exactly
+    g, i = leg_pose_angles(m)
+    from habitsim.ik import pose_from_targets
+
+    p = pose_from_targets("cat", m.root_positions, m.rotations, m.foot_positions(), g, i)
+    np.testing.assert_allclose(p.reach_error, 0.0, atol=1e-9)
+    # hovering feet (the whole body 3 % of a leg too high) and a swing floor of 3 %
+    up = m.root_positions.copy()
+    up[:, 2] += 0.03 * leg
+    hover = Motion("cat", m.fps, up, m.rotations, m.contacts)
+    floor = np.where(m.contacts, np.nan, 0.03 * leg)
+    out, rep = plant_motion(hover, m.contacts, floor)
+    toes = out.foot_positions()[..., 2]
+    assert np.all(np.abs(toes[m.contacts]) <= 0.002 * leg)
+    assert toes.min() >= -1e-9
+    # swing toes reach the floor wherever the leg can reach its target at all
+    reach = rep.reach_error[~m.contacts] < 1e-6
+    assert reach.mean() > 0.8
+    assert np.all(toes[~m.contacts][reach] >= 0.03 * leg - 1e-6)
+    feet = out.foot_positions()[..., :2]
+    both = m.contacts[1:] & m.contacts[:-1]
+    assert np.linalg.norm(np.diff(feet, axis=0), axis=-1)[both].max() <= 0.002 * leg

@@ -171,7 +171,10 @@ class RefineOptions:
             (:func:`clean_contact_labels`).
         preplant: before the optimisation, plant the input's feet on the labels and lift
             them to the swing clearance by leg IK (:func:`_preplant`): the solve starts
-            from, and tracks, feet that are already where the constraints want them.
+            from, and tracks, feet that are already where the constraints want them. Off
+            by default: on 50 transfers of real 4 s clips it met the three targets on 50
+            instead of 49 in a similar time, but it moves clean clips' legs (a synthetic
+            trot 6.4 mm from itself instead of under 6.1).
         swing_clearance: lowest toe height of a moving swing foot, share of leg length
             (:func:`swing_clearance`; at least METRICS.md's contact height, 2 %); None
             switches the clearance profile off (swing feet only stay above the floor).
@@ -207,7 +210,7 @@ class RefineOptions:
     friction: float | None = None
     align_ground: bool = True
     clean_contacts: bool = True
-    preplant: bool = True
+    preplant: bool = False
     swing_clearance: float | None = SWING_CLEARANCE_PER_LEG
     guard: int = 2
     fallback: bool = False
@@ -1089,6 +1092,9 @@ def refine(
             )
         if not opts.fallback:
             raise RefineConvergenceError(msg, failure.status, failure.window, report)
+        if pre is not None:  # the input itself comes back, not its pre-planted form
+            out = motion_in.with_contacts(prep.contacts)
+            qpos = motion_to_qpos(motion_in, m).qpos
     out.metadata["refine"] = {
         "status": report["status"],
         "success": success,
