@@ -95,7 +95,7 @@ from typing import Any
 import numpy as np
 
 from habitsim.errors import HabitsimError, unknown_choice
-from habitsim.fileio import atomic_write, atomic_write_text
+from habitsim.fileio import atomic_write, atomic_write_text, json_safe
 from habitsim.motion import Motion
 
 __all__ = [
@@ -653,18 +653,6 @@ def _cell(v: Any) -> str:
     return str(v)
 
 
-def _json_safe(v: Any) -> Any:
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if isinstance(v, np.generic):
-        return _json_safe(v.item())
-    if isinstance(v, dict):
-        return {k: _json_safe(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_json_safe(x) for x in v]
-    return v
-
-
 def _num(v: Any) -> float:
     return math.nan if v is None or v == "" else _finite(v)
 
@@ -904,12 +892,12 @@ def _write_summary(
         # CPU seconds of every pair (all runs of a resumed benchmark); / cores ≈ wall time
         # on an otherwise idle machine
         "cpu_time_s": cpu_time_s,
-        "methods": _json_safe(summary),
+        "methods": json_safe(summary),
     }
     atomic_write_text(
         out / "summary.json",
         json.dumps(
-            _json_safe(doc),
+            json_safe(doc),
             indent=2,
             sort_keys=True,
         )
@@ -1094,7 +1082,7 @@ def run_benchmark(
     try:
         for task, row in ex.map_unordered(evaluate_pair, pending):
             with atomic_write(_row_path(out, task.key), "w") as fh:
-                json.dump(_json_safe(row), fh, sort_keys=True)
+                json.dump(json_safe(row), fh, sort_keys=True)
             computed += 1
             if bar is not None:
                 bar.update(1)

@@ -557,7 +557,7 @@ def plan(ns: argparse.Namespace) -> tuple[list[WindowTask], list[str]]:
 
 def _bench_real(ns: argparse.Namespace) -> int:
     from ..evaluation.executors import make_executor
-    from ..fileio import atomic_write_text
+    from ..fileio import atomic_write_text, json_safe
 
     t0 = time.perf_counter()
     tasks, notes = plan(ns)
@@ -600,18 +600,8 @@ def _bench_real(ns: argparse.Namespace) -> int:
             "targets": verdicts,
             "wall_time_s": wall,
         }
-        atomic_write_text(ns.json, json.dumps(_json_safe(doc), indent=2) + "\n")
+        atomic_write_text(ns.json, json.dumps(json_safe(doc), indent=2) + "\n")
         print(f"rows written to {ns.json}")
     return exit_code(verdicts)
 
 
-def _json_safe(v: Any) -> Any:
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if isinstance(v, np.generic):
-        return _json_safe(v.item())
-    if isinstance(v, dict):
-        return {str(k): _json_safe(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_json_safe(x) for x in v]
-    return v
