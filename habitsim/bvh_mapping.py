@@ -1425,17 +1425,15 @@ def describe_hierarchy(bvh: BVHData, mapping: JointMapping | None = None) -> str
     are never limbs, ``[end]`` for End Sites, and ``-> habitsim_joint`` where mapped.
     """
     inv = {v: k for k, v in mapping.mapped().items()} if mapping is not None else {}
-    depth = [0] * bvh.num_joints
+    t = _Tree(bvh)
     lines = []
     for j, name in enumerate(bvh.names):
-        p = bvh.parents[j]
-        depth[j] = 0 if p < 0 else depth[p] + 1
         tags = []
         if bvh.is_end_site[j]:
             tags.append("[end]")
-        elif is_helper_name(name):
+        elif t.helper[j]:
             tags.append("[helper]")
-        text = f"{'  ' * depth[j]}{name}  ({float(np.linalg.norm(bvh.offsets[j])):.4g})"
+        text = f"{'  ' * t.depth[j]}{name}  ({t.blen[j]:.4g})"
         if tags:
             text += " " + " ".join(tags)
         if name in inv:

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import IKError
+from .hinges import hinge_limits
 from .rotations import quat_mul, quat_to_matrix, rot_x, rot_y
 from .skeleton import ABDUCTION_SIGN, JOINT_NAMES, get_skeleton, standing_leg_angles
 from .species import FEET, Species, load_species
@@ -476,8 +477,6 @@ def axial_frames(species: str | Species, root_positions: np.ndarray, rotations: 
 
 def _abduction_range(sp: Species, leg: str) -> tuple[float, float]:
     """The R_x-angle range of a leg's shoulder / hip abduction from the species' limits."""
-    from .hinges import hinge_limits
-
     geo = leg_geometry(sp, leg)
     lo, hi = hinge_limits(sp)[f"{geo.joints[1]}_abd"]
     sign = ABDUCTION_SIGN[geo.prefix[0]]
