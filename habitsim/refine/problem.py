@@ -177,6 +177,11 @@ class SolverSettings:
             barrier term then dominates for variables resting at a bound (a joint at its
             limit) and pushes them a radian away whenever the barrier parameter grows —
             IPOPT wandered for 40+ iterations on near-optimal starts. × 100 fixes it.
+        jerk: build the pelvis and hinge jerk rows. Third differences couple every
+            variable to the three frames either side, which widens the KKT matrix's band:
+            with them built (even at weight 0) a stage-A iteration costs about 3× as
+            much, so they are built only for solves whose jerk weights are non-zero
+            (:attr:`habitsim.refine.RefineOptions.settings`).
     """
 
     max_iter: int = 200
@@ -186,6 +191,7 @@ class SolverSettings:
     mu_init: float = 1e-3
     hessian: str = "gauss-newton"
     obj_scaling: float = 100.0
+    jerk: bool = False
 
     def __post_init__(self) -> None:
         if self.hessian not in HESSIANS:
@@ -548,8 +554,11 @@ class _Kin:
         )
 
 
-def _expressions(kin: _Kin, w: int, dynamics: bool) -> _Exprs:
-    """Objective terms, constraints and residual of a ``w``-frame trajectory (MX)."""
+def _expressions(kin: _Kin, w: int, dynamics: bool, jerk_rows: bool = True) -> _Exprs:
+    """Objective terms, constraints and residual of a ``w``-frame trajectory (MX).
+
+    ``jerk_rows`` False leaves out the jerk terms' rows (their entries of the terms stay, at
+    0), see :attr:`SolverSettings.jerk`."""
     info = kin.info
     nh, nv, nj = len(info.hinge_names), kin.nv, len(JOINT_NAMES)
     nx = nv + (4 * _N_EDGES + 3 if dynamics else 0)
@@ -581,7 +590,7 @@ def _expressions(kin: _Kin, w: int, dynamics: bool) -> _Exprs:
     acc = ca.vertcat(d2(X[:3, :]), d2(R) * (L / np.sqrt(2.0))) * fps**2 / grav
     smooth = gp["w_smooth"] * ca.sumsqr(acc) / (w - 2)
     # jerk of the pelvis (position, rotation entries × L/√2) in units of g·√(g/L)
-    if w >= 4:
+    if w >= 4 and jerk_rows:
         trunk = ca.vertcat(X[:3, :], R * (L / np.sqrt(2.0)))
         t_jerk = (trunk[:, 3:] - 3 * trunk[:, 2:-1] + 3 * trunk[:, 1:-2] - trunk[:, :-3]) * (
             fps**3 * ca.sqrt(L) / grav**1.5
@@ -592,7 +601,7 @@ def _expressions(kin: _Kin, w: int, dynamics: bool) -> _Exprs:
         jerk, jerk_lsq = ca.MX(0), []
     # jerk of the hinges, as displacements at half a leg length, same unit: linear, so
     # its Gauss-Newton Hessian is exact and a constant band over 4 frames
-    if w >= 4:
+    if w >= 4 and jerk_rows:
         hx = X[6:nv, :] * (L / 2.0)
         h_jerk = (hx[:, 3:] - 3 * hx[:, 2:-1] + 3 * hx[:, 1:-2] - hx[:, :-3]) * (
             fps**3 * ca.sqrt(L) / grav**1.5
@@ -681,8 +690,8 @@ def _expressions(kin: _Kin, w: int, dynamics: bool) -> _Exprs:
 
 def _gauss_newton_hessian(e: _Exprs) -> ca.Function:
     """IPOPT's ``hess_lag`` as Gauss-Newton: 2·λ_f·JᵀJ of the least-squares residuals
-    (the objective is exactly their sum of squares), plus — stage B — the exact
-    curvature of the ``com`` rows.
+    (the objective is exactly their sum of squares), plus the exact curvature of the
+    ``clearance`` rows and — stage B — of the ``com`` rows.
 
     Why: the exact Hessian of the FK-based tracking term is indefinite away from the
     solution, and IPOPT then refactorises the KKT matrix several times per iteration to
@@ -690,7 +699,9 @@ def _gauss_newton_hessian(e: _Exprs) -> ca.Function:
     halves stage A's time (8–9 iterations per window instead of 11–19) for the same
     optimum. The curvature of the sole/ground/pin rows is left out (including it stalls
     IPOPT); that of the CoM tie is kept, without it stage B sometimes needs 5× the
-    iterations.
+    iterations; so is that of the swing-clearance rows: without it, clips whose swing
+    feet must be lifted (a sunk foot) ran into the Gauss-Newton iteration cap and fell
+    back to the exact Hessian (41–43 iterations instead of 8–20).
     """
     x = ca.vec(e.X)
     xs = ca.SX.sym("x", x.shape[0])
@@ -699,10 +710,12 @@ def _gauss_newton_hessian(e: _Exprs) -> ca.Function:
     lg = ca.SX.sym("lam_g", e.g.shape[0])
     jr = ca.jacobian(ca.Function("lsq", [x, e.P], [e.lsq]).expand()(xs, ps), xs)
     hess = 2 * lf * (jr.T @ jr)
-    if "com" in e.blocks:
-        a, b = e.blocks["com"]
-        gcom = ca.Function("g_com", [x, e.P], [e.g[a:b]]).expand()(xs, ps)
-        hess = hess + ca.hessian(ca.dot(lg[a:b], gcom), xs)[0]
+    for name in ("clearance", "com"):
+        if name not in e.blocks:
+            continue
+        a, b = e.blocks[name]
+        g_rows = ca.Function("g_" + name, [x, e.P], [e.g[a:b]]).expand()(xs, ps)
+        hess = hess + ca.hessian(ca.dot(lg[a:b], g_rows), xs)[0]
     return ca.Function(
         "nlp_hess_l",
         [xs, ps, lf, lg],
@@ -738,7 +751,7 @@ def build_refinement_problem(
     w = int(n_frames)
     settings = settings or SolverSettings()
     kin = _Kin(model)
-    e = _expressions(kin, w, dynamics)
+    e = _expressions(kin, w, dynamics, jerk_rows=settings.jerk)
     x = ca.vec(e.X)
     nlp = {"x": x, "p": e.P, "f": ca.sum1(e.terms), "g": e.g}
     opts = {"expand": True, "print_time": False, "error_on_fail": False, "ipopt": settings.ipopt()}

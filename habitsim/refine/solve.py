@@ -175,6 +175,10 @@ class RefineOptions:
             by default: on 50 transfers of real 4 s clips it met the three targets on 50
             instead of 49 in a similar time, but it moves clean clips' legs (a synthetic
             trot 6.4 mm from itself instead of under 6.1).
+        plant_start: start each solve from the legs planted on the labels and lifted to
+            the swing clearance by leg IK (the targets stay the input's): a warm start
+            that already satisfies most constraints. Gauss-Newton then converges in
+            7–14 iterations instead of 8–22 on artefact clips whose feet sink.
         swing_clearance: lowest toe height of a moving swing foot, share of leg length
             (:func:`swing_clearance`; at least METRICS.md's contact height, 2 %); None
             switches the clearance profile off (swing feet only stay above the floor).
@@ -211,6 +215,7 @@ class RefineOptions:
     align_ground: bool = True
     clean_contacts: bool = True
     preplant: bool = False
+    plant_start: bool = True
     swing_clearance: float | None = SWING_CLEARANCE_PER_LEG
     guard: int = 2
     fallback: bool = False
@@ -268,11 +273,13 @@ class RefineOptions:
     @property
     def settings(self) -> SolverSettings:
         """The settings of the first attempt per window: Gauss-Newton, at most
-        :data:`GAUSS_NEWTON_MAX_ITER` iterations (the exact-Hessian retry gets max_iter)."""
+        :data:`GAUSS_NEWTON_MAX_ITER` iterations (the exact-Hessian retry gets max_iter),
+        the jerk rows built only when a jerk weight is non-zero."""
         return SolverSettings(
             max_iter=min(int(self.max_iter), GAUSS_NEWTON_MAX_ITER),
             tol=float(self.tol),
             constr_viol_tol=float(self.constr_viol_tol),
+            jerk=self.w_jerk > 0 or self.w_hinge_jerk > 0,
         )
 
     @property
@@ -724,6 +731,8 @@ def _prepare(
         clearance, pins = None, c[1:] & c[:-1]
     else:
         clearance, pins = swing_clearance(c, motion.fps, sp.leg_length, opts.swing_clearance)
+    if opts.plant_start:
+        x0[:, :nv] = _planted_start(motion, model, info, q, offset, c, clearance, x0[:, :nv])
     return _Prepared(
         model,
         q_raw,
@@ -741,6 +750,40 @@ def _prepare(
         c_in,
         cleaning,
     )
+
+
+def _planted_start(
+    motion: Motion,
+    model: mujoco.MjModel,
+    info: ModelInfo,
+    q: np.ndarray,
+    offset: np.ndarray,
+    contacts: np.ndarray,
+    clearance: np.ndarray | None,
+    x0: np.ndarray,
+) -> np.ndarray:
+    """The initial guess of :attr:`RefineOptions.plant_start`: the (filtered, aligned)
+    input with its legs planted on the labels and lifted to the clearance by leg IK.
+    The root orientation stays the reference's; a frame IK could not plant keeps
+    ``x0``'s pose (the solver starts there either way)."""
+    qa = q.copy()
+    fa = info.free_qposadr
+    qa[:, fa + 2] -= offset
+    aligned = qpos_to_motion(model, qa, motion.species, motion.fps)
+    floor = None if clearance is None else np.where(contacts, np.nan, clearance)
+    try:
+        planted, _ = plant_motion(aligned, contacts, floor)
+    except (InvalidMotionError, np.linalg.LinAlgError, ValueError):
+        return x0
+    qp = motion_to_qpos(planted, model).qpos
+    out = x0.copy()
+    out[:, :3] = qp[:, fa : fa + 3]
+    span = np.where(np.isfinite(info.upper - info.lower), info.upper - info.lower, 1.0)
+    margin = np.minimum(1e-6, 1e-3 * span)
+    out[:, 6:] = np.clip(qp[:, info.hinge_qposadr], info.lower + margin, info.upper - margin)
+    bad = ~np.all(np.isfinite(out), axis=1)
+    out[bad] = x0[bad]
+    return out
 
 
 def _preplant(
