@@ -5,12 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from .conventions import add_list_option
+
 
 def _build(ns: argparse.Namespace) -> int:
     from habitsim.mjcf_models.builder import write_model
     from habitsim.species import load_species, species_names
 
-    names = ns.species.split(",") if ns.species else species_names()
+    names = ns.species or species_names()
     for n in names:
         load_species(n)  # fail early, with the list of known species
     for n in names:
@@ -41,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write <species>/<species>.xml, scene.xml, the standing model "
         "<species>_position.xml and scene_position.xml, README.md, preview.png",
     )
-    p.add_argument("--species", help="comma-separated species (default: all)")
+    add_list_option(p, "--species", help="species (default: all)")
     p.add_argument("--out", type=Path, default=None,
                    help="models folder (default: the installed habitsim.mjcf_models)")
     p.add_argument("--no-preview", action="store_true",
