@@ -17,7 +17,7 @@ Per row: the import's contact F1 against the source's own feet (the importer's
 none), the stance toe height (median height of the labelled-stance toes / leg length:
 the import's own labels, and the transfer's), how the transfer's stance labels were
 found, skate / jerk / penetration before and after refinement, the refinement check,
-survival, sim MPJPE / leg length and the wall time per stage. Skating is METRICS.md's
+survival, sim MPJPE / leg length and the wall time per stage. Skating is docs/metrics.md's
 ``skate_mm`` (toes within 2 % of leg length of the ground count as in contact, labelled
 or not); the JSON rows and the summary also give it over the labelled stance frames only
 (``skate_labelled_mm_*``), the frames the refinement plants. The summary checks the

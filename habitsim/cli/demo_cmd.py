@@ -240,7 +240,7 @@ def _report(rows: list[dict], table: str, ns: argparse.Namespace) -> str:
         "borrows its nearest training species'); *contacts* = how the transfer's stance "
         "labels were found (`source`: the source's footfalls, `detected` from resting "
         "feet, `duty` from the target's duty factor where feet slide); *skate* = "
-        "METRICS.md `skate_mm` before and after refinement; *check* = the refinement "
+        "docs/metrics.md `skate_mm` before and after refinement; *check* = the refinement "
         "check (`kept`, or `reverted` when the refined clip tracked worse); *survival* = "
         "share of the clip before a fall; *MPJPE/leg* = simulated vs reference joint "
         "positions / leg length; *assist m·g* = mean assisting force.",

@@ -41,7 +41,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="benchmark transfer methods: transfer → refine → track → every metric",
         description=(
             "For every (validation clip, target species) pair and every method: transfer, "
-            "refine, track in MuJoCo and compute every METRICS.md metric; one row per pair, "
+            "refine, track in MuJoCo and compute every docs/metrics.md metric; one row per pair, "
             "a summary in the paper's Table 1 layout and an HTML/Markdown report."
         ),
     )
