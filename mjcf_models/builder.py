@@ -645,8 +645,12 @@ def _readme(sp: Species, model: mujoco.MjModel, density: float) -> str:
         " `home` keyframe in plain MuJoCo:",
         "",
         "```",
-        "python -m mujoco.viewer --mjcf=scene_position.xml   # then load key 'home'",
+        "python -m mujoco.viewer --mjcf=scene_position.xml",
         "```",
+        "",
+        "The viewer opens at `qpos0` (straight legs); load the `home` keyframe (Simulation"
+        " panel: Key 0, Load key) and it stands. In code: `mj_resetDataKeyframe(model, data,"
+        " model.key('home').id)`, then `mj_step`.",
         "",
         f"* kp = τmax / {POSITION_FULL_TORQUE_ERROR:g} rad (each actuator's torque limit is"
         f" reached at {POSITION_FULL_TORQUE_ERROR:g} rad of error), damping ratio"
