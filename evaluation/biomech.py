@@ -1,6 +1,6 @@
 """Biomechanical consistency: how far a motion's gait is from its species' habits.
 
-The measured numbers are METRICS.md's (from foot contacts, via
+The measured numbers are docs/metrics.md's (from foot contacts, via
 :func:`habitsim.gait_stats.gait_statistics`): ``froude`` v²/(g·h), ``duty_factor``,
 ``relative_stride_length`` λ/h and ``phase_offsets`` (touchdown phase of each foot
 relative to the left hind foot). They are compared with each gait of the species' gait

@@ -1,4 +1,4 @@
-"""Distribution metrics of METRICS.md ("Behave Your Motion", Sec. 4.1.2) and MPJPE.
+"""Distribution metrics of docs/metrics.md ("Behave Your Motion", Sec. 4.1.2) and MPJPE.
 
 The set metrics work on feature matrices (N, D) — in the benchmark the penultimate
 features of the frozen evaluator (:mod:`habitsim.evaluation.evaluator`) — so they are
@@ -64,7 +64,7 @@ __all__ = [
     "transfer_mpjpe_mm",
 ]
 
-#: Number of random pairs of ``diversity`` (METRICS.md) …
+#: Number of random pairs of ``diversity`` (docs/metrics.md) …
 DIVERSITY_PAIRS = 300
 #: … and when the set has at most 300 samples.
 DIVERSITY_PAIRS_SMALL = 100
@@ -72,7 +72,7 @@ DIVERSITY_PAIRS_SMALL = 100
 SQRTM_EPS = 1e-6
 #: Largest tolerated imaginary part of ``sqrtm(Σ₁Σ₂)``.
 MAX_IMAG = 1e-3
-#: Fewest real samples of a category used by ``downstream_fid`` (METRICS.md).
+#: Fewest real samples of a category used by ``downstream_fid`` (docs/metrics.md).
 DOWNSTREAM_MIN_REAL = 5
 
 
@@ -181,7 +181,7 @@ def downstream_fid(
         generated: (N, D) features of transferred motions.
         source_labels, target_labels: (N,) source and target category of each.
         real: (M, D) real features; real_labels: (M,) their categories.
-        min_real: fewest real samples of a target category (METRICS.md: 5).
+        min_real: fewest real samples of a target category (docs/metrics.md: 5).
         min_generated: fewest transferred samples of a (source, target) pair.
     """
     g, r = np.asarray(generated, float), np.asarray(real, float)

@@ -1,4 +1,4 @@
-"""Dynamic plausibility metrics (METRICS.md, "Dynamic plausibility").
+"""Dynamic plausibility metrics (docs/metrics.md, "Dynamic plausibility").
 
 The question: which external "hand of god" wrench on the trunk does a motion need, once
 the ground has pushed as much as it physically can? For every reference frame:
@@ -21,7 +21,7 @@ the ground has pushed as much as it physically can? For every reference frame:
    is the share of frames where any joint exceeds its actuator's torque limit
    (gear × control range of the species' motors).
 
-Why not read ``qfrc_inverse`` with contacts enabled, as METRICS.md's sentence suggests:
+Why not read ``qfrc_inverse`` with contacts enabled, as docs/metrics.md's sentence suggests:
 MuJoCo's soft contacts only push when a foot penetrates, and the force then depends on
 the penetration depth, so a kinematic reference with feet exactly on the floor reads
 1.0 standing still (checked: the dog's home pose gives ‖qfrc_inverse[0:3]‖ = m·g). The

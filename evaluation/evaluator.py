@@ -1,6 +1,6 @@
 """The frozen motion evaluator: a small temporal transformer over motion features.
 
-METRICS.md's distribution metrics (``fid``, ``intra_fid``, ``downstream_fid``,
+docs/metrics.md's distribution metrics (``fid``, ``intra_fid``, ``downstream_fid``,
 ``diversity``, ``one_nna``) are computed on its penultimate-layer features and its two
 classification heads give ``habit_accuracy`` (species head) and ``action_accuracy``
 (action head). It is trained once on the training split of the synthetic data set

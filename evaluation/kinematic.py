@@ -1,8 +1,8 @@
-"""Kinematic physical-plausibility metrics (METRICS.md, "Kinematic physical plausibility").
+"""Kinematic physical-plausibility metrics (docs/metrics.md, "Kinematic physical plausibility").
 
 Every metric works on the joint positions of a motion from forward kinematics, with the
 ground plane at z = 0 and thresholds relative to the species' hind-leg length L
-(:attr:`habitsim.species.Species.leg_length`). Keys (exactly METRICS.md's, plus the
+(:attr:`habitsim.species.Species.leg_length`). Keys (exactly docs/metrics.md's, plus the
 size-normalised variants):
 
 =============================  ===========================================================
@@ -35,7 +35,7 @@ key                            definition
 ``bone_length_error_per_leg``  bone_length_error_mm / 1000 / L
 =============================  ===========================================================
 
-Contact for ``skate_mm`` / ``skate_ratio`` is METRICS.md's: toe height < 2 % of L in
+Contact for ``skate_mm`` / ``skate_ratio`` is docs/metrics.md's: toe height < 2 % of L in
 *both* frames of a pair. When explicit ``contacts`` labels (T, 4) are passed to
 :func:`kinematic_metrics` (e.g. simulated contacts), a foot counts as contacting in a
 pair when the labels say so in both frames instead. A motion's own ``contacts``
@@ -226,7 +226,7 @@ def kinematic_metrics(motion: Motion, contacts: np.ndarray | None = None) -> dic
     Args:
         motion: the motion.
         contacts: optional (T, 4) bool contact labels (LF, RF, LH, RH) used by the skating
-            metrics instead of METRICS.md's height criterion.
+            metrics instead of docs/metrics.md's height criterion.
 
     Returns:
         Metric key → value (floats; ``jerk`` is NaN for clips under 4 frames).

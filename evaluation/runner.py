@@ -35,7 +35,7 @@ the refinement as it is) and measures:
    (the refined motion, or the transferred one);
 5. **track** it with :func:`habitsim.sim.track` (unassisted by default; the reference
    contact labels are the refined ones): the simulated
-   metrics of METRICS.md, and the biomechanical score of the simulated motion from its
+   metrics of docs/metrics.md, and the biomechanical score of the simulated motion from its
    simulated foot contacts (``sim_biomech_score``; NaN when the transferred motion is
    no gait, e.g. a sit).
 

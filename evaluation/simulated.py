@@ -1,15 +1,15 @@
-"""Simulated-tracking metrics (METRICS.md, "Simulated tracking").
+"""Simulated-tracking metrics (docs/metrics.md, "Simulated tracking").
 
 Computed by :func:`habitsim.sim.track` on every run and stored in its report; the
 functions take plain arrays so they also score a simulation made elsewhere. Keys (exactly
-METRICS.md's, plus the leg-length-normalised variants):
+docs/metrics.md's, plus the leg-length-normalised variants):
 
 =======================  ==================================================================
 key                      definition
 =======================  ==================================================================
 ``survival``             fraction of the clip completed before a fall or an unstable step
                          (1.0 = whole clip)
-``fell``                 True when the run fell (METRICS.md's rule, see
+``fell``                 True when the run fell (docs/metrics.md's rule, see
                          :class:`habitsim.sim.FallDetector`) or became unstable
 ``sim_mpjpe_mm``         mean over the survived frames and the 30 habitsim joints of the
                          distance between simulated and reference world joint positions,

@@ -4,7 +4,7 @@ A foot (its toe end point, see :meth:`habitsim.motion.Motion.foot_positions`) is
 contact with the ground (the plane z = 0) in a frame when
 
 * its height is below :data:`CONTACT_HEIGHT_PER_LEG` × leg length (2 %, the contact
-  definition of METRICS.md's ``skate_mm``), and
+  definition of docs/metrics.md's ``skate_mm``), and
 * its horizontal speed is below :data:`CONTACT_SPEED_PER_LEG` × leg length per second
   (0.3 leg lengths per second; for a 0.61 m dog leg that is 0.18 m/s, for a cat's 0.27 m
   leg 0.08 m/s). The speed of frame t is the smaller of the backward and the forward
@@ -52,7 +52,7 @@ __all__ = [
     "warp_contacts",
 ]
 
-#: Toe height threshold as a fraction of the hind-leg length (METRICS.md: 2 %).
+#: Toe height threshold as a fraction of the hind-leg length (docs/metrics.md: 2 %).
 CONTACT_HEIGHT_PER_LEG = 0.02
 #: Horizontal toe speed threshold in hind-leg lengths per second.
 CONTACT_SPEED_PER_LEG = 0.3

@@ -1,7 +1,7 @@
 """Measured gait statistics of a motion: speed, Froude number, duty factor, footfall phases,
 stride period and length, and the static stability margin.
 
-Definitions (keys of :meth:`GaitStats.to_dict`; METRICS.md names where it has them):
+Definitions (keys of :meth:`GaitStats.to_dict`; docs/metrics.md names where it has them):
 
 * ``duration_s``: T / fps.
 * ``speed_mps``: the mean horizontal root displacement over one stride period P,
@@ -111,7 +111,7 @@ class GaitStats:
     leg_length_m: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (METRICS.md keys; NaN becomes None; per-foot values as dicts)."""
+        """JSON-ready dict (docs/metrics.md keys; NaN becomes None; per-foot values as dicts)."""
         out: dict[str, Any] = {}
         for k, v in self.__dict__.items():
             if isinstance(v, dict):

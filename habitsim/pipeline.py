@@ -218,7 +218,7 @@ def stance_toe_height(motion: Motion, contacts: np.ndarray | None) -> float:
 
 
 def _motion_metrics(motion: Motion, contacts: np.ndarray | None) -> dict[str, Any]:
-    """METRICS.md kinematic metrics (literal contact definition), the skating under the
+    """docs/metrics.md kinematic metrics (literal contact definition), the skating under the
     stage's own labels, and the stance toe height."""
     from .evaluation.kinematic import kinematic_metrics, skate_mm
 

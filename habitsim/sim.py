@@ -9,7 +9,7 @@ metrics). The pieces, each usable alone:
 * :func:`build_reference` — the reference resampled at the simulation step: cubic Hermite
   for scalar coordinates and the root position, slerp for quaternions; velocities and
   accelerations are the frame-rate finite differences, interpolated linearly.
-* :class:`FallDetector` — METRICS.md's fall rule, checked at every reference frame.
+* :class:`FallDetector` — docs/metrics.md's fall rule, checked at every reference frame.
 * :func:`track` — one clip, Python loop (any :class:`~habitsim.controllers.Controller`,
   optional root assistance) or, for in-engine servos without assistance, one
   ``mujoco.rollout`` call (no Python in the loop).
@@ -68,7 +68,7 @@ __all__ = [
 #: on the motors; ``+stance`` adds the stance-leg trunk stabiliser (virtual model control,
 #: no external force); ``+id`` adds inverse-dynamics feed-forward torques of the reference.
 CONTROLLERS = ("servo", "pd", "servo+stance", "servo+id", "servo+id+stance", "balance", "mpc")
-#: METRICS.md fall rule: trunk height below this share of its reference height …
+#: docs/metrics.md fall rule: trunk height below this share of its reference height …
 FALL_HEIGHT_RATIO = 0.5
 #: … or trunk tilt (from the reference's trunk orientation) above this [deg] …
 FALL_TILT_DEG = 60.0
@@ -495,7 +495,7 @@ def _lowest_z(model: mujoco.MjModel, geoms: np.ndarray, pos: np.ndarray,
 
 
 class FallDetector:
-    """METRICS.md's fall rule, evaluated at the reference frames.
+    """docs/metrics.md's fall rule, evaluated at the reference frames.
 
     A run has fallen at frame k when (a) the trunk (free-joint body) is lower than
     :data:`FALL_HEIGHT_RATIO` × the reference trunk height at k, (b) the angle between
@@ -594,7 +594,7 @@ class TrackResult:
         contacts: (K, 4) bool simulated foot contacts (touch > 1 % m·g), LF, RF, LH, RH.
         touch: (K, 4) foot normal forces [N].
         reference_contacts: (T, 4) bool reference contacts.
-        fell: a fall by METRICS.md's rule; fall_time [s] and fall_reason say when/why.
+        fell: a fall by docs/metrics.md's rule; fall_time [s] and fall_reason say when/why.
         unstable: the simulation produced NaN or a MuJoCo warning (a failed run).
         survival: share of the clip completed before a fall or instability.
         controller: controller name; controller_stats: its ``stats.to_dict()``.

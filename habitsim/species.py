@@ -207,7 +207,7 @@ class Species:
 
     @property
     def leg_length(self) -> float:
-        """The normalising length of METRICS.md: the hind-leg length [m]."""
+        """The normalising length of docs/metrics.md: the hind-leg length [m]."""
         return self.hind_leg_length
 
     def _vertical_extent(self, limb: str, with_girdle: bool) -> float:

@@ -3,7 +3,7 @@
 Two kinds of check:
 
 * :func:`assert_plausible`: a motion is physically plausible for its species within
-  bounds on the kinematic metrics of METRICS.md (skating, penetration, floating, joint
+  bounds on the kinematic metrics of docs/metrics.md (skating, penetration, floating, joint
   limits, bone lengths). Bounds are per leg length by default, so one set of numbers
   fits a rabbit and an elephant.
 * :func:`assert_matches_golden`: figures of a run (any flat ``{metric: number}`` dict,
@@ -55,7 +55,7 @@ class GoldenMissingError(HabitsimError, AssertionError):
 class PlausibilityBounds:
     """Upper bounds on kinematic metrics; ``None`` disables a check.
 
-    ``*_per_leg`` bounds are fractions of the species' hind-leg length (METRICS.md's
+    ``*_per_leg`` bounds are fractions of the species' hind-leg length (docs/metrics.md's
     size-normalised variants); the others are absolute.
 
     Attributes:
@@ -84,7 +84,7 @@ def plausibility_violations(
         motion: the motion.
         bounds: the bounds (default :class:`PlausibilityBounds`).
         use_contacts: measure skating with the motion's own contact labels instead of
-            METRICS.md's height criterion.
+            docs/metrics.md's height criterion.
         **overrides: replace single bounds, e.g. ``skate_per_leg=0.01`` or ``float_per_leg=None``.
 
     Raises:

@@ -19,6 +19,14 @@ Conventions (after MuJoCo Menagerie):
   timestep 2 ms; ``<species>.xml`` holds the animal, ``scene.xml`` adds floor, light and
   includes it.
 
+Two models per species. ``<species>.xml`` (and ``scene.xml``) carries one torque motor
+per hinge: the model habitsim's controllers drive, which needs a controller to stand.
+``<species>_position.xml`` (and ``scene_position.xml``) is the same animal with position
+actuators instead (:func:`to_position_actuators`): its ``home`` keyframe holds the
+standing pose in ``ctrl``, so it stands in plain MuJoCo (``python -m mujoco.viewer
+--mjcf=.../scene_position.xml``, or ``mj_resetDataKeyframe`` + ``mj_step``) with no
+habitsim code. ``preview.png`` shows it standing.
+
 Mass properties: each bone is a capsule (radius from the species' girth, i.e.
 circumference / 2π) made with trimesh, which gives its volume and inertia tensor; one
 density for the whole animal is chosen so the total mass equals the species' mass.
@@ -55,6 +63,14 @@ __all__ = [
     "build_all",
     "model_path",
     "scene_path",
+    "POSITION_FULL_TORQUE_ERROR",
+    "POSITION_DAMPRATIO",
+    "to_position_actuators",
+    "position_spec",
+    "position_model_path",
+    "position_scene_path",
+    "preview_path",
+    "write_preview",
 ]
 
 MODELS_DIR = Path(__file__).resolve().parent
@@ -79,6 +95,16 @@ ROLE_TORQUE = {
 
 
 LOAD_FACTOR = 4.0
+
+#: Joint angle error [rad] at which a position actuator of the standing model reaches its
+#: torque limit (kp = τmax / this). Each limit scales with m·g·L, so the stiffness scales
+#: with the animal's size: 0.05 rad keeps every species' pelvis within 3 % of its ``home``
+#: height (0.15 rad, the servo rule of habitsim.controllers.servo, lets some sag 5 % and
+#: creep on their feet).
+POSITION_FULL_TORQUE_ERROR = 0.05
+#: Damping ratio of the position actuators (MuJoCo's ``dampratio``: kv from the joint's
+#: reflected inertia; 1 = critical), integrated implicitly by ``implicitfast``.
+POSITION_DAMPRATIO = 1.0
 
 
 class ModelBuildError(HabitsimError, RuntimeError):
@@ -389,6 +415,92 @@ def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mu
     return spec
 
 
+def to_position_actuators(
+    spec: mujoco.MjSpec,
+    keyframe: str = "home",
+    full_torque_error: float = POSITION_FULL_TORQUE_ERROR,
+    dampratio: float = POSITION_DAMPRATIO,
+) -> mujoco.MjSpec:
+    """Turn the joint torque motors of a spec into position actuators holding a keyframe.
+
+    Each motor ``<general>`` / ``<motor>`` on a hinge with control range ±τmax becomes a
+    MuJoCo position actuator with
+
+    * ``kp = τmax / full_torque_error`` (full torque at that angle error) and
+      ``dampratio`` (MuJoCo computes kv from the joint's reflected inertia);
+    * ``forcerange = ±τmax``: the torque model's limit, so the actuators are no stronger;
+    * ``ctrlrange`` = the joint's range (a target is an angle).
+
+    The keyframe's ``ctrl`` becomes its joint angles, so ``mj_resetDataKeyframe`` starts
+    the model holding that pose. Nothing else changes: bodies, masses, contacts, gravity
+    and the options stay as they were. The default classes' actuator settings are
+    converted the same way, so the written XML stays class-based. Modifies ``spec`` in
+    place and returns it.
+
+    Example::
+
+        spec = to_position_actuators(mujoco.MjSpec.from_file("mjcf_models/cat/scene.xml"))
+        model = spec.compile()   # stands after mj_resetDataKeyframe(model, data, 0)
+
+    Raises:
+        ModelBuildError: no such keyframe, a non-positive ``full_torque_error``, or an
+            actuator that is not a gear-1 torque motor on a hinge with a control range.
+    """
+    if not full_torque_error > 0:
+        raise ModelBuildError(f"full_torque_error must be positive, got {full_torque_error}")
+    keys = [k for k in spec.keys if k.name == keyframe]
+    if not keys:
+        raise ModelBuildError(f"model {spec.modelname!r} has no keyframe {keyframe!r}")
+    key = keys[0]
+    adr, nq = _qpos_addresses(spec)
+    if len(key.qpos) != nq:
+        raise ModelBuildError(f"keyframe {keyframe!r} has {len(key.qpos)} qpos, model {nq}")
+    joints = {j.name: j for j in spec.joints}
+
+    def tau_of(act: mujoco.MjsActuator | mujoco.MjsDefault) -> float:
+        return float(max(abs(act.ctrlrange[0]), abs(act.ctrlrange[1])))
+
+    def convert(act: mujoco.MjsActuator, tau: float) -> None:
+        act.set_to_position(kp=tau / full_torque_error, dampratio=dampratio)
+        act.forcerange = [-tau, tau]
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+
+    converted: set[str] = set()
+    ctrl = []
+    for act in spec.actuators:
+        joint = joints.get(act.target)
+        motor = (act.gaintype == mujoco.mjtGain.mjGAIN_FIXED
+                 and act.biastype == mujoco.mjtBias.mjBIAS_NONE)
+        if (act.trntype != mujoco.mjtTrn.mjTRN_JOINT or joint is None
+                or joint.type != mujoco.mjtJoint.mjJNT_HINGE or not motor
+                or act.gear[0] != 1.0 or tau_of(act) <= 0):
+            raise ModelBuildError(
+                f"actuator {act.name!r} is not a gear-1 torque motor on a hinge with a "
+                "control range; only those can become position actuators"
+            )
+        cls = act.classname
+        if cls is not None and cls.name not in converted and tau_of(cls.actuator) > 0:
+            convert(cls.actuator, tau_of(cls.actuator))
+            cls.actuator.ctrlrange = [0.0, 0.0]
+            cls.actuator.ctrllimited = mujoco.mjtLimited.mjLIMITED_AUTO
+            converted.add(cls.name)
+        convert(act, tau_of(act))
+        act.ctrlrange = list(joint.range)
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        ctrl.append(float(key.qpos[adr[joint.name]]))
+    key.ctrl = ctrl
+    return spec
+
+
+def position_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mujoco.MjSpec:
+    """The MjSpec of a species' standing model: :func:`build_spec` with position
+    actuators holding ``home`` (:func:`to_position_actuators`)."""
+    sp = load_species(species)
+    spec = to_position_actuators(build_spec(sp, mesh_dir=mesh_dir))
+    spec.modelname = f"{sp.name}_position"
+    return spec
+
+
 _SCENE = """<mujoco model="{name} scene">
   <include file="{name}.xml"/>
 
@@ -428,6 +540,78 @@ def scene_path(species: str | Species, root: str | Path | None = None) -> Path:
     return Path(root or MODELS_DIR) / sp.name / "scene.xml"
 
 
+def position_model_path(species: str | Species, root: str | Path | None = None) -> Path:
+    """Path of ``<species>/<species>_position.xml`` (the standing model, no floor)."""
+    sp = load_species(species)
+    return Path(root or MODELS_DIR) / sp.name / f"{sp.name}_position.xml"
+
+
+def position_scene_path(species: str | Species, root: str | Path | None = None) -> Path:
+    """Path of ``<species>/scene_position.xml``: floor, light and the standing model."""
+    sp = load_species(species)
+    return Path(root or MODELS_DIR) / sp.name / "scene_position.xml"
+
+
+def preview_path(species: str | Species, root: str | Path | None = None) -> Path:
+    """Path of ``<species>/preview.png``."""
+    sp = load_species(species)
+    return Path(root or MODELS_DIR) / sp.name / "preview.png"
+
+
+#: Size of the preview images [px].
+PREVIEW_SIZE = (320, 240)
+#: Preview camera: distance in units of the scene's extent (body length), and
+#: (azimuth, elevation) [deg] — a three-quarter view from the front left.
+PREVIEW_DISTANCE = 1.7
+PREVIEW_VIEW = (-60.0, -15.0)
+
+
+def write_preview(species: str | Species, root: str | Path | None = None) -> Path:
+    """Render ``<species>/preview.png`` (320×240): the standing model on its ``home``
+    keyframe, in a three-quarter view from the front left.
+
+    Rendering is headless (EGL or OSMesa when there is no display, see
+    :mod:`habitsim.render`).
+
+    Raises:
+        RenderError: no OpenGL context here.
+        ModelBuildError: the standing scene is missing (run :func:`write_model` first).
+    """
+    from PIL import Image
+
+    from habitsim.render import RenderError, _headless_context
+
+    sp = load_species(species)
+    scene = position_scene_path(sp, root)
+    if not scene.is_file():
+        raise ModelBuildError(f"{scene} missing: build the model first")
+    model = mujoco.MjModel.from_xml_path(str(scene))
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
+    mujoco.mj_forward(model, data)
+    cam = mujoco.MjvCamera()
+    cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+    cam.lookat[:] = data.subtree_com[model.body("pelvis").id]
+    cam.distance = PREVIEW_DISTANCE * model.stat.extent
+    cam.azimuth, cam.elevation = PREVIEW_VIEW
+    width, height = PREVIEW_SIZE
+    _headless_context()
+    try:
+        with mujoco.Renderer(model, height, width) as renderer:
+            renderer.update_scene(data, camera=cam)
+            image = renderer.render()
+    except Exception as e:  # noqa: BLE001 - GL backends raise many types
+        raise RenderError(
+            f"no OpenGL context for off-screen rendering ({e}); set MUJOCO_GL=egl or "
+            "MUJOCO_GL=osmesa, or build with --no-preview"
+        ) from e
+    out = preview_path(sp, root)
+    tmp = out.with_name(f".{out.name}.tmp")
+    Image.fromarray(image).quantize(colors=128).save(tmp, format="PNG", optimize=True)
+    tmp.replace(out)
+    return out
+
+
 def _readme(sp: Species, model: mujoco.MjModel, density: float) -> str:
     hinges = hinge_joints()
     lines = [
@@ -454,6 +638,28 @@ def _readme(sp: Species, model: mujoco.MjModel, density: float) -> str:
         f"* `home` keyframe: the species' standing posture (hip height {sp.hip_height:.3f} m).",
         f"* Integrator implicitfast, timestep {TIMESTEP * 1000:g} ms, pyramidal friction cones.",
         "",
+        "## Standing model",
+        "",
+        f"`{sp.name}_position.xml` (with floor and light: `scene_position.xml`) is the same"
+        " animal with position actuators instead of torque motors, so it stands on its"
+        " `home` keyframe in plain MuJoCo:",
+        "",
+        "```",
+        "python -m mujoco.viewer --mjcf=scene_position.xml",
+        "```",
+        "",
+        "The viewer opens at `qpos0` (straight legs); load the `home` keyframe (Simulation"
+        " panel: Key 0, Load key) and it stands. In code: `mj_resetDataKeyframe(model, data,"
+        " model.key('home').id)`, then `mj_step`.",
+        "",
+        f"* kp = τmax / {POSITION_FULL_TORQUE_ERROR:g} rad (each actuator's torque limit is"
+        f" reached at {POSITION_FULL_TORQUE_ERROR:g} rad of error), damping ratio"
+        f" {POSITION_DAMPRATIO:g}; force range = the torque motor's limit; control range ="
+        " the joint's range; the `home` keyframe's `ctrl` holds the standing pose.",
+        "* Made by `habitsim.mjcf_models.builder.to_position_actuators`, which converts any"
+        " such torque model in one call. habitsim's controllers use the torque model.",
+        "* `preview.png`: the standing model on `home`.",
+        "",
         "## Sources of the species numbers",
         "",
         *[f"* {s}" for s in sp.sources],
@@ -462,8 +668,12 @@ def _readme(sp: Species, model: mujoco.MjModel, density: float) -> str:
     return "\n".join(lines)
 
 
-def write_model(species: str | Species, root: str | Path | None = None) -> Path:
-    """Write ``<root>/<species>/{<species>.xml, scene.xml, README.md, assets/*.stl}``.
+def write_model(species: str | Species, root: str | Path | None = None,
+                preview: bool = False) -> Path:
+    """Write ``<root>/<species>/{<species>.xml, scene.xml, <species>_position.xml,
+    scene_position.xml, README.md, assets/*.stl}`` (and ``preview.png`` with ``preview``).
+
+    A previous ``preview.png`` is kept when ``preview`` is False.
 
     Everything is built in a temporary folder, compiled from the written XML as a check,
     then moved into place, so a failed build leaves the previous model untouched.
@@ -487,18 +697,26 @@ def write_model(species: str | Species, root: str | Path | None = None) -> Path:
         spec.modelfiledir = str(tmp)  # resolve "assets/" while compiling for to_xml
         xml = spec.to_xml()
         (tmp / f"{sp.name}.xml").write_text(xml, encoding="utf-8")
+        pspec = position_spec(sp, mesh_dir="assets")
+        pspec.modelfiledir = str(tmp)
+        (tmp / f"{sp.name}_position.xml").write_text(pspec.to_xml(), encoding="utf-8")
         solids = _body_meshes(sp)
         density = sp.mass_kg / sum(m.volume for m in solids.values())
         extent = 2.0 * sp.segments["trunk"] + sp.segments["neck"] + sp.segments["head"]
-        (tmp / "scene.xml").write_text(
-            _SCENE.format(name=sp.name, cz=0.6 * sp.hip_height, extent=extent,
-                          light=3.0 * sp.hip_height + 1.0),
-            encoding="utf-8",
-        )
+        for scene, animal in (("scene.xml", sp.name),
+                              ("scene_position.xml", f"{sp.name}_position")):
+            (tmp / scene).write_text(
+                _SCENE.format(name=animal, cz=0.6 * sp.hip_height, extent=extent,
+                              light=3.0 * sp.hip_height + 1.0),
+                encoding="utf-8",
+            )
         try:
             model = mujoco.MjModel.from_xml_path(str(tmp / "scene.xml"))
+            mujoco.MjModel.from_xml_path(str(tmp / "scene_position.xml"))
         except ValueError as e:
             raise ModelBuildError(f"generated model of {sp.name!r} does not compile: {e}") from e
+        if (final / "preview.png").is_file():
+            shutil.copy2(final / "preview.png", tmp / "preview.png")
         (tmp / "README.md").write_text(_readme(sp, model, density), encoding="utf-8")
         if final.exists():
             old = final.with_name(f".{sp.name}.old")
@@ -511,11 +729,14 @@ def write_model(species: str | Species, root: str | Path | None = None) -> Path:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    if preview:
+        write_preview(sp, root)
     return final / "scene.xml"
 
 
-def build_all(root: str | Path | None = None, species: list[str] | None = None) -> list[Path]:
+def build_all(root: str | Path | None = None, species: list[str] | None = None,
+              preview: bool = False) -> list[Path]:
     """Write the models of the given (default: all catalog) species."""
     from habitsim.species import species_names
 
-    return [write_model(n, root) for n in (species or species_names())]
+    return [write_model(n, root, preview) for n in (species or species_names())]

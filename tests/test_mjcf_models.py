@@ -7,7 +7,19 @@ import numpy as np
 import pytest
 
 import habitsim
-from habitsim.mjcf_models.builder import build_spec, hinge_joints, model_path, scene_path
+from habitsim.mjcf_models.builder import (
+    PREVIEW_SIZE,
+    ModelBuildError,
+    build_spec,
+    hinge_joints,
+    model_path,
+    position_model_path,
+    position_scene_path,
+    position_spec,
+    preview_path,
+    scene_path,
+    to_position_actuators,
+)
 from habitsim.skeleton import JOINT_NAMES, get_skeleton
 
 SPECIES = habitsim.species_names()
@@ -88,3 +100,89 @@ def test_shipped_files_are_current(loaded, tmp_path) -> None:
     fresh = build_spec(name, mesh_dir="assets")
     fresh.modelfiledir = str(model_path(name).parent)
     assert fresh.to_xml() == model_path(name).read_text(encoding="utf-8")
+
+
+# ---------------------------------------------------------------- the standing model
+#: Seconds the position model must stand on ``home`` in plain MuJoCo.
+STAND_S = 3.0
+#: Lowest pelvis height while standing, as a share of its ``home`` height.
+STAND_HEIGHT_SHARE = 0.90
+
+
+@pytest.fixture(scope="module", params=SPECIES)
+def standing(request):
+    name = request.param
+    path = position_scene_path(name)
+    assert path.is_file(), f"{path} missing: run `habitsim models build`"
+    return name, mujoco.MjModel.from_xml_path(str(path)), mujoco.MjModel.from_xml_path(
+        str(scene_path(name)))
+
+
+def test_position_model_stands_on_home(standing) -> None:
+    """Plain MuJoCo: reset to ``home``, step 3 s with its ctrl; the animal stays up."""
+    name, m, _ = standing
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, m.key("home").id)
+    pelvis = m.body("pelvis").id
+    mujoco.mj_forward(m, d)
+    z0 = d.xpos[pelvis][2]
+    lowest = z0
+    for _ in range(int(round(STAND_S / m.opt.timestep))):
+        mujoco.mj_step(m, d)
+        lowest = min(lowest, d.xpos[pelvis][2])
+    assert all(w.number == 0 for w in d.warning), {
+        mujoco.mjtWarning(i).name: w.number for i, w in enumerate(d.warning) if w.number}
+    assert lowest >= STAND_HEIGHT_SHARE * z0, f"{name}: pelvis {z0:.3f} -> {lowest:.3f} m"
+    assert np.linalg.norm(d.qvel[:3]) < 0.05 * z0, f"{name} still moving after {STAND_S} s"
+    # upright: the pelvis' z axis within 20° of vertical
+    assert d.xmat[pelvis].reshape(3, 3)[2, 2] > np.cos(np.radians(20.0))
+
+
+def test_position_model_is_the_torque_model_with_servos(standing) -> None:
+    """Honest physics: same bodies, masses, feet, gravity and limits; no welds, only the
+    actuators differ (position, force-limited by the motors' torque limits)."""
+    name, m, t = standing
+    assert m.neq == 0 and m.nmocap == 0
+    np.testing.assert_allclose(m.opt.gravity, t.opt.gravity)
+    assert m.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    assert m.opt.timestep == t.opt.timestep
+    for field in ("body_mass", "body_inertia", "geom_size", "geom_friction", "jnt_range",
+                  "dof_damping", "dof_armature", "key_qpos"):
+        np.testing.assert_array_equal(getattr(m, field), getattr(t, field), err_msg=field)
+    assert m.nu == t.nu
+    for i in range(m.nu):
+        a, b = m.actuator(i), t.actuator(i)
+        assert a.name == b.name and a.trnid[0] == b.trnid[0]
+        assert m.actuator_biastype[i] == mujoco.mjtBias.mjBIAS_AFFINE  # position servo
+        kp = a.gainprm[0]
+        assert kp > 0 and a.biasprm[1] == pytest.approx(-kp) and a.biasprm[2] < 0  # damped
+        np.testing.assert_allclose(a.forcerange, b.ctrlrange)
+        np.testing.assert_allclose(a.ctrlrange, m.jnt_range[a.trnid[0]])
+    # home's ctrl is home's joint angles
+    key = m.key("home")
+    np.testing.assert_allclose(key.ctrl, key.qpos[m.jnt_qposadr[m.actuator_trnid[:, 0]]])
+
+
+def test_shipped_position_model_is_current(standing) -> None:
+    name, _, _ = standing
+    fresh = position_spec(name, mesh_dir="assets")
+    fresh.modelfiledir = str(position_model_path(name).parent)
+    assert fresh.to_xml() == position_model_path(name).read_text(encoding="utf-8")
+
+
+def test_preview_png(standing) -> None:
+    name, _, _ = standing
+    from PIL import Image
+
+    with Image.open(preview_path(name)) as im:
+        assert im.size == PREVIEW_SIZE, name
+    assert preview_path(name).stat().st_size < 100_000
+
+
+def test_to_position_actuators_refuses_what_it_cannot_convert() -> None:
+    spec = build_spec("cat")
+    spec.actuators[0].set_to_position(kp=10.0)  # already a servo: not a torque motor
+    with pytest.raises(ModelBuildError, match="torque motor"):
+        to_position_actuators(spec)
+    with pytest.raises(ModelBuildError, match="keyframe"):
+        to_position_actuators(build_spec("cat"), keyframe="crouch")

@@ -612,7 +612,7 @@ def _shortened_stance(contacts: np.ndarray) -> np.ndarray:
 def test_swing_feet_clear_the_metric_contact_height():
     """Feet labelled swing that the input drags along the ground (a sliding trot whose
     stance labels cover only half of each stance) used to stay as low as the input, under
-    METRICS.md's contact height (2 % L) while moving: skate_mm of the result ≈ 12 mm.
+    docs/metrics.md's contact height (2 % L) while moving: skate_mm of the result ≈ 12 mm.
     Now a swing foot either rises vertically at its foothold or clears 2.5 % L."""
     clean = _clip("dog", "trot", 64)
     bad = inject_artefacts(clean, ["slide", "jitter"], seed=1)

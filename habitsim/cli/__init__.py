@@ -3,12 +3,16 @@
 Each command group lives in its own module exposing ``register(subparsers)``; the module
 adds its commands, each with ``set_defaults(func=...)`` taking the parsed namespace and
 returning an exit code. Every :class:`~habitsim.errors.HabitsimError` becomes a one-line
-``error: ...`` message on stderr and exit code 2.
+``error: ...`` message on stderr and exit code 2. Output into a pipe closed early
+(``habitsim species list | head -1``) ends the command quietly with exit code 141 (128 +
+SIGPIPE, as a shell reports it), without a traceback. Shared option conventions (lists of
+names, ``--check``) are in :mod:`habitsim.cli.conventions`.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
@@ -57,13 +61,33 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(ns.func(ns) or 0)
+        code = int(ns.func(ns) or 0)
+        sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
+        return code
+    except BrokenPipeError:
+        return _closed_pipe()
     except HabitsimError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+
+
+#: Exit code when stdout is a pipe its reader closed (128 + SIGPIPE).
+EXIT_CLOSED_PIPE = 141
+
+
+def _closed_pipe() -> int:
+    """The reader of stdout went away: point stdout at /dev/null so the interpreter's
+    final flush cannot fail again, and exit quietly (the Python docs' SIGPIPE recipe)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # stdout without a file descriptor (captured, closed)
+        pass
+    return EXIT_CLOSED_PIPE
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -31,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from .conventions import add_check_option, add_list_option, check_exit, format_legend
+
 #: Targets of the issue.
 TARGET_STANCE_QP_MS = 0.2
 TARGET_MPC_MS = 5.0
@@ -53,12 +55,11 @@ def register(sub: argparse._SubParsersAction) -> None:
             "sim MPJPE per species, QP and MPC solve times and the real-time factor."
         ),
     )
-    p.add_argument("--species", nargs="+", metavar="NAME",
-                   help="species (default: the training species)")
-    p.add_argument("--actions", nargs="+", default=list(DEFAULT_ACTIONS), metavar="ACTION",
-                   help="actions (default: walk trot pace turn; 'turn' = turn_left)")
-    p.add_argument("--controllers", nargs="+", default=list(CONTROLLERS),
-                   choices=CONTROLLERS, help="controllers (default: all three)")
+    add_list_option(p, "--species", help="species (default: the training species)")
+    add_list_option(p, "--actions", default=list(DEFAULT_ACTIONS), metavar="ACTION",
+                    help="actions (default: walk trot pace turn; 'turn' = turn_left)")
+    add_list_option(p, "--controllers", default=list(CONTROLLERS), choices=CONTROLLERS,
+                    metavar="CONTROLLER", help="controllers (default: all three)")
     p.add_argument("--clips", type=int, default=1, metavar="N",
                    help="clips per species and action (default 1)")
     p.add_argument("--duration", type=float, default=5.0, metavar="S",
@@ -73,6 +74,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="refine every clip first (habitsim.refine): stage A (kinematic, the "
                    "default of --refine) or B (centroidal dynamics, --refine B)")
     p.add_argument("--json", action="store_true", help="one JSON object per run, then a summary")
+    add_check_option(p, help="exit with code 1 when a target is MISSED (stance QP and MPC solve "
+                     "times, real-time factor, mpc survival share and MPJPE; default: print "
+                     "the verdicts, exit 0)")
     p.set_defaults(func=_bench_balance)
 
 
@@ -237,9 +241,13 @@ def _bench_balance(ns: argparse.Namespace) -> int:
                 if not ns.json:
                     print(_fmt_row(sp, action, by, controllers), flush=True)
     summary = summarise(rows)
+    missed = missed_targets(summary, controllers)
     if ns.json:
         print(json.dumps({"summary": {k: _clean(v) for k, v in summary.items()}}))
-        return 0
+        return check_exit(missed, ns.check)
+    print(format_legend("(per controller: surv = share of the clip completed before a fall; "
+                        "mpjpe = sim MPJPE [mm] against the reference; /leg = the same per "
+                        "hind-leg length)"))
     qp, mpc = summary["stance_qp_median_ms"], summary["mpc_median_ms"]
     rt = summary.get("realtime_factor_mpc", float("nan"))
     print()
@@ -265,4 +273,27 @@ def _bench_balance(ns: argparse.Namespace) -> int:
     for c in controllers:
         rtc = summary.get(f"realtime_factor_{c}", float("nan"))
         print(f"tracking speed {c:<8}     {rtc:8.2f} × real time")
-    return 0
+    return check_exit(missed, ns.check)
+
+
+def missed_targets(summary: dict[str, Any], controllers: list[str]) -> list[str]:
+    """The targets a summary misses, as the printed verdicts judge them (a figure that
+    was not measured, NaN, counts as missed only for a controller that ran)."""
+    missed = []
+    qp = summary["stance_qp_median_ms"]
+    if any(c != "pd" for c in controllers) and not qp <= TARGET_STANCE_QP_MS:
+        missed.append(f"stance QP median {qp:.3f} ms > {TARGET_STANCE_QP_MS} ms")
+    if "mpc" in controllers:
+        mpc = summary["mpc_median_ms"]
+        rt = summary.get("realtime_factor_mpc", float("nan"))
+        share = summary.get("survival_share_mpc", float("nan"))
+        mp = summary.get("mpjpe_per_leg_mpc", float("nan"))
+        if not mpc <= TARGET_MPC_MS:
+            missed.append(f"MPC median {mpc:.3f} ms > {TARGET_MPC_MS} ms")
+        if not rt >= TARGET_REALTIME:
+            missed.append(f"MPC tracking {rt:.2f} × real time < {TARGET_REALTIME}")
+        if not share >= TARGET_SURVIVAL_SHARE:
+            missed.append(f"mpc survival share {share:.2f} < {TARGET_SURVIVAL_SHARE}")
+        if not mp <= TARGET_MPJPE_PER_LEG:
+            missed.append(f"mpc MPJPE/leg {mp:.3f} > {TARGET_MPJPE_PER_LEG}")
+    return missed

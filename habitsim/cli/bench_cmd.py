@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..dataset import DatasetBuild, build_dataset, iter_clips
+from .conventions import add_check_option, check_exit
 
 #: Modules of ``habitsim.cli`` that may add more ``bench`` sub-commands.
 _EXTRA: tuple[str, ...] = (
@@ -56,6 +57,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="build here (an existing data set in DIR is replaced); default: a temporary folder",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_check_option(p, help="exit with code 1 when the default data set builds slower than "
+                     f"the target ({TARGET_BUILD_S:.0f} s; default: print the verdict, exit 0)")
     p.set_defaults(func=_bench_data)
 
     for name in _EXTRA:
@@ -123,11 +126,17 @@ def fk_throughput(out_dir: str | Path) -> dict[str, float]:
     return out
 
 
+def _is_default(build: DatasetBuild) -> bool:
+    """The build is the default data set (the target applies to it only)."""
+    man = build.manifest
+    return man.clips_per_species >= _DEFAULT_CLIPS and len(man.species) >= 17
+
+
 def _report(build: DatasetBuild, fk_stats: dict[str, float], cpus: int | None) -> str:
     man = build.manifest
     n = len(man.clips)
     frames = sum(c.frames for c in man.clips)
-    default = man.clips_per_species >= _DEFAULT_CLIPS and len(man.species) >= 17
+    default = _is_default(build)
     verdict = "met" if build.wall_time_s <= TARGET_BUILD_S else "MISSED"
     lines = [
         f"bench data: {n} clips ({len(man.species)} species × {man.clips_per_species}), "
@@ -148,6 +157,8 @@ def _report(build: DatasetBuild, fk_stats: dict[str, float], cpus: int | None) -
 def _bench_data(ns: argparse.Namespace) -> int:
     import torch
 
+    missed: list[str] = []
+
     def run(out: str, overwrite: bool) -> None:
         build = build_dataset(
             out,
@@ -161,10 +172,12 @@ def _bench_data(ns: argparse.Namespace) -> int:
         fk_stats = fk_throughput(out)
         print(_report(build, fk_stats, os.cpu_count()))
         print(f"  torch threads        {torch.get_num_threads():8d}")
+        if _is_default(build) and build.wall_time_s > TARGET_BUILD_S:
+            missed.append(f"build {build.wall_time_s:.1f} s > {TARGET_BUILD_S:.0f} s")
 
     if ns.out is not None:
         run(ns.out, overwrite=True)
     else:
         with tempfile.TemporaryDirectory(prefix="habitsim-bench-") as tmp:
             run(str(Path(tmp) / "data"), overwrite=False)
-    return 0
+    return check_exit(missed, ns.check)

@@ -17,7 +17,7 @@ Per row: the import's contact F1 against the source's own feet (the importer's
 none), the stance toe height (median height of the labelled-stance toes / leg length:
 the import's own labels, and the transfer's), how the transfer's stance labels were
 found, skate / jerk / penetration before and after refinement, the refinement check,
-survival, sim MPJPE / leg length and the wall time per stage. Skating is METRICS.md's
+survival, sim MPJPE / leg length and the wall time per stage. Skating is docs/metrics.md's
 ``skate_mm`` (toes within 2 % of leg length of the ground count as in contact, labelled
 or not); the JSON rows and the summary also give it over the labelled stance frames only
 (``skate_labelled_mm_*``), the frames the refinement plants. The summary checks the
@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import HabitsimError
+from .conventions import add_list_option, format_legend, split_names
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..motion import Motion
@@ -368,6 +369,16 @@ _HEAD = (
 )
 
 
+#: Printed under the table of runs.
+LEGEND = (
+    "(F1 imp: contact F1 of the import against the source's own stance; toe/L: median "
+    "stance toe height per hind-leg length; contacts: how the stance labels were found; "
+    "b→a: before → after refinement (skate, pen: mm; jerk: m/s³); check: the refinement "
+    "check (kept, reverted, fallback); surv: share of the window tracked before a fall; "
+    "MPJPE/L: sim MPJPE per hind-leg length; t: wall time of transfer / refine / track [s])"
+)
+
+
 def format_row(r: dict[str, Any]) -> str:
     """One printed line of a row."""
     name = f"{Path(r['clip']).stem}@{r['start_s']:g}"
@@ -461,10 +472,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--data", required=True, metavar="DIR",
                    help="folder of .bvh, .glb or .gltf clips")
-    p.add_argument("--targets", default=",".join(DEFAULT_TARGETS), metavar="A,B",
-                   help=f"target species (default {','.join(DEFAULT_TARGETS)})")
-    p.add_argument("--methods", default=",".join(DEFAULT_METHODS), metavar="M,N",
-                   help=f"transfer methods (default {','.join(DEFAULT_METHODS)})")
+    add_list_option(p, "--targets", default=list(DEFAULT_TARGETS), metavar="SPECIES",
+                    help=f"target species (default {','.join(DEFAULT_TARGETS)})")
+    add_list_option(p, "--methods", default=list(DEFAULT_METHODS), metavar="METHOD",
+                    help=f"transfer methods (default {','.join(DEFAULT_METHODS)})")
     p.add_argument("--species", default="dog", metavar="NAME",
                    help="skeleton the clips are imported onto (default dog)")
     p.add_argument("--seconds", type=float, default=4.0, metavar="S",
@@ -487,8 +498,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_bench_real)
 
 
-def _split(text: str) -> list[str]:
-    return [x.strip() for x in text.split(",") if x.strip()]
+def _split(text: str | Sequence[str]) -> list[str]:
+    return split_names(text)
 
 
 def plan(ns: argparse.Namespace) -> tuple[list[WindowTask], list[str]]:
@@ -588,6 +599,7 @@ def _bench_real(ns: argparse.Namespace) -> int:
                              methods.index(r["method"])))
     verdicts = evaluate_targets(rows, seconds=ns.seconds, refine=tasks[0].refine,
                                 controller=ns.controller, tracked=not ns.no_track)
+    print(format_legend(LEGEND))
     print(format_summary(rows, verdicts))
     wall = time.perf_counter() - t0
     print(f"bench real finished in {wall:.1f} s ({len(rows)} runs)")

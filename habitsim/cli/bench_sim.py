@@ -35,6 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from .conventions import add_check_option, add_list_option, check_exit, format_legend
+
 #: Batched tracking must reach this share of the raw mj_step rate.
 TARGET_BATCH_RATIO = 0.5
 #: Assisted tracking error target, share of the hind-leg length.
@@ -52,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "servo+stance) and tracking error with root assistance."
         ),
     )
-    p.add_argument("--species", nargs="+", metavar="NAME", help="species (default: all)")
+    add_list_option(p, "--species", help="species (default: all)")
     p.add_argument("--clips", type=int, default=2, metavar="N",
                    help="walks per species for survival / assisted error (default 2)")
     p.add_argument("--batch", type=int, default=8, metavar="N",
@@ -73,6 +75,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--skip-quality", action="store_true",
                    help="rates only (no survival / assisted runs)")
     p.add_argument("--json", action="store_true", help="one JSON object per species per line")
+    add_check_option(p)
     p.set_defaults(func=_bench_sim)
 
 
@@ -153,6 +156,19 @@ def bench_species(species: str, ns: argparse.Namespace, threads: int) -> dict[st
     return out
 
 
+_LEGEND = (
+    "raw/s: mj_step per second holding the home pose; single/s: simulated steps per wall "
+    "second of one track() call (in-engine servos, mujoco.rollout); python/s: the same with "
+    "the controller called from Python; batch/s: track_many over the threads; b/raw: "
+    f"batch/s ÷ raw/s, ≥0.5: its target ({TARGET_BATCH_RATIO})"
+)
+_LEGEND_QUALITY = _LEGEND + (
+    "; surv, s+stc: survival (share of the walk completed) unassisted with servo and "
+    "servo+stance; as.mpjpe: sim MPJPE [mm] with root assistance, /leg: per hind-leg length, "
+    f"≤0.05: its target ({TARGET_ASSISTED_MPJPE_PER_LEG}); as.mg: mean assistance force / m·g"
+)
+
+
 def _fmt(row: dict[str, Any]) -> str:
     def g(key: str, spec: str) -> str:
         v = row.get(key)
@@ -201,8 +217,24 @@ def _bench_sim(ns: argparse.Namespace) -> int:
                               for k, v in row.items()}), flush=True)
         else:
             print(_fmt(row), flush=True)
+    if not ns.json:
+        print(format_legend(_LEGEND_QUALITY if not ns.skip_quality else _LEGEND))
     if not ns.json and len(rows) > 1:
         ratio = [r["batched_vs_raw"] for r in rows]
         print(f"batched/raw: min {min(ratio):.2f}, median {float(np.median(ratio)):.2f} "
               f"(target ≥ {TARGET_BATCH_RATIO})")
-    return 0
+    return check_exit(missed_targets(rows), ns.check)
+
+
+def missed_targets(rows: list[dict[str, Any]]) -> list[str]:
+    """The targets the rows miss (batched rate; assisted error where measured)."""
+    missed = []
+    for r in rows:
+        if not r["batched_vs_raw"] >= TARGET_BATCH_RATIO:
+            missed.append(f"{r['species']} batched/raw {r['batched_vs_raw']:.2f} "
+                          f"< {TARGET_BATCH_RATIO}")
+        mp = r.get("assisted_sim_mpjpe_per_leg")
+        if mp is not None and not mp <= TARGET_ASSISTED_MPJPE_PER_LEG:
+            missed.append(f"{r['species']} assisted MPJPE/leg {mp:.3f} "
+                          f"> {TARGET_ASSISTED_MPJPE_PER_LEG}")
+    return missed

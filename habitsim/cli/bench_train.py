@@ -15,6 +15,8 @@ import statistics
 import time
 from pathlib import Path
 
+from .conventions import add_check_option, check_exit
+
 #: Transfer latency target per 64-frame clip [ms].
 TARGET_LATENCY_MS = 20.0
 
@@ -45,6 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--repeats", type=int, default=20, metavar="R", help="latency repeats (default 20)"
     )
+    add_check_option(p)
     p.set_defaults(func=_bench_train)
 
 
@@ -169,4 +172,6 @@ def _bench_train(ns: argparse.Namespace) -> int:
         f"                      network    {lat['network_best_ms']:6.1f} ms best, "
         f"{lat['network_median_ms']:6.1f} ms median"
     )
-    return 0
+    missed = ([] if verdict == "met" else
+              [f"transfer latency {lat['end_to_end_median_ms']:.1f} ms > {TARGET_LATENCY_MS:.0f} ms"])
+    return check_exit(missed, ns.check)

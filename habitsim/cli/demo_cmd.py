@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 from ..dataset import build_dataset, check_resumable, format_stats_table
 from ..errors import DatasetError
+from .conventions import add_list_option, split_names
 from .synth_cmd import format_summary
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -57,8 +58,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
     p.add_argument("--workers", type=int, metavar="W", help="worker processes (default: CPU count)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--targets", default="cat,bear,tiger", metavar="A,B",
-                   help="target species of the transfer stage (default cat,bear,tiger)")
+    add_list_option(p, "--targets", default=["cat", "bear", "tiger"], metavar="SPECIES",
+                    help="target species of the transfer stage (default cat,bear,tiger)")
     p.add_argument("--no-video", action="store_true",
                    help="do not render the MP4 of each unassisted tracking run")
     p.add_argument("--controller", default="mpc", choices=("balance", "mpc"),
@@ -129,7 +130,7 @@ def _pipeline(ns: argparse.Namespace) -> None:
 
     out = Path(ns.out) / "pipeline"
     out.mkdir(parents=True, exist_ok=True)
-    targets = [load_species(t).name for t in ns.targets.split(",") if t.strip()]
+    targets = [load_species(t).name for t in split_names(ns.targets)]
     videos = not ns.no_video and render_available()
     sources = _sources(ns.seed)
     print()
@@ -239,7 +240,7 @@ def _report(rows: list[dict], table: str, ns: argparse.Namespace) -> str:
         "borrows its nearest training species'); *contacts* = how the transfer's stance "
         "labels were found (`source`: the source's footfalls, `detected` from resting "
         "feet, `duty` from the target's duty factor where feet slide); *skate* = "
-        "METRICS.md `skate_mm` before and after refinement; *check* = the refinement "
+        "docs/metrics.md `skate_mm` before and after refinement; *check* = the refinement "
         "check (`kept`, or `reverted` when the refined clip tracked worse); *survival* = "
         "share of the clip before a fall; *MPJPE/leg* = simulated vs reference joint "
         "positions / leg length; *assist m·g* = mean assisting force.",

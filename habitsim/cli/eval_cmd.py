@@ -16,13 +16,13 @@ Dask cluster (see :mod:`habitsim.evaluation.executors` for starting one).
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
+
+from .conventions import add_list_option, split_names
 
 
-def _csv(text: str | None) -> tuple[str, ...] | None:
-    if text is None:
-        return None
-    names = tuple(s.strip() for s in text.split(",") if s.strip())
-    return names or None
+def _csv(text: str | Sequence[str] | None) -> tuple[str, ...] | None:
+    return tuple(split_names(text)) or None
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -41,18 +41,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="benchmark transfer methods: transfer → refine → track → every metric",
         description=(
             "For every (validation clip, target species) pair and every method: transfer, "
-            "refine, track in MuJoCo and compute every METRICS.md metric; one row per pair, "
+            "refine, track in MuJoCo and compute every docs/metrics.md metric; one row per pair, "
             "a summary in the paper's Table 1 layout and an HTML/Markdown report."
         ),
     )
     p.add_argument("--data", metavar="DIR", help="synthetic data set folder")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument(
-        "--methods",
-        default="direct,ground_truth",
-        metavar="M1,M2",
-        help="comma-separated methods (default direct,ground_truth)",
-    )
+    add_list_option(p, "--methods", default=["direct", "ground_truth"], metavar="METHOD",
+                    help="methods (default direct,ground_truth)")
     p.add_argument(
         "--refine",
         default="kinematic",
@@ -69,10 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-track", action="store_true", help="skip the MuJoCo tracking")
     p.add_argument("--no-dynamic", action="store_true", help="skip the inverse-dynamics metrics")
     p.add_argument("--split", default="val", help="split of the source clips (default val)")
-    p.add_argument("--sources", metavar="A,B", help="only these source species")
-    p.add_argument(
-        "--targets", metavar="A,B", help="target species (default: the data set's training species)"
-    )
+    add_list_option(p, "--sources", metavar="SPECIES", help="only these source species")
+    add_list_option(p, "--targets", metavar="SPECIES",
+                    help="target species (default: the data set's training species)")
     p.add_argument(
         "--reference-split",
         default="train,val",

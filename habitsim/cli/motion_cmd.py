@@ -30,7 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="gait statistics and kinematic plausibility metrics of a motion file",
         description=(
             "Report duration, speed, Froude number, duty factor, footfall phase offsets, "
-            "stride, static stability margin and the kinematic and dynamic metrics of METRICS.md."
+            "stride, static stability margin and the kinematic and dynamic metrics "
+            "(definitions: docs/metrics.md)."
         ),
     )
     p.add_argument("file", metavar="FILE", help="motion file (.npz)")

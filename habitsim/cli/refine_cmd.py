@@ -12,7 +12,7 @@ writes
 * ``--out``: the refined motion (habitsim ``.npz``, with the contact labels used and
   ``metadata["refine"]``);
 * ``--report``: the JSON report of :mod:`habitsim.refine.report` (status, iterations,
-  solve time, each cost term, constraint violations, MuJoCo checks, METRICS.md kinematic
+  solve time, each cost term, constraint violations, MuJoCo checks, docs/metrics.md kinematic
   and dynamic metrics before / after, the cleaned contact labels, and the ``verdict``:
   skate / jerk / penetration before and after and whether the result is worse on any;
   the summary prints it, and a result worse than its input gets a warning on stderr);
@@ -98,7 +98,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--no-metrics",
         action="store_true",
-        help="skip the before/after METRICS.md metrics in the report",
+        help="skip the before/after docs/metrics.md metrics in the report",
     )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=_refine)

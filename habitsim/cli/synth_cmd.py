@@ -9,8 +9,10 @@ another seed) become ``error: ...`` and exit code 2, with no manifest written.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 
 from ..dataset import DatasetBuild, build_dataset, format_stats_table
+from .conventions import add_list_option, split_names
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -30,9 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="clips per species (default 40)",
     )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="build seed (default 0)")
-    p.add_argument(
-        "--species", metavar="A,B", help="comma-separated species (default: the whole catalog)"
-    )
+    add_list_option(p, "--species", help="species (default: the whole catalog)")
     p.add_argument(
         "--workers", type=int, metavar="W", help="worker processes (default: CPU count)"
     )
@@ -48,12 +48,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_synth)
 
 
-def parse_species(text: str | None) -> list[str] | None:
-    """``"cat, dog"`` → ``["cat", "dog"]``; None or blank → None (every species)."""
-    if text is None:
-        return None
-    names = [s.strip() for s in text.split(",") if s.strip()]
-    return names or None
+def parse_species(text: str | Sequence[str] | None) -> list[str] | None:
+    """``"cat, dog"`` or ``["cat", "dog"]`` → ``["cat", "dog"]``; None or blank → None
+    (every species)."""
+    return split_names(text) or None
 
 
 def format_summary(build: DatasetBuild) -> str:

@@ -3,7 +3,7 @@
 MPJPE here is the mean Euclidean distance [mm] between the global joint positions of a
 clip and of its reconstruction by :func:`~habitsim.models.transfer.reconstruct` (root
 path integrated from the decoded velocities, so root drift counts), over all frames and
-joints; ``pct_leg`` divides it by the species' leg length (hind-leg length, METRICS.md).
+joints; ``pct_leg`` divides it by the species' leg length (hind-leg length, docs/metrics.md).
 ``root_relative_mm`` removes each frame's pelvis position first (pose error only).
 
 :data:`REFERENCE_CLIPS` are a few fixed synthetic clips made by

@@ -46,7 +46,7 @@ window length and species):
   differences of the hinge angles × L/2 (a displacement at half a leg length), same unit.
   Planting feet the input lets slide and lifting swing feet over the contact height bend
   the input's paths, and inputs far outside the joint ranges are clipped; without these
-  two terms the bends came out as kinks (a transferred trot went from METRICS.md's jerk
+  two terms the bends came out as kinks (a transferred trot went from docs/metrics.md's jerk
   of 143 to 1193 m/s³). Both are linear or nearly so; a jerk of the 30 joint positions
   themselves made every KKT factorisation about 5× slower and IPOPT's Gauss-Newton
   iterations stall. The hinge term couples 4 frames and costs about 1.5× per iteration;
@@ -74,7 +74,7 @@ Constraints (rows of g, in this order):
   a given swing floor in swing; bounds, see :meth:`RefinementProblem.bounds`);
 * ``ground`` (per frame, every habitsim joint except the toes): height ≥ 0 (the toe
   sites lie on the foot spheres, so the sole rows cover them);
-* ``clearance`` (4 per frame): height of each toe site — the point METRICS.md's
+* ``clearance`` (4 per frame): height of each toe site — the point docs/metrics.md's
   ``skate_mm`` and ``penetration_mm`` measure — at least the swing clearance profile
   of :mod:`habitsim.refine.solve` in swing (free in stance and where no profile is
   given);

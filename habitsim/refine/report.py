@@ -35,7 +35,7 @@ Keys (all values JSON types; lengths in mm where the key says so):
                                 ``stance_share_input`` of the labels given,
                                 ``cleaning`` (what :func:`~.solve.clean_contact_labels`
                                 changed, None when off), ``swing_clearance_mm``
-``metrics_before/after``        METRICS.md kinematic metrics (and dynamic ones when
+``metrics_before/after``        docs/metrics.md kinematic metrics (and dynamic ones when
                                 :mod:`habitsim.evaluation.dynamic` is available) of the
                                 input and of the result (when ``options.metrics``), by
                                 the metrics' literal definitions (contact = toe height

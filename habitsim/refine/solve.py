@@ -31,7 +31,7 @@ Preparation, in this order:
    :data:`MIN_RUN_S` are dropped. Planting a label the input does not follow bends the
    whole leg for its duration and kinks it at the lift-off; the report lists the
    changes (``contacts.cleaning``).
-5. **Swing clearance** (:func:`swing_clearance`): METRICS.md counts a foot as in contact
+5. **Swing clearance** (:func:`swing_clearance`): docs/metrics.md counts a foot as in contact
    whenever its toe is below :data:`CONTACT_HEIGHT_PER_LEG` × L, labelled or not, so a
    swing foot skimming the ground while it moves reads as skating. Each swing phase
    gets a minimum toe height that rises linearly from the ground at the lift-off (and
@@ -105,7 +105,7 @@ __all__ = [
     "swing_clearance",
 ]
 
-#: METRICS.md's contact height of ``skate_mm`` (toe height, share of leg length).
+#: docs/metrics.md's contact height of ``skate_mm`` (toe height, share of leg length).
 CONTACT_HEIGHT_PER_LEG = _CONTACT_HEIGHT_PER_LEG
 #: Default lowest toe height of a moving swing foot, share of leg length: the contact
 #: height plus a margin of 0.5 % L.
@@ -180,7 +180,7 @@ class RefineOptions:
             that already satisfies most constraints. Gauss-Newton then converges in
             7–14 iterations instead of 8–22 on artefact clips whose feet sink.
         swing_clearance: lowest toe height of a moving swing foot, share of leg length
-            (:func:`swing_clearance`; at least METRICS.md's contact height, 2 %); None
+            (:func:`swing_clearance`; at least docs/metrics.md's contact height, 2 %); None
             switches the clearance profile off (swing feet only stay above the floor).
         guard: when the result is worse than the input on a metric of the verdict
             (:func:`compare_metrics`; in practice the jerk), solve again with
@@ -189,7 +189,7 @@ class RefineOptions:
             this many times (0: never); the report's ``guard`` lists the retries and its
             ``verdict`` says whether the result is still worse.
         fallback: on failure return the input with ``success=False`` instead of raising.
-        metrics: compute METRICS.md kinematic and dynamic metrics before / after for the
+        metrics: compute docs/metrics.md kinematic and dynamic metrics before / after for the
             report (off in benchmarks).
         max_iter, tol, constr_viol_tol: IPOPT settings (constraint tolerance in [m]; 10 µm,
             ten times below ``verify_tol_mm``: at 1 µm the Gauss-Newton iterations crawl
@@ -538,7 +538,7 @@ def swing_clearance(
 
     A swing frame k frames from the nearest stance frame must hold its toe at least
     ``clearance_per_leg`` × L × min(1, k / r) high, r = max(1, round(ramp_s · fps));
-    the swing frames whose minimum is below METRICS.md's contact height are pinned
+    the swing frames whose minimum is below docs/metrics.md's contact height are pinned
     horizontally to the neighbouring foothold (a swing run whose every frame would be
     pinned gets the full clearance in its middle frame(s), so the foot can move there).
 
@@ -726,7 +726,7 @@ def _prepare(
         "mu": info.friction if opts.friction is None else float(opts.friction),
         **opts.weights,
     }
-    # swing feet clear METRICS.md's contact height wherever they move (module docstring)
+    # swing feet clear docs/metrics.md's contact height wherever they move (module docstring)
     if opts.swing_clearance is None:
         clearance, pins = None, c[1:] & c[:-1]
     else:
@@ -941,7 +941,7 @@ def _solve_checked(
 
 
 def compare_metrics(motion_in: Motion, motion_out: Motion) -> dict[str, Any]:
-    """METRICS.md's ``skate_mm``, ``jerk`` and ``penetration_mm`` (the functions of
+    """docs/metrics.md's ``skate_mm``, ``jerk`` and ``penetration_mm`` (the functions of
     :mod:`habitsim.evaluation.kinematic`, literal definitions) of the input and of the
     result, and which of them the result makes worse (beyond :data:`WORSE_TOLERANCE`).
 
