@@ -278,3 +278,46 @@ def test_contact_tracker_tells_a_landing_from_a_scuff() -> None:
     assert tr.events["early_touchdown"] == 1
     cfg = BalanceConfig.scaled(25.0, 0.6)
     assert cfg.early_phase == 0.75 and cfg.early_reach == pytest.approx(0.06)
+
+
+def test_swing_foot_lifts_at_least_the_minimum_height(robot: mujoco.MjModel) -> None:
+    """A reference that drags a swing foot along the ground gets a mid-swing lift of
+    ``swing_height`` over the lift-off/touch-down line (the bump is gone by 80 % of the
+    swing); a reference swing higher than that is followed as it is."""
+    from habitsim.controllers.swing import SWING, PlanSample, SwingLegs
+
+    legs = LegSet(robot)
+    nf = legs.n_feet
+    h = 0.05
+
+    def sample(phase: float, ref_z: float) -> PlanSample:
+        feet = np.zeros((nf, 3))
+        feet[:, 2] = 0.01
+        feet[0, 2] = ref_z
+        hold = np.full(nf, np.nan)
+        ph = hold.copy()
+        ph[0] = phase
+        t_lo, t_td = hold.copy(), hold.copy()
+        t_lo[0], t_td[0] = 0.0, 0.3
+        foothold = feet.copy()
+        foothold[0] = [0.1, 0.0, 0.01]
+        z3 = np.zeros(3)
+        return PlanSample(0.0, z3, z3, z3, z3, z3, z3, feet, np.zeros((nf, 3)),
+                          np.arange(nf) != 0, ph, t_lo, t_td, foothold)
+
+    modes = np.full(nf, -1)
+    modes[0] = SWING
+    lifted = SwingLegs(legs, 100.0, 10.0, min_height=h)
+    plain = SwingLegs(legs, 100.0, 10.0)
+    ref = np.zeros((nf, 3))
+    ref[:, 2] = 0.01
+    for sw in (lifted, plain):
+        sw.lift_off(np.array([0]), ref, ref)
+    p, v = lifted.targets(sample(0.4, 0.01), modes, np.zeros(3))
+    assert p[0, 2] == pytest.approx(0.01 + h)  # peak of the bump at u = 0.5
+    assert v[0, 2] == pytest.approx(0.0, abs=1e-9)
+    assert plain.targets(sample(0.4, 0.01), modes, np.zeros(3))[0][0, 2] == pytest.approx(0.01)
+    assert lifted.targets(sample(0.2, 0.01), modes, np.zeros(3))[1][0, 2] > 0.0  # rising
+    assert lifted.targets(sample(0.4, 0.2), modes, np.zeros(3))[0][0, 2] == pytest.approx(0.2)
+    assert lifted.targets(sample(0.85, 0.01), modes, np.zeros(3))[0][0, 2] < 0.01  # seeking
+    assert BalanceConfig.scaled(25.0, 0.6).swing_height == pytest.approx(0.036)

@@ -683,6 +683,10 @@ def test_contact_labels_are_cleaned():
     assert out[:, 1].sum() < 10 and changes["RF"]["trimmed"] >= 6
     assert out[5:15, 2].all() and changes["LH"]["filled"] == 1
     assert changes["frames_changed"] == int((out != c).sum())
+    # without trimming the dragged RF keeps its whole stance; filling and dropping stay
+    kept, changes = S.clean_contact_labels(c, toes, 30.0, leg, trim=False)
+    assert kept[5:15, 1].all() and changes["RF"]["trimmed"] == 0
+    assert kept[5:15, 2].all() and not kept[20, 0]
 
 
 def test_refine_reports_cleaned_labels():

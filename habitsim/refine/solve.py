@@ -169,6 +169,13 @@ class RefineOptions:
         align_ground: shift the targets onto the floor first (module docstring).
         clean_contacts: clean the contact labels before planting them
             (:func:`clean_contact_labels`).
+        trim_contacts: let the cleaning trim stance runs where the input's toe moves
+            (step 1 of :func:`clean_contact_labels`). Off for labels that are the
+            intent rather than a reading of the input — a transfer's footfall schedule
+            taken from its source (:func:`habitsim.pipeline.run_clip` switches it off
+            there): a decoded foot that slides is planted, not lifted, since trimming
+            the slide off halved the stance of real-clip transfers and left a walk
+            with flight phases that no controller could track.
         preplant: before the optimisation, plant the input's feet on the labels and lift
             them to the swing clearance by leg IK (:func:`_preplant`): the solve starts
             from, and tracks, feet that are already where the constraints want them. Off
@@ -214,6 +221,7 @@ class RefineOptions:
     friction: float | None = None
     align_ground: bool = True
     clean_contacts: bool = True
+    trim_contacts: bool = True
     preplant: bool = False
     plant_start: bool = True
     swing_clearance: float | None = SWING_CLEARANCE_PER_LEG
@@ -454,6 +462,7 @@ def clean_contact_labels(
     leg_length: float,
     slip_per_leg: float = STANCE_SLIP_PER_LEG,
     min_run_s: float = MIN_RUN_S,
+    trim: bool = True,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Contact labels made consistent with the motion before they are planted.
 
@@ -474,6 +483,7 @@ def clean_contact_labels(
         toes: (T, 4, ≥2) toe positions of the motion [m] (x, y used).
         fps: frame rate [Hz].
         leg_length: the species' hind-leg length L [m].
+        trim: run step 1 (off: only fill and drop).
 
     Returns:
         The cleaned (T, 4) labels and what changed: ``frames_changed`` (total), and per
@@ -491,7 +501,7 @@ def clean_contact_labels(
     for f in range(c.shape[1]):
         trimmed = filled = dropped = 0
         col = c[:, f]
-        for a, b in _runs(col):
+        for a, b in _runs(col) if trim else ():
             anchor = np.median(xy[a:b, f], axis=0)
             far = np.linalg.norm(xy[a:b, f] - anchor, axis=1) > tol
             lo, hi = a, b
@@ -692,7 +702,8 @@ def _prepare(
     sp = motion.species_info
     cleaning = None
     if opts.clean_contacts:
-        c, cleaning = clean_contact_labels(c_in, targets[:, toe_idx], motion.fps, sp.leg_length)
+        c, cleaning = clean_contact_labels(c_in, targets[:, toe_idx], motion.fps, sp.leg_length,
+                                           trim=opts.trim_contacts)
         if cleaning["frames_changed"] and f_c is not None:  # corners moved: filter again
             q = _lowpass_qpos(q_raw, info, motion.fps, f_c, c)
             targets = qpos_joint_positions(model, q)
@@ -799,7 +810,7 @@ def _preplant(
     c, cleaning = c_in, None
     if opts.clean_contacts:
         c, cleaning = clean_contact_labels(c_in, motion.foot_positions(), motion.fps,
-                                           sp.leg_length)
+                                           sp.leg_length, trim=opts.trim_contacts)
     floor = None
     if opts.swing_clearance is not None:
         floor = swing_clearance(c, motion.fps, sp.leg_length, opts.swing_clearance)[0]
