@@ -9,10 +9,13 @@ returning an exit code. Every :class:`~habitsim.errors.HabitsimError` becomes a 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
 
-from ..errors import HabitsimError
+from ..errors import HabitsimError, bounded
 
 # (group name, help, module names registering into it). Group None = top-level commands.
 _GROUPS: list[tuple[str | None, str, tuple[str, ...]]] = [
@@ -57,13 +60,32 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(ns.func(ns) or 0)
+        with _sigterm_as_interrupt():
+            return int(ns.func(ns) or 0)
     except HabitsimError as e:
-        print(f"error: {e}", file=sys.stderr)
+        print(f"error: {bounded(str(e))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """While a command runs, SIGTERM stops it like Ctrl-C (KeyboardInterrupt), so pools
+    are shut down and temporary files removed; the previous handler is restored after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum, frame):  # noqa: ARG001 - signal handler signature
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover
