@@ -19,7 +19,7 @@ class UnknownSpeciesError(HabitsimError, KeyError):
     def __init__(self, name: str, known: Iterable[str]):
         self.name = name
         self.known = sorted(known)
-        super().__init__(f"unknown species {name!r}; known: {', '.join(self.known)}")
+        super().__init__(f"unknown species {brief(name)}; known: {', '.join(self.known)}")
 
     def __str__(self) -> str:  # KeyError would quote the whole message
         return self.args[0]
@@ -95,12 +95,14 @@ def brief(value: object, limit: int = BRIEF_CHARS) -> str:
 
 def bounded(message: str, limit: int = MAX_MESSAGE_CHARS) -> str:
     """``message`` cut to ``limit`` characters (the rest elided with its length)."""
-    return message if len(message) <= limit else message[:limit] + f"… ({len(message)} characters)"
+    if len(message) <= limit:
+        return message
+    return message[:limit] + f"… ({len(message)} characters)"
 
 
 
 def brief_path(path: object, limit: int = 160) -> str:
-    """A path for a message: quoted, and only its last ``limit`` characters when longer
-    (the file name is the informative end)."""
+    """A path for a message: only its last ``limit`` characters when longer (the file
+    name is the informative end)."""
     text = str(path)
-    return repr(text) if len(text) <= limit else repr("…" + text[-limit:])
+    return text if len(text) <= limit else "…" + text[-limit:]

@@ -451,7 +451,7 @@ def load_species(name: str | Species) -> Species:
     if isinstance(name, Species):
         return name
     cat = _catalog()
-    if name not in cat:
+    if not isinstance(name, str) or name not in cat:
         raise UnknownSpeciesError(name, cat)
     return cat[name]
 

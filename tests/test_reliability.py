@@ -161,3 +161,247 @@ def test_transfer_writes_both_outputs(tmp_path: Path, motion_file: Path, capsys)
     )
     assert code == 0
     assert files_under(tmp_path) == ["ok.npz", "x.bvh"]
+
+
+# ------------------------------------------------------------------ BVH reader
+
+from habitsim.bvh import MAX_DEPTH, parse_bvh, read_bvh  # noqa: E402
+from habitsim.errors import BVHParseError, MotionFileError  # noqa: E402
+
+EXAMPLE_BVH = Path(__file__).parents[1] / "habitsim" / "examples" / "dog_walk.bvh"
+
+
+def small_bvh(offset: str = "0 0 1", frame_time: str = "0.0333333", root: str = "0 0 0") -> str:
+    return (
+        "HIERARCHY\nROOT hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition "
+        f"Zrotation Xrotation Yrotation\n  JOINT spine\n  {{\n    OFFSET {offset}\n"
+        "    CHANNELS 3 Zrotation Xrotation Yrotation\n    End Site\n    {\n      OFFSET 0 0 1\n"
+        f"    }}\n  }}\n}}\nMOTION\nFrames: 2\nFrame Time: {frame_time}\n"
+        f"{root} 0 0 0 0 0 0\n0 0 0 0 0 0 0 0 0\n"
+    )
+
+
+def test_small_bvh_reads() -> None:
+    assert parse_bvh(small_bvh()).num_frames == 2
+
+
+@pytest.mark.parametrize("ft", ["1e-320", "0", "-0.1", "1e-9", "3600", "1e300"])
+def test_bvh_frame_time_out_of_range(ft: str) -> None:
+    with pytest.raises(BVHParseError, match=r"frame time .*1 to 1000 Hz"):
+        parse_bvh(small_bvh(frame_time=ft))
+
+
+def test_bvh_all_zero_offsets() -> None:
+    text = small_bvh(offset="0 0 0").replace("OFFSET 0 0 1", "OFFSET 0 0 0")
+    with pytest.raises(BVHParseError, match="OFFSET is zero"):
+        parse_bvh(text)
+
+
+@pytest.mark.parametrize("where", ["offset", "root"])
+def test_bvh_absurd_values(where: str) -> None:
+    text = small_bvh(offset="0 0 1e300") if where == "offset" else small_bvh(root="1e300 0 0")
+    with pytest.raises(BVHParseError, match=r"valid: \|value\| <= 1e\+07"):
+        parse_bvh(text)
+
+
+def test_bvh_deep_nesting_is_bounded() -> None:
+    depth = 1000
+    head = "HIERARCHY\nROOT j0\n{\nOFFSET 0 0 1\nCHANNELS 0\n"
+    body = "".join(f"JOINT j{k}\n{{\nOFFSET 0 0 1\nCHANNELS 1 Xrotation\n" for k in range(1, depth))
+    text = head + body + "}\n" * depth + "MOTION\nFrames: 1\nFrame Time: 0.1\n" + "0 " * (depth - 1)
+    with pytest.raises(BVHParseError, match=f"at most {MAX_DEPTH}"):
+        parse_bvh(text)
+
+
+def test_bvh_huge_token_is_not_echoed(tmp_path: Path) -> None:
+    token = "x" * 5_000_000
+    for text in (
+        small_bvh().replace("OFFSET 0 0 1", f"OFFSET 0 0 {token}", 1),
+        small_bvh().replace("Frames: 2", f"Frames: {token}"),
+        small_bvh().replace("0 0 0 0 0 0 0 0 0\n", f"0 0 0 0 0 0 0 0 {token}\n0 0 0 0 0 0 0 0 0\n"),
+    ):
+        with pytest.raises(BVHParseError) as ei:
+            parse_bvh(text)
+        assert len(str(ei.value)) < 300
+
+
+def test_bvh_without_motion_fails_before_reading_it_whole(tmp_path: Path) -> None:
+    import tracemalloc
+
+    p = tmp_path / "big.bvh"
+    with p.open("w") as fh:
+        fh.write("HIERARCHY\nROOT hips\n{\n  OFFSET 0 0 0\n")
+        line = "  OFFSET 1 2 3 " + "4 " * 40 + "\n"
+        for _ in range(50_000_000 // len(line)):
+            fh.write(line)
+    tracemalloc.start()
+    try:
+        with pytest.raises(BVHParseError, match=":5: "):
+            read_bvh(p)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 300 * 2**20  # the 50 MB file is never held (let alone tokenised) whole
+
+
+def test_bvh_long_hierarchy_without_motion(tmp_path: Path) -> None:
+    p = tmp_path / "long.bvh"
+    joints = "".join(f"JOINT j{k}\n{{\nOFFSET 0 0 1\nCHANNELS 1 Xrotation\n}}\n" for k in range(40_000))
+    p.write_text("HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\nCHANNELS 0\n" + joints)
+    with pytest.raises(BVHParseError, match="joints|no MOTION"):
+        read_bvh(p)
+
+
+def test_bvh_example_still_imports() -> None:
+    from habitsim.bvh_mapping import import_bvh
+    from habitsim.species import load_species
+
+    motion, _ = import_bvh(EXAMPLE_BVH, load_species("dog"))
+    assert motion.num_frames > 10
+
+
+def test_bvh_cli_error_is_exit_2(tmp_path: Path, capsys) -> None:
+    p = tmp_path / "bad.bvh"
+    p.write_text(small_bvh(frame_time="1e-320"))
+    code, err = run_cli(
+        ["transfer", p, "--from", "dog", "--to", "cat", "--method", "direct",
+         "--out", tmp_path / "o.npz"],
+        capsys,
+    )
+    assert code == 2 and err.startswith("error: ") and "frame time" in err
+    assert files_under(tmp_path) == ["bad.bvh"]
+
+
+# ------------------------------------------------------------------ .npz motion reader
+
+
+def _motion_arrays() -> dict[str, np.ndarray]:
+    from habitsim.gaits import generate
+
+    m = generate("dog", "walk", seed=0, duration_s=0.3)
+    with np.load(_save(m)) as z:
+        return {k: z[k] for k in z.files}
+
+
+def _save(m) -> Path:
+    import tempfile
+
+    p = Path(tempfile.mkdtemp()) / "m.npz"
+    m.save(p)
+    return p
+
+
+@pytest.fixture(scope="module")
+def arrays() -> dict[str, np.ndarray]:
+    return _motion_arrays()
+
+
+def write_npz(tmp_path: Path, arrays: dict[str, np.ndarray], **changes) -> Path:
+    d = {**arrays, **changes}
+    d = {k: v for k, v in d.items() if v is not None}
+    p = tmp_path / "m.npz"
+    with p.open("wb") as fh:
+        np.savez(fh, **d)
+    return p
+
+
+NPZ_CASES = {
+    "format_version_str": dict(format_version=np.array("1")),
+    "format_version_array": dict(format_version=np.array([1, 1])),
+    "format_version_nan": dict(format_version=np.array(np.nan)),
+    "joint_names_0d": dict(joint_names=np.array("pelvis")),
+    "joint_names_numbers": dict(joint_names=np.arange(27)),
+    "fps_array": dict(fps=np.array([30.0, 30.0])),
+    "fps_str": dict(fps=np.array("30")),
+    "fps_huge": dict(fps=np.array(1e300)),
+    "fps_tiny": dict(fps=np.array(1e-300)),
+    "species_array": dict(species=np.array(["dog", "cat"])),
+    "species_number": dict(species=np.array(3)),
+    "rotations_str": dict(rotations=np.array([["a"]])),
+    "root_str": dict(root_positions=np.array(["x", "y", "z"])),
+    "contacts_str": dict(contacts=np.array([["a"] * 4])),
+    "metadata_list": dict(metadata_json=np.array("[1, 2]")),
+    "metadata_deep": dict(metadata_json=np.array("[" * 100_000 + "]" * 100_000)),
+    "metadata_deep_object": dict(metadata_json=np.array('{"a":' + "[" * 200 + "]" * 200 + "}")),
+    "metadata_bytes": dict(metadata_json=np.array(b"{}")),
+}
+
+
+@pytest.mark.parametrize("case", sorted(NPZ_CASES))
+def test_npz_bad_fields_are_typed(tmp_path: Path, arrays, case: str) -> None:
+    from habitsim.motion import load_motion
+
+    p = write_npz(tmp_path, arrays, **NPZ_CASES[case])
+    with pytest.raises(HabitsimError) as ei:
+        load_motion(p)
+    assert len(str(ei.value)) < 400
+
+
+def test_npz_root_far_away(tmp_path: Path, arrays) -> None:
+    from habitsim.errors import InvalidMotionError
+    from habitsim.motion import load_motion
+
+    root = arrays["root_positions"].copy()
+    root[0, 0] = 1e300
+    with pytest.raises(InvalidMotionError, match="root_positions reach"):
+        load_motion(write_npz(tmp_path, arrays, root_positions=root))
+
+
+def test_npy_under_npz_name(tmp_path: Path) -> None:
+    from habitsim.motion import load_motion
+
+    p = tmp_path / "m.npz"
+    with p.open("wb") as fh:
+        np.save(fh, np.zeros(3))
+    with pytest.raises(MotionFileError, match="single .npy array"):
+        load_motion(p)
+
+
+def test_non_npz_refused_in_our_words(tmp_path: Path, arrays) -> None:
+    from habitsim.motion import load_motion
+
+    p = tmp_path / "m.npz"
+    np.savez(p, **arrays, extra=np.array([object()], dtype=object))
+    with pytest.raises(MotionFileError) as ei:
+        load_motion(p)
+    assert "allow_pickle" not in str(ei.value) and "never loads" in str(ei.value)
+    p.write_text("hello")
+    with pytest.raises(MotionFileError, match="not a zip"):
+        load_motion(p)
+
+
+def test_npz_zip_bomb_is_refused_from_the_headers(tmp_path: Path, arrays) -> None:
+    import tracemalloc
+
+    from habitsim.motion import load_motion
+
+    big = np.zeros((40_000, 27, 4, 8))  # 276 MB of zeros, compresses to < 1 MB
+    p = tmp_path / "bomb.npz"
+    np.savez_compressed(p, **{**arrays, "rotations": big})
+    del big
+    assert p.stat().st_size < 2 * 2**20
+    tracemalloc.start()
+    try:
+        with pytest.raises(MotionFileError, match="decompress"):
+            load_motion(p)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20 * 2**20
+
+
+@pytest.mark.parametrize(
+    "kw",
+    [dict(fps=1e300), dict(fps=1e-300), dict(fps="30"), dict(fps=np.array([30.0])),
+     dict(root=1e300), dict(root="x")],
+)
+def test_motion_absurd_but_finite(kw) -> None:
+    from habitsim.motion import Motion
+    from habitsim.skeleton import get_skeleton
+
+    root, rot = get_skeleton("dog").standing_pose()
+    rp = np.repeat(root[None], 3, axis=0)
+    if "root" in kw:
+        rp = np.full((3, 3), kw["root"], dtype=object if isinstance(kw["root"], str) else float)
+    with pytest.raises(HabitsimError):
+        Motion("dog", kw.get("fps", 30.0), rp, np.repeat(rot[None], 3, axis=0))

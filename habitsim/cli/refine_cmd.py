@@ -22,7 +22,8 @@ writes
 
 Every output is written atomically, and only once the refinement has finished: the
 destinations are checked before it starts, and the files appear together or not at all,
-so a failed run (or one output that cannot be written) leaves no file behind. Exit codes: 0 success; 1 IPOPT failed and ``--fallback``
+so a failed run (or one output that cannot be written) leaves no file behind.
+Exit codes: 0 success; 1 IPOPT failed and ``--fallback``
 wrote the input unchanged (status in the report); 2 bad input or (without
 ``--fallback``) a failed refinement, with ``error: ...`` on stderr.
 """
