@@ -94,7 +94,7 @@ from typing import Any
 
 import numpy as np
 
-from habitsim.errors import HabitsimError, unknown_choice
+from habitsim.errors import HabitsimError, brief, unknown_choice
 from habitsim.fileio import atomic_write, atomic_write_text, json_safe
 from habitsim.motion import Motion
 
@@ -631,11 +631,23 @@ def load_rows(out: str | Path) -> list[dict[str, Any]]:
     rows = []
     for p in sorted(folder.glob("*.json")):
         try:
-            rows.append(json.loads(p.read_text(encoding="utf-8")))
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            row = json.loads(p.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, OSError) as e:
+            reason = "nested too deep" if isinstance(e, RecursionError) else brief(str(e), 200)
             raise EvalError(
-                f"{p}: unreadable row file ({e}); delete it to recompute the pair"
-            ) from e
+                f"{p}: unreadable row file ({reason}); delete it to recompute the pair"
+            ) from None
+        if (
+            not isinstance(row, dict)
+            or not isinstance(row.get("key"), str)
+            or not isinstance(row.get("status"), str)
+            or row["key"] != p.stem
+        ):
+            raise EvalError(
+                f"{p}: not a row of this run (a JSON object with the string 'key' {p.stem!r} "
+                "and a 'status'); delete it to recompute the pair"
+            )
+        rows.append(row)
     return rows
 
 
@@ -991,14 +1003,17 @@ def _check_out(cfg: EvalConfig, resume: bool, overwrite: bool) -> None:
         )
     try:
         old = json.loads(run.read_text(encoding="utf-8"))["config"]
-    except (json.JSONDecodeError, KeyError, UnicodeDecodeError) as e:
-        raise EvalError(f"{run}: unreadable ({e}); pass --overwrite to start over") from e
+        if not isinstance(old, dict):
+            raise TypeError("'config' is not a JSON object")
+    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError, RecursionError) as e:
+        reason = "nested too deep" if isinstance(e, RecursionError) else brief(str(e), 200)
+        raise EvalError(f"{run}: unreadable ({reason}); pass --overwrite to start over") from None
     new = cfg.to_dict()
     diff = [k for k in EvalConfig.RESUME_KEYS if old.get(k) != new.get(k)]
     if diff:
         raise EvalError(
             f"cannot resume {out}: it was run with other settings ("
-            + ", ".join(f"{k}: {old.get(k)!r} → {new.get(k)!r}" for k in diff)
+            + ", ".join(f"{k}: {brief(old.get(k))} → {brief(new.get(k))}" for k in diff)
             + "); use another --out or --overwrite"
         )
 

@@ -405,3 +405,180 @@ def test_motion_absurd_but_finite(kw) -> None:
         rp = np.full((3, 3), kw["root"], dtype=object if isinstance(kw["root"], str) else float)
     with pytest.raises(HabitsimError):
         Motion("dog", kw.get("fps", 30.0), rp, np.repeat(rot[None], 3, axis=0))
+
+
+# ------------------------------------------------------------------ species, manifest, run state
+
+
+def _species_toml(tmp_path: Path, old: str, new: str, top: str = "") -> Path:
+    """The dog's species file with ``old`` replaced by ``new`` (every time) and ``top``
+    put first (top-level keys)."""
+    from habitsim.species import load_species
+
+    text = load_species("dog").path.read_text(encoding="utf-8")
+    assert old in text
+    p = tmp_path / "dog.toml"
+    p.write_text(top + "\n" + text.replace(old, new), encoding="utf-8")
+    return p
+
+
+@pytest.mark.parametrize(
+    "old, new, top, match",
+    [
+        ("[posture]", "[xposture]", "posture = 5", "posture must be a table"),
+        ("[gaits.", "[xgaits.", 'gaits = "x"', "gaits must be a table"),
+        ("[segments]", "[xsegments]", "segments = [1, 2]", "segments must be a table"),
+        ("mass_kg = ", "mass_kg = 1e300 # ", "", "within"),
+        ("mass_kg = ", "mass_kg = 100000000000000000000 # ", "", "within"),
+    ],
+    ids=["posture_int", "gaits_str", "segments_list", "mass_huge", "mass_bigint"],
+)
+def test_species_toml_wrong_types(tmp_path: Path, old: str, new: str, top: str, match: str):
+    from habitsim.errors import SpeciesFileError
+    from habitsim.species import load_species_file
+
+    with pytest.raises(SpeciesFileError, match=match):
+        load_species_file(_species_toml(tmp_path, old, new, top))
+
+
+def test_species_cli_bad_file_exit_2(tmp_path: Path, capsys) -> None:
+    from habitsim.species import load_species_file
+
+    p = _species_toml(tmp_path, "[posture]", "[xposture]", "posture = 5")
+    with pytest.raises(HabitsimError):
+        load_species_file(p)
+
+
+@pytest.fixture(scope="module")
+def small_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from habitsim.dataset import build_dataset
+
+    out = tmp_path_factory.mktemp("data")
+    build_dataset(out, clips_per_species=1, seed=0, species=["cat", "dog"], workers=1,
+                  progress=False)
+    return out
+
+
+@pytest.mark.parametrize("value", ['"fast"', "[1]", '{"a": 1}', "true"])
+def test_manifest_non_numeric_measured(tmp_path: Path, small_dataset: Path, value: str) -> None:
+    import json
+    import shutil
+
+    from habitsim.dataset import load_manifest
+    from habitsim.errors import DatasetError
+
+    d = tmp_path / "d"
+    shutil.copytree(small_dataset, d)
+    m = json.loads((d / "manifest.json").read_text())
+    key = next(iter(m["clips"][0]["measured"]))
+    m["clips"][0]["measured"][key] = json.loads(value)
+    (d / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(DatasetError, match="measured"):
+        load_manifest(d)
+
+
+@pytest.mark.parametrize(
+    "path", ["a\x00b.npz", "x" * 300 + ".npz", "/abs.npz", "../up.npz"]
+)
+def test_manifest_bad_clip_path(tmp_path: Path, small_dataset: Path, path: str) -> None:
+    import json
+    import shutil
+
+    from habitsim.dataset import load_manifest
+    from habitsim.errors import DatasetError
+
+    d = tmp_path / "d"
+    shutil.copytree(small_dataset, d)
+    m = json.loads((d / "manifest.json").read_text())
+    m["clips"][0]["path"] = path
+    (d / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(DatasetError, match="clip path"):
+        load_manifest(d)
+
+
+EVAL_ARGS = ["--methods", "direct", "--refine", "none", "--workers", "1", "--report-pairs",
+             "0", "--no-videos", "--no-report", "--no-progress", "--max-clips", "1", "--split",
+             "train", "--no-track", "--no-dynamic"]
+
+
+@pytest.fixture(scope="module")
+def eval_run(small_dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("eval") / "run"
+    assert main(["eval", "--data", str(small_dataset), "--out", str(out), *EVAL_ARGS]) == 0
+    return out
+
+
+@pytest.mark.parametrize(
+    "tamper",
+    ["run_list", "run_config_str", "run_deep", "row_list", "row_no_key", "row_wrong_key",
+     "row_deep"],
+)
+def test_eval_resume_tampered_state(
+    tmp_path: Path, small_dataset: Path, eval_run: Path, capsys, tamper: str
+) -> None:
+    import json
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(eval_run, out)
+    run, rows = out / "run.json", sorted((out / "rows").glob("*.json"))
+    assert rows
+    deep = "[" * 100_000 + "]" * 100_000
+    if tamper == "run_list":
+        run.write_text("[1, 2]")
+    elif tamper == "run_config_str":
+        run.write_text(json.dumps({"config": "x"}))
+    elif tamper == "run_deep":
+        run.write_text(deep)
+    elif tamper == "row_list":
+        rows[0].write_text("[1]")
+    elif tamper == "row_no_key":
+        rows[0].write_text(json.dumps({"status": "ok"}))
+    elif tamper == "row_wrong_key":
+        rows[0].write_text(json.dumps({"key": 5, "status": "ok"}))
+    elif tamper == "row_deep":
+        rows[0].write_text(deep)
+    code, err = run_cli(
+        ["eval", "--data", small_dataset, "--out", out, *EVAL_ARGS, "--resume"], capsys
+    )
+    assert code == 2 and err.startswith("error: ") and len(err) < 600, err
+
+
+# ------------------------------------------------------------------ CLI argument bounds
+
+
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--seed", str(2**64)], "--seed"),
+        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--seed", "-1"], "--seed"),
+        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--temperature", "0"],
+         "--temperature"),
+        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--temperature", "-1"],
+         "--temperature"),
+        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--temperature", "nan"],
+         "--temperature"),
+        (["track", "{m}", "--settle", "1e9"], "--settle"),
+        (["track", "{m}", "--control-hz", "inf"], "--control-hz"),
+        (["data", "synth", "--out", "{t}/d", "--fps", "100000"], "fps"),
+        (["data", "synth", "--out", "{t}/d", "--fps", "0.001"], "fps"),
+        (["data", "synth", "--out", "{t}/d", "--seed", str(2**64)], "--seed"),
+        (["eval", "--data", "{t}", "--out", "{t}/e", "--workers", "100000"], "--workers"),
+    ],
+)
+def test_cli_argument_bounds(tmp_path: Path, motion_file: Path, capsys, argv, match) -> None:
+    argv = [a.format(m=motion_file, t=tmp_path) for a in argv]
+    code, err = run_cli(argv, capsys)
+    assert code == 2 and err.startswith("error: ") and match in err, err
+    assert "valid" in err
+    assert files_under(tmp_path) == []
+
+
+def test_build_dataset_fps_bounds(tmp_path: Path) -> None:
+    from habitsim.dataset import build_dataset
+    from habitsim.errors import DatasetError
+
+    for fps in (100000.0, 0.001):
+        with pytest.raises(DatasetError, match="valid"):
+            build_dataset(tmp_path / "d", clips_per_species=1, fps=fps, species=["cat"],
+                          workers=1, progress=False)

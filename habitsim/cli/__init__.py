@@ -60,6 +60,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        from .bounds import check_bounds
+
+        check_bounds(ns)
         with _sigterm_as_interrupt():
             return int(ns.func(ns) or 0)
     except HabitsimError as e:
