@@ -699,7 +699,12 @@ def build_dataset(
                 generated += made
                 bar.update(1)
         else:
-            with cf.ProcessPoolExecutor(max_workers=n_workers) as pool:
+            from .workers import init_worker, stop_pool
+
+            # workers die with this process, however it ends (see habitsim.workers)
+            with cf.ProcessPoolExecutor(
+                max_workers=n_workers, initializer=init_worker, initargs=(os.getpid(),)
+            ) as pool:
                 futures = {
                     pool.submit(_make_clip, str(out), job, resume): i for i, job in enumerate(jobs)
                 }
@@ -709,7 +714,7 @@ def build_dataset(
                         generated += made
                         bar.update(1)
                 except BaseException:
-                    pool.shutdown(wait=True, cancel_futures=True)
+                    stop_pool(pool)
                     raise
     _remove_empty_dirs(out)
 
