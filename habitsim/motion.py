@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -425,7 +426,9 @@ def load_motion(path: str | Path) -> Motion:
         raise MotionFileError(
             f"{brief_path(p)}: not a readable .npz motion file ({brief(str(e))})"
         ) from None
-    except (OSError, zipfile.BadZipFile, EOFError, NotImplementedError, MemoryError) as e:
+    except (
+        OSError, zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, MemoryError
+    ) as e:
         raise MotionFileError(
             f"{brief_path(p)}: not a readable .npz motion file ({brief(str(e))})"
         ) from None
