@@ -432,6 +432,12 @@ def load_motion(path: str | Path) -> Motion:
         raise MotionFileError(
             f"{brief_path(p)}: not a readable .npz motion file ({brief(str(e))})"
         ) from None
+    except Exception as e:  # noqa: BLE001 - only numpy's and zipfile's decoding ran here
+        # a corrupt .npy header reaches numpy's header parser (tokenize / ast errors)
+        raise MotionFileError(
+            f"{brief_path(p)}: not a readable .npz motion file (corrupt array header: "
+            f"{type(e).__name__})"
+        ) from None
     missing = [k for k in _REQUIRED if k not in data]
     if missing:
         raise MotionFileError(

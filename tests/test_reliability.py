@@ -582,3 +582,23 @@ def test_build_dataset_fps_bounds(tmp_path: Path) -> None:
         with pytest.raises(DatasetError, match="valid"):
             build_dataset(tmp_path / "d", clips_per_species=1, fps=fps, species=["cat"],
                           workers=1, progress=False)
+
+
+def test_npz_corrupt_array_header(tmp_path: Path, arrays) -> None:
+    """A member whose .npy header dict is cut short (numpy raises tokenize.TokenError)."""
+    import io
+    import zipfile
+
+    from habitsim.motion import load_motion
+
+    p = tmp_path / "m.npz"
+    with zipfile.ZipFile(p, "w") as zf:
+        for k, v in arrays.items():
+            buf = io.BytesIO()
+            np.save(buf, v)
+            raw = buf.getvalue()
+            if k == "fps":  # the header dict left open: {'descr': '<f8', ... (no '}')
+                raw = raw.replace(b"}", b" ", 1)
+            zf.writestr(f"{k}.npy", raw)
+    with pytest.raises(MotionFileError, match="not a readable"):
+        load_motion(p)
