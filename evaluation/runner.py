@@ -95,7 +95,7 @@ from typing import Any
 import numpy as np
 
 from habitsim.errors import HabitsimError, brief, unknown_choice
-from habitsim.fileio import atomic_write, atomic_write_text, json_safe
+from habitsim.fileio import atomic_write, atomic_write_text, json_safe, make_dirs
 from habitsim.motion import Motion
 
 __all__ = [
@@ -577,7 +577,7 @@ def _per_frame_error_mm(sim_res: Any) -> np.ndarray:
 def _write_trace(task: PairTask, src: Motion, out: Motion, ref: Motion, sim_res: Any) -> None:
     """Contacts, tracking error and motions of a report pair (traces/<key>/)."""
     folder = Path(task.out) / "traces" / task.key
-    folder.mkdir(parents=True, exist_ok=True)
+    make_dirs(folder)
     arrays: dict[str, np.ndarray] = {
         "fps": np.array(out.fps),
         "source_contacts": src.contacts if src.contacts is not None else src.detect_contacts(),
@@ -1053,7 +1053,7 @@ def run_benchmark(
     _check_out(cfg, resume, overwrite)
     tasks = plan_tasks(cfg)
     out = Path(cfg.out)
-    (out / "rows").mkdir(parents=True, exist_ok=True)
+    make_dirs(out / "rows", "--out")
     atomic_write_text(
         out / "run.json",
         json.dumps(

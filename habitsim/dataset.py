@@ -63,7 +63,7 @@ from typing import Any
 import numpy as np
 
 from .errors import DatasetError, HabitsimError, brief
-from .fileio import atomic_write_text
+from .fileio import atomic_write_text, make_dirs
 from .gaits import ACTIONS, GENERATOR_VERSION, available_actions, generate
 from .motion import Motion, load_motion
 from .species import FEET, all_species, load_species
@@ -676,7 +676,7 @@ def build_dataset(
         check_resumable(out, seed=seed, fps=fps)
 
     jobs = plan_clips(names, clips_per_species, seed, fps)
-    out.mkdir(parents=True, exist_ok=True)
+    make_dirs(out, "data set folder")
     # From here on the folder is "being built": no manifest until the end.
     for name in (MANIFEST_NAME, STATS_CSV_NAME, STATS_MD_NAME):
         (out / name).unlink(missing_ok=True)

@@ -86,6 +86,22 @@ def check_writable(path: str | Path, what: str = "output") -> Path:
     return p
 
 
+def make_dirs(path: str | Path, what: str = "output folder") -> Path:
+    """``mkdir -p path``, with a typed error instead of a raw ``OSError``.
+
+    Raises:
+        OutputPathError: a file where a folder should be, a read-only parent, …
+    """
+    p = Path(path)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        if p.exists() and not p.is_dir():
+            raise OutputPathError(f"{what} {brief_path(p)}: is a file, expected a folder") from None
+        raise _output_error(p / "x", e, what) from None
+    return p
+
+
 @contextlib.contextmanager
 def output_transaction(paths: dict[str, str | Path | None] | None = None) -> Iterator[None]:
     """Write the files of one command all together or not at all.

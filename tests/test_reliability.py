@@ -246,7 +246,8 @@ def test_bvh_without_motion_fails_before_reading_it_whole(tmp_path: Path) -> Non
 
 def test_bvh_long_hierarchy_without_motion(tmp_path: Path) -> None:
     p = tmp_path / "long.bvh"
-    joints = "".join(f"JOINT j{k}\n{{\nOFFSET 0 0 1\nCHANNELS 1 Xrotation\n}}\n" for k in range(40_000))
+    joint = "JOINT j{k}\n{{\nOFFSET 0 0 1\nCHANNELS 1 Xrotation\n}}\n"
+    joints = "".join(joint.format(k=k) for k in range(40_000))
     p.write_text("HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\nCHANNELS 0\n" + joints)
     with pytest.raises(BVHParseError, match="joints|no MOTION"):
         read_bvh(p)
@@ -602,3 +603,17 @@ def test_npz_corrupt_array_header(tmp_path: Path, arrays) -> None:
             zf.writestr(f"{k}.npy", raw)
     with pytest.raises(MotionFileError, match="not a readable"):
         load_motion(p)
+
+
+@pytest.mark.parametrize("command", ["synth", "eval"])
+def test_output_folder_under_a_file(tmp_path: Path, small_dataset: Path, capsys, command) -> None:
+    blocker = tmp_path / "blocker"
+    blocker.write_text("x")
+    if command == "synth":
+        argv = ["data", "synth", "--out", blocker / "d", "--species", "cat",
+                "--clips-per-species", "1", "--workers", "1", "--no-progress"]
+    else:
+        argv = ["eval", "--data", small_dataset, "--out", blocker / "e", *EVAL_ARGS]
+    code, err = run_cli(argv, capsys)
+    assert code == 2 and err.startswith("error: ") and "file where a folder" in err, err
+    assert files_under(tmp_path) == ["blocker"]
