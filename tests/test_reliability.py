@@ -67,6 +67,21 @@ def test_read_only_folder_is_typed(tmp_path: Path) -> None:
         ro.chmod(0o755)
 
 
+def test_read_only_folder_is_typed_even_for_root(tmp_path: Path, monkeypatch) -> None:
+    """What a read-only folder (or file system) answers, simulated: EACCES on create."""
+    import tempfile
+
+    def denied(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(tempfile, "mkstemp", denied)
+    with pytest.raises(OutputPathError, match="Permission denied"):
+        check_writable(tmp_path / "r.json", "--report")
+    with pytest.raises(OutputPathError, match="Permission denied"):
+        atomic_write_text(tmp_path / "r.json", "{}")
+    assert files_under(tmp_path) == []
+
+
 def test_transaction_all_or_none(tmp_path: Path) -> None:
     a, b = tmp_path / "a.txt", tmp_path / "sub" / "b.txt"
     with pytest.raises(RuntimeError):
