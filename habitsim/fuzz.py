@@ -45,7 +45,9 @@ import numpy as np
 
 from .errors import HabitsimError
 
-__all__ = ["TARGETS", "Case", "Workspace", "make_case", "run_case", "campaign", "main"]
+__all__ = [
+    "TARGETS", "Case", "Workspace", "CampaignResult", "make_case", "run_case", "campaign", "main"
+]
 
 #: Inputs of each kind, in the proportions of a campaign.
 TARGETS: dict[str, float] = {
@@ -187,7 +189,9 @@ Frame Time: 0.033333
 # ---------------------------------------------------------------------- text mutations
 
 
-def _mutate_lines(text: str, rnd: random.Random, tokens: list[str], extra_lines: list[str]) -> str:
+def _mutate_lines(
+    text: str, rnd: random.Random, tokens: list[str], extra_lines: list[str]
+) -> str:
     """1–3 random edits of a text: a token replaced, a line dropped / doubled / inserted,
     the text cut or random characters spliced in."""
     lines = text.split("\n")
