@@ -8,7 +8,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.habitsim-installed
 DEMO_OUT ?= demo_out
 
-.PHONY: demo test install clean
+.PHONY: demo test install clean fuzz
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +26,10 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+
+# A long fuzzing campaign over the readers and the command line (counts by outcome).
+fuzz: $(STAMP)
+	$(BIN)/python -m habitsim.fuzz --n $(or $(FUZZ_N),10000)
 
 clean:
 	rm -rf $(VENV) $(DEMO_OUT)

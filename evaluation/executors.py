@@ -67,7 +67,11 @@ class Executor(Protocol):
         ...
 
 
-def _init_worker() -> None:
+def _init_worker(parent_pid: int | None = None) -> None:
+    if parent_pid is not None:  # die with the run that started the pool
+        from habitsim.workers import init_worker
+
+        init_worker(parent_pid)
     # One busy core per worker process: no thread oversubscription from torch/BLAS.
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ.setdefault(var, "1")
@@ -103,11 +107,21 @@ class LocalExecutor:
                 yield t, fn(t)
             return
         if self._pool is None:
-            self._pool = cf.ProcessPoolExecutor(self.workers, initializer=_init_worker)
+            self._pool = cf.ProcessPoolExecutor(
+                self.workers, initializer=_init_worker, initargs=(os.getpid(),)
+            )
         futs = {self._pool.submit(fn, t): t for t in tasks}
         try:
             for f in cf.as_completed(futs):
                 yield futs[f], f.result()
+        except BaseException:
+            # interrupted (Ctrl-C / SIGTERM) or a task failed: stop the workers now rather
+            # than wait for the pairs in flight
+            from habitsim.workers import stop_pool
+
+            pool, self._pool = self._pool, None
+            stop_pool(pool)
+            raise
         finally:
             for f in futs:
                 f.cancel()

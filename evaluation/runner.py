@@ -94,8 +94,8 @@ from typing import Any
 
 import numpy as np
 
-from habitsim.errors import HabitsimError, unknown_choice
-from habitsim.fileio import atomic_write, atomic_write_text, json_safe
+from habitsim.errors import HabitsimError, brief, unknown_choice
+from habitsim.fileio import atomic_write, atomic_write_text, json_safe, make_dirs
 from habitsim.motion import Motion
 
 __all__ = [
@@ -577,7 +577,7 @@ def _per_frame_error_mm(sim_res: Any) -> np.ndarray:
 def _write_trace(task: PairTask, src: Motion, out: Motion, ref: Motion, sim_res: Any) -> None:
     """Contacts, tracking error and motions of a report pair (traces/<key>/)."""
     folder = Path(task.out) / "traces" / task.key
-    folder.mkdir(parents=True, exist_ok=True)
+    make_dirs(folder)
     arrays: dict[str, np.ndarray] = {
         "fps": np.array(out.fps),
         "source_contacts": src.contacts if src.contacts is not None else src.detect_contacts(),
@@ -631,11 +631,23 @@ def load_rows(out: str | Path) -> list[dict[str, Any]]:
     rows = []
     for p in sorted(folder.glob("*.json")):
         try:
-            rows.append(json.loads(p.read_text(encoding="utf-8")))
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            row = json.loads(p.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, OSError) as e:
+            reason = "nested too deep" if isinstance(e, RecursionError) else brief(str(e), 200)
             raise EvalError(
-                f"{p}: unreadable row file ({e}); delete it to recompute the pair"
-            ) from e
+                f"{p}: unreadable row file ({reason}); delete it to recompute the pair"
+            ) from None
+        if (
+            not isinstance(row, dict)
+            or not isinstance(row.get("key"), str)
+            or not isinstance(row.get("status"), str)
+            or row["key"] != p.stem
+        ):
+            raise EvalError(
+                f"{p}: not a row of this run (a JSON object with the string 'key' {p.stem!r} "
+                "and a 'status'); delete it to recompute the pair"
+            )
+        rows.append(row)
     return rows
 
 
@@ -991,14 +1003,17 @@ def _check_out(cfg: EvalConfig, resume: bool, overwrite: bool) -> None:
         )
     try:
         old = json.loads(run.read_text(encoding="utf-8"))["config"]
-    except (json.JSONDecodeError, KeyError, UnicodeDecodeError) as e:
-        raise EvalError(f"{run}: unreadable ({e}); pass --overwrite to start over") from e
+        if not isinstance(old, dict):
+            raise TypeError("'config' is not a JSON object")
+    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError, RecursionError) as e:
+        reason = "nested too deep" if isinstance(e, RecursionError) else brief(str(e), 200)
+        raise EvalError(f"{run}: unreadable ({reason}); pass --overwrite to start over") from None
     new = cfg.to_dict()
     diff = [k for k in EvalConfig.RESUME_KEYS if old.get(k) != new.get(k)]
     if diff:
         raise EvalError(
             f"cannot resume {out}: it was run with other settings ("
-            + ", ".join(f"{k}: {old.get(k)!r} → {new.get(k)!r}" for k in diff)
+            + ", ".join(f"{k}: {brief(old.get(k))} → {brief(new.get(k))}" for k in diff)
             + "); use another --out or --overwrite"
         )
 
@@ -1038,7 +1053,7 @@ def run_benchmark(
     _check_out(cfg, resume, overwrite)
     tasks = plan_tasks(cfg)
     out = Path(cfg.out)
-    (out / "rows").mkdir(parents=True, exist_ok=True)
+    make_dirs(out / "rows", "--out")
     atomic_write_text(
         out / "run.json",
         json.dumps(

@@ -40,12 +40,13 @@ from __future__ import annotations
 import math
 import re
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .errors import BVHParseError, InvalidMotionError
+from .errors import BVHParseError, InvalidMotionError, brief, brief_path
 from .fileio import atomic_write
 from .rotations import quat_identity, quat_mul, quat_to_euler, quat_to_matrix
 
@@ -253,11 +254,20 @@ class BVHData:
 # ---------------------------------------------------------------------- parsing
 
 
-class _Tokens:
-    """Whitespace tokens of the HIERARCHY part with their 1-based line numbers."""
+class _PartEnded(Exception):
+    """The tokens of the start of an over-long file ran out (not an error of the file)."""
 
-    def __init__(self, lines: list[str], source: str):
+
+class _Tokens:
+    """Whitespace tokens of the HIERARCHY part with their 1-based line numbers.
+
+    With ``complete=False`` the lines are only the start of the file, and running out of
+    tokens raises :class:`_PartEnded` instead of a "truncated file" error.
+    """
+
+    def __init__(self, lines: list[str], source: str, complete: bool = True):
         self.source = source
+        self.complete = complete
         self.items: list[tuple[str, int, int]] = []  # (token, line, index within line)
         for n, line in enumerate(lines, start=1):
             for k, tok in enumerate(line.split()):
@@ -275,6 +285,8 @@ class _Tokens:
 
     def next(self, what: str) -> tuple[str, int]:
         if self.pos >= len(self.items):
+            if not self.complete:
+                raise _PartEnded
             raise self.error(
                 f"unexpected end of the HIERARCHY section, expected {what} "
                 "(truncated file or unbalanced braces?)"
@@ -286,7 +298,7 @@ class _Tokens:
     def expect(self, word: str) -> int:
         tok, line = self.next(repr(word))
         if tok.upper() != word.upper():
-            raise self.error(f"expected {word!r}, found {tok!r}", line)
+            raise self.error(f"expected {word!r}, found {brief(tok)}", line)
         return line
 
     def rest_of_line(self, line: int) -> list[str]:
@@ -301,9 +313,11 @@ class _Tokens:
         try:
             v = float(tok)
         except ValueError:
-            raise self.error(f"{what}: {tok!r} is not a number", line) from None
+            raise self.error(f"{what}: {brief(tok)} is not a number", line) from None
         if not math.isfinite(v):
-            raise self.error(f"{what}: non-finite value {tok!r}", line)
+            raise self.error(f"{what}: non-finite value {brief(tok)}", line)
+        if abs(v) > MAX_ABS_VALUE:
+            raise self.error(f"{what}: {brief(tok)}; valid: |value| <= {MAX_ABS_VALUE:g}", line)
         return v
 
 
@@ -330,14 +344,15 @@ def _parse_channels(tk: _Tokens, owner: str, line: int) -> tuple[str, ...]:
         n = int(tok)
     except ValueError:
         raise tk.error(
-            f"CHANNELS of {owner}: channel count {tok!r} is not an integer", n_line
+            f"CHANNELS of {owner}: channel count {brief(tok)} is not an integer", n_line
         ) from None
     if not 0 <= n <= 6:
         raise tk.error(f"CHANNELS of {owner}: {n} channels; a joint has 0 to 6", n_line)
     names = tk.rest_of_line(n_line)
     if len(names) != n:
         raise tk.error(
-            f"CHANNELS of {owner} declares {n} channels but lists {len(names)}: {' '.join(names)}",
+            f"CHANNELS of {owner} declares {n} channels but lists {len(names)}: "
+            + brief(" ".join(names)),
             n_line,
         )
     out = []
@@ -345,7 +360,7 @@ def _parse_channels(tk: _Tokens, owner: str, line: int) -> tuple[str, ...]:
         canon = _CHANNEL_CANON.get(c.lower())
         if canon is None:
             raise tk.error(
-                f"unknown channel {c!r} of {owner}; valid: "
+                f"unknown channel {brief(c)} of {owner}; valid: "
                 + ", ".join(POSITION_CHANNELS + ROTATION_CHANNELS),
                 n_line,
             )
@@ -355,7 +370,11 @@ def _parse_channels(tk: _Tokens, owner: str, line: int) -> tuple[str, ...]:
     return tuple(out)
 
 
-def _parse_joint(tk: _Tokens, b: _Builder, parent: int, kw_line: int) -> None:
+def _parse_joint(tk: _Tokens, b: _Builder, parent: int, kw_line: int, depth: int) -> None:
+    if depth >= MAX_DEPTH:
+        raise tk.error(f"joints nested {depth + 1} deep; valid: at most {MAX_DEPTH}", kw_line)
+    if len(b.names) >= MAX_JOINTS:
+        raise tk.error(f"more than {MAX_JOINTS} joints; valid: at most {MAX_JOINTS}", kw_line)
     name_toks = tk.rest_of_line(kw_line)
     opened = bool(name_toks) and name_toks[-1] == "{"
     if opened:
@@ -363,6 +382,8 @@ def _parse_joint(tk: _Tokens, b: _Builder, parent: int, kw_line: int) -> None:
     if not name_toks:
         raise tk.error("joint without a name", kw_line)
     name = " ".join(name_toks)
+    if len(name) > 200:
+        raise tk.error(f"joint name {brief(name)} longer than 200 characters", kw_line)
     if name in b.names:
         raise tk.error(f"duplicate joint name {name!r}", kw_line)
     if not opened:
@@ -389,7 +410,7 @@ def _parse_joint(tk: _Tokens, b: _Builder, parent: int, kw_line: int) -> None:
             b.channels[idx] = _parse_channels(tk, name, line)
             seen_channels = True
         elif kw == "JOINT":
-            _parse_joint(tk, b, idx, line)
+            _parse_joint(tk, b, idx, line, depth + 1)
             n_children += 1
         elif kw == "END":
             tk.expect("Site")
@@ -400,7 +421,7 @@ def _parse_joint(tk: _Tokens, b: _Builder, parent: int, kw_line: int) -> None:
         elif kw in ("MOTION", "ROOT", "HIERARCHY"):
             raise tk.error(f"found {tok} before joint {name!r} was closed with '}}'", line)
         else:
-            raise tk.error(f"unexpected {tok!r} in joint {name!r}", line)
+            raise tk.error(f"unexpected {brief(tok)} in joint {name!r}", line)
     if not seen_offset:
         raise tk.error(f"joint {name!r} has no OFFSET", kw_line)
 
@@ -409,7 +430,7 @@ def _parse_end_site(tk: _Tokens, b: _Builder, parent: int, parent_name: str) -> 
     tk.expect("{")
     tok, line = tk.next(f"OFFSET of the End Site of {parent_name!r}")
     if tok.upper() != "OFFSET":
-        raise tk.error(f"End Site of {parent_name!r}: expected OFFSET, found {tok!r}", line)
+        raise tk.error(f"End Site of {parent_name!r}: expected OFFSET, found {brief(tok)}", line)
     off = _parse_offset(tk, f"End Site of {parent_name}")
     tk.expect("}")
     name = parent_name + END_SITE_SUFFIX
@@ -426,6 +447,20 @@ def _parse_end_site(tk: _Tokens, b: _Builder, parent: int, parent_name: str) -> 
 
 _FRAMES_RE = re.compile(r"^\s*frames\s*:\s*(\S*)\s*$", re.IGNORECASE)
 _FTIME_RE = re.compile(r"^\s*frame\s+time\s*:\s*(\S*)\s*$", re.IGNORECASE)
+
+#: Sensible bounds of a BVH file; anything outside is a :class:`BVHParseError` naming it.
+#: Frame rates [Hz] a file may declare (through ``Frame Time``).
+FPS_RANGE = (1.0, 1000.0)
+#: Largest |OFFSET| or |channel value| (file units or degrees); beyond, a number is garbage.
+MAX_ABS_VALUE = 1e7
+#: Deepest joint nesting (the habitsim skeleton is 8 deep, real rigs about 20).
+MAX_DEPTH = 200
+#: Most joints (End Sites included) and frames of one file.
+MAX_JOINTS = 2000
+MAX_FRAMES = 1_000_000
+#: Longest line, and longest HIERARCHY part, read before the file is refused (bytes).
+MAX_LINE_BYTES = 1 << 20
+MAX_HIERARCHY_BYTES = 1 << 20
 
 
 def parse_bvh(text: str, source: str = "<string>", strict: bool = True) -> BVHData:
@@ -444,89 +479,97 @@ def parse_bvh(text: str, source: str = "<string>", strict: bool = True) -> BVHDa
     Raises:
         BVHParseError: malformed hierarchy, bad channel declarations, missing MOTION
             section / ``Frames:`` / ``Frame Time:``, truncated data, wrong number of values
-            on a frame line, non-numeric or non-finite values, non-positive frame time.
-            The message starts with ``source:line:``.
+            on a frame line, non-numeric or non-finite values, a frame time outside
+            :data:`FPS_RANGE`, offsets or values beyond :data:`MAX_ABS_VALUE`, a skeleton
+            whose offsets are all zero, nesting deeper than :data:`MAX_DEPTH`, more than
+            :data:`MAX_JOINTS` joints or :data:`MAX_FRAMES` frames. The message starts
+            with ``source:line:`` and quotes at most a short piece of any bad token.
     """
-    text = text.lstrip("\ufeff")
-    lines = text.splitlines()
+    return _parse_lines(iter(text.lstrip("\ufeff").splitlines()), source, strict)
+
+
+def _parse_lines(lines: Iterator[str], source: str, strict: bool) -> BVHData:
+    """Parse BVH lines read one at a time: the HIERARCHY part (at most
+    :data:`MAX_HIERARCHY_BYTES`) is kept until the MOTION line, the frame lines are
+    converted as they come, so a malformed file fails before it is read whole."""
     # Split off the MOTION section (line based) from the HIERARCHY part (token based).
+    head: list[str] = []
+    size = 0
     motion_line = None
-    for i, text_line in enumerate(lines):
+    for text_line in lines:
         if text_line.strip().upper() == "MOTION":
-            motion_line = i
+            motion_line = len(head)
             break
-    head = lines if motion_line is None else lines[:motion_line]
-    tk = _Tokens(head, source)
-    if tk.peek() is None:
-        raise BVHParseError(f"{source}:1: empty file, expected HIERARCHY")
-    tk.expect("HIERARCHY")
-    tok, ln_no = tk.next("ROOT")
-    if tok.upper() != "ROOT":
-        raise tk.error(f"expected ROOT, found {tok!r}", ln_no)
-    b = _Builder()
-    _parse_joint(tk, b, -1, ln_no)
-    if tk.peek() is not None:
-        tok, ln_no = tk.next("MOTION")
-        if tok.upper() == "ROOT":
-            raise tk.error(
-                "more than one ROOT: only single-skeleton BVH files are supported", ln_no
+        head.append(text_line)
+        size += len(text_line) + 1
+        if size > MAX_HIERARCHY_BYTES:
+            # a hierarchy this long is no hierarchy: report what is wrong in it, if anything
+            _parse_hierarchy(head, source, complete=False)
+            raise BVHParseError(
+                f"{source}:{len(head)}: no MOTION section in the first "
+                f"{MAX_HIERARCHY_BYTES >> 20} MB (a HIERARCHY is far shorter)"
             )
-        raise tk.error(f"unexpected {tok!r} after the hierarchy, expected MOTION", ln_no)
+    b = _parse_hierarchy(head, source, complete=True)
     if motion_line is None:
-        raise BVHParseError(f"{source}:{len(lines)}: no MOTION section (truncated file?)")
+        raise BVHParseError(f"{source}:{len(head)}: no MOTION section (truncated file?)")
 
     n_channels = sum(len(c) for c in b.channels)
+    n = motion_line + 1  # 1-based number of the MOTION line
+    numbered = _numbered_nonempty(lines, n)
     # Header lines of MOTION.
-    i = motion_line + 1
-
-    def next_nonempty(k: int) -> int:
-        while k < len(lines) and not lines[k].strip():
-            k += 1
-        return k
-
-    i = next_nonempty(i)
-    if i >= len(lines):
-        raise BVHParseError(f"{source}:{motion_line + 1}: MOTION section without 'Frames:' line")
-    m = _FRAMES_RE.match(lines[i])
+    item = next(numbered, None)
+    if item is None:
+        raise BVHParseError(f"{source}:{n}: MOTION section without 'Frames:' line")
+    ln, line = item
+    m = _FRAMES_RE.match(line)
     if not m:
-        raise BVHParseError(f"{source}:{i + 1}: expected 'Frames: N', found {lines[i].strip()!r}")
+        raise BVHParseError(f"{source}:{ln}: expected 'Frames: N', found {brief(line.strip())}")
     try:
-        n_frames = int(m.group(1))
+        n_frames = int(m.group(1)) if len(m.group(1)) <= 20 else None
     except ValueError:
+        n_frames = None
+    if n_frames is None:
         raise BVHParseError(
-            f"{source}:{i + 1}: frame count {m.group(1)!r} is not an integer"
-        ) from None
-    if n_frames < 1:
-        raise BVHParseError(
-            f"{source}:{i + 1}: the file declares {n_frames} frames; need at least 1"
+            f"{source}:{ln}: frame count {brief(m.group(1))} is not an integer"
         )
-    i = next_nonempty(i + 1)
-    if i >= len(lines):
-        raise BVHParseError(f"{source}:{len(lines)}: missing 'Frame Time:' line (truncated file?)")
-    m = _FTIME_RE.match(lines[i])
+    if not 1 <= n_frames <= MAX_FRAMES:
+        raise BVHParseError(
+            f"{source}:{ln}: the file declares {n_frames} frames; valid: 1 to {MAX_FRAMES}"
+        )
+    last_ln = ln
+    item = next(numbered, None)
+    if item is None:
+        raise BVHParseError(f"{source}:{last_ln}: missing 'Frame Time:' line (truncated file?)")
+    ln, line = item
+    m = _FTIME_RE.match(line)
     if not m:
         raise BVHParseError(
-            f"{source}:{i + 1}: expected 'Frame Time: seconds', found {lines[i].strip()!r}"
+            f"{source}:{ln}: expected 'Frame Time: seconds', found {brief(line.strip())}"
         )
     try:
         frame_time = float(m.group(1))
     except ValueError:
         raise BVHParseError(
-            f"{source}:{i + 1}: frame time {m.group(1)!r} is not a number"
+            f"{source}:{ln}: frame time {brief(m.group(1))} is not a number"
         ) from None
-    if not math.isfinite(frame_time) or frame_time <= 0:
+    lo, hi = 1.0 / FPS_RANGE[1], 1.0 / FPS_RANGE[0]
+    if not (math.isfinite(frame_time) and lo * (1 - 1e-9) <= frame_time <= hi * (1 + 1e-9)):
         raise BVHParseError(
-            f"{source}:{i + 1}: frame time must be positive and finite, got {m.group(1)}"
+            f"{source}:{ln}: frame time must be positive and finite, from {lo:g} to {hi:g} s "
+            f"(a frame rate of {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} Hz), got {brief(m.group(1))}"
         )
 
     # Frame lines.
     rows: list[np.ndarray] = []
     row_lines: list[int] = []
     problem: str | None = None
-    data_lines = [(k + 1, lines[k]) for k in range(i + 1, len(lines)) if lines[k].strip()]
-    for idx, (ln, line) in enumerate(data_lines):
+    item = next(numbered, None)
+    while item is not None:
+        ln, line = item
+        last_ln = ln
+        item = next(numbered, None)
+        last = item is None
         toks = line.split()
-        last = idx == len(data_lines) - 1
         try:
             vals = np.array(toks, dtype=np.float64)
         except ValueError:
@@ -535,7 +578,7 @@ def parse_bvh(text: str, source: str = "<string>", strict: bool = True) -> BVHDa
                 vals = np.array(toks[:-1], dtype=np.float64)  # a number cut off at end of file
             else:
                 raise BVHParseError(
-                    f"{source}:{ln}: value {c + 1} ({_channel_label(b, c)}) {toks[c]!r} "
+                    f"{source}:{ln}: value {c + 1} ({_channel_label(b, c)}) {brief(toks[c])} "
                     "is not a number"
                 ) from None
         if vals.size != n_channels:
@@ -549,29 +592,31 @@ def parse_bvh(text: str, source: str = "<string>", strict: bool = True) -> BVHDa
                 f"{source}:{ln}: frame line holds {vals.size} values but the hierarchy declares "
                 f"{n_channels} channels"
             )
-        bad = ~np.isfinite(vals)
+        bad = ~(np.abs(vals) <= MAX_ABS_VALUE)
         if bad.any():
             c = int(np.flatnonzero(bad)[0])
+            kind = "non-finite value" if not np.isfinite(vals[c]) else "value"
             raise BVHParseError(
-                f"{source}:{ln}: non-finite value {toks[c]!r} in value {c + 1} "
-                f"({_channel_label(b, c)})"
+                f"{source}:{ln}: {kind} {brief(toks[c])} in value {c + 1} "
+                f"({_channel_label(b, c)}); valid: |value| <= {MAX_ABS_VALUE:g}"
             )
         rows.append(vals)
         row_lines.append(ln)
+        if len(rows) > n_frames:
+            break  # more frames than declared: no need to read the rest
     if problem is None and len(rows) < n_frames:
         problem = (
-            f"{source}:{len(lines)}: the file declares {n_frames} frames but holds "
+            f"{source}:{last_ln}: the file declares {n_frames} frames but holds "
             f"{len(rows)} (truncated file?)"
         )
     if problem is None and len(rows) > n_frames:
         problem = (
-            f"{source}:{row_lines[n_frames]}: the file declares {n_frames} frames but holds "
-            f"{len(rows)}"
+            f"{source}:{row_lines[n_frames]}: the file declares {n_frames} frames but holds more"
         )
     if problem is not None:
         if strict or not rows:
             raise BVHParseError(problem)
-        warnings.warn(problem + "; keeping the complete frames", stacklevel=2)
+        warnings.warn(problem + "; keeping the complete frames", stacklevel=3)
         rows = rows[:n_frames]
     frames = np.stack(rows) if n_channels else np.zeros((len(rows), 0))
     return BVHData(
@@ -584,6 +629,45 @@ def parse_bvh(text: str, source: str = "<string>", strict: bool = True) -> BVHDa
         frames=frames,
         source=source,
     )
+
+
+def _numbered_nonempty(lines: Iterator[str], after: int) -> Iterator[tuple[int, str]]:
+    """(1-based line number, line) of the non-blank lines of ``lines``, numbered from
+    ``after + 1``."""
+    for k, line in enumerate(lines, start=after + 1):
+        if line.strip():
+            yield k, line
+
+
+def _parse_hierarchy(head: list[str], source: str, complete: bool) -> _Builder:
+    """Parse the HIERARCHY lines; with ``complete=False`` (the start of an over-long
+    file) only a malformation inside that part is reported, running out of it is not."""
+    tk = _Tokens(head, source, complete)
+    try:
+        if tk.peek() is None:
+            raise BVHParseError(f"{source}:1: empty file, expected HIERARCHY")
+        tk.expect("HIERARCHY")
+        tok, ln_no = tk.next("ROOT")
+        if tok.upper() != "ROOT":
+            raise tk.error(f"expected ROOT, found {brief(tok)}", ln_no)
+        b = _Builder()
+        _parse_joint(tk, b, -1, ln_no, depth=0)
+        if tk.peek() is not None:
+            tok, ln_no = tk.next("MOTION")
+            if tok.upper() == "ROOT":
+                raise tk.error(
+                    "more than one ROOT: only single-skeleton BVH files are supported", ln_no
+                )
+            raise tk.error(f"unexpected {brief(tok)} after the hierarchy, expected MOTION", ln_no)
+    except _PartEnded:
+        return _Builder()
+    offsets = np.asarray(b.offsets, dtype=np.float64).reshape(-1, 3)
+    if len(b.names) > 1 and not np.any(offsets[1:]):
+        raise BVHParseError(
+            f"{source}: every joint OFFSET is zero, so the skeleton has no size; "
+            "valid: at least one non-zero OFFSET below the root"
+        )
+    return b
 
 
 def _is_number(tok: str) -> bool:
@@ -605,29 +689,51 @@ def _channel_label(b: _Builder, column: int) -> str:
 
 
 def read_bvh(path: str | Path, strict: bool = True) -> BVHData:
-    """Read a BVH file.
+    """Read a BVH file, line by line (a malformed file fails without being read whole).
 
     Args:
         path: the ``.bvh`` file.
         strict: see :func:`parse_bvh`.
 
     Raises:
-        BVHParseError: missing / unreadable file or any problem listed in :func:`parse_bvh`.
+        BVHParseError: missing / unreadable file, binary data, a line longer than
+            :data:`MAX_LINE_BYTES` or any problem listed in :func:`parse_bvh`.
     """
     p = Path(path)
     try:
-        raw = p.read_bytes()
+        fh = p.open("rb")
     except FileNotFoundError:
-        raise BVHParseError(f"{p}: no such BVH file") from None
+        raise BVHParseError(f"{brief_path(p)}: no such BVH file") from None
     except OSError as e:
-        raise BVHParseError(f"{p}: cannot read BVH file ({e})") from e
-    if b"\x00" in raw[:4096]:
-        raise BVHParseError(f"{p}: binary data, not a BVH text file")
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
-    return parse_bvh(text, source=str(p), strict=strict)
+        raise BVHParseError(f"{brief_path(p)}: cannot read BVH file ({e.strerror})") from None
+    with fh:
+        try:
+            if b"\x00" in fh.read(4096):
+                raise BVHParseError(f"{brief_path(p)}: binary data, not a BVH text file")
+            fh.seek(0)
+            return _parse_lines(_file_lines(fh, str(p)), str(p), strict)
+        except OSError as e:
+            raise BVHParseError(f"{brief_path(p)}: cannot read BVH file ({e.strerror})") from None
+
+
+def _file_lines(fh, source: str) -> Iterator[str]:
+    """Decoded lines of a binary file (UTF-8, Latin-1 where that fails), at most
+    :data:`MAX_LINE_BYTES` each; a BOM at the start is dropped."""
+    first = True
+    for n, raw in enumerate(iter(lambda: fh.readline(MAX_LINE_BYTES + 1), b""), start=1):
+        if len(raw) > MAX_LINE_BYTES:
+            raise BVHParseError(
+                f"{source}:{n}: line longer than {MAX_LINE_BYTES >> 20} MB; not a BVH file"
+            )
+        try:
+            line = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            line = raw.decode("latin-1")
+        if first:
+            line = line.lstrip("\ufeff")
+            first = False
+        # the same line breaks as str.splitlines() on the whole text
+        yield from line.splitlines() or [""]
 
 
 # ---------------------------------------------------------------------- writing

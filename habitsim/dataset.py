@@ -62,8 +62,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import DatasetError, HabitsimError
-from .fileio import atomic_write_text
+from .errors import DatasetError, HabitsimError, brief
+from .fileio import atomic_write_text, make_dirs
 from .gaits import ACTIONS, GENERATOR_VERSION, available_actions, generate
 from .motion import Motion, load_motion
 from .species import FEET, all_species, load_species
@@ -95,6 +95,11 @@ STATS_CSV_NAME = "stats.csv"
 STATS_MD_NAME = "stats.md"
 #: Version of the manifest layout (bumped when keys change meaning).
 MANIFEST_FORMAT_VERSION = 1
+#: Frame rates [Hz] the synthetic generator is built for (higher only costs time).
+SYNTH_FPS_RANGE = (1.0, 240.0)
+#: Most clips per species of one build, and the largest build seed.
+MAX_CLIPS_PER_SPECIES = 10_000
+MAX_SEED = 2**32 - 1
 #: Value of the manifest's ``kind`` key.
 DATASET_KIND = "habitsim.synthetic_gaits"
 SPLITS: tuple[str, ...] = ("train", "val", "test")
@@ -216,8 +221,14 @@ class ClipEntry:
             v = d[k]
             if not isinstance(v, types) or (bool not in types and isinstance(v, bool)):
                 kind = "/".join(t.__name__ for t in types)
-                raise DatasetError(f"{where}: {k!r} must be {kind}, got {v!r}")
-        measured = {str(k): (None if v is None else float(v)) for k, v in d["measured"].items()}
+                raise DatasetError(f"{where}: {k!r} must be {kind}, got {brief(v)}")
+        measured: dict[str, float | None] = {}
+        for k, v in d["measured"].items():
+            if v is not None and (isinstance(v, bool) or not isinstance(v, int | float)):
+                raise DatasetError(
+                    f"{where}: measured {brief(k)} must be a number or null, got {brief(v)}"
+                )
+            measured[str(k)] = None if v is None else float(v)
         vals = {k: d[k] for k in kinds if k != "measured"}
         for k, types in kinds.items():
             if types == (int, float):
@@ -373,9 +384,15 @@ def clip_split(action: str, pair_index: int, held_out: bool) -> str:
     return _SPLIT_AT.get(pos, "train")
 
 
-def _check_int(name: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
-        raise DatasetError(f"{name} must be an integer ≥ {minimum}, got {value!r}")
+def _check_int(name: str, value: Any, minimum: int, maximum: int | None = None) -> int:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | np.integer)
+        or value < minimum
+        or (maximum is not None and value > maximum)
+    ):
+        valid = f"≥ {minimum}" if maximum is None else f"from {minimum} to {maximum}"
+        raise DatasetError(f"{name} must be an integer {valid}, got {brief(value)}")
     return int(value)
 
 
@@ -506,8 +523,9 @@ def _make_clip(root: str, job: ClipJob, resume: bool) -> tuple[dict[str, Any], b
 def _read_manifest_json(path: Path) -> dict[str, Any]:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise DatasetError(f"{path}: not a readable manifest ({e})") from e
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
+        reason = "nested too deep" if isinstance(e, RecursionError) else brief(str(e), 200)
+        raise DatasetError(f"{path}: not a readable manifest ({reason})") from None
     if not isinstance(data, dict) or data.get("kind") != DATASET_KIND:
         raise DatasetError(
             f"{path}: not a habitsim synthetic data set manifest (kind != {DATASET_KIND!r})"
@@ -515,7 +533,7 @@ def _read_manifest_json(path: Path) -> dict[str, Any]:
     version = data.get("format_version")
     if version != MANIFEST_FORMAT_VERSION:
         raise DatasetError(
-            f"{path}: manifest format_version {version!r}; "
+            f"{path}: manifest format_version {brief(version)}; "
             f"this habitsim reads {MANIFEST_FORMAT_VERSION}"
         )
     return data
@@ -634,13 +652,20 @@ def build_dataset(
         UnknownSpeciesError: an unknown species name.
     """
     t0 = time.perf_counter()
-    clips_per_species = _check_int("clips_per_species", clips_per_species, 1)
-    seed = _check_int("seed", seed, 0)
+    clips_per_species = _check_int(
+        "clips_per_species", clips_per_species, 1, MAX_CLIPS_PER_SPECIES
+    )
+    seed = _check_int("seed", seed, 0, MAX_SEED)
     number = isinstance(fps, int | float) and not isinstance(fps, bool)
     if not (number and math.isfinite(fps) and fps > 0):
-        raise DatasetError(f"fps must be a positive number, got {fps!r}")
+        raise DatasetError(f"fps must be a positive number, got {brief(fps)}")
+    lo, hi = SYNTH_FPS_RANGE
+    if not lo <= fps <= hi:
+        raise DatasetError(f"fps {fps:g} Hz; valid: {lo:g} to {hi:g} Hz for synthetic clips")
     fps = float(fps)
-    n_workers = (os.cpu_count() or 1) if workers is None else _check_int("workers", workers, 1)
+    n_workers = (
+        (os.cpu_count() or 1) if workers is None else _check_int("workers", workers, 1, 1024)
+    )
     names = _resolve_species(species)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -651,7 +676,7 @@ def build_dataset(
         check_resumable(out, seed=seed, fps=fps)
 
     jobs = plan_clips(names, clips_per_species, seed, fps)
-    out.mkdir(parents=True, exist_ok=True)
+    make_dirs(out, "data set folder")
     # From here on the folder is "being built": no manifest until the end.
     for name in (MANIFEST_NAME, STATS_CSV_NAME, STATS_MD_NAME):
         (out / name).unlink(missing_ok=True)
@@ -674,7 +699,12 @@ def build_dataset(
                 generated += made
                 bar.update(1)
         else:
-            with cf.ProcessPoolExecutor(max_workers=n_workers) as pool:
+            from .workers import init_worker, stop_pool
+
+            # workers die with this process, however it ends (see habitsim.workers)
+            with cf.ProcessPoolExecutor(
+                max_workers=n_workers, initializer=init_worker, initargs=(os.getpid(),)
+            ) as pool:
                 futures = {
                     pool.submit(_make_clip, str(out), job, resume): i for i, job in enumerate(jobs)
                 }
@@ -684,7 +714,7 @@ def build_dataset(
                         generated += made
                         bar.update(1)
                 except BaseException:
-                    pool.shutdown(wait=True, cancel_futures=True)
+                    stop_pool(pool)
                     raise
     _remove_empty_dirs(out)
 
@@ -723,9 +753,12 @@ def build_dataset(
 
 def _safe_relpath(p: str, where: str) -> str:
     pp = PurePosixPath(p)
-    if pp.is_absolute() or ".." in pp.parts or "\\" in p or not p.endswith(".npz"):
+    if (
+        pp.is_absolute() or ".." in pp.parts or "\\" in p or "\x00" in p or not p.endswith(".npz")
+        or len(p) > 1024 or any(len(part) > 255 for part in pp.parts)
+    ):
         raise DatasetError(
-            f"{where}: clip path {p!r} must be a relative .npz path inside the data set"
+            f"{where}: clip path {brief(p)} must be a relative .npz path inside the data set"
         )
     return p
 
@@ -761,7 +794,9 @@ def load_manifest(dataset_dir: str | Path, *, check_files: bool = True) -> Datas
     for s in data["species"]:
         ok = isinstance(s, dict) and isinstance(s.get("name"), str)
         if not ok or not isinstance(s.get("held_out"), bool):
-            raise DatasetError(f"{mpath}: species entries need 'name' and 'held_out', got {s!r}")
+            raise DatasetError(
+                f"{mpath}: species entries need 'name' and 'held_out', got {brief(s)}"
+            )
         species.append(dict(s))
     held = {s["name"]: s["held_out"] for s in species}
     clips: list[ClipEntry] = []

@@ -19,7 +19,7 @@ class UnknownSpeciesError(HabitsimError, KeyError):
     def __init__(self, name: str, known: Iterable[str]):
         self.name = name
         self.known = sorted(known)
-        super().__init__(f"unknown species {name!r}; known: {', '.join(self.known)}")
+        super().__init__(f"unknown species {brief(name)}; known: {', '.join(self.known)}")
 
     def __str__(self) -> str:  # KeyError would quote the whole message
         return self.args[0]
@@ -62,6 +62,47 @@ class DatasetError(HabitsimError, ValueError):
     """A data set folder that is missing files or has an inconsistent manifest."""
 
 
+class OutputPathError(HabitsimError, OSError):
+    """An output path that cannot be written: a file where a folder should be, a folder
+    where a file should be, a read-only folder, a full disk."""
+
+
+class ArgumentRangeError(HabitsimError, ValueError):
+    """A command-line or API argument outside its physically sensible range."""
+
+
+#: Longest message text a value is echoed with (:func:`brief`).
+BRIEF_CHARS = 60
+#: Longest message the command line prints after ``error:``.
+MAX_MESSAGE_CHARS = 2000
+
+
 def unknown_choice(kind: str, value: object, valid: Iterable[str]) -> str:
     """Format the standard "unknown X 'v'; valid: a, b, c" message."""
     return f"unknown {kind} {value!r}; valid: {', '.join(sorted(valid))}"
+
+
+def brief(value: object, limit: int = BRIEF_CHARS) -> str:
+    """``repr(value)`` cut to ``limit`` characters, so a 5 MB token or a huge array never
+    ends up whole in an error message."""
+    if isinstance(value, str | bytes) and len(value) > 4 * limit:
+        value = value[: 4 * limit]  # repr of a huge string costs its whole length
+        text = repr(value)
+        return text[:limit] + "…"
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + f"… ({len(text)} characters)"
+
+
+def bounded(message: str, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """``message`` cut to ``limit`` characters (the rest elided with its length)."""
+    if len(message) <= limit:
+        return message
+    return message[:limit] + f"… ({len(message)} characters)"
+
+
+
+def brief_path(path: object, limit: int = 160) -> str:
+    """A path for a message: only its last ``limit`` characters when longer (the file
+    name is the informative end)."""
+    text = str(path)
+    return text if len(text) <= limit else "…" + text[-limit:]

@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import json
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .errors import InvalidMotionError, MotionFileError
+from .errors import InvalidMotionError, MotionFileError, brief, brief_path
 from .fileio import atomic_write
 from .rotations import quat_fix_continuity, quat_slerp
 from .skeleton import JOINT_NAMES, Skeleton, get_skeleton
@@ -42,6 +43,16 @@ __all__ = [
 ]
 
 FORMAT_VERSION = 1
+#: Frame rates [Hz] a motion may have.
+FPS_RANGE = (1.0, 1000.0)
+#: Largest |coordinate| of the root [m]: beyond, a number is garbage, not a place.
+MAX_ABS_POSITION_M = 1e5
+#: Largest total decompressed size of a motion file's arrays [bytes] (read from the zip
+#: headers before anything is decompressed: ~290,000 frames).
+MAX_FILE_BYTES = 256 << 20
+#: Deepest nesting of ``metadata_json`` and longest text of a string field.
+MAX_METADATA_DEPTH = 32
+MAX_TEXT_CHARS = 1 << 20
 #: Per-frame feature size of the paper's representation: J·4 quaternions + J·3 velocities.
 FEATURE_DIM = len(JOINT_NAMES) * 7
 #: Actions that a sagittal reflection turns into one another (:meth:`Motion.mirrored`).
@@ -71,14 +82,22 @@ class Motion:
     def __post_init__(self) -> None:
         sp = load_species(self.species)  # raises UnknownSpeciesError with the list
         self.species = sp.name
+        fps = self.fps
+        if isinstance(fps, np.ndarray) and fps.ndim == 0:
+            fps = fps[()]
+        if isinstance(fps, bool | np.bool_) or not isinstance(fps, int | float | np.number):
+            raise InvalidMotionError(f"fps must be a number, got {brief(fps)}")
         try:
-            self.fps = float(self.fps)
-        except (TypeError, ValueError):
-            raise InvalidMotionError(f"fps must be a number, got {self.fps!r}") from None
+            self.fps = float(fps)
+        except (TypeError, ValueError, OverflowError):
+            raise InvalidMotionError(f"fps must be a number, got {brief(fps)}") from None
+        lo, hi = FPS_RANGE
         if not np.isfinite(self.fps) or self.fps <= 0:
-            raise InvalidMotionError(f"fps must be positive and finite, got {self.fps}")
-        rp = np.asarray(self.root_positions, dtype=np.float64)
-        q = np.asarray(self.rotations, dtype=np.float64)
+            raise InvalidMotionError(f"fps must be positive and finite, got {self.fps:g}")
+        if not lo <= self.fps <= hi:
+            raise InvalidMotionError(f"fps {self.fps:g} Hz; valid: {lo:g} to {hi:g} Hz")
+        rp = _float_array(self.root_positions, "root_positions")
+        q = _float_array(self.rotations, "rotations")
         j = len(JOINT_NAMES)
         if q.ndim != 3 or q.shape[1:] != (j, 4):
             raise InvalidMotionError(f"rotations must have shape (T, {j}, 4), got {q.shape}")
@@ -89,6 +108,11 @@ class Motion:
             raise InvalidMotionError(f"root_positions must have shape ({t}, 3), got {rp.shape}")
         if not np.all(np.isfinite(rp)):
             raise InvalidMotionError("root_positions contain NaN or inf")
+        if np.any(np.abs(rp) > MAX_ABS_POSITION_M):
+            raise InvalidMotionError(
+                f"root_positions reach {np.abs(rp).max():.3g} m; valid: |coordinate| <= "
+                f"{MAX_ABS_POSITION_M:g} m"
+            )
         if not np.all(np.isfinite(q)):
             raise InvalidMotionError("rotations contain NaN or inf")
         n = np.linalg.norm(q, axis=-1)
@@ -102,6 +126,8 @@ class Motion:
         self.rotations = q / n[..., None]
         if self.contacts is not None:
             c = np.asarray(self.contacts)
+            if c.dtype.kind not in "biuf":
+                raise InvalidMotionError(f"contacts must be booleans, got dtype {c.dtype.str}")
             if c.shape != (t, 4):
                 raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
             self.contacts = c.astype(bool)
@@ -284,42 +310,188 @@ def resample_motion(motion: Motion, fps: float) -> Motion:
     return Motion(motion.species, float(fps), root, rot, contacts, dict(motion.metadata))
 
 
+def _float_array(v: Any, what: str) -> np.ndarray:
+    """``v`` as a float64 array; strings, objects or ragged lists are an InvalidMotionError."""
+    a = np.asarray(v) if not isinstance(v, np.ndarray) else v
+    if a.dtype.kind not in "biuf":
+        raise InvalidMotionError(f"{what} must hold numbers, got dtype {a.dtype.str}")
+    return a.astype(np.float64, copy=False)
+
+
+def _check_zip(p: Path) -> None:
+    """Refuse a file that is not a zip archive of ``.npy`` members, or whose members would
+    decompress to more than :data:`MAX_FILE_BYTES` (read from the zip headers: no member
+    is decompressed here)."""
+    try:
+        with p.open("rb") as fh:
+            magic = fh.read(4)
+    except OSError as e:
+        raise MotionFileError(f"{brief_path(p)}: cannot read motion file ({e.strerror})") from None
+    if magic == b"\x93NUM":
+        raise MotionFileError(
+            f"{brief_path(p)}: not a readable .npz motion file (a single .npy array saved "
+            "under a .npz name); a motion file is the .npz archive written by Motion.save"
+        )
+    if magic[:2] != b"PK":
+        raise MotionFileError(
+            f"{brief_path(p)}: not a readable .npz motion file (not a zip archive); a motion "
+            "file is the .npz archive written by Motion.save"
+        )
+    try:
+        with zipfile.ZipFile(p) as zf:
+            infos = zf.infolist()
+    except (OSError, zipfile.BadZipFile, ValueError, EOFError, NotImplementedError) as e:
+        raise MotionFileError(
+            f"{brief_path(p)}: not a readable .npz motion file (corrupt zip: {brief(str(e))})"
+        ) from None
+    if len(infos) > 64:
+        raise MotionFileError(f"{brief_path(p)}: {len(infos)} arrays; a motion file has at most 8")
+    total = sum(i.file_size for i in infos)
+    if total > MAX_FILE_BYTES:
+        raise MotionFileError(
+            f"{brief_path(p)}: its arrays would decompress to {total / 2**20:.0f} MB; valid: at "
+            f"most {MAX_FILE_BYTES >> 20} MB (~290,000 frames)"
+        )
+
+
+def _text(data: dict[str, np.ndarray], key: str, p: Path) -> str:
+    """A 0-d string field of a motion file."""
+    v = data[key]
+    if v.ndim != 0 or v.dtype.kind != "U":
+        raise MotionFileError(
+            f"{brief_path(p)}: {key} must be a single string, got dtype {v.dtype.str} "
+            f"shape {v.shape}"
+        )
+    text = str(v[()])
+    if len(text) > MAX_TEXT_CHARS:
+        raise MotionFileError(
+            f"{brief_path(p)}: {key} holds {len(text)} characters; valid: at most {MAX_TEXT_CHARS}"
+        )
+    return text
+
+
+def _number(data: dict[str, np.ndarray], key: str, p: Path) -> float:
+    """A 0-d real number field of a motion file."""
+    v = data[key]
+    if v.ndim != 0 or v.dtype.kind not in "iuf":
+        raise MotionFileError(
+            f"{brief_path(p)}: {key} must be a single number, got dtype {v.dtype.str} "
+            f"shape {v.shape}"
+        )
+    return float(v[()])
+
+
+def _depth(obj: Any) -> int:
+    """Nesting depth of a JSON value (iterative: a deep value cannot exhaust the stack)."""
+    deepest, stack = 0, [(obj, 1)]
+    while stack:
+        o, d = stack.pop()
+        deepest = max(deepest, d)
+        if d > MAX_METADATA_DEPTH:
+            break
+        if isinstance(o, dict):
+            stack.extend((x, d + 1) for x in o.values())
+        elif isinstance(o, list):
+            stack.extend((x, d + 1) for x in o)
+    return deepest
+
+
 def load_motion(path: str | Path) -> Motion:
     """Read a motion ``.npz`` written by :meth:`Motion.save`.
 
+    The file is checked before any array is decompressed: it must be a zip archive (not
+    a bare ``.npy``, not pickled objects) whose arrays decompress to at most
+    :data:`MAX_FILE_BYTES`. Every field is then checked for its dtype and shape.
+
     Raises:
-        MotionFileError: missing file, not an npz, missing keys, unknown format version or
-            joint names that differ from the habitsim skeleton.
+        MotionFileError: missing file, not an npz, too large, missing keys, a field of the
+            wrong type or shape, unknown format version, joint names that differ from the
+            habitsim skeleton, ``metadata_json`` that is not a JSON object of at most
+            :data:`MAX_METADATA_DEPTH` levels.
         InvalidMotionError / UnknownSpeciesError: bad array contents or species.
     """
     p = Path(path)
     if not p.is_file():
-        raise MotionFileError(f"{p}: no such motion file")
+        raise MotionFileError(f"{brief_path(p)}: no such motion file")
+    _check_zip(p)
     try:
         with np.load(p, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
-        raise MotionFileError(f"{p}: not a readable .npz motion file ({e})") from e
+    except ValueError as e:
+        if "pickle" in str(e).lower():  # numpy's advice (allow_pickle=True) is not ours
+            raise MotionFileError(
+                f"{brief_path(p)}: holds Python objects (pickled data), which habitsim never "
+                "loads; a motion file holds numeric and string arrays only"
+            ) from None
+        raise MotionFileError(
+            f"{brief_path(p)}: not a readable .npz motion file ({brief(str(e))})"
+        ) from None
+    except (
+        OSError, zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, MemoryError
+    ) as e:
+        raise MotionFileError(
+            f"{brief_path(p)}: not a readable .npz motion file ({brief(str(e))})"
+        ) from None
+    except Exception as e:  # noqa: BLE001 - only numpy's and zipfile's decoding ran here
+        # a corrupt .npy header reaches numpy's header parser (tokenize / ast errors)
+        raise MotionFileError(
+            f"{brief_path(p)}: not a readable .npz motion file (corrupt array header: "
+            f"{type(e).__name__})"
+        ) from None
     missing = [k for k in _REQUIRED if k not in data]
     if missing:
-        raise MotionFileError(f"{p}: missing keys {missing}; a motion file has {list(_REQUIRED)}")
-    version = int(data["format_version"])
+        raise MotionFileError(
+            f"{brief_path(p)}: missing keys {missing}; a motion file has {list(_REQUIRED)}"
+        )
+    v = data["format_version"]
+    if v.ndim != 0 or v.dtype.kind not in "iu":
+        raise MotionFileError(
+            f"{brief_path(p)}: format_version must be a single integer, got dtype "
+            f"{v.dtype.str} shape {v.shape}; this habitsim reads {FORMAT_VERSION}"
+        )
+    version = int(v[()])
     if version != FORMAT_VERSION:
-        raise MotionFileError(f"{p}: format_version {version}; this habitsim reads {FORMAT_VERSION}")
-    names = tuple(str(n) for n in data["joint_names"])
+        raise MotionFileError(
+            f"{brief_path(p)}: format_version {version}; this habitsim reads {FORMAT_VERSION}"
+        )
+    jn = data["joint_names"]
+    if jn.ndim != 1 or jn.dtype.kind != "U":
+        raise MotionFileError(
+            f"{brief_path(p)}: joint_names must be a list of strings, got dtype {jn.dtype.str} "
+            f"shape {jn.shape}"
+        )
+    names = tuple(str(n) for n in jn)
     if names != JOINT_NAMES:
         raise MotionFileError(
-            f"{p}: joint names do not match the habitsim skeleton ({len(names)} vs {len(JOINT_NAMES)} joints)"
+            f"{brief_path(p)}: joint names do not match the habitsim skeleton ({len(names)} vs "
+            f"{len(JOINT_NAMES)} joints)"
         )
     meta: dict[str, Any] = {}
     if "metadata_json" in data:
+        text = _text(data, "metadata_json", p)
         try:
-            meta = json.loads(str(data["metadata_json"]))
-        except json.JSONDecodeError as e:
-            raise MotionFileError(f"{p}: metadata_json is not valid JSON ({e})") from e
+            meta = json.loads(text)
+        except (json.JSONDecodeError, RecursionError) as e:
+            reason = "nested too deep" if isinstance(e, RecursionError) else brief(str(e))
+            raise MotionFileError(
+                f"{brief_path(p)}: metadata_json is not valid JSON ({reason})"
+            ) from None
+        if not isinstance(meta, dict):
+            raise MotionFileError(
+                f"{brief_path(p)}: metadata_json must be a JSON object, got {type(meta).__name__}"
+            )
+        if _depth(meta) > MAX_METADATA_DEPTH:
+            raise MotionFileError(
+                f"{brief_path(p)}: metadata_json nested more than {MAX_METADATA_DEPTH} levels deep"
+            )
+    for key in ("root_positions", "rotations", "contacts"):
+        if key in data and data[key].dtype.kind not in "biuf":
+            raise MotionFileError(
+                f"{brief_path(p)}: {key} must hold numbers, got dtype {data[key].dtype.str}"
+            )
     return Motion(
-        species=str(data["species"]),
-        fps=float(data["fps"]),
+        species=_text(data, "species", p),
+        fps=_number(data, "fps", p),
         root_positions=data["root_positions"],
         rotations=data["rotations"],
         contacts=data.get("contacts"),

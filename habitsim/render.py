@@ -19,14 +19,13 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import os
-import tempfile
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from .errors import HabitsimError
-from .fileio import atomic_write
+from .fileio import atomic_path, atomic_write
 
 __all__ = [
     "RenderError",
@@ -150,22 +149,12 @@ def save_video(frames: np.ndarray, fps: float, path: str | Path) -> Path:
     if suffix == ".mp4":
         import imageio.v2 as iio
 
-        # the ffmpeg writer needs a file name: write a temporary file, then rename
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".mp4", dir=path.parent)
-        os.close(fd)
-        try:
+        # the ffmpeg writer needs a file name: a temporary file, renamed when complete
+        with atomic_path(path, suffix=".mp4") as tmp:
             with iio.get_writer(tmp, format="FFMPEG", mode="I", fps=float(fps),
                                 codec="libx264", macro_block_size=8) as w:
                 for f in frames:
                     w.append_data(f)
-            umask = os.umask(0)  # mkstemp made it 0600: give it a plain file's permissions
-            os.umask(umask)
-            os.chmod(tmp, 0o666 & ~umask)
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
         return path
     duration_ms = max(int(round(1000.0 / float(fps))), 20)
     if _has("PIL"):

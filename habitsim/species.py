@@ -31,7 +31,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from .errors import SpeciesFileError, UnknownSpeciesError
+from .errors import SpeciesFileError, UnknownSpeciesError, brief
 
 __all__ = [
     "POSTURES",
@@ -267,17 +267,36 @@ def _req(d: dict[str, Any], key: str, where: str) -> Any:
     return d[key]
 
 
+#: Largest magnitude of any number in a species file (kg, m or degrees): beyond it a
+#: number is a typo, and arithmetic on it would overflow.
+MAX_ABS_NUMBER = 1e6
+
+
+def _table(d: dict[str, Any], key: str, where: str) -> dict[str, Any]:
+    """A required TOML table (``[key]``)."""
+    v = _req(d, key, where)
+    if not isinstance(v, dict):
+        raise SpeciesFileError(f"{where}: {key} must be a table ([{key}]), got {brief(v)}")
+    return v
+
+
 def _num(v: Any, where: str, positive: bool = False) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise SpeciesFileError(f"{where}: expected a finite number, got {v!r}")
+    if (
+        isinstance(v, bool)
+        or not isinstance(v, int | float)
+        or not -MAX_ABS_NUMBER <= v <= MAX_ABS_NUMBER  # also refuses NaN
+    ):
+        raise SpeciesFileError(
+            f"{where}: expected a finite number within ±{MAX_ABS_NUMBER:g}, got {brief(v)}"
+        )
     if positive and v <= 0:
-        raise SpeciesFileError(f"{where}: expected a positive number, got {v!r}")
+        raise SpeciesFileError(f"{where}: expected a positive number, got {brief(v)}")
     return float(v)
 
 
 def _pair(v: Any, where: str) -> tuple[float, float]:
     if not isinstance(v, list) or len(v) != 2:
-        raise SpeciesFileError(f"{where}: expected [min, max], got {v!r}")
+        raise SpeciesFileError(f"{where}: expected [min, max], got {brief(v)}")
     lo, hi = _num(v[0], where), _num(v[1], where)
     if lo > hi:
         raise SpeciesFileError(f"{where}: min {lo} > max {hi}")
@@ -288,35 +307,39 @@ def _parse(data: dict[str, Any], path: Path | None) -> Species:
     where = str(path) if path else "<species>"
     name = _req(data, "name", where)
     if not isinstance(name, str) or not name.isidentifier() or name.lower() != name:
-        raise SpeciesFileError(f"{where}: name must be a lower-case identifier, got {name!r}")
-    posture_tbl = _req(data, "posture", where)
+        raise SpeciesFileError(f"{where}: name must be a lower-case identifier, got {brief(name)}")
+    posture_tbl = _table(data, "posture", where)
     posture = _req(posture_tbl, "class", f"{where} [posture]")
-    if posture not in POSTURES:
-        raise SpeciesFileError(f"{where}: posture class {posture!r}; valid: {', '.join(POSTURES)}")
+    if not isinstance(posture, str) or posture not in POSTURES:
+        raise SpeciesFileError(
+            f"{where}: posture class {brief(posture)}; valid: {', '.join(POSTURES)}"
+        )
 
-    segs_tbl = _req(data, "segments", where)
+    segs_tbl = _table(data, "segments", where)
     segments = {k: _num(_req(segs_tbl, k, f"{where} [segments]"), f"{where} segments.{k}", True)
                 for k in SEGMENT_KEYS}
-    girth_tbl = _req(data, "girths", where)
+    girth_tbl = _table(data, "girths", where)
     girths = {k: _num(_req(girth_tbl, k, f"{where} [girths]"), f"{where} girths.{k}", True)
               for k in GIRTH_KEYS}
     incl = {
         k: math.radians(_num(_req(posture_tbl, f"{k}_deg", f"{where} [posture]"), f"{where} posture.{k}_deg"))
         for k in INCLINATION_KEYS
     }
-    lim_tbl = _req(data, "joint_limits", where)
+    lim_tbl = _table(data, "joint_limits", where)
     limits: dict[str, tuple[float, float]] = {}
     for k in LIMIT_KEYS:
         lo, hi = _pair(_req(lim_tbl, f"{k}_deg", f"{where} [joint_limits]"), f"{where} joint_limits.{k}_deg")
         limits[k] = (math.radians(lo), math.radians(hi))
 
-    gaits_tbl = _req(data, "gaits", where)
+    gaits_tbl = _table(data, "gaits", where)
     gaits: dict[str, GaitHabit] = {}
     for g, tbl in gaits_tbl.items():
-        gw = f"{where} [gaits.{g}]"
+        gw = f"{where} [gaits.{brief(g)}]"
         if g not in GAITS:
-            raise SpeciesFileError(f"{gw}: unknown gait {g!r}; valid: {', '.join(GAITS)}")
-        ff = _req(tbl, "footfall", gw)
+            raise SpeciesFileError(f"{gw}: unknown gait {brief(g)}; valid: {', '.join(GAITS)}")
+        if not isinstance(tbl, dict):
+            raise SpeciesFileError(f"{gw}: must be a table, got {brief(tbl)}")
+        ff = _table(tbl, "footfall", gw)
         if set(ff) != set(FEET):
             raise SpeciesFileError(f"{gw}: footfall needs exactly the feet {', '.join(FEET)}")
         footfall = {f: _num(ff[f], f"{gw} footfall.{f}") % 1.0 for f in FEET}
@@ -332,7 +355,7 @@ def _parse(data: dict[str, Any], path: Path | None) -> Species:
     if "walk" not in gaits:
         raise SpeciesFileError(f"{where}: every species needs a 'walk' gait")
 
-    hab = _req(data, "habits", where)
+    hab = _table(data, "habits", where)
     hw = f"{where} [habits]"
 
     def habit(key: str, lo: float, hi: float) -> float:
@@ -357,6 +380,8 @@ def _parse(data: dict[str, Any], path: Path | None) -> Species:
         raise SpeciesFileError(f"{where}: sources must be a non-empty list of strings")
     held_out = bool(data.get("held_out", False))
     cousin = data.get("cousin") or None
+    if cousin is not None and not isinstance(cousin, str):
+        raise SpeciesFileError(f"{where}: cousin must be a species name, got {brief(cousin)}")
     if held_out and not cousin:
         raise SpeciesFileError(f"{where}: a held-out species must name its training cousin")
 
@@ -451,7 +476,7 @@ def load_species(name: str | Species) -> Species:
     if isinstance(name, Species):
         return name
     cat = _catalog()
-    if name not in cat:
+    if not isinstance(name, str) or name not in cat:
         raise UnknownSpeciesError(name, cat)
     return cat[name]
 

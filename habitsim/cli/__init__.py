@@ -12,11 +12,14 @@ names, ``--check``) are in :mod:`habitsim.cli.conventions`.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
 
-from ..errors import HabitsimError
+from ..errors import HabitsimError, bounded
 
 # (group name, help, module names registering into it). Group None = top-level commands.
 _GROUPS: list[tuple[str | None, str, tuple[str, ...]]] = [
@@ -61,13 +64,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        code = int(ns.func(ns) or 0)
+        from .bounds import check_bounds
+
+        check_bounds(ns)
+        with _sigterm_as_interrupt():
+            code = int(ns.func(ns) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
         return code
     except BrokenPipeError:
         return _closed_pipe()
     except HabitsimError as e:
-        print(f"error: {e}", file=sys.stderr)
+        print(f"error: {bounded(str(e))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
@@ -88,6 +95,24 @@ def _closed_pipe() -> int:
     except (OSError, ValueError):  # stdout without a file descriptor (captured, closed)
         pass
     return EXIT_CLOSED_PIPE
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """While a command runs, SIGTERM stops it like Ctrl-C (KeyboardInterrupt), so pools
+    are shut down and temporary files removed; the previous handler is restored after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum, frame):  # noqa: ARG001 - signal handler signature
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

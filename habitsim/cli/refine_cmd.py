@@ -20,8 +20,10 @@ writes
   (T, nq), ``fps``, ``species`` and ``qpos_names``, one per column: ``root_x`` …
   ``root_qz`` for the free joint, then the hinge names).
 
-Every output is written atomically, and only once the refinement has finished: a failed
-run leaves no file behind. Exit codes: 0 success; 1 IPOPT failed and ``--fallback``
+Every output is written atomically, and only once the refinement has finished: the
+destinations are checked before it starts, and the files appear together or not at all,
+so a failed run (or one output that cannot be written) leaves no file behind.
+Exit codes: 0 success; 1 IPOPT failed and ``--fallback``
 wrote the input unchanged (status in the report); 2 bad input or (without
 ``--fallback``) a failed refinement, with ``error: ...`` on stderr.
 """
@@ -183,13 +185,21 @@ def _summary(rep: dict) -> str:
 
 
 def _refine(ns: argparse.Namespace) -> int:
+    from ..fileio import output_transaction
+
+    _check_out(ns.out, "--out")
+    _check_out(ns.qpos, "--qpos")
+    # every destination is checked before the work, and the files appear together or not at all
+    with output_transaction({"--out": ns.out, "--qpos": ns.qpos, "--report": ns.report}):
+        return _refine_outputs(ns)
+
+
+def _refine_outputs(ns: argparse.Namespace) -> int:
     from ..fileio import atomic_write, atomic_write_text
     from ..motion import load_motion
     from ..qpos import species_model
     from ..refine import RefineOptions, refine
 
-    _check_out(ns.out, "--out")
-    _check_out(ns.qpos, "--qpos")
     motion = load_motion(ns.input)
     contacts = motion.detect_contacts() if ns.detect_contacts else None
     opts = RefineOptions(

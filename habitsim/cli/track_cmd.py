@@ -16,6 +16,9 @@
   and ``simulated_kinematic`` (:data:`habitsim.evaluation.kinematic.KINEMATIC_KEYS` of the
   simulated frames, skating judged on the simulated contacts). Non-finite numbers are
   ``null``.
+
+The output paths are checked before the simulation, and the files are written together
+or not at all (a failure leaves none of them).
 * ``--video``: MP4 (needs ``imageio`` + ``imageio-ffmpeg``) or GIF (needs ``Pillow``),
   rendered headless with the model's tracking camera. The writer is checked before the
   simulation runs.
@@ -132,12 +135,20 @@ def _summary(report: dict[str, Any]) -> str:
 
 
 def _track(ns: argparse.Namespace) -> int:
-    from ..fileio import atomic_write_text
+    from ..fileio import output_transaction
 
     if ns.video:
         from ..render import check_video_writer
 
         check_video_writer(Path(ns.video))  # fail before simulating
+    # destinations checked before the simulation; the files appear together or not at all
+    with output_transaction({"--out": ns.out, "--report": ns.report, "--video": ns.video}):
+        return _track_outputs(ns)
+
+
+def _track_outputs(ns: argparse.Namespace) -> int:
+    from ..fileio import atomic_write_text
+
     report, result = track_report(ns)
     if ns.out:
         result.motion().save(ns.out)

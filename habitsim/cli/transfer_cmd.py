@@ -84,6 +84,19 @@ def _transfer(ns: argparse.Namespace) -> int:
         raise MotionFileError(f"--out must end in .npz, got {ns.out.name!r}")
     if ns.bvh is not None and ns.bvh.suffix.lower() != ".bvh":
         raise MotionFileError(f"--bvh must end in .bvh, got {ns.bvh.name!r}")
+    from ..fileio import output_transaction
+
+    # both destinations checked before the transfer; written together or not at all
+    with output_transaction({"--out": ns.out, "--bvh": ns.bvh}):
+        return _transfer_outputs(ns)
+
+
+def _transfer_outputs(ns: argparse.Namespace) -> int:
+    from ..errors import MotionFileError
+    from ..models.transfer import transfer
+    from ..motion import load_motion
+    from ..species import load_species
+
     target = load_species(ns.to).name
     suffix = ns.source.suffix.lower()
     if suffix in (".bvh", ".glb", ".gltf"):

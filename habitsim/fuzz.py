@@ -1,0 +1,659 @@
+"""A fuzzing campaign over habitsim's readers and command line.
+
+::
+
+    python -m habitsim.fuzz [--n 10000] [--seed 0] [--show 5] [--targets bvh,npz,...]
+
+Each input is made by mutating a valid one (the shipped example BVH, a generated motion
+file, the dog's species file, a small data set's manifest, a well-formed command line)
+with a seeded :class:`random.Random`: tokens replaced by hostile values (``1e-320``,
+``nan``, ``1e300``, a 100,000-character word, …), lines dropped, doubled or cut, joints
+nested a thousand deep, arrays swapped for ones of another dtype or shape, zip archives
+truncated or corrupted, JSON values replaced. Every input is then read the way a user's
+file would be, and its outcome counted:
+
+* ``ok`` — read (or the command ran) without an error;
+* ``typed`` — refused with a :class:`~habitsim.errors.HabitsimError` (for the command
+  line: ``error: …`` and exit code 2, or an argparse usage error);
+* ``raw`` — any other exception: a bug, shown with its input and traceback.
+
+The same generators drive the hypothesis tests of ``tests/test_fuzz.py`` (there with a
+small, bounded number of examples); this module runs the long campaign. The exit code
+is 1 if any input ended in a raw exception.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import random
+import shutil
+import sys
+import tempfile
+import time
+import traceback
+import warnings
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import HabitsimError
+
+__all__ = [
+    "TARGETS", "Case", "Workspace", "CampaignResult", "make_case", "run_case", "campaign", "main"
+]
+
+#: Inputs of each kind, in the proportions of a campaign.
+TARGETS: dict[str, float] = {
+    "bvh": 0.30,
+    "bvh_import": 0.08,
+    "npz": 0.27,
+    "species": 0.17,
+    "manifest": 0.10,
+    "cli": 0.08,
+}
+
+#: Hostile number-like tokens.
+NUMBERS = [
+    "0", "-0", "1", "-1", "0.0333333", "1e-320", "5e-324", "1e-300", "1e300", "-1e300",
+    "1e308", "1e309", "nan", "-nan", "inf", "-inf", "NaN", "1e7", "1e8", "123456789012345678901",
+    "0x10", "1_000", "1e", "--1", "+1", "3.", ".5", "1e-9", "100000", "0.001", "2e9",
+]
+#: Hostile words and structure tokens of a BVH file.
+WORDS = [
+    "", "{", "}", "ROOT", "JOINT", "End", "Site", "OFFSET", "CHANNELS", "MOTION", "HIERARCHY",
+    "Frames:", "Frame", "Time:", "Xrotation", "Yposition", "Wrotation", "\x00", "\u2028", "é",
+    "x" * 100_000, "9" * 5000,
+]
+#: Hostile TOML values.
+TOML_VALUES = [
+    "5", "-1", "0", '"x"', '""', "[]", "[1]", "[1, 2, 3]", '["a", "b"]', "[[1, 2], [3]]",
+    "{ a = 1 }", "{}", "1e300", "-1e300", "inf", "nan", "true", "100000000000000000000",
+    "9223372036854775807", "[1e300, 1e301]", "[-1, 1]", "[1, -1]", "0.5", "1979-05-27",
+    '"' + "x" * 10_000 + '"',
+]
+#: Hostile JSON values.
+JSON_VALUES: list[Any] = [
+    None, True, False, 0, -1, 1.5, 1e300, -1e300, float("nan"), "x", "", "x" * 10_000, [],
+    [1], {}, {"a": 1}, 2**70, "../up.npz", "/abs.npz", "a\x00b.npz",
+]
+
+
+@dataclass
+class Case:
+    """One fuzzed input: which reader it is for and what to feed it."""
+
+    target: str
+    data: Any
+    note: str = ""
+
+
+class Workspace:
+    """Valid starting points and a scratch folder for the generated files.
+
+    Building it generates one short motion and a two-species, one-clip data set (a few
+    seconds); call :meth:`close` (or use it as a context manager) to remove the folder.
+    """
+
+    def __init__(self, root: str | Path | None = None):
+        from .dataset import build_dataset
+        from .gaits import generate
+        from .species import load_species
+
+        self._own = root is None
+        self.root = Path(tempfile.mkdtemp(prefix="habitsim-fuzz-") if root is None else root)
+        self.root.mkdir(parents=True, exist_ok=True)
+        example = Path(__file__).parent / "examples" / "dog_walk.bvh"
+        lines = example.read_text(encoding="utf-8").splitlines()
+        m = lines.index("MOTION")
+        # the example's hierarchy with 4 of its frames
+        self.bvh_seeds = [
+            "\n".join(lines[: m + 1] + ["Frames: 4"] + lines[m + 2 : m + 7]) + "\n",
+            _TINY_BVH,
+        ]
+        motion = generate("dog", "walk", seed=0, duration_s=0.2)
+        p = self.root / "seed.npz"
+        motion.save(p)
+        with np.load(p) as z:
+            self.npz_seed = {k: z[k] for k in z.files}
+        self.motion_file = p
+        self.toml_seed = load_species("dog").path.read_text(encoding="utf-8")
+        data = self.root / "dataset"
+        build_dataset(data, clips_per_species=1, seed=0, species=["cat", "dog"], workers=1,
+                      progress=False)
+        self.dataset = data
+        self.manifest_seed = json.loads((data / "manifest.json").read_text(encoding="utf-8"))
+        self.blocker = self.root / "blocker"
+        self.blocker.write_text("a file where a folder should be")
+        self._n = 0
+
+    def path(self, suffix: str) -> Path:
+        """A fresh file path in the scratch folder."""
+        self._n += 1
+        return self.root / "cases" / f"c{self._n}{suffix}"
+
+    def close(self) -> None:
+        if self._own:
+            shutil.rmtree(self.root, ignore_errors=True)
+
+    def __enter__(self) -> Workspace:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+_TINY_BVH = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Spine
+  {
+    OFFSET 0 10 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT Head
+    {
+      OFFSET 0 10 5
+      CHANNELS 3 Zrotation Xrotation Yrotation
+      End Site
+      {
+        OFFSET 0 0 5
+      }
+    }
+  }
+  JOINT LeftLeg
+  {
+    OFFSET 5 -10 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 0 -10 0
+    }
+  }
+}
+MOTION
+Frames: 2
+Frame Time: 0.033333
+0 40 0 0 0 0 0 0 0 0 0 0 0 0 0
+1 40 0 5 0 0 0 0 0 0 0 0 0 0 0
+"""
+
+
+# ---------------------------------------------------------------------- text mutations
+
+
+def _mutate_lines(
+    text: str, rnd: random.Random, tokens: list[str], extra_lines: list[str]
+) -> str:
+    """1–3 random edits of a text: a token replaced, a line dropped / doubled / inserted,
+    the text cut or random characters spliced in."""
+    lines = text.split("\n")
+    for _ in range(rnd.randint(1, 3)):
+        op = rnd.randrange(7)
+        k = rnd.randrange(len(lines)) if lines else 0
+        if op == 0 and lines:  # replace one token of a line
+            toks = lines[k].split(" ")
+            toks[rnd.randrange(len(toks))] = rnd.choice(tokens)
+            lines[k] = " ".join(toks)
+        elif op == 1 and lines:
+            del lines[k]
+        elif op == 2 and lines:
+            lines[k:k] = [lines[k]] * rnd.choice([1, 2, 50])
+        elif op == 3:
+            lines.insert(k, rnd.choice(extra_lines))
+        elif op == 4:
+            cut = "\n".join(lines)[: rnd.randrange(len("\n".join(lines)) + 1)]
+            lines = cut.split("\n")
+        elif op == 5 and lines:
+            noise = "".join(rnd.choice("{} \t\r\x00\u2028#=.-e09aZ\"'[],") for _ in range(8))
+            pos = rnd.randrange(len(lines[k]) + 1)
+            lines[k] = lines[k][:pos] + noise + lines[k][pos:]
+        elif op == 6 and lines:  # many edits of the same kind: every number of a line
+            lines[k] = " ".join(rnd.choice(tokens) if _isnum(t) else t for t in lines[k].split(" "))
+    return "\n".join(lines)
+
+
+def _isnum(tok: str) -> bool:
+    try:
+        float(tok)
+    except ValueError:
+        return False
+    return True
+
+
+def _bvh_text(ws: Workspace, rnd: random.Random) -> str:
+    text = rnd.choice(ws.bvh_seeds)
+    r = rnd.random()
+    if r < 0.08:  # deep nesting
+        depth = rnd.choice([50, 199, 201, 1000, 3000])
+        nest = "".join(f"JOINT n{d}\n{{\nOFFSET 0 0 1\nCHANNELS 0\n" for d in range(depth))
+        i = text.index("End Site")
+        return text[:i] + nest + "}\n" * depth + text[i:]
+    if r < 0.16:  # every OFFSET scaled
+        f = rnd.choice([0.0, 1e-300, 1e-30, 1e300, -1.0, 1e6, 1e8])
+        out = []
+        for line in text.split("\n"):
+            parts = line.split()
+            if parts[:1] == ["OFFSET"] and len(parts) == 4:
+                line = "OFFSET " + " ".join(repr(float(v) * f) for v in parts[1:])
+            out.append(line)
+        return "\n".join(out)
+    if r < 0.24:  # Frame Time
+        ft = rnd.choice(NUMBERS + WORDS[:4])
+        return "\n".join(
+            f"Frame Time: {ft}" if ln.startswith("Frame Time") else ln for ln in text.split("\n")
+        )
+    if r < 0.30:  # joints renamed: the mapping works from the hierarchy alone
+        for name in {ln.split()[1] for ln in text.split("\n")
+                     if ln.strip().split()[:1] in (["JOINT"], ["ROOT"]) and len(ln.split()) > 1}:
+            text = text.replace(f" {name}\n", f" j{rnd.randrange(10**6)}\n")
+        return text
+    return _mutate_lines(text, rnd, NUMBERS + WORDS, [
+        "{", "}", "End Site", "MOTION", "Frames: 3", "Frame Time: 0.1", "ROOT r", "JOINT j",
+        "OFFSET 1 2 3", "CHANNELS 3 Xrotation Yrotation Zrotation", "CHANNELS 7", "",
+        "0 " * 15, "1e300 " * 15,
+    ])
+
+
+# ---------------------------------------------------------------------- arrays
+
+
+def _hostile_array(rnd: random.Random) -> np.ndarray:
+    kind = rnd.randrange(9)
+    if kind == 0:
+        return np.array(rnd.choice([1, 0, -1, 2**62, 30, 1.0, np.nan, np.inf, 1e300, 1e-300]))
+    if kind == 1:
+        return np.array(rnd.choice(["1", "dog", "", "x" * 10_000, "[]", "{}", "pelvis"]))
+    if kind == 2:
+        return np.array(rnd.choice([True, False]))
+    if kind == 3:
+        shape = tuple(rnd.choice([0, 1, 2, 3, 4, 27]) for _ in range(rnd.randrange(4)))
+        return np.full(shape, rnd.choice([0.0, 1.0, np.nan, 1e300, -1e300, 0.5]))
+    if kind == 4:
+        return np.array(["a", "b", "c"])
+    if kind == 5:
+        return np.zeros(rnd.choice([(3,), (2, 2)]), dtype=rnd.choice(["c16", "u1", "i8", "f2"]))
+    if kind == 6:
+        return np.array([{"a": 1}, None], dtype=object)  # pickled by np.savez
+    if kind == 7:
+        return np.array(b"bytes")
+    return np.array("[" * rnd.choice([10, 10_000]) + "]" * 10)
+
+
+def _npz_file(ws: Workspace, rnd: random.Random) -> Path:
+    arrays = dict(ws.npz_seed)
+    for _ in range(rnd.randint(1, 3)):
+        key = rnd.choice([*arrays, "contacts", "extra"])
+        op = rnd.randrange(5)
+        if op == 0:
+            arrays.pop(key, None)
+        elif op in (1, 2):
+            arrays[key] = _hostile_array(rnd)
+        elif (
+            op == 3 and key in ("root_positions", "rotations") and key in arrays
+            and arrays[key].dtype.kind == "f" and arrays[key].size
+        ):
+            a = np.array(arrays[key], dtype=float)
+            a.flat[rnd.randrange(a.size)] = rnd.choice([np.nan, 1e300, -1e300, 0.0, 1e6])
+            if rnd.random() < 0.3:
+                with np.errstate(all="ignore"):
+                    a = a * rnd.choice([0.0, 1e300, 1e-300, -1.0])
+            arrays[key] = a
+        elif op == 4:
+            arrays["fps"] = np.array(rnd.choice([1e300, 1e-300, 0.001, 1e5, -30.0, 30, 1, 1000]))
+    p = ws.path(".npz")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    with p.open("wb") as fh:
+        (np.savez_compressed if rnd.random() < 0.5 else np.savez)(fh, **arrays)
+    r = rnd.random()
+    if r < 0.10:  # cut short
+        raw = p.read_bytes()
+        p.write_bytes(raw[: rnd.randrange(len(raw))])
+    elif r < 0.20:  # bytes flipped
+        raw = bytearray(p.read_bytes())
+        for _ in range(rnd.randint(1, 20)):
+            raw[rnd.randrange(len(raw))] = rnd.randrange(256)
+        p.write_bytes(bytes(raw))
+    elif r < 0.24:
+        with p.open("wb") as fh:
+            np.save(fh, np.zeros(3))
+    elif r < 0.27:
+        p.write_bytes(bytes(rnd.randrange(256) for _ in range(rnd.randrange(200))))
+    elif r < 0.30:  # a zip bomb: a few MB of zeros that decompress to far more
+        with p.open("wb") as fh:
+            np.savez_compressed(fh, **{**arrays, "rotations": np.zeros((80_000, 27, 4, 2))})
+    return p
+
+
+# ---------------------------------------------------------------------- TOML, JSON
+
+
+def _species_text(ws: Workspace, rnd: random.Random) -> str:
+    text = ws.toml_seed
+    if rnd.random() < 0.15:  # a table replaced by a value, written at the top
+        table = rnd.choice(["posture", "segments", "girths", "joint_limits", "gaits", "habits",
+                            "gaits.walk", "gaits.walk.footfall"])
+        text = text.replace(f"[{table}]", f"[x{table}]").replace(f"[{table}.", f"[x{table}.")
+        return f"{table.split('.')[0]} = {rnd.choice(TOML_VALUES)}\n{text}"
+    lines = text.split("\n")
+    for _ in range(rnd.randint(1, 3)):
+        k = rnd.randrange(len(lines))
+        if "=" in lines[k] and rnd.random() < 0.7:
+            key = lines[k].split("=", 1)[0]
+            lines[k] = f"{key}= {rnd.choice(TOML_VALUES)}"
+        else:
+            lines = _mutate_lines("\n".join(lines), rnd, TOML_VALUES, ["[gaits.trot]", "[x]",
+                                                                       "name = 5", "a = ["]
+                                  ).split("\n")
+    return "\n".join(lines)
+
+
+def _json_paths(obj: Any, prefix: tuple = ()) -> list[tuple]:
+    out = [prefix]
+    if len(prefix) > 6:
+        return out
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            out += _json_paths(v, (*prefix, k))
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj[:3]):
+            out += _json_paths(v, (*prefix, i))
+    return out
+
+
+def _manifest(ws: Workspace, rnd: random.Random) -> dict[str, Any]:
+    m = json.loads(json.dumps(ws.manifest_seed))
+    for _ in range(rnd.randint(1, 3)):
+        path = rnd.choice(_json_paths(m)[1:])
+        parent = m
+        for k in path[:-1]:
+            parent = parent[k]
+        if rnd.random() < 0.2 and isinstance(parent, dict):
+            parent.pop(path[-1], None)
+            continue
+        v = rnd.choice(JSON_VALUES)
+        if rnd.random() < 0.05:
+            v = _DEEP  # written as 100,000 nested lists (see _run_manifest)
+        with contextlib.suppress(IndexError, KeyError, TypeError):
+            parent[path[-1]] = v
+    return m
+
+
+_DEEP = "\x00deep\x00"
+
+
+# ---------------------------------------------------------------------- command line
+
+
+def _cli_argv(ws: Workspace, rnd: random.Random) -> list[str]:
+    seeds = ["0", "1", "-1", str(2**32 - 1), str(2**32), str(2**64), "abc", "1e3"]
+    temps = ["1", "0.5", "0", "-1", "nan", "inf", "1e-9", "11", "x"]
+    fpss = ["30", "0", "-5", "100000", "0.001", "nan", "1000", "1"]
+    species = ["dog", "cat", "horse", "unicorn", "", "x" * 1000, "Dog"]
+
+    def motion_in() -> str:
+        r = rnd.random()
+        if r < 0.5:
+            return str(ws.motion_file)
+        if r < 0.8:
+            return str(_npz_file(ws, rnd))
+        return rnd.choice([str(ws.root / "missing.npz"), str(ws.root), str(ws.blocker)])
+
+    def bvh_in() -> str:
+        if rnd.random() < 0.2:
+            return rnd.choice([str(ws.root / "missing.bvh"), str(ws.blocker)])
+        p = ws.path(".bvh")
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(rnd.choice(ws.bvh_seeds) if rnd.random() < 0.3 else _bvh_text(ws, rnd),
+                     encoding="utf-8", errors="surrogatepass")
+        return str(p)
+
+    def out(suffix: str) -> str:
+        r = rnd.random()
+        if r < 0.7:
+            return str(ws.path(suffix))
+        if r < 0.85:
+            return str(ws.blocker / f"x{suffix}")
+        return rnd.choice([str(ws.root), str(ws.path(".txt"))])
+
+    c = rnd.randrange(7)
+    if c == 0:
+        argv = ["transfer", motion_in(), "--to", rnd.choice(species), "--out", out(".npz"),
+                "--method", rnd.choice(["direct", "direct", "nope"]), "--seed", rnd.choice(seeds),
+                "--temperature", rnd.choice(temps)]
+        if rnd.random() < 0.4:
+            argv += ["--bvh", out(".bvh")]
+    elif c == 1:
+        argv = ["data", "export-bvh", motion_in(), "--out", out(".bvh"),
+                "--order", rnd.choice(["ZXY", "XYZ", "abc", "", "XXY"])]
+    elif c == 2:
+        argv = ["data", "import-bvh", bvh_in(), "--species", rnd.choice(species),
+                "--out", out(".npz")]
+        if rnd.random() < 0.5:
+            argv += ["--fps", rnd.choice(fpss)]
+    elif c == 3:
+        argv = ["data", "inspect-bvh", bvh_in(), "--species", rnd.choice(species)]
+    elif c == 4:
+        argv = ["motion", "stats", motion_in()]
+    elif c == 5:
+        argv = ["species", "show", rnd.choice(species)]
+    else:  # argument bounds of the heavy commands (refused before any work)
+        argv = rnd.choice([
+            ["track", motion_in(), "--settle", rnd.choice(["1e9", "-1", "nan", "61"])],
+            ["track", motion_in(), "--control-hz", rnd.choice(["0", "-1", "inf", "1e6"])],
+            ["data", "synth", "--out", out(""), "--fps", rnd.choice(["100000", "0.001", "nan"])],
+            ["data", "synth", "--out", out(""), "--seed", rnd.choice(["-1", str(2**64)])],
+            ["eval", "--data", str(ws.dataset), "--out", out(""), "--workers",
+             rnd.choice(["0", "100000"])],
+            ["refine", motion_in(), "--out", out(".npz"), "--report", str(ws.blocker / "r.json")],
+        ])
+    return argv
+
+
+# ---------------------------------------------------------------------- running
+
+
+def make_case(target: str, ws: Workspace, rnd: random.Random) -> Case:
+    """One fuzzed input for ``target`` (a key of :data:`TARGETS`)."""
+    if target in ("bvh", "bvh_import"):
+        return Case(target, _bvh_text(ws, rnd))
+    if target == "npz":
+        return Case(target, _npz_file(ws, rnd))
+    if target == "species":
+        return Case(target, _species_text(ws, rnd))
+    if target == "manifest":
+        return Case(target, (_manifest(ws, rnd), rnd.random() < 0.5))
+    if target == "cli":
+        return Case(target, _cli_argv(ws, rnd))
+    raise HabitsimError(f"unknown fuzz target {target!r}; valid: {', '.join(TARGETS)}")
+
+
+def _run_bvh(ws: Workspace, case: Case) -> None:
+    from .bvh import parse_bvh
+
+    parse_bvh(case.data, source="<fuzz>", strict=len(case.data) % 2 == 0)
+
+
+def _run_bvh_import(ws: Workspace, case: Case) -> None:
+    from .bvh_mapping import import_bvh
+
+    p = ws.path(".bvh")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_bytes(case.data.encode("utf-8", errors="surrogatepass"))
+    import_bvh(p, "dog", plant=len(case.data) % 3 == 0)
+
+
+def _run_npz(ws: Workspace, case: Case) -> None:
+    from .motion import load_motion
+
+    m = load_motion(case.data)
+    m.features()
+
+
+def _run_species(ws: Workspace, case: Case) -> None:
+    from .species import load_species_file
+
+    p = ws.path(".toml")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_bytes(case.data.encode("utf-8", errors="surrogatepass"))
+    load_species_file(p)
+
+
+def _run_manifest(ws: Workspace, case: Case) -> None:
+    from .dataset import load_manifest
+
+    manifest, check_files = case.data
+    d = ws.path("")
+    d.mkdir(parents=True)
+    text = json.dumps(manifest).replace(json.dumps(_DEEP), "[" * 100_000 + "]" * 100_000)
+    (d / "manifest.json").write_text(text, encoding="utf-8")
+    if check_files:  # the clip files next to the manifest
+        for f in ws.dataset.iterdir():
+            if f.is_dir():
+                shutil.copytree(f, d / f.name)
+    load_manifest(d, check_files=check_files)
+
+
+def _run_cli(ws: Workspace, case: Case) -> None:
+    from .cli import main as cli_main
+
+    out, err = io.StringIO(), io.StringIO()
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = cli_main(case.data)
+    except SystemExit as e:  # argparse: "usage: … error: …", exit code 2
+        if e.code == 2:
+            raise _Typed("usage error") from None
+        raise
+    if code == 2:
+        if not err.getvalue().startswith("error: ") and "usage" not in err.getvalue():
+            raise RuntimeError(f"exit code 2 without 'error:' ({err.getvalue()[:200]!r})")
+        raise _Typed(err.getvalue())
+    if code not in (0, 1):
+        raise RuntimeError(f"exit code {code}")
+
+
+class _Typed(HabitsimError):
+    """The command line refused the input the proper way (counted as ``typed``)."""
+
+
+_RUNNERS: dict[str, Callable[[Workspace, Case], None]] = {
+    "bvh": _run_bvh,
+    "bvh_import": _run_bvh_import,
+    "npz": _run_npz,
+    "species": _run_species,
+    "manifest": _run_manifest,
+    "cli": _run_cli,
+}
+
+
+def run_case(ws: Workspace, case: Case) -> tuple[str, BaseException | None]:
+    """Run one input; ``("ok" | "typed" | "raw", the exception or None)``."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with np.errstate(all="ignore"):
+                _RUNNERS[case.target](ws, case)
+    except HabitsimError as e:
+        return "typed", e
+    except Exception as e:  # noqa: BLE001 - what the campaign is looking for
+        return "raw", e
+    return "ok", None
+
+
+@dataclass
+class CampaignResult:
+    """Counts of a campaign: ``counts[target][outcome]`` and the first raw failures."""
+
+    counts: dict[str, Counter]
+    raw: list[tuple[Case, BaseException, str]]
+    seconds: float
+
+    @property
+    def total(self) -> Counter:
+        t: Counter = Counter()
+        for c in self.counts.values():
+            t.update(c)
+        return t
+
+    def table(self) -> str:
+        lines = [f"{'target':12s} {'inputs':>7s} {'ok':>7s} {'typed':>7s} {'raw':>7s}"]
+        for name, c in [*self.counts.items(), ("total", self.total)]:
+            lines.append(
+                f"{name:12s} {sum(c.values()):7d} {c['ok']:7d} {c['typed']:7d} {c['raw']:7d}"
+            )
+        return "\n".join(lines)
+
+
+def campaign(
+    n: int, seed: int = 0, targets: list[str] | None = None, keep: int = 5,
+    progress: bool = False, workspace: Workspace | None = None,
+) -> CampaignResult:
+    """Run ``n`` fuzzed inputs (targets drawn in the proportions of :data:`TARGETS`)."""
+    names = targets or list(TARGETS)
+    bad = [t for t in names if t not in TARGETS]
+    if bad:
+        raise HabitsimError(f"unknown fuzz targets {bad}; valid: {', '.join(TARGETS)}")
+    weights = [TARGETS[t] for t in names]
+    rnd = random.Random(seed)
+    counts: dict[str, Counter] = {t: Counter() for t in names}
+    raw: list[tuple[Case, BaseException, str]] = []
+    t0 = time.perf_counter()
+    ws = workspace or Workspace()
+    try:
+        for i in range(n):
+            target = rnd.choices(names, weights)[0]
+            case = make_case(target, ws, random.Random(rnd.getrandbits(64)))
+            outcome, exc = run_case(ws, case)
+            counts[target][outcome] += 1
+            if outcome == "raw" and len(raw) < keep:
+                raw.append((case, exc, "".join(traceback.format_exception(exc)[-4:])))
+            if progress and (i + 1) % 500 == 0:
+                print(f"  {i + 1}/{n} inputs, {sum(c['raw'] for c in counts.values())} raw",
+                      file=sys.stderr)
+            if (i + 1) % 200 == 0:  # keep the scratch folder small
+                shutil.rmtree(ws.root / "cases", ignore_errors=True)
+    finally:
+        if workspace is None:
+            ws.close()
+    return CampaignResult(counts, raw, time.perf_counter() - t0)
+
+
+def _describe(case: Case) -> str:
+    d = case.data
+    if isinstance(d, str | Path):
+        text = str(d)
+    else:
+        text = json.dumps(d, default=str)
+    return text if len(text) <= 300 else text[:300] + f"… ({len(text)} characters)"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m habitsim.fuzz``: run a campaign and print counts by outcome."""
+    p = argparse.ArgumentParser(
+        prog="python -m habitsim.fuzz", description="Fuzz habitsim's readers and command line."
+    )
+    p.add_argument("--n", type=int, default=10_000, help="inputs to try (default 10000)")
+    p.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
+    p.add_argument("--targets", default=None,
+                   help=f"comma-separated targets (default all: {','.join(TARGETS)})")
+    p.add_argument("--show", type=int, default=5, help="raw exceptions to show (default 5)")
+    ns = p.parse_args(argv)
+    targets = [t.strip() for t in ns.targets.split(",")] if ns.targets else None
+    res = campaign(ns.n, ns.seed, targets, keep=ns.show, progress=True)
+    print(f"fuzz: {ns.n} inputs, seed {ns.seed}, {res.seconds:.0f} s")
+    print(res.table())
+    for case, exc, tb in res.raw:
+        print(f"\nraw {type(exc).__name__} on a {case.target} input: {_describe(case)}\n{tb}")
+    return 1 if res.total["raw"] else 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

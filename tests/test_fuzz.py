@@ -1,0 +1,118 @@
+"""Hypothesis-driven fuzzing of the readers and the command line (issue 17): every input
+is either read or refused with a :class:`~habitsim.errors.HabitsimError`, never another
+exception. The mutations are those of :mod:`habitsim.fuzz` (whose long campaign is
+``python -m habitsim.fuzz``), driven here by hypothesis with a small number of examples
+so the file runs in seconds."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from habitsim import fuzz
+from habitsim.bvh import parse_bvh
+from habitsim.errors import HabitsimError
+
+FAST = settings(
+    max_examples=40, deadline=None, derandomize=True, database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
+
+
+@pytest.fixture(scope="module")
+def ws():
+    with fuzz.Workspace() as w:
+        yield w
+
+
+def _check(ws: fuzz.Workspace, case: fuzz.Case) -> None:
+    outcome, exc = fuzz.run_case(ws, case)
+    if outcome == "raw":
+        raise AssertionError(f"raw {type(exc).__name__} on {case.target}: {exc}") from exc
+
+
+@pytest.mark.parametrize("target", ["bvh", "npz", "species", "manifest"])
+def test_mutated_inputs_are_read_or_refused(ws, target: str) -> None:
+    @FAST
+    @given(rnd=st.randoms(use_true_random=False))
+    def check(rnd) -> None:
+        _check(ws, fuzz.make_case(target, ws, rnd))
+
+    check()
+
+
+def test_mutated_bvh_imports_are_read_or_refused(ws) -> None:
+    @settings(FAST, max_examples=10)
+    @given(rnd=st.randoms(use_true_random=False))
+    def check(rnd) -> None:
+        _check(ws, fuzz.make_case("bvh_import", ws, rnd))
+
+    check()
+
+
+def test_cli_entry_points(ws) -> None:
+    @settings(FAST, max_examples=15)
+    @given(rnd=st.randoms(use_true_random=False))
+    def check(rnd) -> None:
+        _check(ws, fuzz.make_case("cli", ws, rnd))
+
+    check()
+
+
+@FAST
+@given(text=st.text(max_size=3000))
+def test_arbitrary_text_as_bvh(text: str) -> None:
+    try:
+        parse_bvh(text)
+    except HabitsimError:
+        pass
+
+
+_BVH_TOKENS = st.sampled_from(
+    ["HIERARCHY", "ROOT", "JOINT", "End", "Site", "{", "}", "OFFSET", "CHANNELS", "MOTION",
+     "Frames:", "Frame", "Time:", "3", "6", "0", "1", "-1", "1e-320", "1e300", "nan",
+     "Xrotation", "Yrotation", "Zrotation", "Xposition", "a", "\n"]
+)
+
+
+@FAST
+@given(tokens=st.lists(_BVH_TOKENS, max_size=200))
+def test_bvh_token_soup(tokens: list[str]) -> None:
+    try:
+        parse_bvh(" ".join(tokens))
+    except HabitsimError:
+        pass
+
+
+@FAST
+@given(raw=st.binary(max_size=3000))
+def test_arbitrary_bytes_as_npz(raw: bytes) -> None:
+    from habitsim.motion import load_motion
+
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "m.npz"
+        p.write_bytes(raw)
+        with pytest.raises(HabitsimError):
+            load_motion(p)
+
+
+@FAST
+@given(text=st.text(max_size=2000))
+def test_arbitrary_text_as_species_toml(text: str) -> None:
+    from habitsim.species import load_species_file
+
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "x.toml"
+        p.write_text(text, encoding="utf-8", errors="surrogatepass")
+        with pytest.raises(HabitsimError):
+            load_species_file(p)
+
+
+def test_campaign_counts() -> None:
+    res = fuzz.campaign(30, seed=3, targets=["bvh", "species"])
+    assert sum(res.total.values()) == 30 and res.total["raw"] == 0
+    assert "total" in res.table()

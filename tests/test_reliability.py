@@ -1,0 +1,634 @@
+"""Regression tests of issue 17 (reliability): every bad input found by the probe ends in
+a typed :class:`~habitsim.errors.HabitsimError` (``error: …``, exit 2, a message of
+bounded length), and a command that writes several files leaves all of them or none."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from habitsim.cli import main
+from habitsim.errors import HabitsimError, OutputPathError
+from habitsim.fileio import atomic_write_text, check_writable, output_transaction
+
+
+@pytest.fixture(scope="module")
+def motion_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from habitsim.gaits import generate
+
+    p = tmp_path_factory.mktemp("motion") / "walk.npz"
+    generate("dog", "walk", seed=0, duration_s=0.5).save(p)
+    return p
+
+
+def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    """Exit code and stderr of ``habitsim ARGV`` run in this process."""
+    code = main([str(a) for a in argv])
+    err = capsys.readouterr().err
+    return code, err
+
+
+def files_under(folder: Path) -> list[str]:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+# ------------------------------------------------------------------ outputs as transactions
+
+
+def test_check_writable_file_where_a_folder_should_be(tmp_path: Path) -> None:
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(OutputPathError, match="file where a folder should be"):
+        check_writable(tmp_path / "f" / "sub" / "r.json", "--report")
+    with pytest.raises(OutputPathError, match="is a folder"):
+        check_writable(tmp_path, "--out")
+    assert files_under(tmp_path) == ["f"]
+
+
+def test_atomic_write_into_a_file_is_typed(tmp_path: Path) -> None:
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(OutputPathError, match="file where a folder should be"):
+        atomic_write_text(tmp_path / "f" / "r.json", "{}")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="the super-user writes into read-only folders")
+def test_read_only_folder_is_typed(tmp_path: Path) -> None:
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    try:
+        with pytest.raises(OutputPathError):
+            check_writable(ro / "r.json")
+        with pytest.raises(OutputPathError):
+            atomic_write_text(ro / "r.json", "{}")
+    finally:
+        ro.chmod(0o755)
+
+
+def test_read_only_folder_is_typed_even_for_root(tmp_path: Path, monkeypatch) -> None:
+    """What a read-only folder (or file system) answers, simulated: EACCES on create."""
+    import tempfile
+
+    def denied(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(tempfile, "mkstemp", denied)
+    with pytest.raises(OutputPathError, match="Permission denied"):
+        check_writable(tmp_path / "r.json", "--report")
+    with pytest.raises(OutputPathError, match="Permission denied"):
+        atomic_write_text(tmp_path / "r.json", "{}")
+    assert files_under(tmp_path) == []
+
+
+def test_transaction_all_or_none(tmp_path: Path) -> None:
+    a, b = tmp_path / "a.txt", tmp_path / "sub" / "b.txt"
+    with pytest.raises(RuntimeError):
+        with output_transaction({"a": a, "b": b}):
+            atomic_write_text(a, "1")
+            raise RuntimeError("work failed after the first write")
+    assert files_under(tmp_path) == []
+    a.write_text("old")
+    with output_transaction({"a": a, "b": b}):
+        atomic_write_text(a, "new")
+        atomic_write_text(b, "new")
+        assert a.read_text() == "old"  # nothing moves before the end of the block
+    assert a.read_text() == b.read_text() == "new"
+    assert files_under(tmp_path) == ["a.txt", "sub", "sub/b.txt"]
+
+
+def test_transaction_rolls_back_a_failed_commit(tmp_path: Path, monkeypatch) -> None:
+    a, b = tmp_path / "a.txt", tmp_path / "b.txt"
+    a.write_text("old")
+    real_replace = os.replace
+
+    def failing_replace(src, dst):
+        if str(dst) == str(b):
+            raise PermissionError(13, "Permission denied")
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", failing_replace)
+    with pytest.raises(OutputPathError, match="b.txt"):
+        with output_transaction({"a": a, "b": b}):
+            atomic_write_text(a, "new")
+            atomic_write_text(b, "new")
+    assert a.read_text() == "old"
+    assert files_under(tmp_path) == ["a.txt"]
+
+
+def test_transaction_refuses_one_path_twice(tmp_path: Path) -> None:
+    with pytest.raises(OutputPathError, match="same file"):
+        with output_transaction({"--out": tmp_path / "x", "--report": tmp_path / "." / "x"}):
+            pass
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["--report", "{blocker}/r.json"], ["--qpos", "{blocker}/q.npz"]],
+    ids=["report", "qpos"],
+)
+def test_refine_unwritable_second_output_leaves_nothing(
+    tmp_path: Path, motion_file: Path, capsys, extra: list[str]
+) -> None:
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file where a folder should be")
+    out = tmp_path / "ok.npz"
+    extra = [e.format(blocker=blocker) for e in extra]
+    code, err = run_cli(["refine", motion_file, "--out", out, *extra], capsys)
+    assert code == 2 and err.startswith("error: ") and "file where a folder" in err
+    assert files_under(tmp_path) == ["blocker"]
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["--report", "{blocker}/r.json"], ["--video", "{blocker}/v.gif"]],
+    ids=["report", "video"],
+)
+def test_track_unwritable_second_output_leaves_nothing(
+    tmp_path: Path, motion_file: Path, capsys, extra: list[str]
+) -> None:
+    blocker = tmp_path / "blocker"
+    blocker.write_text("x")
+    extra = [e.format(blocker=blocker) for e in extra]
+    code, err = run_cli(["track", motion_file, "--out", tmp_path / "sim.npz", *extra], capsys)
+    assert code == 2 and err.startswith("error: "), err
+    assert files_under(tmp_path) == ["blocker"]
+
+
+def test_transfer_unwritable_bvh_leaves_nothing(tmp_path: Path, motion_file: Path, capsys) -> None:
+    blocker = tmp_path / "blocker"
+    blocker.write_text("x")
+    code, err = run_cli(
+        ["transfer", motion_file, "--to", "cat", "--method", "direct",
+         "--out", tmp_path / "ok.npz", "--bvh", blocker / "x.bvh"],
+        capsys,
+    )
+    assert code == 2 and "file where a folder" in err
+    assert files_under(tmp_path) == ["blocker"]
+
+
+def test_transfer_writes_both_outputs(tmp_path: Path, motion_file: Path, capsys) -> None:
+    code, _ = run_cli(
+        ["transfer", motion_file, "--to", "cat", "--method", "direct",
+         "--out", tmp_path / "ok.npz", "--bvh", tmp_path / "x.bvh"],
+        capsys,
+    )
+    assert code == 0
+    assert files_under(tmp_path) == ["ok.npz", "x.bvh"]
+
+
+# ------------------------------------------------------------------ BVH reader
+
+from habitsim.bvh import MAX_DEPTH, parse_bvh, read_bvh  # noqa: E402
+from habitsim.errors import BVHParseError, MotionFileError  # noqa: E402
+
+EXAMPLE_BVH = Path(__file__).parents[1] / "habitsim" / "examples" / "dog_walk.bvh"
+
+
+def small_bvh(offset: str = "0 0 1", frame_time: str = "0.0333333", root: str = "0 0 0") -> str:
+    return (
+        "HIERARCHY\nROOT hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition "
+        f"Zrotation Xrotation Yrotation\n  JOINT spine\n  {{\n    OFFSET {offset}\n"
+        "    CHANNELS 3 Zrotation Xrotation Yrotation\n    End Site\n    {\n      OFFSET 0 0 1\n"
+        f"    }}\n  }}\n}}\nMOTION\nFrames: 2\nFrame Time: {frame_time}\n"
+        f"{root} 0 0 0 0 0 0\n0 0 0 0 0 0 0 0 0\n"
+    )
+
+
+def test_small_bvh_reads() -> None:
+    assert parse_bvh(small_bvh()).num_frames == 2
+
+
+@pytest.mark.parametrize("ft", ["1e-320", "0", "-0.1", "1e-9", "3600", "1e300"])
+def test_bvh_frame_time_out_of_range(ft: str) -> None:
+    with pytest.raises(BVHParseError, match=r"frame time .*1 to 1000 Hz"):
+        parse_bvh(small_bvh(frame_time=ft))
+
+
+def test_bvh_all_zero_offsets() -> None:
+    text = small_bvh(offset="0 0 0").replace("OFFSET 0 0 1", "OFFSET 0 0 0")
+    with pytest.raises(BVHParseError, match="OFFSET is zero"):
+        parse_bvh(text)
+
+
+@pytest.mark.parametrize("where", ["offset", "root"])
+def test_bvh_absurd_values(where: str) -> None:
+    text = small_bvh(offset="0 0 1e300") if where == "offset" else small_bvh(root="1e300 0 0")
+    with pytest.raises(BVHParseError, match=r"valid: \|value\| <= 1e\+07"):
+        parse_bvh(text)
+
+
+def test_bvh_deep_nesting_is_bounded() -> None:
+    depth = 1000
+    head = "HIERARCHY\nROOT j0\n{\nOFFSET 0 0 1\nCHANNELS 0\n"
+    body = "".join(f"JOINT j{k}\n{{\nOFFSET 0 0 1\nCHANNELS 1 Xrotation\n" for k in range(1, depth))
+    text = head + body + "}\n" * depth + "MOTION\nFrames: 1\nFrame Time: 0.1\n" + "0 " * (depth - 1)
+    with pytest.raises(BVHParseError, match=f"at most {MAX_DEPTH}"):
+        parse_bvh(text)
+
+
+def test_bvh_huge_token_is_not_echoed(tmp_path: Path) -> None:
+    token = "x" * 5_000_000
+    for text in (
+        small_bvh().replace("OFFSET 0 0 1", f"OFFSET 0 0 {token}", 1),
+        small_bvh().replace("Frames: 2", f"Frames: {token}"),
+        small_bvh().replace("0 0 0 0 0 0 0 0 0\n", f"0 0 0 0 0 0 0 0 {token}\n0 0 0 0 0 0 0 0 0\n"),
+    ):
+        with pytest.raises(BVHParseError) as ei:
+            parse_bvh(text)
+        assert len(str(ei.value)) < 300
+
+
+def test_bvh_without_motion_fails_before_reading_it_whole(tmp_path: Path) -> None:
+    import tracemalloc
+
+    p = tmp_path / "big.bvh"
+    with p.open("w") as fh:
+        fh.write("HIERARCHY\nROOT hips\n{\n  OFFSET 0 0 0\n")
+        line = "  OFFSET 1 2 3 " + "4 " * 40 + "\n"
+        for _ in range(50_000_000 // len(line)):
+            fh.write(line)
+    tracemalloc.start()
+    try:
+        with pytest.raises(BVHParseError, match=":5: "):
+            read_bvh(p)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 300 * 2**20  # the 50 MB file is never held (let alone tokenised) whole
+
+
+def test_bvh_long_hierarchy_without_motion(tmp_path: Path) -> None:
+    p = tmp_path / "long.bvh"
+    joint = "JOINT j{k}\n{{\nOFFSET 0 0 1\nCHANNELS 1 Xrotation\n}}\n"
+    joints = "".join(joint.format(k=k) for k in range(40_000))
+    p.write_text("HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\nCHANNELS 0\n" + joints)
+    with pytest.raises(BVHParseError, match="joints|no MOTION"):
+        read_bvh(p)
+
+
+def test_bvh_example_still_imports() -> None:
+    from habitsim.bvh_mapping import import_bvh
+    from habitsim.species import load_species
+
+    motion, _ = import_bvh(EXAMPLE_BVH, load_species("dog"))
+    assert motion.num_frames > 10
+
+
+def test_bvh_cli_error_is_exit_2(tmp_path: Path, capsys) -> None:
+    p = tmp_path / "bad.bvh"
+    p.write_text(small_bvh(frame_time="1e-320"))
+    code, err = run_cli(
+        ["transfer", p, "--from", "dog", "--to", "cat", "--method", "direct",
+         "--out", tmp_path / "o.npz"],
+        capsys,
+    )
+    assert code == 2 and err.startswith("error: ") and "frame time" in err
+    assert files_under(tmp_path) == ["bad.bvh"]
+
+
+# ------------------------------------------------------------------ .npz motion reader
+
+
+def _motion_arrays() -> dict[str, np.ndarray]:
+    from habitsim.gaits import generate
+
+    m = generate("dog", "walk", seed=0, duration_s=0.3)
+    with np.load(_save(m)) as z:
+        return {k: z[k] for k in z.files}
+
+
+def _save(m) -> Path:
+    import tempfile
+
+    p = Path(tempfile.mkdtemp()) / "m.npz"
+    m.save(p)
+    return p
+
+
+@pytest.fixture(scope="module")
+def arrays() -> dict[str, np.ndarray]:
+    return _motion_arrays()
+
+
+def write_npz(tmp_path: Path, arrays: dict[str, np.ndarray], **changes) -> Path:
+    d = {**arrays, **changes}
+    d = {k: v for k, v in d.items() if v is not None}
+    p = tmp_path / "m.npz"
+    with p.open("wb") as fh:
+        np.savez(fh, **d)
+    return p
+
+
+NPZ_CASES = {
+    "format_version_str": dict(format_version=np.array("1")),
+    "format_version_array": dict(format_version=np.array([1, 1])),
+    "format_version_nan": dict(format_version=np.array(np.nan)),
+    "joint_names_0d": dict(joint_names=np.array("pelvis")),
+    "joint_names_numbers": dict(joint_names=np.arange(27)),
+    "fps_array": dict(fps=np.array([30.0, 30.0])),
+    "fps_str": dict(fps=np.array("30")),
+    "fps_huge": dict(fps=np.array(1e300)),
+    "fps_tiny": dict(fps=np.array(1e-300)),
+    "species_array": dict(species=np.array(["dog", "cat"])),
+    "species_number": dict(species=np.array(3)),
+    "rotations_str": dict(rotations=np.array([["a"]])),
+    "root_str": dict(root_positions=np.array(["x", "y", "z"])),
+    "contacts_str": dict(contacts=np.array([["a"] * 4])),
+    "metadata_list": dict(metadata_json=np.array("[1, 2]")),
+    "metadata_deep": dict(metadata_json=np.array("[" * 100_000 + "]" * 100_000)),
+    "metadata_deep_object": dict(metadata_json=np.array('{"a":' + "[" * 200 + "]" * 200 + "}")),
+    "metadata_bytes": dict(metadata_json=np.array(b"{}")),
+}
+
+
+@pytest.mark.parametrize("case", sorted(NPZ_CASES))
+def test_npz_bad_fields_are_typed(tmp_path: Path, arrays, case: str) -> None:
+    from habitsim.motion import load_motion
+
+    p = write_npz(tmp_path, arrays, **NPZ_CASES[case])
+    with pytest.raises(HabitsimError) as ei:
+        load_motion(p)
+    assert len(str(ei.value)) < 400
+
+
+def test_npz_root_far_away(tmp_path: Path, arrays) -> None:
+    from habitsim.errors import InvalidMotionError
+    from habitsim.motion import load_motion
+
+    root = arrays["root_positions"].copy()
+    root[0, 0] = 1e300
+    with pytest.raises(InvalidMotionError, match="root_positions reach"):
+        load_motion(write_npz(tmp_path, arrays, root_positions=root))
+
+
+def test_npy_under_npz_name(tmp_path: Path) -> None:
+    from habitsim.motion import load_motion
+
+    p = tmp_path / "m.npz"
+    with p.open("wb") as fh:
+        np.save(fh, np.zeros(3))
+    with pytest.raises(MotionFileError, match="single .npy array"):
+        load_motion(p)
+
+
+def test_non_npz_refused_in_our_words(tmp_path: Path, arrays) -> None:
+    from habitsim.motion import load_motion
+
+    p = tmp_path / "m.npz"
+    np.savez(p, **arrays, extra=np.array([object()], dtype=object))
+    with pytest.raises(MotionFileError) as ei:
+        load_motion(p)
+    assert "allow_pickle" not in str(ei.value) and "never loads" in str(ei.value)
+    p.write_text("hello")
+    with pytest.raises(MotionFileError, match="not a zip"):
+        load_motion(p)
+
+
+def test_npz_zip_bomb_is_refused_from_the_headers(tmp_path: Path, arrays) -> None:
+    import tracemalloc
+
+    from habitsim.motion import load_motion
+
+    big = np.zeros((40_000, 27, 4, 8))  # 276 MB of zeros, compresses to < 1 MB
+    p = tmp_path / "bomb.npz"
+    np.savez_compressed(p, **{**arrays, "rotations": big})
+    del big
+    assert p.stat().st_size < 2 * 2**20
+    tracemalloc.start()
+    try:
+        with pytest.raises(MotionFileError, match="decompress"):
+            load_motion(p)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20 * 2**20
+
+
+@pytest.mark.parametrize(
+    "kw",
+    [dict(fps=1e300), dict(fps=1e-300), dict(fps="30"), dict(fps=np.array([30.0])),
+     dict(root=1e300), dict(root="x")],
+)
+def test_motion_absurd_but_finite(kw) -> None:
+    from habitsim.motion import Motion
+    from habitsim.skeleton import get_skeleton
+
+    root, rot = get_skeleton("dog").standing_pose()
+    rp = np.repeat(root[None], 3, axis=0)
+    if "root" in kw:
+        rp = np.full((3, 3), kw["root"], dtype=object if isinstance(kw["root"], str) else float)
+    with pytest.raises(HabitsimError):
+        Motion("dog", kw.get("fps", 30.0), rp, np.repeat(rot[None], 3, axis=0))
+
+
+# ------------------------------------------------------------------ species, manifest, run state
+
+
+def _species_toml(tmp_path: Path, old: str, new: str, top: str = "") -> Path:
+    """The dog's species file with ``old`` replaced by ``new`` (every time) and ``top``
+    put first (top-level keys)."""
+    from habitsim.species import load_species
+
+    text = load_species("dog").path.read_text(encoding="utf-8")
+    assert old in text
+    p = tmp_path / "dog.toml"
+    p.write_text(top + "\n" + text.replace(old, new), encoding="utf-8")
+    return p
+
+
+@pytest.mark.parametrize(
+    "old, new, top, match",
+    [
+        ("[posture]", "[xposture]", "posture = 5", "posture must be a table"),
+        ("[gaits.", "[xgaits.", 'gaits = "x"', "gaits must be a table"),
+        ("[segments]", "[xsegments]", "segments = [1, 2]", "segments must be a table"),
+        ("mass_kg = ", "mass_kg = 1e300 # ", "", "within"),
+        ("mass_kg = ", "mass_kg = 100000000000000000000 # ", "", "within"),
+    ],
+    ids=["posture_int", "gaits_str", "segments_list", "mass_huge", "mass_bigint"],
+)
+def test_species_toml_wrong_types(tmp_path: Path, old: str, new: str, top: str, match: str):
+    from habitsim.errors import SpeciesFileError
+    from habitsim.species import load_species_file
+
+    with pytest.raises(SpeciesFileError, match=match):
+        load_species_file(_species_toml(tmp_path, old, new, top))
+
+
+def test_species_cli_bad_file_exit_2(tmp_path: Path, capsys) -> None:
+    from habitsim.species import load_species_file
+
+    p = _species_toml(tmp_path, "[posture]", "[xposture]", "posture = 5")
+    with pytest.raises(HabitsimError):
+        load_species_file(p)
+
+
+@pytest.fixture(scope="module")
+def small_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from habitsim.dataset import build_dataset
+
+    out = tmp_path_factory.mktemp("data")
+    build_dataset(out, clips_per_species=1, seed=0, species=["cat", "dog"], workers=1,
+                  progress=False)
+    return out
+
+
+@pytest.mark.parametrize("value", ['"fast"', "[1]", '{"a": 1}', "true"])
+def test_manifest_non_numeric_measured(tmp_path: Path, small_dataset: Path, value: str) -> None:
+    import json
+    import shutil
+
+    from habitsim.dataset import load_manifest
+    from habitsim.errors import DatasetError
+
+    d = tmp_path / "d"
+    shutil.copytree(small_dataset, d)
+    m = json.loads((d / "manifest.json").read_text())
+    key = next(iter(m["clips"][0]["measured"]))
+    m["clips"][0]["measured"][key] = json.loads(value)
+    (d / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(DatasetError, match="measured"):
+        load_manifest(d)
+
+
+@pytest.mark.parametrize(
+    "path", ["a\x00b.npz", "x" * 300 + ".npz", "/abs.npz", "../up.npz"]
+)
+def test_manifest_bad_clip_path(tmp_path: Path, small_dataset: Path, path: str) -> None:
+    import json
+    import shutil
+
+    from habitsim.dataset import load_manifest
+    from habitsim.errors import DatasetError
+
+    d = tmp_path / "d"
+    shutil.copytree(small_dataset, d)
+    m = json.loads((d / "manifest.json").read_text())
+    m["clips"][0]["path"] = path
+    (d / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(DatasetError, match="clip path"):
+        load_manifest(d)
+
+
+EVAL_ARGS = ["--methods", "direct", "--refine", "none", "--workers", "1", "--report-pairs",
+             "0", "--no-videos", "--no-report", "--no-progress", "--max-clips", "1", "--split",
+             "train", "--no-track", "--no-dynamic"]
+
+
+@pytest.fixture(scope="module")
+def eval_run(small_dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("eval") / "run"
+    assert main(["eval", "--data", str(small_dataset), "--out", str(out), *EVAL_ARGS]) == 0
+    return out
+
+
+@pytest.mark.parametrize(
+    "tamper",
+    ["run_list", "run_config_str", "run_deep", "row_list", "row_no_key", "row_wrong_key",
+     "row_deep"],
+)
+def test_eval_resume_tampered_state(
+    tmp_path: Path, small_dataset: Path, eval_run: Path, capsys, tamper: str
+) -> None:
+    import json
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(eval_run, out)
+    run, rows = out / "run.json", sorted((out / "rows").glob("*.json"))
+    assert rows
+    deep = "[" * 100_000 + "]" * 100_000
+    if tamper == "run_list":
+        run.write_text("[1, 2]")
+    elif tamper == "run_config_str":
+        run.write_text(json.dumps({"config": "x"}))
+    elif tamper == "run_deep":
+        run.write_text(deep)
+    elif tamper == "row_list":
+        rows[0].write_text("[1]")
+    elif tamper == "row_no_key":
+        rows[0].write_text(json.dumps({"status": "ok"}))
+    elif tamper == "row_wrong_key":
+        rows[0].write_text(json.dumps({"key": 5, "status": "ok"}))
+    elif tamper == "row_deep":
+        rows[0].write_text(deep)
+    code, err = run_cli(
+        ["eval", "--data", small_dataset, "--out", out, *EVAL_ARGS, "--resume"], capsys
+    )
+    assert code == 2 and err.startswith("error: ") and len(err) < 600, err
+
+
+# ------------------------------------------------------------------ CLI argument bounds
+
+
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--seed", str(2**64)], "--seed"),
+        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--seed", "-1"], "--seed"),
+        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--temperature", "0"],
+         "--temperature"),
+        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--temperature", "-1"],
+         "--temperature"),
+        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--temperature", "nan"],
+         "--temperature"),
+        (["track", "{m}", "--settle", "1e9"], "--settle"),
+        (["track", "{m}", "--control-hz", "inf"], "--control-hz"),
+        (["data", "synth", "--out", "{t}/d", "--fps", "100000"], "fps"),
+        (["data", "synth", "--out", "{t}/d", "--fps", "0.001"], "fps"),
+        (["data", "synth", "--out", "{t}/d", "--seed", str(2**64)], "--seed"),
+        (["eval", "--data", "{t}", "--out", "{t}/e", "--workers", "100000"], "--workers"),
+    ],
+)
+def test_cli_argument_bounds(tmp_path: Path, motion_file: Path, capsys, argv, match) -> None:
+    argv = [a.format(m=motion_file, t=tmp_path) for a in argv]
+    code, err = run_cli(argv, capsys)
+    assert code == 2 and err.startswith("error: ") and match in err, err
+    assert "valid" in err
+    assert files_under(tmp_path) == []
+
+
+def test_build_dataset_fps_bounds(tmp_path: Path) -> None:
+    from habitsim.dataset import build_dataset
+    from habitsim.errors import DatasetError
+
+    for fps in (100000.0, 0.001):
+        with pytest.raises(DatasetError, match="valid"):
+            build_dataset(tmp_path / "d", clips_per_species=1, fps=fps, species=["cat"],
+                          workers=1, progress=False)
+
+
+def test_npz_corrupt_array_header(tmp_path: Path, arrays) -> None:
+    """A member whose .npy header dict is cut short (numpy raises tokenize.TokenError)."""
+    import io
+    import zipfile
+
+    from habitsim.motion import load_motion
+
+    p = tmp_path / "m.npz"
+    with zipfile.ZipFile(p, "w") as zf:
+        for k, v in arrays.items():
+            buf = io.BytesIO()
+            np.save(buf, v)
+            raw = buf.getvalue()
+            if k == "fps":  # the header dict left open: {'descr': '<f8', ... (no '}')
+                raw = raw.replace(b"}", b" ", 1)
+            zf.writestr(f"{k}.npy", raw)
+    with pytest.raises(MotionFileError, match="not a readable"):
+        load_motion(p)
+
+
+@pytest.mark.parametrize("command", ["synth", "eval"])
+def test_output_folder_under_a_file(tmp_path: Path, small_dataset: Path, capsys, command) -> None:
+    blocker = tmp_path / "blocker"
+    blocker.write_text("x")
+    if command == "synth":
+        argv = ["data", "synth", "--out", blocker / "d", "--species", "cat",
+                "--clips-per-species", "1", "--workers", "1", "--no-progress"]
+    else:
+        argv = ["eval", "--data", small_dataset, "--out", blocker / "e", *EVAL_ARGS]
+    code, err = run_cli(argv, capsys)
+    assert code == 2 and err.startswith("error: ") and "file where a folder" in err, err
+    assert files_under(tmp_path) == ["blocker"]

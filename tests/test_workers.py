@@ -1,0 +1,97 @@
+"""Pool workers die with their parent (issue 17): SIGKILL or SIGTERM of a running
+``habitsim data synth`` / ``habitsim eval`` leaves no worker process behind."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+psutil = pytest.importorskip("psutil")
+
+
+def _start(args: list[str], tmp_path: Path) -> tuple[subprocess.Popen, list]:
+    """Start ``habitsim ARGS`` and wait until its pool workers are running."""
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "habitsim", *args],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, cwd=tmp_path,
+    )
+    parent = psutil.Process(proc.pid)
+    deadline = time.monotonic() + 30
+    workers: list = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        workers = parent.children(recursive=True)
+        if len(workers) >= 2:
+            break
+        time.sleep(0.05)
+    assert len(workers) >= 2, f"no pool started: {proc.stderr.read().decode()[-500:]}"
+    return proc, workers
+
+
+def _assert_all_gone(workers: list, within_s: float = 5.0) -> None:
+    gone, alive = psutil.wait_procs(workers, timeout=within_s)
+    for p in alive:  # do not leave them behind even when the test fails
+        p.kill()
+    assert not alive, f"{len(alive)} worker(s) outlived their parent"
+
+
+def _synth(tmp_path: Path) -> list[str]:
+    return ["data", "synth", "--out", str(tmp_path / "d"), "--clips-per-species", "40",
+            "--workers", "2", "--no-progress"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
+def test_synth_workers_die_with_the_parent(tmp_path: Path, sig: int) -> None:
+    proc, workers = _start(_synth(tmp_path), tmp_path)
+    time.sleep(0.3)  # let the workers start on clips
+    proc.send_signal(sig)
+    proc.wait(timeout=15)
+    if sig == signal.SIGTERM:
+        assert proc.returncode == 130  # stopped like Ctrl-C, not killed by the signal
+    _assert_all_gone(workers)
+    # nothing writes into the folder after the run is gone
+    files = sorted((tmp_path / "d").rglob("*"))
+    time.sleep(0.5)
+    assert sorted((tmp_path / "d").rglob("*")) == files
+
+
+_EXECUTOR_SCRIPT = """
+import time
+from habitsim.evaluation.executors import LocalExecutor
+
+def slow(x):
+    time.sleep(60)
+    return x
+
+if __name__ == "__main__":
+    for _ in LocalExecutor(2).map_unordered(slow, list(range(8))):
+        pass
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
+def test_eval_executor_workers_die_with_the_parent(tmp_path: Path, sig: int) -> None:
+    """The local executor of ``habitsim eval`` (a parent stuck waiting on 60 s tasks)."""
+    script = tmp_path / "run.py"
+    script.write_text(_EXECUTOR_SCRIPT)
+    proc = subprocess.Popen([sys.executable, str(script)], stderr=subprocess.PIPE)
+    parent = psutil.Process(proc.pid)
+    deadline = time.monotonic() + 20
+    workers: list = []
+    while time.monotonic() < deadline and len(workers) < 2:
+        workers = parent.children(recursive=True)
+        time.sleep(0.05)
+    assert len(workers) >= 2
+    time.sleep(0.3)
+    proc.send_signal(sig)
+    if sig == signal.SIGTERM:
+        # a plain Python parent dies of SIGTERM at once, as it would of SIGKILL
+        proc.wait(timeout=10)
+    _assert_all_gone(workers)
+    proc.wait(timeout=10)
