@@ -170,9 +170,6 @@ class BalanceConfig:
         capture_max: bound of the stepping feedback [m] (default 0.15·L).
         seek_depth: a lost-contact foot aims this far below its reference point [m]
             (default 0.03·L).
-        swing_height: the lowest mid-swing lift of a swing foot over the line between
-            its lift-off and touch-down [m] (default 0.06·L; 0 follows the reference path
-            as it is; :class:`~habitsim.controllers.swing.SwingLegs`).
         posture_body: scale of the joint PD on non-leg joints (1 = kp = τmax/0.15 rad,
             capped at half the explicit stability limit; kd critical, capped).
         posture_leg: scale of the posture PD of the leg joints.
@@ -207,7 +204,6 @@ class BalanceConfig:
     capture_pos_gain: float = 0.3
     capture_max: float = 0.0
     seek_depth: float = 0.0
-    swing_height: float = 0.0
     posture_body: float = 1.0
     posture_leg: float = 0.3
     leg_damping: float = 0.1
@@ -233,8 +229,7 @@ class BalanceConfig:
                   trunk_omega=min(2.0 * w0, OMEGA_CAP), rot_omega=min(2.0 * w0, OMEGA_CAP),
                   fz_max=1.5 * mass * gravity,
                   swing_omega=8.0 * w0, capture_max=0.15 * leg_length,
-                  seek_depth=0.03 * leg_length, early_reach=0.1 * leg_length,
-                  swing_height=0.06 * leg_length)
+                  seek_depth=0.03 * leg_length, early_reach=0.1 * leg_length)
         known = set(cls.__dataclass_fields__) - {"mass", "leg_length", "gravity"}
         bad = sorted(set(overrides) - known)
         if bad:
@@ -243,13 +238,13 @@ class BalanceConfig:
         cfg = replace(cfg, **{k: (v if isinstance(v, (dict, bool)) else float(v))
                               for k, v in overrides.items()})
         for name in known - {"extra", "null_space_posture", "fz_min", "capture_gain",
-                             "capture_pos_gain", "swing_height",
+                             "capture_pos_gain",
                              "posture_body", "posture_leg", "leg_damping", "regularization",
                              "smooth"}:
             v = getattr(cfg, name)
             if not (np.isfinite(v) and v > 0):
                 raise ControllerError(f"balance option {name} must be > 0, got {v}")
-        for name in ("fz_min", "capture_gain", "capture_pos_gain", "swing_height", "posture_body",
+        for name in ("fz_min", "capture_gain", "capture_pos_gain", "posture_body",
                      "posture_leg", "leg_damping", "regularization", "smooth"):
             v = getattr(cfg, name)
             if not (np.isfinite(v) and v >= 0):
@@ -522,8 +517,7 @@ class BalanceController(Controller):
         self.swing = SwingLegs(legs, kp_sw, kd_sw, capture_gain=config.capture_gain,
                                capture_pos_gain=config.capture_pos_gain,
                                capture_max=config.capture_max, seek_depth=config.seek_depth,
-                               seek_speed=0.3 * float(np.sqrt(config.gravity * config.leg_length)),
-                               min_height=config.swing_height)
+                               seek_speed=0.3 * float(np.sqrt(config.gravity * config.leg_length)))
         kp, kd = _posture_gains(model, jm.names, self.control_dt)
         leg = legs.own.any(axis=0)
         self.kp_post = np.where(leg, config.posture_leg, config.posture_body) * kp

@@ -656,13 +656,6 @@ class SwingLegs:
     moving down at ``seek_speed``. Force ``F = Kp (p_des − p) + Kd (v_des − v)``, torques
     ``τ = J_ownᵀ F`` on the leg's own joints.
 
-    The height of the wanted point is at least ``z_lo + (z_td − z_lo)·φ + h·4u(1 − u)``,
-    ``u = min(φ / 0.8, 1)`` (the reference foot height at lift-off and at touch-down, plus a
-    bump of ``min_height`` that is back to zero at 80 % of the swing): a reference that
-    shuffles its feet close to the ground (real motion capture: swing apexes of 2–5 % of
-    leg length) would otherwise have the simulated foot scuff the ground whenever the
-    body is a few millimetres low, and the scuffs trip the body.
-
     Args:
         legs: the :class:`LegSet`.
         kp: (nf,) or scalar Cartesian stiffness [N/m].
@@ -674,14 +667,12 @@ class SwingLegs:
         capture_max: bound of the stepping feedback in ``Δ`` [m].
         seek_depth: how far below its reference point a SEEK foot aims [m].
         seek_speed: downward speed wanted of a SEEK foot [m/s].
-        min_height: the lowest mid-swing lift over the lift-off/touch-down line [m]
-            (0: the reference path as it is).
     """
 
     def __init__(self, legs: LegSet, kp: float | np.ndarray, kd: float | np.ndarray, *,
                  capture_gain: float = 1.0, capture_pos_gain: float = 0.3,
                  capture_max: float = 0.1, seek_depth: float = 0.02,
-                 seek_speed: float = 0.3, min_height: float = 0.0) -> None:
+                 seek_speed: float = 0.3) -> None:
         nf = legs.n_feet
         self.legs = legs
         self.kp = np.broadcast_to(np.asarray(kp, dtype=float), (nf,)).copy()
@@ -691,10 +682,8 @@ class SwingLegs:
         self.capture_max = float(capture_max)
         self.seek_depth = float(seek_depth)
         self.seek_speed = float(seek_speed)
-        self.min_height = float(min_height)
         self.last_target = np.zeros((nf, 3))
         self.d_lo = np.zeros((nf, 3))
-        self.z_lo = np.full(nf, np.nan)
 
     def correction(self, com: np.ndarray, com_vel: np.ndarray, com_ref: np.ndarray,
                    com_vel_ref: np.ndarray, height: float, gravity: float,
@@ -741,14 +730,12 @@ class SwingLegs:
 
     def reset(self) -> None:
         self.d_lo[:] = 0.0
-        self.z_lo[:] = np.nan
         self.last_target[:] = 0.0
 
     def lift_off(self, feet: np.ndarray, actual: np.ndarray, reference: np.ndarray) -> None:
         """Record ``δ_lo = actual − reference`` foot point for the feet (indices) that
-        just lifted off, and the reference foot height there."""
+        just lifted off."""
         self.d_lo[feet] = actual[feet] - reference[feet]
-        self.z_lo[feet] = reference[feet, 2]
 
     def targets(self, sample: PlanSample, modes: np.ndarray,
                 delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -771,15 +758,6 @@ class SwingLegs:
                 d_lo = self.d_lo[i]
                 p[i] += (1.0 - s) * d_lo + s * delta
                 v[i] += ds * (delta - d_lo)
-                if self.min_height > 0.0 and ph < 0.8:
-                    z_lo = self.z_lo[i] if self.z_lo[i] == self.z_lo[i] else p[i, 2]
-                    z_td = float(sample.foothold[i, 2])
-                    u = ph / 0.8
-                    lift = z_lo + (z_td - z_lo) * ph + self.min_height * 4.0 * u * (1.0 - u)
-                    if lift > p[i, 2]:
-                        p[i, 2] = lift
-                        v[i, 2] = ((z_td - z_lo) + self.min_height * 4.0 * (1.0 - 2.0 * u) / 0.8
-                                   ) / span
                 if ph > 0.7:  # reach slightly into the ground so touch-down is not late
                     w = (ph - 0.7) / 0.3
                     p[i, 2] -= self.seek_depth * w * w

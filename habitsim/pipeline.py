@@ -272,8 +272,6 @@ def _refine(
 
     opts = options or RefineOptions(metrics=False)
     opts = replace(opts, dynamics=mode == "B", fallback=True)
-    if stage.contacts_method == "source":  # the source's footfalls: planted, not trimmed
-        opts = replace(opts, trim_contacts=False)
     t0 = time.perf_counter()
     res = refine(stage.motion, opts, contacts=stage.contacts, model=model)
     wall = time.perf_counter() - t0
