@@ -202,7 +202,9 @@ class RefineOptions:
             report (off in benchmarks).
         max_iter, tol, constr_viol_tol: IPOPT settings (constraint tolerance in [m]; 10 µm,
             ten times below ``verify_tol_mm``: at 1 µm the Gauss-Newton iterations crawl
-            through the last digits linearly and stage B ran into their cap).
+            through the last digits linearly and stage B ran into their cap). The
+            optimality tolerance is IPOPT's scaled one: 1e-5 instead of 1e-6 saved 16 %
+            of the stage-A iterations on artefact clips with the same verdicts.
         verify_tol_mm: largest stance drift / penetration [mm] the MuJoCo check accepts.
     """
 
@@ -231,7 +233,7 @@ class RefineOptions:
     fallback: bool = False
     metrics: bool = True
     max_iter: int = 200
-    tol: float = 1e-6
+    tol: float = 1e-5
     constr_viol_tol: float = 1e-5
     verify_tol_mm: float = 0.1
 
