@@ -32,8 +32,8 @@ foot names, figures of the fit), saved atomically as ``.npz``; track it with
 ``habitsim.sim.track(clip.trajectory(), model=robot, feet=clip.feet,
 contacts=clip.contacts, controller="mpc")`` (:func:`track_clip`).
 
-:func:`trot` makes a robot reference from nothing: standing, trotting in place or
-trotting forward, with the same IK.
+:func:`trot` and :func:`stand` make a robot reference from nothing: trotting in place
+or forward (the same IK), standing on ``home``.
 
 Bad input raises :class:`RetargetError`; units are SI, world z up, ground at z = 0.
 """
@@ -62,6 +62,7 @@ __all__ = [
     "leg_ik",
     "retarget",
     "trot",
+    "stand",
     "track_clip",
     "load_robot_clip",
 ]
@@ -535,6 +536,25 @@ def trot(robot: mujoco.MjModel | RobotLegs, feet: Sequence[str] | None = None, *
                          "source": "habitsim.retarget.trot", "speed_m_s": float(speed),
                          "period_s": period, "duty": float(duty), "step_height_m": height,
                          "frames": n}))
+
+
+def stand(robot: mujoco.MjModel | RobotLegs, feet: Sequence[str] | None = None, *,
+          duration_s: float = 10.0, fps: float = 100.0) -> RobotClip:
+    """A standing reference: the ``home`` pose with the feet on the ground, held.
+
+    Raises:
+        RetargetError: see :func:`robot_legs`; non-positive duration or rate.
+    """
+    rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet))
+    for name, v in (("duration_s", duration_s), ("fps", fps)):
+        if not (math.isfinite(v) and v > 0):
+            raise RetargetError(f"{name} must be > 0, got {v}")
+    n = int(round(duration_s * fps)) + 1
+    q = rl.home.copy()
+    q[rl.trunk_qadr + 2] = rl.height
+    qpos = np.tile(q, (n, 1))
+    return RobotClip(qpos=qpos, fps=float(fps), contacts=np.ones((n, len(rl.feet)), bool),
+                     feet=rl.feet, metadata={"source": "habitsim.retarget.stand", "frames": n})
 
 
 def track_clip(clip: RobotClip, robot: mujoco.MjModel, *, controller: str | Any = "mpc",

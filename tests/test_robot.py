@@ -147,3 +147,35 @@ def test_go1_trots_under_mpc_through_track(go1, speed):
     # simulated with torque motors of the servos' strength (the given model is kept)
     assert not actuated_joints(res.model).biased.any()
     assert res.controller_stats["mpc_failures"] == 0
+
+
+def _readme_section_code() -> list[str]:
+    text = (Path(__file__).parents[1] / "README.md").read_text()
+    sec = text.split("## Using the controllers on your own robot", 1)[1].split("\n## ", 1)[0]
+    return [b.split("\n", 1)[1] for b in sec.split("```")[1::2] if b.startswith("python")]
+
+
+def test_readme_robot_code_runs_as_written(monkeypatch, capsys):
+    """The README section's code blocks, verbatim, from the repository root."""
+    monkeypatch.chdir(Path(__file__).parents[1])
+    blocks = _readme_section_code()
+    assert len(blocks) == 2 and 'feet=["FL", "FR", "RL", "RR"]' in blocks[0]
+    scope: dict = {}
+    for code in blocks:
+        exec(compile(code, "README.md", "exec"), scope)  # noqa: S102 - our own README
+    res = scope["res"]
+    assert res.survival == 1.0 and res.qpos[-1, 0] > 4.0  # 10 s at 0.5 m/s
+    survival, mpjpe, _ = capsys.readouterr().out.split()
+    assert float(survival) == 1.0 and float(mpjpe) < 15.0
+
+
+def test_robot_trot_example(capsys):
+    from habitsim.examples.robot_trot import main, run
+
+    rows = run(duration_s=2.5, speed=0.6)  # 0.5 s standing, 1 s ramp: 0.9 m
+    assert [r["case"] for r in rows] == ["stand", "trot in place", "trot 0.6 m/s"]
+    assert all(r["survival"] == 1.0 and r["fall_reason"] is None for r in rows)
+    assert abs(rows[1]["distance_m"]) < 0.05 and rows[2]["distance_m"] > 0.8
+    assert all(r["mpc_median_ms"] < 20.0 for r in rows)
+    assert main(["--duration", "0.5", "--feet", "FL,FR,RL,toe"]) == 2
+    assert "unknown foot name(s) 'toe'" in capsys.readouterr().err
