@@ -65,6 +65,7 @@ __all__ = [
     "stand",
     "track_clip",
     "load_robot_clip",
+    "drawable",
 ]
 
 #: File format version of a saved :class:`RobotClip`.
@@ -186,11 +187,14 @@ def robot_legs(model: mujoco.MjModel, feet: Sequence[str]) -> RobotLegs:
 
 
 def _point_names(model: mujoco.MjModel) -> list[str]:
+    """Names of the sites, geoms and bodies that could be feet (none on the world body)."""
     names: list[str] = []
-    for n, get in ((model.nsite, model.site), (model.ngeom, model.geom), (model.nbody, model.body)):
+    for n, get, body in ((model.nsite, model.site, model.site_bodyid),
+                         (model.ngeom, model.geom, model.geom_bodyid),
+                         (model.nbody, model.body, np.arange(model.nbody))):
         for i in range(n):
             nm = get(i).name
-            if nm and nm not in names and nm != "world":
+            if nm and nm not in names and body[i] != 0:
                 names.append(nm)
     return names
 
@@ -565,3 +569,15 @@ def track_clip(clip: RobotClip, robot: mujoco.MjModel, *, controller: str | Any 
 
     return track(clip.trajectory(), model=robot, feet=clip.feet, contacts=clip.contacts,
                  controller=controller, **options)
+
+
+def drawable(model: mujoco.MjModel) -> mujoco.MjModel:
+    """A copy of ``model`` whose colliding geoms are drawn (for videos): a collision-only
+    robot (Menagerie's style) keeps them in geom group 3, which MuJoCo's renderer hides
+    by default. Physics is untouched."""
+    import copy
+
+    out = copy.copy(model)
+    colliding = (out.geom_contype != 0) | (out.geom_conaffinity != 0)
+    out.geom_group[colliding & (out.geom_group > 2)] = 0
+    return out

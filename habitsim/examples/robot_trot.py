@@ -33,7 +33,7 @@ def run(robot: str | Path = GO1_SCENE, feet: tuple[str, ...] = GO1_FEET, *,
         video: str | Path | None = None) -> list[dict[str, Any]]:
     """Stand, trot in place and trot forward at ``speed`` for ``duration_s`` each under
     ``mpc``; one row of figures per case (``video``: a folder for an MP4 per case)."""
-    from habitsim.retarget import load_robot, stand, track_clip, trot
+    from habitsim.retarget import drawable, load_robot, stand, track_clip, trot
 
     model = load_robot(robot)
     cases = (("stand", stand(model, feet, duration_s=duration_s)),
@@ -55,19 +55,8 @@ def run(robot: str | Path = GO1_SCENE, feet: tuple[str, ...] = GO1_FEET, *,
             from habitsim.render import render_video
 
             out = Path(video) / f"{name.replace(' ', '_').replace('/', '_')}.mp4"
-            render_video(visible(res.model), res.qpos, res.fps, out, camera="tracking")
+            render_video(drawable(res.model), res.qpos, res.fps, out, camera="tracking")
     return rows
-
-
-def visible(model):
-    """A copy of ``model`` whose colliding geoms are drawn: a collision-only model keeps
-    them in geom group 3, which MuJoCo's renderer hides by default."""
-    import copy
-
-    out = copy.copy(model)
-    colliding = (out.geom_contype != 0) | (out.geom_conaffinity != 0)
-    out.geom_group[colliding & (out.geom_group > 2)] = 0
-    return out
 
 
 def format_rows(rows: list[dict[str, Any]]) -> str:
