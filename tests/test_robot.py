@@ -179,3 +179,7 @@ def test_robot_trot_example(capsys):
     assert all(r["mpc_median_ms"] < 20.0 for r in rows)
     assert main(["--duration", "0.5", "--feet", "FL,FR,RL,toe"]) == 2
     assert "unknown foot name(s) 'toe'" in capsys.readouterr().err
+
+
+def test_menagerie_unitree_foot_names_are_found_by_default(go1):
+    assert make_controller("mpc", go1).legs.feet == tuple(FEET)
