@@ -206,3 +206,20 @@ def test_mpc_trots_the_robot_on_its_own_servos(go1):
     assert np.linalg.norm(d.qpos[:3] - ref.qpos[-1, :3]) < 0.05
     assert d.xmat[1, 8] > 0.99  # trunk upright
     assert ctl.stats.failures == 0
+
+
+def test_drawable_shows_collision_geoms_only_for_drawing(go1):
+    from habitsim.render import render_available, render_frames
+    from habitsim.retarget import drawable
+
+    vis = drawable(go1)
+    robot = go1.geom_bodyid != 0  # the floor is drawn anyway
+    assert (go1.geom_group[robot] == 3).all() and (vis.geom_group[robot] == 0).all()
+    assert np.array_equal(vis.geom_size, go1.geom_size)
+    assert np.array_equal(vis.geom_contype, go1.geom_contype)
+    if render_available():
+        frames = render_frames(vis, _home(go1).qpos[None], camera="tracking", width=160,
+                               height=120)
+        hidden = render_frames(go1, _home(go1).qpos[None], camera="tracking", width=160,
+                               height=120)
+        assert np.abs(frames.astype(int) - hidden).sum() > 0  # the robot is drawn
