@@ -855,7 +855,8 @@ def _sim_model(controller: Any, clip: _Clip, given: mujoco.MjModel | None) -> mu
 def _has_position_servos(model: mujoco.MjModel) -> bool:
     from .controllers.robot import is_position_servo
 
-    return any(is_position_servo(model, a) for a in range(model.nu))
+    return any(is_position_servo(model, a)
+               for a in range(int(getattr(model, "nactuator", model.nu))))
 
 
 # --------------------------------------------------------------------------- running
