@@ -223,3 +223,16 @@ def test_drawable_shows_collision_geoms_only_for_drawing(go1):
         hidden = render_frames(go1, _home(go1).qpos[None], camera="tracking", width=160,
                                height=120)
         assert np.abs(frames.astype(int) - hidden).sum() > 0  # the robot is drawn
+
+
+def test_track_on_a_robot_refuses_what_does_not_fit(go1):
+    from habitsim.gaits import generate
+
+    walk = generate("dog", "walk", seed=1, duration_s=1.0)
+    with pytest.raises(SimulationError, match="retarget it first"):
+        track(walk, model=go1, feet=FEET, controller="mpc")
+    clip = trot(go1, FEET, duration_s=0.5)
+    with pytest.raises(SimulationError, match=r"contacts must have shape \(51, 4\)"):
+        track(clip.trajectory(), model=go1, feet=FEET, contacts=clip.contacts[:, :3])
+    with pytest.raises(SimulationError, match="pass the robot as model="):
+        track(clip.trajectory(), species="dog", feet=FEET)
