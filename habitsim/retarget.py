@@ -286,7 +286,7 @@ class RobotClip:
     def duration(self) -> float:
         return (len(self.qpos) - 1) / self.fps if len(self.qpos) > 1 else 0.0
 
-    def trajectory(self):
+    def trajectory(self) -> Any:
         """The frames as a :class:`~habitsim.qpos.QposTrajectory` (for
         :func:`habitsim.sim.track`)."""
         from .qpos import QposTrajectory
@@ -331,7 +331,8 @@ def load_robot_clip(path: str | Path) -> RobotClip:
 
 # --------------------------------------------------------------------------- retarget
 def _source_paths(motion: Motion) -> dict[str, np.ndarray]:
-    """Trunk position / rotation, foot sole points and radius of a motion on its model."""
+    """Per frame, the trunk position (T, 3) and rotation (T, 3, 3) and the feet's lowest
+    points (T, 4, 3) of a motion played on its species' model."""
     from .qpos import motion_to_qpos, species_model
     from .sim import foot_geoms
 
