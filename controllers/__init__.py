@@ -78,3 +78,9 @@ __all__ += [
     "make_controller",
     "plan_from_qpos",
 ]
+
+# Robots habitsim did not build (issue [4/5]): position servos driven as torques, feet by
+# the robot's own names.
+from .robot import ServoTorque, foot_geoms, torque_model  # noqa: E402
+
+__all__ += ["ServoTorque", "foot_geoms", "torque_model"]

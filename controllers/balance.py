@@ -445,7 +445,9 @@ class BalanceController(Controller):
     """Stance-force QP + swing legs + posture: balance-aware tracking, no external force.
 
     Args:
-        model: the MuJoCo model (torque actuators on the joints, one free joint).
+        model: the MuJoCo model (one free joint; torque motors or position servos on the
+            joints: a servo is given the target that makes it exert the wanted torque,
+            see :class:`~habitsim.controllers.robot.ServoTorque`).
         feet: foot names in contact-label order (default: ``lf_foot, rf_foot, lh_foot,
             rh_foot`` or the usual robot names, see
             :func:`~habitsim.controllers.swing.default_feet`).
@@ -477,7 +479,8 @@ class BalanceController(Controller):
 
     Raises:
         ControllerError: no free joint, unknown feet, a foot without joints of its own,
-            bad options, a missing solver plugin.
+            biased actuators other than position servos, bad options, a missing solver
+            plugin.
     """
 
     name = "balance"
@@ -496,10 +499,13 @@ class BalanceController(Controller):
         self.legs = LegSet(model, feet)
         legs = self.legs
         jm = legs.jmap
-        biased = [n for n, b in zip(jm.names, jm.biased, strict=True) if b]
-        if biased:
-            raise ControllerError(f"{type(self).__name__} needs torque actuators; servo "
-                                  f"(biased) actuators on: {', '.join(biased[:8])}")
+        # position servos (a robot's usual actuators) give the wanted torques through the
+        # inverse of their law (controllers.robot.ServoTorque); torque motors as they are
+        self._servo = None
+        if jm.biased is not None and jm.biased.any():
+            from .robot import ServoTorque
+
+            self._servo = ServoTorque(model, jm)
         gnorm = float(np.linalg.norm(model.opt.gravity))
         if config is None:
             length = model_leg_length(model, legs.feet) if leg_length is None else float(leg_length)
@@ -836,6 +842,11 @@ class BalanceController(Controller):
         u = np.array(data.ctrl)
         u[self._ctrl_idx] = np.minimum(np.maximum(clipped / self._tpc, jm.ctrl_lo), jm.ctrl_hi)
         self.last_torque = u[self._ctrl_idx] * self._tpc
+        if self._servo is not None:
+            ctrl, torque = self._servo.controls(data, clipped)
+            sv = self._servo.servo
+            u[self._ctrl_idx[sv]] = ctrl[sv]
+            self.last_torque = np.where(sv, torque, self.last_torque)
         return u
 
     def _refresh_stats(self) -> None:

@@ -63,13 +63,18 @@ def make_controller(name: str, model: mujoco.MjModel, species=None, *,
 
     Args:
         name: one of :data:`CONTROLLER_NAMES`.
-        model: the model to control (torque motors on the joints; the shipped species
-            models and most robot MJCFs qualify).
+        model: the model to control: torque motors on the joints (the shipped species
+            models), or position servos (most robot MJCFs, e.g. MuJoCo Menagerie's):
+            ``balance`` and ``mpc`` drive a servo with the target that makes it exert the
+            torque they want (:class:`~habitsim.controllers.robot.ServoTorque`); ``pd``
+            needs torque motors (:func:`~habitsim.controllers.robot.torque_model`).
         species: catalog species name or :class:`~habitsim.species.Species` (sets the
             leg length used for scaling); ``None`` for a user model.
         qpos, fps, contacts: the reference clip, (T, nq) at ``fps`` with (T, n_feet)
             contact labels (LF, RF, LH, RH), given to ``balance`` / ``mpc`` as their plan.
-        feet: foot names (default: ``lf_foot …`` or the usual robot names).
+        feet: foot names as the model names them — sites, geoms or bodies, in the order
+            of the contact labels, e.g. ``["FL", "FR", "RL", "RR"]`` on Menagerie's Unitree
+            robots (default: ``lf_foot …`` or the usual robot names).
         **options: passed on — ``pd``: ``kp``, ``kd``, ``joints``, ``dt``; ``balance``:
             :class:`~habitsim.controllers.balance.BalanceConfig` fields, ``solver``,
             ``control_dt``; ``mpc``: those plus ``rate_hz``, ``horizon_s``, ``max_steps``,

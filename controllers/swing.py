@@ -68,7 +68,8 @@ SEEK = 2
 HABITSIM_FEET = ("lf_foot", "rf_foot", "lh_foot", "rh_foot")
 _ROBOT_FEET = (("FL_foot", "FR_foot", "RL_foot", "RR_foot"),
                ("LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"),
-               ("fl_foot", "fr_foot", "rl_foot", "rr_foot"))
+               ("fl_foot", "fr_foot", "rl_foot", "rr_foot"),
+               ("FL", "FR", "RL", "RR"))  # MuJoCo Menagerie's Unitree robots
 
 
 def default_feet(model: mujoco.MjModel) -> tuple[str, ...]:

@@ -13,7 +13,8 @@ key                      definition
                          :class:`habitsim.sim.FallDetector`) or became unstable
 ``sim_mpjpe_mm``         mean over the survived frames and the 30 habitsim joints of the
                          distance between simulated and reference world joint positions,
-                         both by MuJoCo FK of the same model (global, no alignment) [mm]
+                         both by MuJoCo FK of the same model (global, no alignment) [mm];
+                         on a robot (no habitsim joint names) over its body origins
 ``root_drift_mm``        horizontal distance between the simulated and the reference root
                          (free-joint position) at the last survived frame [mm]
 ``contact_f1``           F1 of simulated foot contacts (touch > 1 % m·g) against the
@@ -78,16 +79,33 @@ def sim_mpjpe_mm(model: mujoco.MjModel, sim_qpos: np.ndarray, ref_qpos: np.ndarr
     """Mean per-joint position error [mm] over the frames of ``sim_qpos`` (K ≤ T).
 
     Args:
-        model: a model with habitsim joint names (bodies/sites named after the joints).
+        model: a model with habitsim joint names (bodies/sites named after the joints),
+            or any other model (a robot): then the error is over its bodies' origins.
         sim_qpos: (K, nq) simulated frames.
         ref_qpos: (T, nq) reference frames; the first K are compared.
     """
     k = len(sim_qpos)
     if k == 0:
         return math.nan
-    a = qpos_joint_positions(model, sim_qpos)
-    b = qpos_joint_positions(model, np.asarray(ref_qpos)[:k])
+    try:
+        a = qpos_joint_positions(model, sim_qpos)
+        b = qpos_joint_positions(model, np.asarray(ref_qpos)[:k])
+    except InvalidMotionError:  # not a habitsim model: every body but the world
+        a = _body_positions(model, sim_qpos)
+        b = _body_positions(model, np.asarray(ref_qpos)[:k])
     return float(np.linalg.norm(a - b, axis=-1).mean() * 1000.0)
+
+
+def _body_positions(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
+    """(T, nbody − 1, 3) world positions of the body origins (world body left out)."""
+    q = np.atleast_2d(np.asarray(qpos, dtype=np.float64))
+    d = mujoco.MjData(model)
+    out = np.empty((len(q), model.nbody - 1, 3))
+    for t, row in enumerate(q):
+        d.qpos[:] = row
+        mujoco.mj_kinematics(model, d)
+        out[t] = d.xpos[1:]
+    return out
 
 
 def root_drift_mm(model: mujoco.MjModel, sim_qpos: np.ndarray, ref_qpos: np.ndarray) -> float:

@@ -241,26 +241,41 @@ def _free_body(model: mujoco.MjModel) -> int:
     return int(model.jnt_bodyid[free[0]])
 
 
-def foot_geoms(model: mujoco.MjModel) -> np.ndarray:
-    """(4,) geom ids of the feet ``lf_foot, rf_foot, lh_foot, rh_foot``.
+def foot_geoms(model: mujoco.MjModel, feet: Sequence[str] | None = None) -> np.ndarray:
+    """(nf,) geom ids of the feet: ``lf_foot, rf_foot, lh_foot, rh_foot`` (habitsim's
+    models), or the colliding geom of each of ``feet``, named as the robot names them
+    (site, geom or body; :func:`habitsim.controllers.robot.foot_geoms`).
 
     Raises:
-        SimulationError: a foot geom is missing (the message lists the model's geoms).
+        SimulationError: a foot geom is missing (the message lists the model's geoms), an
+            unknown foot name.
     """
+    if feet is not None:
+        from .controllers import ControllerError
+        from .controllers.robot import foot_geoms as robot_feet
+
+        try:
+            return robot_feet(model, feet)
+        except ControllerError as e:
+            raise SimulationError(str(e)) from e
     ids = []
     for leg in ("lf", "rf", "lh", "rh"):
         g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"{leg}_foot")
         if g < 0:
             names = [model.geom(i).name for i in range(model.ngeom) if model.geom(i).name]
             raise SimulationError(
-                f"the model has no foot geom '{leg}_foot'; geoms: {', '.join(names[:40])}"
+                f"the model has no foot geom '{leg}_foot'; geoms: {', '.join(names[:40])} "
+                "(name a robot's feet with feet=[...])"
             )
         ids.append(g)
     return np.array(ids)
 
 
-def _touch_adr(model: mujoco.MjModel) -> np.ndarray | None:
-    """(4,) sensordata addresses of ``<leg>_touch`` sensors, or None if any is missing."""
+def _touch_adr(model: mujoco.MjModel, feet: Sequence[str] | None = None) -> np.ndarray | None:
+    """(4,) sensordata addresses of ``<leg>_touch`` sensors, or None if any is missing
+    (always None for a robot's named ``feet``: their contact forces are summed)."""
+    if feet is not None:
+        return None
     adr = []
     for leg in ("lf", "rf", "lh", "rh"):
         s = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"{leg}_touch")
@@ -271,8 +286,8 @@ def _touch_adr(model: mujoco.MjModel) -> np.ndarray | None:
 
 
 def _foot_forces(model: mujoco.MjModel, data: mujoco.MjData, feet: np.ndarray) -> np.ndarray:
-    """(4,) normal contact force [N] on each foot geom (from the contact list)."""
-    out = np.zeros(4)
+    """(nf,) normal contact force [N] on each foot geom (from the contact list)."""
+    out = np.zeros(len(feet))
     f6 = np.zeros(6)
     for c in range(data.ncon):
         con = data.contact[c]
@@ -390,8 +405,9 @@ def _make_controller(controller: Any, model: mujoco.MjModel, clip: _Clip | None 
 
             opts = {} if control_dt is None else {"control_dt": control_dt}
             plan = {} if clip is None else {"qpos": clip.qpos, "fps": clip.fps, "contacts": clip.contacts}
-            species = None if clip is None else clip.species
-            return make_controller(controller, model, species, **plan, **opts)
+            species = None if clip is None or clip.feet is not None else clip.species
+            feet = None if clip is None else clip.feet
+            return make_controller(controller, model, species, feet=feet, **plan, **opts)
         if controller == "pd":
             return _default_pd(model)
         from .controllers.feedforward import InverseDynamicsFeedforward
@@ -402,7 +418,8 @@ def _make_controller(controller: Any, model: mujoco.MjModel, clip: _Clip | None 
         if controller.endswith("+stance"):
             from .controllers.stance import StabilizedController, TrunkStabilizer
 
-            ctl = StabilizedController(ctl, TrunkStabilizer(model, FOOT_GEOMS))
+            feet = FOOT_GEOMS if clip is None or clip.feet is None else clip.feet
+            ctl = StabilizedController(ctl, TrunkStabilizer(model, feet))
     except ControllerError as e:
         raise SimulationError(f"controller {controller!r} does not fit the model: {e}") from e
     return ctl
@@ -510,14 +527,15 @@ class FallDetector:
         ref_qpos: (T, nq) reference frames.
         fps: frame rate [Hz].
         leg_length: normalising length [m].
+        feet: foot names of a robot (default habitsim's foot geoms, see :func:`foot_geoms`).
     """
 
     def __init__(self, model: mujoco.MjModel, ref_qpos: np.ndarray, fps: float,
-                 leg_length: float) -> None:
+                 leg_length: float, feet: Sequence[str] | None = None) -> None:
         self.model = model
         self.fps = float(fps)
         self.trunk = _free_body(model)
-        feet = foot_geoms(model)
+        feet = foot_geoms(model, feet)
         self.foot_bodies = set(int(model.geom_bodyid[g]) for g in feet)
         self.ground = set(int(g) for g in np.flatnonzero(model.geom_bodyid == 0))
         q = _check_qpos(model, ref_qpos)
@@ -687,16 +705,18 @@ class _Clip:
     base: mujoco.MjModel  # the model the reference was mapped on (torque motors or servos)
     qpos: np.ndarray  # (T, nq)
     fps: float
-    contacts: np.ndarray  # (T, 4) bool reference contact labels
+    contacts: np.ndarray  # (T, nf) bool reference contact labels
     leg_length: float
+    feet: tuple[str, ...] | None = None  # a robot's foot names (None: habitsim's)
 
 
-def _check_contacts(contacts: Any, n_frames: int) -> np.ndarray:
-    """Explicit reference contact labels as (T, 4) bool."""
+def _check_contacts(contacts: Any, n_frames: int, n_feet: int = 4) -> np.ndarray:
+    """Explicit reference contact labels as (T, nf) bool."""
     c = np.asarray(contacts)
-    if c.shape != (n_frames, 4):
+    if c.shape != (n_frames, n_feet):
+        order = "feet LF, RF, LH, RH" if n_feet == 4 else f"{n_feet} feet"
         raise SimulationError(
-            f"contacts must have shape ({n_frames}, 4) (feet LF, RF, LH, RH), got {c.shape}"
+            f"contacts must have shape ({n_frames}, {n_feet}) ({order}), got {c.shape}"
         )
     if c.dtype != bool and not np.isin(c, (0, 1)).all():
         raise SimulationError("contacts must be booleans (or 0/1)")
@@ -709,9 +729,23 @@ def _resolve(
     model: mujoco.MjModel | None,
     fps: float | None = None,
     contacts: np.ndarray | None = None,
+    feet: Sequence[str] | None = None,
 ) -> _Clip:
     """Reference qpos, contacts and sizes of one input clip (explicit ``contacts`` labels
-    win over a motion's own and over detection)."""
+    win over a motion's own and over detection). ``feet`` names a robot's feet: the
+    clip is then a qpos trajectory of that robot (a Motion is retargeted first, see
+    :mod:`habitsim.retarget`)."""
+    if feet is not None:
+        feet = tuple(feet)
+        if not feet:
+            raise SimulationError("feet=[] names no foot")
+        if isinstance(motion_or_qpos, Motion):
+            raise SimulationError(
+                "a Motion is tracked on habitsim's own models; for a robot (feet=...) "
+                "retarget it first (habitsim.retarget.retarget or `habitsim retarget`) and "
+                "track the qpos trajectory")
+        if model is None:
+            raise SimulationError("feet=... names a robot's feet: pass the robot as model=")
     if isinstance(motion_or_qpos, Motion):
         motion = motion_or_qpos
         if species is not None and load_species(species).name != motion.species:
@@ -745,12 +779,15 @@ def _resolve(
             q, f = motion_or_qpos, fps
         q = _check_qpos(base, q)
         leg = sp.leg_length if sp is not None else _model_leg_length(base)
+        nf = 4 if feet is None else len(feet)
         if contacts is not None:
-            contacts = _check_contacts(contacts, len(q))
+            contacts = _check_contacts(contacts, len(q), nf)
         else:
-            contacts = contacts_from_feet(_foot_points(base, q), f, leg)
+            contacts = contacts_from_feet(_foot_points(base, q, feet), f, leg)
         name = sp.name if sp is not None else "model"
-        return _Clip(name, base, q, float(f), contacts, leg)
+        if sp is None and feet is not None:
+            name = bytes(base.names).split(b"\0", 1)[0].decode() or "robot"
+        return _Clip(name, base, q, float(f), contacts, leg, feet)
     raise SimulationError(
         f"expected a Motion or a QposTrajectory, got {type(motion_or_qpos).__name__}"
     )
@@ -765,11 +802,12 @@ def _model_leg_length(model: mujoco.MjModel) -> float:
     return float(max(d.xpos[_free_body(model), 2], 1e-3))
 
 
-def _foot_points(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
-    """(T, 4, 3) lowest points of the foot spheres."""
-    feet = foot_geoms(model)
+def _foot_points(model: mujoco.MjModel, qpos: np.ndarray,
+                 names: Sequence[str] | None = None) -> np.ndarray:
+    """(T, nf, 3) lowest points of the foot spheres."""
+    feet = foot_geoms(model, names)
     d = mujoco.MjData(model)
-    out = np.empty((len(qpos), 4, 3))
+    out = np.empty((len(qpos), len(feet), 3))
     for k, q in enumerate(qpos):
         d.qpos[:] = q
         mujoco.mj_kinematics(model, d)
@@ -796,12 +834,29 @@ def _has_servos(model: mujoco.MjModel) -> bool:
 
 
 def _sim_model(controller: Any, clip: _Clip, given: mujoco.MjModel | None) -> mujoco.MjModel:
-    """The model to simulate: servos for the servo controllers (unless already there)."""
+    """The model to simulate: servos for the servo controllers (unless already there);
+    torque motors for ``pd``, ``balance`` and ``mpc`` by name on a model with position
+    servos (a robot's: :func:`habitsim.controllers.robot.torque_model`, same limits)."""
     if isinstance(controller, str) and controller.startswith("servo"):
         if given is None:
             return _species_model(clip.species, True)
         return given if _has_servos(given) else servo_model(given)
+    if isinstance(controller, str) and given is not None and _has_position_servos(given):
+        from .controllers import ControllerError
+        from .controllers.robot import torque_model
+
+        try:
+            return torque_model(given)
+        except ControllerError as e:
+            raise SimulationError(f"controller {controller!r} does not fit the model: {e}") from e
     return clip.base
+
+
+def _has_position_servos(model: mujoco.MjModel) -> bool:
+    from .controllers.robot import is_position_servo
+
+    return any(is_position_servo(model, a)
+               for a in range(int(getattr(model, "nactuator", model.nu))))
 
 
 # --------------------------------------------------------------------------- running
@@ -871,7 +926,7 @@ def _run_python(
     ref = build_reference(model, clip.qpos, clip.fps, dt)
     fsteps = _frame_steps(len(clip.qpos), clip.fps, dt)
     n_total = int(fsteps[-1])
-    adr, feet = _touch_adr(model), foot_geoms(model)
+    adr, feet = _touch_adr(model, clip.feet), foot_geoms(model, clip.feet)
     jdofs = _joint_dofs(model)
     data = _init_data(model, clip.qpos[0], ref.qvel[0] if settle_s <= 0 else np.zeros(model.nv))
     # the assist rides on the controller when it can (Controller.control applies it)
@@ -944,7 +999,7 @@ def _run_python(
     rep: dict[str, Any] = {}
     if assist is not None:
         rep = dict(assist.report(data))
-    return _Run(np.array(qs), np.array(touches).reshape(-1, 4), fall, fall_reason, unstable,
+    return _Run(np.array(qs), np.array(touches).reshape(-1, len(feet)), fall, fall_reason, unstable,
                 unstable_reason, work_at_end, wall, float(data.time), rep)
 
 
@@ -980,10 +1035,10 @@ def _run_rollout(
     datas = [mujoco.MjData(model) for _ in range(max(1, threads))]
     state, _ = rollout.rollout(model, datas, x0, ctrl)
     off = _state_offsets(model)
-    adr, feet = _touch_adr(model), foot_geoms(model)
     scratch = mujoco.MjData(model)
     runs = []
     for b, c in enumerate(clips):
+        adr, feet = _touch_adr(model, c.feet), foot_geoms(model, c.feet)
         st = state[b]
         expect = x0[b, off["TIME"]] + dt * np.arange(1, nstep + 1)
         bad = ~np.isfinite(st).all(axis=1) | (np.abs(st[:, off["TIME"]] - expect) > 0.5 * dt)
@@ -1105,6 +1160,7 @@ def track(
     seed: int | None = None,
     use_rollout: bool | None = None,
     contacts: np.ndarray | None = None,
+    feet: Sequence[str] | None = None,
 ) -> TrackResult:
     """Track a reference motion in MuJoCo with a controller.
 
@@ -1144,7 +1200,16 @@ def track(
             schedule of ``balance`` / ``mpc`` and the reference of ``contact_f1``.
             Default: a Motion's own labels, else contacts detected on the reference
             (for a qpos trajectory always detected). Pass the labels an earlier stage
-            decided (refinement's) so they are not detected again.
+            decided (refinement's) so they are not detected again. With ``feet``:
+            (T, nf) in the order of ``feet``.
+        feet: a robot's foot names (sites, geoms or bodies, as the robot names them,
+            e.g. ``["FL", "FR", "RL", "RR"]`` on Menagerie's Unitree robots) when
+            ``model`` is not a habitsim species model: the controllers' feet, the touch
+            and contact labels, and the fall rule's allowed ground contacts. The input is
+            then a qpos trajectory of the robot (:func:`habitsim.retarget.retarget` makes
+            one from a Motion). A robot with position servos is simulated with torque
+            motors of the same strength for ``pd``, ``balance`` and ``mpc``
+            (:func:`habitsim.controllers.robot.torque_model`).
 
     Returns:
         The :class:`TrackResult` (metrics in :attr:`TrackResult.metrics`).
@@ -1156,7 +1221,7 @@ def track(
     """
     del seed
     _check_settle(settle_s)
-    clip = _resolve(motion_or_qpos, species, model, contacts=contacts)
+    clip = _resolve(motion_or_qpos, species, model, contacts=contacts, feet=feet)
     sim_model = _sim_model(controller, clip, model)
     asst = _make_assist(assist, sim_model)
     if control_hz is None and controller == "mpc" and asst is None:
@@ -1167,7 +1232,7 @@ def track(
     fast = controller == "servo" and asst is None and every == 1
     if use_rollout and not fast:
         raise SimulationError("use_rollout needs controller='servo', no assist, full rate")
-    detector = FallDetector(sim_model, clip.qpos, clip.fps, clip.leg_length)
+    detector = FallDetector(sim_model, clip.qpos, clip.fps, clip.leg_length, clip.feet)
     if use_rollout if use_rollout is not None else fast:
         run = _run_rollout(sim_model, [clip], 1, settle_s, stop_on_fall, [detector])[0]
         return _finish(clip, sim_model, run, "servo", _rollout_stats(1))

@@ -1,0 +1,147 @@
+"""Animal motion on a robot: ``habitsim.retarget`` and ``habitsim retarget`` on the Go1."""
+
+from __future__ import annotations
+
+import copy
+import json
+import re
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from habitsim.cli import main
+from habitsim.gaits import generate
+from habitsim.retarget import (
+    RetargetError,
+    load_robot,
+    load_robot_clip,
+    retarget,
+    robot_legs,
+    track_clip,
+)
+
+GO1 = Path(__file__).parent / "robots" / "unitree_go1" / "scene.xml"
+FEET = ["FL", "FR", "RL", "RR"]
+
+
+@pytest.fixture(scope="module")
+def go1() -> mujoco.MjModel:
+    return load_robot(GO1)
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return generate("dog", "walk", seed=7, duration_s=3.0)
+
+
+@pytest.fixture(scope="module")
+def clip(go1, walk):
+    return retarget(walk, go1, FEET)
+
+
+def _feet_world(model, qpos, names):
+    d = mujoco.MjData(model)
+    out = np.empty((len(qpos), len(names), 3))
+    for k, q in enumerate(qpos):
+        d.qpos[:] = q
+        mujoco.mj_kinematics(model, d)
+        out[k] = [d.site_xpos[model.site(n).id] for n in names]
+    return out
+
+
+def test_dog_walk_on_go1_reference(go1, walk, clip):
+    rl = robot_legs(go1, FEET)
+    assert clip.qpos.shape == (walk.num_frames, go1.nq) and clip.fps == walk.fps
+    assert np.array_equal(clip.contacts, walk.contacts) and clip.feet == tuple(FEET)
+    assert clip.metadata["ik_residual_max_m"] < 1e-4
+    k = clip.metadata["scale"]
+    assert k == pytest.approx(rl.leg_length / walk.species_info.leg_length)
+    # trunk path kept, scaled: the same displacement times k, standing at the robot's height
+    src = walk.root_positions
+    assert np.allclose(clip.qpos[-1, :2] - clip.qpos[0, :2], k * (src[-1, :2] - src[0, :2]),
+                       atol=1e-9)
+    assert abs(clip.qpos[:, 2].mean() - rl.height) < 1e-9
+    # stance feet stand still on the ground; swing feet leave it
+    feet = _feet_world(go1, clip.qpos, FEET)
+    for i in range(4):
+        st = clip.contacts[:, i]
+        prev = np.concatenate([[False], st[:-1]])
+        still = st & prev
+        step = np.linalg.norm(np.diff(feet[:, i], axis=0), axis=1)[still[1:]]
+        assert step.max() < 1e-4
+        assert np.allclose(feet[st, i, 2], rl.radius[i], atol=1e-4)
+        assert feet[~st, i, 2].max() > rl.radius[i] + 0.01
+    # every leg joint within its range
+    jm = rl.legs.jmap
+    q = clip.qpos[:, jm.qpos_adr]
+    rng = go1.jnt_range[jm.joint_ids]
+    assert np.all(q >= rng[:, 0] - 1e-12) and np.all(q <= rng[:, 1] + 1e-12)
+
+
+def test_joint_limits_bind_and_hold(go1, walk):
+    """A robot whose knees barely bend: the IK keeps them in range (and says so)."""
+    stiff = copy.copy(go1)
+    knees = [stiff.joint(f"{leg}_calf_joint").id for leg in FEET]
+    stiff.jnt_range[knees] = (-1.85, -1.75)
+    out = retarget(walk, stiff, FEET)
+    adr = stiff.jnt_qposadr[knees]
+    assert out.qpos[:, adr].min() >= -1.85 - 1e-12 and out.qpos[:, adr].max() <= -1.75 + 1e-12
+    assert out.metadata["joints_at_limit_share"] > 0.0
+    assert out.metadata["ik_residual_max_m"] > 1e-3  # the feet cannot all be reached
+
+
+def test_retargeted_walk_tracks_under_mpc(go1, clip):
+    res = track_clip(clip, go1, controller="mpc")
+    assert not res.failed and res.survival == 1.0
+    assert res.assist["assist_force_mg"] == 0.0
+    assert res.metrics["sim_mpjpe_mm"] < 20.0 and res.metrics["contact_f1"] > 0.7
+
+
+def test_save_load_roundtrip(clip, tmp_path):
+    path = clip.save(tmp_path / "q.npz")
+    back = load_robot_clip(path)
+    assert np.array_equal(back.qpos, clip.qpos) and np.array_equal(back.contacts, clip.contacts)
+    assert back.feet == clip.feet and back.fps == clip.fps
+    assert back.metadata["scale"] == pytest.approx(clip.metadata["scale"])
+    assert [p.name for p in tmp_path.iterdir()] == ["q.npz"]  # no temporary left behind
+
+
+def test_bad_input_is_typed(go1, walk, tmp_path):
+    valid = "head, imu, FR, FL, RR, RL, trunk, FR_hip"  # sites, geoms, bodies; no floor
+    with pytest.raises(RetargetError, match=rf"unknown foot name\(s\) 'FL_foot'; .*: {valid}"):
+        retarget(walk, go1, ["FL_foot", "FR", "RL", "RR"])
+    with pytest.raises(RetargetError, match="4 feet"):
+        retarget(walk, go1, ["FL", "FR", "RL"])
+    with pytest.raises(RetargetError, match="name the robot's feet"):
+        retarget(walk, go1)
+    fixed = tmp_path / "fixed.xml"
+    xml = GO1.with_name("go1.xml").read_text().replace("<freejoint/>", "")
+    fixed.write_text(re.sub(r"<keyframe>.*</keyframe>", "", xml, flags=re.S))
+    with pytest.raises(RetargetError, match="no free joint"):
+        retarget(walk, load_robot(fixed), FEET)
+    with pytest.raises(RetargetError, match="does not exist"):
+        load_robot(tmp_path / "none.xml")
+    walk.save(tmp_path / "motion.npz")
+    with pytest.raises(RetargetError, match="not a robot clip"):
+        load_robot_clip(tmp_path / "motion.npz")
+
+
+def test_cli_retarget_and_track(walk, tmp_path, capsys):
+    src, out = walk.save(tmp_path / "walk.npz"), tmp_path / "go1_walk.npz"
+    code = main(["retarget", str(src), "--robot", str(GO1), "--feet", "FL,FR,RL,RR",
+                 "--out", str(out), "--track", "--report", str(tmp_path / "r.json"), "--json"])
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["track"]["survival"] == 1.0 and summary["track"]["controller"] == "mpc"
+    assert load_robot_clip(out).qpos.shape[0] == walk.num_frames
+    assert json.loads((tmp_path / "r.json").read_text())["metrics"]["survival"] == 1.0
+    # bad input: exit 2 with the valid names, nothing written
+    bad = tmp_path / "bad.npz"
+    assert main(["retarget", str(src), "--robot", str(GO1), "--feet", "FL,FR,RL,toe",
+                 "--out", str(bad)]) == 2
+    assert "unknown foot name(s) 'toe'" in capsys.readouterr().err and not bad.exists()
+    assert main(["retarget", str(src), "--robot", str(GO1.with_name("go1.xml")), "--feet",
+                 "FL,FR,RL,RR", "--out", str(bad), "--track"]) == 2
+    assert "no floor" in capsys.readouterr().err
