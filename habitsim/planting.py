@@ -360,12 +360,13 @@ def _solve_planted(
         root[:, 2] -= drop
         pose = pose_from_targets(sp, root, rot, targets, girdle_flex, foot_inclination,
                              limit_abduction=limit_abduction)
-    for _ in range(2):  # a toe the IK could not hold on its target must not sink
+    for _ in range(4):  # a toe the IK could not hold on its target must not sink
         toe_z = np.stack([lg.toe[:, 2] for lg in pose.legs], axis=1)
-        if toe_z.min() >= 0.0:
+        under = toe_z < -1e-6 * leg  # below round-off: an IK miss, lifted with a margin
+        if not under.any():
             break
         targets = targets.copy()
-        targets[..., 2] += np.maximum(-toe_z, 0.0) * 1.05
+        targets[..., 2] += np.where(under, -toe_z * 1.05 + 0.001 * leg, 0.0)
         pose = pose_from_targets(sp, root, rot, targets, girdle_flex, foot_inclination,
                                  limit_abduction=limit_abduction)
     out = Motion(motion.species, motion.fps, root, pose.rotations, c.copy(),
