@@ -8,7 +8,7 @@ module named in :data:`_EXTRA` that exists add its own (``register(sub)`` with t
 each, in a temporary folder unless ``--out``) and prints synthetic clips per second, the
 build's wall time, and forward-kinematics throughput in frames per second over every
 frame of the built clips: numpy (:func:`habitsim.skeleton.fk`) and torch
-(:func:`habitsim.skeleton.fk_torch`, float32 and float64, no autograd), each batched per
+(:func:`habitsim.models.kinematics.fk_torch`, float32 and float64, no autograd), each batched per
 species. Target of the issue: the default data set builds in ≤ 120 s on 2 cores.
 """
 
@@ -95,7 +95,8 @@ def fk_throughput(out_dir: str | Path) -> dict[str, float]:
     """
     import torch
 
-    from ..skeleton import fk, fk_torch, get_skeleton
+    from ..models.kinematics import fk_torch
+    from ..skeleton import fk, get_skeleton
 
     roots: dict[str, list[np.ndarray]] = {}
     quats: dict[str, list[np.ndarray]] = {}
