@@ -33,7 +33,6 @@ use :data:`ABDUCTION_SIGN` to get "outward = positive" for either side.
 from __future__ import annotations
 
 import functools
-
 from dataclasses import dataclass
 
 import numpy as np

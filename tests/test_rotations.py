@@ -94,6 +94,7 @@ def test_torch_agrees_with_numpy() -> None:
     np.testing.assert_allclose(K.torch_quat_apply(ta, tv).numpy(), R.quat_apply(a, v), atol=1e-12)
     np.testing.assert_allclose(K.torch_quat_to_matrix(ta).numpy(), R.quat_to_matrix(a), atol=1e-12)
     m = torch.tensor(R.quat_to_matrix(a))
-    np.testing.assert_allclose(K.torch_sixd_to_matrix(K.torch_matrix_to_6d(m)).numpy(), m.numpy(), atol=1e-9)
+    back = K.torch_sixd_to_matrix(K.torch_matrix_to_6d(m))
+    np.testing.assert_allclose(back.numpy(), m.numpy(), atol=1e-9)
     q_back = K.torch_matrix_to_quat(m).numpy()
     np.testing.assert_allclose(R.quat_angle(q_back, a), 0.0, atol=1e-6)

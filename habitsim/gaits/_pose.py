@@ -126,13 +126,19 @@ class Trunk:
         t = self.root.shape[0]
         q = np.zeros((t, len(JOINT_NAMES), 4))
         q[..., 0] = 1.0
-        q[:, _J["pelvis"]] = quat_mul(quat_mul(rot_z(self.yaw), rot_y(-self.pitch)), rot_x(self.roll))
+        q[:, _J["pelvis"]] = quat_mul(
+            quat_mul(rot_z(self.yaw), rot_y(-self.pitch)), rot_x(self.roll)
+        )
         for i in range(3):
-            q[:, _J[f"spine{i + 1}"]] = quat_mul(rot_z(self.spine_yaw[:, i]), rot_y(self.spine_pitch[:, i]))
+            q[:, _J[f"spine{i + 1}"]] = quat_mul(
+                rot_z(self.spine_yaw[:, i]), rot_y(self.spine_pitch[:, i])
+            )
         q[:, _J["neck"]] = quat_mul(rot_z(self.neck_yaw), rot_y(self.neck_pitch))
         q[:, _J["head"]] = quat_mul(rot_z(self.head_yaw), rot_y(self.head_pitch))
         for i in range(2):
-            q[:, _J[f"tail{i + 1}"]] = quat_mul(rot_z(self.tail_yaw[:, i]), rot_y(self.tail_pitch[:, i]))
+            q[:, _J[f"tail{i + 1}"]] = quat_mul(
+                rot_z(self.tail_yaw[:, i]), rot_y(self.tail_pitch[:, i])
+            )
         return q
 
 
@@ -283,7 +289,8 @@ def required_raising(sp: Species, legs: tuple[LegIKResult, ...]) -> np.ndarray:
 
 
 def fix_reach(
-    sp: Species, trunk: Trunk, plan: LegPlan, window: int, iterations: int = 30, mask: np.ndarray | None = None
+    sp: Species, trunk: Trunk, plan: LegPlan, window: int, iterations: int = 30,
+    mask: np.ndarray | None = None,
 ) -> tuple[Trunk, Solved]:
     """Lower the pelvis and withers (smoothly) until every leg keeps its reach reserve.
 
