@@ -200,10 +200,10 @@ def _servo_controller(name: str, model: mujoco.MjModel, feet: Sequence[str] | No
     from .servo import ServoController
 
     ff = InverseDynamicsFeedforward(model) if "+id" in name else None
-    ctl: Controller = ServoController(model, feedforward=ff)
-    if name.endswith("+stance"):
-        from .stance import StabilizedController, TrunkStabilizer
+    servo = ServoController(model, feedforward=ff)
+    if not name.endswith("+stance"):
+        return servo
+    from .stance import StabilizedController, TrunkStabilizer
 
-        stab = TrunkStabilizer(model, _SPECIES_FEET if feet is None else feet)
-        ctl = StabilizedController(ctl, stab)
-    return ctl
+    stab = TrunkStabilizer(model, _SPECIES_FEET if feet is None else feet)
+    return StabilizedController(servo, stab)

@@ -11,8 +11,12 @@ The 6-D form is the first two columns of the rotation matrix, concatenated
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 
 __all__ = [
     "quat_identity",
@@ -37,6 +41,19 @@ __all__ = [
     "rot_x",
     "rot_z",
 ]
+
+
+def _rotation() -> type[Rotation]:
+    """scipy's Rotation, imported on first use (scipy.spatial takes ~0.3 s to import)."""
+    global _ROTATION
+    if _ROTATION is None:
+        from scipy.spatial.transform import Rotation
+
+        _ROTATION = Rotation
+    return _ROTATION
+
+
+_ROTATION: type[Rotation] | None = None
 
 
 def _flat(q: np.ndarray) -> tuple[np.ndarray, tuple[int, ...]]:
@@ -91,14 +108,14 @@ def quat_conj(q: np.ndarray) -> np.ndarray:
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrices (…, 3, 3) from quaternions (…, 4) wxyz (normalised first)."""
     flat, shape = _flat(q)
-    return Rotation.from_quat(flat, scalar_first=True).as_matrix().reshape(*shape, 3, 3)
+    return _rotation().from_quat(flat, scalar_first=True).as_matrix().reshape(*shape, 3, 3)
 
 
 def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     """Quaternions (…, 4) wxyz with w ≥ 0 from rotation matrices (…, 3, 3)."""
     m = np.asarray(m, dtype=np.float64)
     shape = m.shape[:-2]
-    q = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat(canonical=True, scalar_first=True)
+    q = _rotation().from_matrix(m.reshape(-1, 3, 3)).as_quat(canonical=True, scalar_first=True)
     return q.reshape(*shape, 4)
 
 
@@ -123,7 +140,7 @@ def quat_from_axis_angle(axis: np.ndarray, angle: np.ndarray | float) -> np.ndar
 def quat_to_axis_angle(q: np.ndarray) -> np.ndarray:
     """Rotation vectors (…, 3) [rad] from quaternions (…, 4)."""
     flat, shape = _flat(q)
-    return Rotation.from_quat(flat, scalar_first=True).as_rotvec().reshape(*shape, 3)
+    return _rotation().from_quat(flat, scalar_first=True).as_rotvec().reshape(*shape, 3)
 
 
 def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -150,14 +167,14 @@ def euler_to_quat(angles: np.ndarray, order: str) -> np.ndarray:
     """
     a = np.asarray(angles, dtype=np.float64)
     shape = a.shape[:-1]
-    q = Rotation.from_euler(order.upper(), a.reshape(-1, 3)).as_quat(scalar_first=True)
+    q = _rotation().from_euler(order.upper(), a.reshape(-1, 3)).as_quat(scalar_first=True)
     return q.reshape(*shape, 4)
 
 
 def quat_to_euler(q: np.ndarray, order: str) -> np.ndarray:
     """Intrinsic Euler angles [rad] (…, 3) in ``order`` from quaternions (…, 4)."""
     flat, shape = _flat(q)
-    r = Rotation.from_quat(flat, scalar_first=True)
+    r = _rotation().from_quat(flat, scalar_first=True)
     import warnings
 
     with warnings.catch_warnings():  # gimbal lock warnings: the result is still valid

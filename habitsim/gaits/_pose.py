@@ -10,7 +10,6 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d, uniform_filter1d
 
 from ..body import center_of_mass
 from ..ik import (
@@ -235,6 +234,8 @@ def upper_envelope(x: np.ndarray, window: int) -> np.ndarray:
     """Smooth function ≥ x (1-D): moving average of a moving maximum of one window."""
     if window <= 1 or x.size < 2:
         return x.copy()
+    from scipy.ndimage import maximum_filter1d, uniform_filter1d  # (on use: 0.3 s import)
+
     w = _odd(window)
     return uniform_filter1d(maximum_filter1d(x, w, mode="nearest"), w, mode="nearest")
 
@@ -446,6 +447,8 @@ def respect_limits(sp: Species, trunk: Trunk, plan: LegPlan, base: Solved, windo
         turned = wrap_angle(finc0 - _nominal_inclination(sp, k, plan, frames))
         delta = best + turned
         if window > 1:
+            from scipy.ndimage import uniform_filter1d
+
             delta = uniform_filter1d(delta, _odd(window), mode="nearest")
         plan.foot_extra[:, k] += delta
     return solve(sp, trunk, plan)
