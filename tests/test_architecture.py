@@ -78,6 +78,16 @@ def test_one_controller_registry() -> None:
     assert track_cmd is not None
 
 
+def test_command_selections_come_from_the_registry() -> None:
+    """Benchmarks and commands that offer a subset of the controllers offer registry names."""
+    from habitsim.cli import bench_balance, bench_refine, retarget_cmd
+    from habitsim.controllers import CONTROLLERS, REGISTRY
+
+    torque = {n for n, s in REGISTRY.items() if s.actuators == "torque"}
+    assert set(bench_balance.CONTROLLERS) == set(retarget_cmd.TRACK_CONTROLLERS) == torque
+    assert set(bench_refine._SURVIVAL_CONTROLLERS) <= set(CONTROLLERS)
+
+
 @pytest.mark.parametrize("name", ["servo", "servo+id+stance", "pd"])
 def test_registry_builds_every_kind(name: str) -> None:
     from habitsim.controllers import Controller, make_controller
