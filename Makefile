@@ -1,6 +1,7 @@
 # Two commands set everything up on a new machine:
 #   make demo   - run the main job on the embedded default data
 #   make test   - run the test suite
+# (make lint runs ruff on the code and the tests; CI runs it before the tests.)
 # Both create or reuse .venv, install the CPU build of torch 2.13.0 first, then the project.
 PYTHON ?= python3
 VENV   := .venv
@@ -8,7 +9,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.habitsim-installed
 DEMO_OUT ?= demo_out
 
-.PHONY: demo test install clean fuzz
+.PHONY: demo test lint install clean fuzz
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +27,13 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+
+# ruff is a dev tool, not a dependency of the package: installed on first use.
+$(BIN)/ruff: $(BIN)/python
+	$(BIN)/python -m pip install --quiet "ruff>=0.5"
+
+lint: $(BIN)/ruff
+	$(BIN)/ruff check habitsim controllers evaluation tests
 
 # A long fuzzing campaign over the readers and the command line (counts by outcome).
 fuzz: $(STAMP)

@@ -8,12 +8,15 @@
 * :class:`TrunkStabilizer` / :class:`StabilizedController`: stance-leg virtual model
   control of the trunk (a wrench distributed over the stance feet by a QP, applied as
   ``Jᵀf`` joint torques), no external force.
+* :data:`CONTROLLERS` / :func:`make_controller`: every controller name, and one by name
+  (:mod:`~habitsim.controllers.factory`, the one registry).
 * :class:`RootAssist`: optional external PD wrench on the free joint, off unless created,
   always recorded.
 """
 
 from .assist import RootAssist
 from .base import (
+    BaseController,
     Controller,
     ControllerError,
     ControllerStats,
@@ -35,6 +38,7 @@ from .servo import ServoController, ServoMap, configure_servos, servo_map
 from .stance import StabilizedController, TrunkStabilizer, distribute_wrench
 
 __all__ = [
+    "BaseController",
     "Controller",
     "ControllerError",
     "ControllerStats",
@@ -61,7 +65,14 @@ __all__ = [
 
 # Balance-aware tracking (issue [6/6]): stance-force QP, convex MPC, swing legs, factory.
 from .balance import BalanceConfig, BalanceController, StanceQP  # noqa: E402
-from .factory import CONTROLLER_NAMES, make_controller  # noqa: E402
+from .factory import (  # noqa: E402
+    CONTROLLER_NAMES,
+    CONTROLLERS,
+    REGISTRY,
+    ControllerSpec,
+    controller_spec,
+    make_controller,
+)
 from .mpc import ConvexMPC, MPCController, MPCWeights  # noqa: E402
 from .swing import LegSet, MotionPlan, plan_from_qpos  # noqa: E402
 
@@ -69,6 +80,10 @@ __all__ += [
     "BalanceConfig",
     "BalanceController",
     "CONTROLLER_NAMES",
+    "CONTROLLERS",
+    "REGISTRY",
+    "ControllerSpec",
+    "controller_spec",
     "ConvexMPC",
     "LegSet",
     "MPCController",

@@ -72,7 +72,7 @@ import casadi
 import mujoco
 import numpy as np
 
-from .base import Controller, ControllerError, ControllerStats, Reference
+from .base import BaseController, ControllerError, ControllerStats, Reference
 from .gains import critical_damping, max_stable_gains, stiffness_rule
 from .swing import (
     STANCE,
@@ -441,7 +441,7 @@ class _LiveStats(ControllerStats):
         return super().to_dict()
 
 
-class BalanceController(Controller):
+class BalanceController(BaseController):
     """Stance-force QP + swing legs + posture: balance-aware tracking, no external force.
 
     Args:

@@ -17,6 +17,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import mujoco
 import numpy as np
@@ -28,6 +29,7 @@ __all__ = [
     "Reference",
     "ControllerStats",
     "Controller",
+    "BaseController",
     "JointActuatorMap",
     "actuated_joints",
     "check_reference",
@@ -268,8 +270,32 @@ def joint_torques(component, model: mujoco.MjModel, data: mujoco.MjData, ref: Re
     return out
 
 
-class Controller(abc.ABC):
-    """Base class: actuator controls from the state and a :class:`Reference`."""
+@runtime_checkable
+class Controller(Protocol):
+    """What the tracking runner needs of a controller (any object with these members).
+
+    Every habitsim controller is one (they derive from :class:`BaseController`); a
+    user's own needs no base class. A controller that plans with the whole clip also has
+    ``set_plan(qpos, fps, contacts)``, which the runner calls before :meth:`reset`.
+    """
+
+    #: Short name used in reports and on the command line.
+    name: str
+    #: Timing and failure counts of the run so far.
+    stats: ControllerStats
+
+    def reset(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        """Called once before a run."""
+        ...
+
+    def control(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:
+        """(nu,) actuator controls for this tick."""
+        ...
+
+
+class BaseController(abc.ABC):
+    """Base class of habitsim's controllers (a :class:`Controller`): timing, reference
+    checks and the optional root assist around :meth:`_control`."""
 
     #: Short name used in reports and on the command line.
     name: str = "controller"
@@ -308,7 +334,7 @@ class Controller(abc.ABC):
         """Subclasses compute the controls here."""
 
 
-class PDController(Controller):
+class PDController(BaseController):
     """Explicit joint-space PD torque control for torque (motor) actuators.
 
     τ_i = kp_i (q_ref,i − q_i) + kd_i (q̇_ref,i − q̇_i) + τ_ff,i, converted to controls by

@@ -1,8 +1,17 @@
-"""Build a tracking controller by name: ``make_controller("pd" | "balance" | "mpc", model)``.
+"""The controller registry: every controller name, and ``make_controller(name, model)``.
 
-The one entry point the tracking runner (``habitsim track --controller …``) and the
-evaluation use, so every caller gets the same defaults:
+:data:`CONTROLLERS` is the one list of controller names in habitsim: the tracking runner
+(:func:`habitsim.sim.track`), the command line (``--controller`` choices) and the
+evaluation all take it from here. Each name has a :class:`ControllerSpec` in
+:data:`REGISTRY` (which actuators it drives, whether it plans with the whole clip):
 
+* ``"servo"`` — :class:`~habitsim.controllers.ServoController`: in-engine position
+  servos (``ctrl`` = target angle; the model must have servos, see
+  :func:`~habitsim.controllers.configure_servos`).
+* ``"servo+stance"``, ``"servo+id"``, ``"servo+id+stance"`` — the same servos plus the
+  stance-leg trunk stabiliser (:class:`~habitsim.controllers.TrunkStabilizer`, virtual
+  model control, no external force) and / or inverse-dynamics feed-forward torques of the
+  reference (:class:`~habitsim.controllers.InverseDynamicsFeedforward`).
 * ``"pd"`` — :class:`~habitsim.controllers.PDController` on the joint motors, stiffness by
   the torque rule (kp = τmax / 0.15 rad) and critical damping, both capped at half the
   explicit-integration stability limit; no balance, no external force.
@@ -20,17 +29,80 @@ hind-leg length when ``species`` is given, else the model's trunk height over th
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Literal
 
 import mujoco
 import numpy as np
 
+from habitsim.errors import unknown_choice
+
 from .base import Controller, ControllerError, PDController, actuated_joints
 
-__all__ = ["CONTROLLER_NAMES", "make_controller", "default_pd"]
+__all__ = [
+    "CONTROLLERS",
+    "CONTROLLER_NAMES",
+    "REGISTRY",
+    "ControllerSpec",
+    "controller_spec",
+    "make_controller",
+    "default_pd",
+]
 
-#: Names accepted by :func:`make_controller`.
-CONTROLLER_NAMES = ("pd", "balance", "mpc")
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """What a controller name needs of the model and the clip.
+
+    Attributes:
+        name: the name (``--controller`` on the command line).
+        actuators: ``"servo"``: the model must have position servos (the tracking runner
+            configures them, :func:`~habitsim.controllers.configure_servos`);
+            ``"torque"``: torque motors (a robot's servos are turned into motors of the
+            same strength, :func:`~habitsim.controllers.robot.torque_model`).
+        planned: the controller plans with the whole clip (``set_plan``).
+        summary: one line for help texts.
+    """
+
+    name: str
+    actuators: Literal["servo", "torque"]
+    planned: bool
+    summary: str
+
+
+#: Every controller name, in the order help texts and tables list them.
+REGISTRY: Mapping[str, ControllerSpec] = {
+    s.name: s
+    for s in (
+        ControllerSpec("servo", "servo", False, "in-engine position servos"),
+        ControllerSpec("pd", "torque", False, "explicit PD torques on the motors"),
+        ControllerSpec("servo+stance", "servo", False, "servos + stance-leg trunk stabiliser"),
+        ControllerSpec("servo+id", "servo", False, "servos + inverse-dynamics feed-forward"),
+        ControllerSpec("servo+id+stance", "servo", False,
+                       "servos + inverse-dynamics feed-forward + trunk stabiliser"),
+        ControllerSpec("balance", "torque", True, "stance-force QP + swing legs"),
+        ControllerSpec("mpc", "torque", True, "convex MPC feeding the stance-force QP"),
+    )
+}
+#: The controller names accepted by :func:`make_controller` and :func:`habitsim.sim.track`.
+CONTROLLERS: tuple[str, ...] = tuple(REGISTRY)
+#: Same tuple as :data:`CONTROLLERS` (the older name).
+CONTROLLER_NAMES = CONTROLLERS
+#: Foot geoms of habitsim's species models (LF, RF, LH, RH): the trunk stabiliser's default.
+_SPECIES_FEET = ("lf_foot", "rf_foot", "lh_foot", "rh_foot")
+
+
+def controller_spec(name: str) -> ControllerSpec:
+    """The :class:`ControllerSpec` of a name.
+
+    Raises:
+        ControllerError: unknown name (the message lists the valid ones).
+    """
+    try:
+        return REGISTRY[name]
+    except (KeyError, TypeError):
+        raise ControllerError(unknown_choice("controller", name, CONTROLLERS)) from None
 
 
 def default_pd(model: mujoco.MjModel, joints: Sequence[str] | None = None,
@@ -62,7 +134,7 @@ def make_controller(name: str, model: mujoco.MjModel, species=None, *,
     """A controller for ``model`` by name.
 
     Args:
-        name: one of :data:`CONTROLLER_NAMES`.
+        name: one of :data:`CONTROLLERS`.
         model: the model to control: torque motors on the joints (the shipped species
             models), or position servos (most robot MJCFs, e.g. MuJoCo Menagerie's):
             ``balance`` and ``mpc`` drive a servo with the target that makes it exert the
@@ -75,18 +147,20 @@ def make_controller(name: str, model: mujoco.MjModel, species=None, *,
         feet: foot names as the model names them — sites, geoms or bodies, in the order
             of the contact labels, e.g. ``["FL", "FR", "RL", "RR"]`` on Menagerie's Unitree
             robots (default: ``lf_foot …`` or the usual robot names).
-        **options: passed on — ``pd``: ``kp``, ``kd``, ``joints``, ``dt``; ``balance``:
-            :class:`~habitsim.controllers.balance.BalanceConfig` fields, ``solver``,
-            ``control_dt``; ``mpc``: those plus ``rate_hz``, ``horizon_s``, ``max_steps``,
-            ``mpc_solver``, ``weights``, ``feedback_scale``, ``resolve_on_contact``.
+        **options: passed on — servo names: none; ``pd``: ``kp``, ``kd``, ``joints``,
+            ``dt``; ``balance``: :class:`~habitsim.controllers.balance.BalanceConfig`
+            fields, ``solver``, ``control_dt``; ``mpc``: those plus ``rate_hz``,
+            ``horizon_s``, ``max_steps``, ``mpc_solver``, ``weights``, ``feedback_scale``,
+            ``resolve_on_contact``.
 
     Raises:
         ControllerError: unknown name (the message lists the valid ones), a model the
             controller does not fit, bad options.
         UnknownSpeciesError: unknown species.
     """
-    if name not in CONTROLLER_NAMES:
-        raise ControllerError(f"unknown controller {name!r}; valid: {', '.join(CONTROLLER_NAMES)}")
+    spec = controller_spec(name)
+    if spec.actuators == "servo":
+        return _servo_controller(name, model, feet, options)
     if name == "pd":
         kp, kd = options.pop("kp", None), options.pop("kd", None)
         joints, dt = options.pop("joints", None), options.pop("dt", None)
@@ -114,3 +188,22 @@ def make_controller(name: str, model: mujoco.MjModel, species=None, *,
             raise ControllerError("a reference qpos needs fps")
         ctl.set_plan(qpos, fps, contacts)  # type: ignore[attr-defined]
     return ctl
+
+
+def _servo_controller(name: str, model: mujoco.MjModel, feet: Sequence[str] | None,
+                      options: dict) -> Controller:
+    """``servo``, optionally ``+id`` (inverse-dynamics feed-forward) and ``+stance`` (the
+    trunk stabiliser on ``feet``, default habitsim's foot geoms)."""
+    if options:
+        raise ControllerError(f"unknown {name} option(s): {', '.join(sorted(options))}")
+    from .feedforward import InverseDynamicsFeedforward
+    from .servo import ServoController
+
+    ff = InverseDynamicsFeedforward(model) if "+id" in name else None
+    servo = ServoController(model, feedforward=ff)
+    if not name.endswith("+stance"):
+        return servo
+    from .stance import StabilizedController, TrunkStabilizer
+
+    stab = TrunkStabilizer(model, _SPECIES_FEET if feet is None else feet)
+    return StabilizedController(servo, stab)

@@ -39,7 +39,6 @@ from collections.abc import Sequence
 
 import mujoco
 import numpy as np
-from scipy.optimize import nnls
 
 from .base import ControllerError, Reference, actuated_joints
 
@@ -167,6 +166,8 @@ class InverseDynamicsFeedforward:
         a = np.concatenate([(jt[i].T @ self._edges.T)[self._free_dofs] for i in range(len(jac))],
                            axis=1)
         reg = np.sqrt(_FORCE_REG) * max(float(np.abs(a).max()), 1e-9)
+        from scipy.optimize import nnls  # (scipy.optimize takes 0.1 s to import)
+
         lam, _ = nnls(np.vstack([a, reg * np.eye(a.shape[1])]),
                       np.concatenate([b, np.zeros(a.shape[1])]), maxiter=50 * a.shape[1])
         lam = lam.reshape(len(jac), _CONE_EDGES)

@@ -30,7 +30,7 @@ import mujoco
 import numpy as np
 
 from .base import (
-    Controller,
+    BaseController,
     ControllerError,
     JointActuatorMap,
     Reference,
@@ -420,7 +420,7 @@ def servo_map(model: mujoco.MjModel, joints: Sequence[str] | None = None) -> Ser
     )
 
 
-class ServoController(Controller):
+class ServoController(BaseController):
     """Drive in-engine servos: ``ctrl = gear · (q_ref + kv/kp · q̇_ref)`` (clipped to the
     control range; :meth:`ServoMap.position_targets`), so the D term of a position
     actuator damps the velocity error instead of braking the reference's own motion.

@@ -40,7 +40,7 @@ import mujoco
 import numpy as np
 
 from .base import (
-    Controller,
+    BaseController,
     ControllerError,
     ControllerStats,
     Reference,
@@ -398,7 +398,7 @@ class TrunkStabilizer:
     __call__ = torques
 
 
-class StabilizedController(Controller):
+class StabilizedController(BaseController):
     """A PD or servo controller plus a :class:`TrunkStabilizer` (torques summed).
 
     With a :class:`~habitsim.controllers.PDController` the stabiliser torques join the PD
@@ -412,7 +412,7 @@ class StabilizedController(Controller):
     base's figures and ``stance_mean_time_ms``.
     """
 
-    def __init__(self, base: Controller, stabilizer: TrunkStabilizer) -> None:
+    def __init__(self, base: BaseController, stabilizer: TrunkStabilizer) -> None:
         if not hasattr(base, "_control_with"):
             raise ControllerError(
                 f"StabilizedController needs a PDController or ServoController base, got "

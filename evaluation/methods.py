@@ -18,9 +18,8 @@ Built in:
   performed by the target in its own habits. Only for clips made by the generator.
 
 The learned methods of :mod:`habitsim.models` (``habit``, ``habit_ema``, ``no_habit``,
-``habit_only``, ``text_only``) are registered automatically when that package imports
-and exposes ``transfer(motion, to=..., method=...)``; their names come from its
-``TRANSFER_METHODS`` (or ``METHODS``) constant.
+``habit_only``, ``text_only``: :func:`habitsim.models.available_methods`) are registered
+on the first look-up of a method, and run :func:`habitsim.models.transfer`.
 
 For the process-pool and Dask executors, the function of a method travels to the
 workers by reference: register module-level functions (or ``functools.partial`` of
@@ -30,12 +29,10 @@ them), not lambdas or closures.
 from __future__ import annotations
 
 import functools
-import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
-from habitsim.errors import HabitsimError, unknown_choice
+from habitsim.errors import HabitsimError, UnknownMethodError, unknown_choice
 from habitsim.motion import Motion
 from habitsim.species import load_species
 
@@ -56,13 +53,6 @@ TransferFn = Callable[..., Motion]
 
 class MethodUnavailable(HabitsimError):
     """A method that cannot produce this (clip, target) pair; the reason is the message."""
-
-
-class UnknownMethodError(HabitsimError, KeyError):
-    """A method name that is not registered (the message lists the registered ones)."""
-
-    def __str__(self) -> str:
-        return str(self.args[0])
 
 
 @dataclass(frozen=True)
@@ -111,47 +101,23 @@ def register_method(
 
 
 def _learned_transfer(source: Motion, target: str, *, seed: int, method: str) -> Motion:
-    from habitsim import models  # type: ignore[attr-defined]
+    from habitsim.models import MethodNotAvailableError, transfer
 
-    fn = models.transfer
-    kw: dict[str, Any] = {"to": target, "method": method}
     try:
-        params = inspect.signature(fn).parameters
-    except (TypeError, ValueError):  # pragma: no cover
-        params = {}
-    if "seed" in params or any(p.kind is p.VAR_KEYWORD for p in params.values()):
-        kw["seed"] = seed
-    try:
-        out = fn(source, **kw)
-    except HabitsimError as e:
-        # a variant without a trained checkpoint is "unavailable", not a failure
-        if type(e).__name__ == "MethodNotAvailableError":
-            raise MethodUnavailable(str(e)) from None
-        raise
-    if not isinstance(out, Motion):  # a result object carrying the motion
-        out = getattr(out, "motion", out)
-    if not isinstance(out, Motion):
-        raise HabitsimError(
-            f"habitsim.models.transfer(method={method!r}) returned {type(out).__name__}"
-        )
-    return out
+        return transfer(source, to=target, method=method, seed=seed)
+    except MethodNotAvailableError as e:  # a variant without a trained checkpoint
+        raise MethodUnavailable(str(e)) from None
 
 
 def _discover() -> None:
-    """Register the learned methods of :mod:`habitsim.models` if it is importable."""
+    """Register the learned methods of :mod:`habitsim.models` (first use: imports torch)."""
     global _discovered
     if _discovered:
         return
     _discovered = True
-    try:
-        from habitsim import models  # type: ignore[attr-defined]
-    except ImportError:
-        return
-    if not callable(getattr(models, "transfer", None)):
-        return
-    names = getattr(models, "TRANSFER_METHODS", None) or getattr(models, "METHODS", None) or ()
-    for name in names:
-        name = str(name)
+    from habitsim.models import available_methods
+
+    for name in available_methods():
         if name not in _REGISTRY:
             register_method(
                 name,

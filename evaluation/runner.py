@@ -80,7 +80,6 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import inspect
 import io
 import json
 import math
@@ -94,6 +93,7 @@ from typing import Any
 
 import numpy as np
 
+from habitsim.controllers import CONTROLLERS
 from habitsim.errors import HabitsimError, brief, unknown_choice
 from habitsim.fileio import atomic_write, atomic_write_text, json_safe, make_dirs
 from habitsim.motion import Motion
@@ -190,7 +190,7 @@ class EvalConfig:
         out: output folder.
         methods: method names (:func:`habitsim.evaluation.methods.method_names`).
         refine: ``none``, ``kinematic`` or ``dynamics``.
-        controller: tracking controller (:data:`habitsim.sim.CONTROLLERS`).
+        controller: tracking controller (:data:`habitsim.controllers.CONTROLLERS`).
         assist: root assistance while tracking.
         track: run the MuJoCo tracking at all.
         dynamic: compute the dynamic plausibility (inverse dynamics) of the reference.
@@ -251,6 +251,8 @@ class EvalConfig:
             )
         if self.refine not in REFINE_MODES:
             raise EvalError(unknown_choice("refine mode", self.refine, REFINE_MODES))
+        if self.controller not in CONTROLLERS:
+            raise EvalError(unknown_choice("controller", self.controller, CONTROLLERS))
         if self.max_clips is not None and self.max_clips < 1:
             raise EvalError(f"max_clips must be >= 1, got {self.max_clips}")
 
@@ -410,17 +412,6 @@ def _finite(x: Any) -> float:
     except (TypeError, ValueError):
         return math.nan
     return v if math.isfinite(v) else math.nan
-
-
-def _call_with_supported(fn: Callable[..., Any], *args: Any, **kw: Any) -> Any:
-    """Call ``fn`` with the keyword arguments its signature accepts."""
-    try:
-        params = inspect.signature(fn).parameters
-    except (TypeError, ValueError):  # pragma: no cover
-        return fn(*args, **kw)
-    if any(p.kind is p.VAR_KEYWORD for p in params.values()):
-        return fn(*args, **kw)
-    return fn(*args, **{k: v for k, v in kw.items() if k in params})
 
 
 def _row_base(task: PairTask) -> dict[str, Any]:
@@ -597,18 +588,15 @@ def _write_trace(task: PairTask, src: Motion, out: Motion, ref: Motion, sim_res:
 
 
 def _render(sim_res: Any, path: Path) -> None:
-    """A small GIF of the simulated run, if habitsim.render works here (else nothing)."""
-    try:
-        from habitsim import render
-    except ImportError:
-        return
+    """A small GIF of the simulated run, if rendering works here (else nothing)."""
+    from habitsim import render
+
     with contextlib.suppress(Exception):
         if not render.render_available():
             return
         q = np.asarray(sim_res.qpos)
         step = max(1, int(round(sim_res.fps / 15.0)))
-        _call_with_supported(
-            render.render_video,
+        render.render_video(
             sim_res.model,
             q[::step],
             sim_res.fps / step,

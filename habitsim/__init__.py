@@ -52,13 +52,14 @@ __all__ = [
 
 
 def __getattr__(name: str):
-    """``habitsim.transfer`` and ``habitsim.refine`` load their stage on first use."""
+    """``habitsim.transfer`` (the function) and ``habitsim.refine`` (the module, its
+    function is ``habitsim.refine.refine``) load their stage on first use."""
     if name == "transfer":
         from .models import transfer
 
         return transfer
     if name == "refine":
-        from .refine import refine
+        import importlib
 
-        return refine
+        return importlib.import_module(".refine", __name__)
     raise AttributeError(f"module 'habitsim' has no attribute {name!r}")

@@ -57,7 +57,7 @@ def _bone_masses(name: str) -> np.ndarray:
     skel = get_skeleton(sp)
     lengths = skel.bone_lengths
     vol = np.zeros(len(JOINT_NAMES))
-    for j, (joint, key) in enumerate(bone_girth_keys().items()):
+    for j, key in enumerate(bone_girth_keys().values()):
         if key is None:
             continue
         r = sp.girths[key] / (2.0 * math.pi)

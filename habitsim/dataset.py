@@ -983,5 +983,6 @@ def _stats_markdown(rows: list[StatsRow], man: DatasetManifest) -> str:
         "'plan' columns are the generator's targets, phase err is the mean circular distance "
         "between measured and planned footfall phases [stride], '-' = undefined "
         "(e.g. no steps). For `jump`, 'Fr plan' is the take-off Froude number while 'Fr' "
-        "averages the whole clip (stand, jump, land).\n\n" + format_stats_table(rows, markdown=True) + "\n"
+        "averages the whole clip (stand, jump, land).\n\n"
+        + format_stats_table(rows, markdown=True) + "\n"
     )

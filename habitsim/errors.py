@@ -62,6 +62,14 @@ class DatasetError(HabitsimError, ValueError):
     """A data set folder that is missing files or has an inconsistent manifest."""
 
 
+class UnknownMethodError(HabitsimError, KeyError, ValueError):
+    """A transfer method name that is not registered (the message lists the valid ones);
+    raised by :func:`habitsim.models.transfer` and the benchmark's method registry."""
+
+    def __str__(self) -> str:  # KeyError would quote the whole message
+        return str(self.args[0]) if self.args else ""
+
+
 class OutputPathError(HabitsimError, OSError):
     """An output path that cannot be written: a file where a folder should be, a folder
     where a file should be, a read-only folder, a full disk."""

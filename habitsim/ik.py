@@ -220,13 +220,15 @@ def _as_rotmats(r: np.ndarray, t: int) -> np.ndarray:
 def _ry(a: np.ndarray) -> np.ndarray:
     c, s = np.cos(a), np.sin(a)
     z, o = np.zeros_like(a), np.ones_like(a)
-    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+    rows = [np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)]
+    return np.stack(rows, -2)
 
 
 def _rx(a: np.ndarray) -> np.ndarray:
     c, s = np.cos(a), np.sin(a)
     z, o = np.zeros_like(a), np.ones_like(a)
-    return np.stack([np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)], -2)
+    rows = [np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)]
+    return np.stack(rows, -2)
 
 
 def _mv(m: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -301,7 +303,9 @@ def leg_ik(
     prot = _as_rotmats(parent_rotation, t)
     gflex = _as_frames(geo.girdle_flex0 if girdle_flex is None else girdle_flex, t, "girdle_flex")
     finc = _as_frames(
-        geo.foot_inclination0 if foot_inclination is None else foot_inclination, t, "foot_inclination"
+        geo.foot_inclination0 if foot_inclination is None else foot_inclination,
+        t,
+        "foot_inclination",
     )
 
     g = prot @ _ry(gflex)  # girdle global rotation
@@ -400,7 +404,8 @@ def leg_fk(
     root = np.atleast_2d(np.asarray(girdle_root, dtype=np.float64))
     t = root.shape[0]
     prot = _as_rotmats(parent_rotation, t)
-    a = [_as_frames(x, t, "angle") for x in (abduction, girdle_flex, upper_flex, lower_flex, foot_flex)]
+    angles = (abduction, girdle_flex, upper_flex, lower_flex, foot_flex)
+    a = [_as_frames(x, t, "angle") for x in angles]
     g = prot @ _ry(a[1])
     pos = root + _mv(g, np.array([0.0, 0.0, -geo.girdle]))
     r = g @ _rx(a[0]) @ _ry(a[2])
@@ -443,7 +448,8 @@ class AxialFrames:
     parent_rotation: np.ndarray
 
 
-def axial_frames(species: str | Species, root_positions: np.ndarray, rotations: np.ndarray) -> AxialFrames:
+def axial_frames(species: str | Species, root_positions: np.ndarray,
+                 rotations: np.ndarray) -> AxialFrames:
     """Girdle roots and parent rotations from the root and the axial joint rotations.
 
     Args:

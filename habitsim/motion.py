@@ -164,7 +164,9 @@ class Motion:
         """Frames ``start:stop`` as a new Motion."""
         sl = slice(start, stop)
         if self.rotations[sl].shape[0] == 0:
-            raise InvalidMotionError(f"empty slice {start}:{stop} of a {self.num_frames}-frame motion")
+            raise InvalidMotionError(
+                f"empty slice {start}:{stop} of a {self.num_frames}-frame motion"
+            )
         return Motion(
             self.species,
             self.fps,
@@ -231,7 +233,10 @@ class Motion:
             raise InvalidMotionError("features hold zero or non-finite quaternions")
         q = q / n
         v_root = f[:, j * 4 : j * 4 + 3] / float(fps)
-        start = get_skeleton(species).standing_pose()[0] if root_start is None else np.asarray(root_start, float)
+        if root_start is None:
+            start = get_skeleton(species).standing_pose()[0]
+        else:
+            start = np.asarray(root_start, float)
         root = start[None] + np.cumsum(np.concatenate([np.zeros((1, 3)), v_root[1:]]), axis=0)
         return cls(species, fps, root, q)
 

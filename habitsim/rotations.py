@@ -1,9 +1,9 @@
 """Rotation utilities on unit quaternions (w, x, y, z), rotation matrices and the 6-D form.
 
-numpy functions wrap :class:`scipy.spatial.transform.Rotation` (maintained, vectorised C);
-the torch functions wrap ``roma`` (batched, differentiable). Both libraries store
-quaternions scalar-last, habitsim stores them scalar-first (w, x, y, z) everywhere, so
-every conversion between the two conventions happens in this module only.
+The functions wrap :class:`scipy.spatial.transform.Rotation` (maintained, vectorised C).
+scipy stores quaternions scalar-last, habitsim stores them scalar-first (w, x, y, z)
+everywhere, so every conversion between the two conventions happens in this module only
+(and, for the batched, differentiable torch versions, in :mod:`habitsim.models.kinematics`).
 
 The 6-D form is the first two columns of the rotation matrix, concatenated
 ``[r00, r10, r20, r01, r11, r21]`` (continuous representation, Zhou et al. CVPR 2019).
@@ -11,10 +11,12 @@ The 6-D form is the first two columns of the rotation matrix, concatenated
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import roma
-import torch
-from scipy.spatial.transform import Rotation
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 
 __all__ = [
     "quat_identity",
@@ -38,13 +40,20 @@ __all__ = [
     "rot_y",
     "rot_x",
     "rot_z",
-    "torch_quat_mul",
-    "torch_quat_apply",
-    "torch_quat_to_matrix",
-    "torch_matrix_to_quat",
-    "torch_sixd_to_matrix",
-    "torch_matrix_to_6d",
 ]
+
+
+def _rotation() -> type[Rotation]:
+    """scipy's Rotation, imported on first use (scipy.spatial takes ~0.3 s to import)."""
+    global _ROTATION
+    if _ROTATION is None:
+        from scipy.spatial.transform import Rotation
+
+        _ROTATION = Rotation
+    return _ROTATION
+
+
+_ROTATION: type[Rotation] | None = None
 
 
 def _flat(q: np.ndarray) -> tuple[np.ndarray, tuple[int, ...]]:
@@ -99,14 +108,14 @@ def quat_conj(q: np.ndarray) -> np.ndarray:
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrices (…, 3, 3) from quaternions (…, 4) wxyz (normalised first)."""
     flat, shape = _flat(q)
-    return Rotation.from_quat(flat, scalar_first=True).as_matrix().reshape(*shape, 3, 3)
+    return _rotation().from_quat(flat, scalar_first=True).as_matrix().reshape(*shape, 3, 3)
 
 
 def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     """Quaternions (…, 4) wxyz with w ≥ 0 from rotation matrices (…, 3, 3)."""
     m = np.asarray(m, dtype=np.float64)
     shape = m.shape[:-2]
-    q = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat(canonical=True, scalar_first=True)
+    q = _rotation().from_matrix(m.reshape(-1, 3, 3)).as_quat(canonical=True, scalar_first=True)
     return q.reshape(*shape, 4)
 
 
@@ -131,7 +140,7 @@ def quat_from_axis_angle(axis: np.ndarray, angle: np.ndarray | float) -> np.ndar
 def quat_to_axis_angle(q: np.ndarray) -> np.ndarray:
     """Rotation vectors (…, 3) [rad] from quaternions (…, 4)."""
     flat, shape = _flat(q)
-    return Rotation.from_quat(flat, scalar_first=True).as_rotvec().reshape(*shape, 3)
+    return _rotation().from_quat(flat, scalar_first=True).as_rotvec().reshape(*shape, 3)
 
 
 def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -158,14 +167,14 @@ def euler_to_quat(angles: np.ndarray, order: str) -> np.ndarray:
     """
     a = np.asarray(angles, dtype=np.float64)
     shape = a.shape[:-1]
-    q = Rotation.from_euler(order.upper(), a.reshape(-1, 3)).as_quat(scalar_first=True)
+    q = _rotation().from_euler(order.upper(), a.reshape(-1, 3)).as_quat(scalar_first=True)
     return q.reshape(*shape, 4)
 
 
 def quat_to_euler(q: np.ndarray, order: str) -> np.ndarray:
     """Intrinsic Euler angles [rad] (…, 3) in ``order`` from quaternions (…, 4)."""
     flat, shape = _flat(q)
-    r = Rotation.from_quat(flat, scalar_first=True)
+    r = _rotation().from_quat(flat, scalar_first=True)
     import warnings
 
     with warnings.catch_warnings():  # gimbal lock warnings: the result is still valid
@@ -238,45 +247,3 @@ def rot_y(angle: np.ndarray | float) -> np.ndarray:
 def rot_z(angle: np.ndarray | float) -> np.ndarray:
     """Quaternion of a rotation about +z by ``angle`` [rad]."""
     return _rot_axis(angle, 2)
-
-
-# ---------------------------------------------------------------- torch (via roma)
-
-
-def _to_xyzw(q: torch.Tensor) -> torch.Tensor:
-    return torch.cat([q[..., 1:], q[..., :1]], dim=-1)
-
-
-def _to_wxyz(q: torch.Tensor) -> torch.Tensor:
-    return torch.cat([q[..., 3:], q[..., :3]], dim=-1)
-
-
-def torch_quat_mul(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """Hamilton product of wxyz quaternions (…, 4), differentiable."""
-    return _to_wxyz(roma.quat_product(_to_xyzw(a), _to_xyzw(b)))
-
-
-def torch_quat_apply(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    """Rotate vectors (…, 3) by wxyz quaternions (…, 4), differentiable."""
-    return roma.quat_action(_to_xyzw(q), v, is_normalized=True)
-
-
-def torch_quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
-    """Rotation matrices (…, 3, 3) from wxyz quaternions (…, 4) (normalised first)."""
-    return roma.unitquat_to_rotmat(roma.quat_normalize(_to_xyzw(q)))
-
-
-def torch_matrix_to_quat(m: torch.Tensor) -> torch.Tensor:
-    """wxyz quaternions (…, 4) from rotation matrices (…, 3, 3)."""
-    return _to_wxyz(roma.rotmat_to_unitquat(m))
-
-
-def torch_sixd_to_matrix(d6: torch.Tensor) -> torch.Tensor:
-    """Rotation matrices (…, 3, 3) from the 6-D form (…, 6) (Gram–Schmidt, via roma)."""
-    cols = torch.stack([d6[..., :3], d6[..., 3:]], dim=-1)  # (…, 3, 2)
-    return roma.special_gramschmidt(cols)
-
-
-def torch_matrix_to_6d(m: torch.Tensor) -> torch.Tensor:
-    """6-D form (…, 6) of rotation matrices (…, 3, 3)."""
-    return torch.cat([m[..., :, 0], m[..., :, 1]], dim=-1)

@@ -37,6 +37,7 @@ import mujoco
 import numpy as np
 
 from .contacts import contacts_from_feet
+from .controllers import CONTROLLERS, REGISTRY, ControllerError, make_controller
 from .errors import HabitsimError, InvalidMotionError, unknown_choice
 from .motion import Motion
 from .qpos import QposTrajectory, motion_to_qpos, qpos_to_motion, species_model
@@ -63,11 +64,6 @@ __all__ = [
     "track_many",
 ]
 
-#: Controller names accepted by :func:`track` (or pass a Controller instance):
-#: ``servo`` in-engine position servos (ctrl = target angle); ``pd`` explicit PD torques
-#: on the motors; ``+stance`` adds the stance-leg trunk stabiliser (virtual model control,
-#: no external force); ``+id`` adds inverse-dynamics feed-forward torques of the reference.
-CONTROLLERS = ("servo", "pd", "servo+stance", "servo+id", "servo+id+stance", "balance", "mpc")
 #: docs/metrics.md fall rule: trunk height below this share of its reference height …
 FALL_HEIGHT_RATIO = 0.5
 #: … or trunk tilt (from the reference's trunk orientation) above this [deg] …
@@ -368,19 +364,6 @@ def _servo_power(model: mujoco.MjModel, q: np.ndarray, v: np.ndarray, v_next: np
 
 
 # --------------------------------------------------------------------------- controllers
-def _default_pd(model: mujoco.MjModel) -> Any:
-    """Explicit PD with the torque rule (kp = τmax/0.15 rad) and critical damping capped
-    at the explicit-integration stability limit."""
-    from .controllers import PDController, actuated_joints
-    from .controllers.gains import critical_damping, max_stable_gains, stiffness_rule
-
-    names = actuated_joints(model).names
-    kp_max, kd_max = max_stable_gains(model, joints=names)
-    kp = np.minimum(stiffness_rule(model, names, mode="torque"), kp_max)
-    kd = np.minimum(critical_damping(model, kp, names), kd_max)
-    return PDController(model, kp, kd)
-
-
 def _make_controller(controller: Any, model: mujoco.MjModel, clip: _Clip | None = None,
                      control_dt: float | None = None) -> Any:
     """A controller instance for a name (on ``model``, already servo-configured when the
@@ -397,32 +380,20 @@ def _make_controller(controller: Any, model: mujoco.MjModel, clip: _Clip | None 
         return controller
     if controller not in CONTROLLERS:
         raise SimulationError(unknown_choice("controller", controller, CONTROLLERS))
-    from .controllers import ControllerError
-
+    spec = REGISTRY[controller]
+    kw: dict[str, Any] = {}
+    if spec.planned:
+        if control_dt is not None:
+            kw["control_dt"] = control_dt
+        if clip is not None:
+            kw.update(qpos=clip.qpos, fps=clip.fps, contacts=clip.contacts)
+            kw["species"] = clip.species if clip.feet is None else None
+    if (spec.planned or controller.endswith("+stance")) and clip is not None:
+        kw["feet"] = clip.feet
     try:
-        if controller in ("balance", "mpc"):
-            from .controllers.factory import make_controller
-
-            opts = {} if control_dt is None else {"control_dt": control_dt}
-            plan = {} if clip is None else {"qpos": clip.qpos, "fps": clip.fps, "contacts": clip.contacts}
-            species = None if clip is None or clip.feet is not None else clip.species
-            feet = None if clip is None else clip.feet
-            return make_controller(controller, model, species, feet=feet, **plan, **opts)
-        if controller == "pd":
-            return _default_pd(model)
-        from .controllers.feedforward import InverseDynamicsFeedforward
-        from .controllers.servo import ServoController
-
-        ff = InverseDynamicsFeedforward(model) if "+id" in controller else None
-        ctl = ServoController(model, feedforward=ff)
-        if controller.endswith("+stance"):
-            from .controllers.stance import StabilizedController, TrunkStabilizer
-
-            feet = FOOT_GEOMS if clip is None or clip.feet is None else clip.feet
-            ctl = StabilizedController(ctl, TrunkStabilizer(model, feet))
+        return make_controller(controller, model, **kw)
     except ControllerError as e:
         raise SimulationError(f"controller {controller!r} does not fit the model: {e}") from e
-    return ctl
 
 
 #: Default torque-layer rate of the ``"mpc"`` controller [Hz] (MPC solves at 30 Hz).
@@ -837,7 +808,8 @@ def _sim_model(controller: Any, clip: _Clip, given: mujoco.MjModel | None) -> mu
     """The model to simulate: servos for the servo controllers (unless already there);
     torque motors for ``pd``, ``balance`` and ``mpc`` by name on a model with position
     servos (a robot's: :func:`habitsim.controllers.robot.torque_model`, same limits)."""
-    if isinstance(controller, str) and controller.startswith("servo"):
+    if isinstance(controller, str) and REGISTRY.get(controller) is not None \
+            and REGISTRY[controller].actuators == "servo":
         if given is None:
             return _species_model(clip.species, True)
         return given if _has_servos(given) else servo_model(given)

@@ -33,14 +33,12 @@ use :data:`ABDUCTION_SIGN` to get "outward = positive" for either side.
 from __future__ import annotations
 
 import functools
-
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from .errors import InvalidMotionError
-from .rotations import quat_to_matrix, rot_y, torch_quat_to_matrix
+from .rotations import quat_to_matrix, rot_y
 from .species import Species, load_species
 
 __all__ = [
@@ -54,7 +52,6 @@ __all__ = [
     "get_skeleton",
     "standing_leg_angles",
     "fk",
-    "fk_torch",
 ]
 
 LEG_PREFIXES = ("lf", "rf", "lh", "rh")  # the order of FEET: LF, RF, LH, RH
@@ -240,10 +237,6 @@ class Skeleton:
         """Global joint positions (…, J, 3) [m], see :func:`fk`."""
         return fk(self, root_pos, quats)
 
-    def fk_torch(self, root_pos: torch.Tensor, quats: torch.Tensor) -> torch.Tensor:
-        """Global joint positions (…, J, 3), differentiable, see :func:`fk_torch`."""
-        return fk_torch(self, root_pos, quats)
-
 
 def get_skeleton(species: str | Species) -> Skeleton:
     """The skeleton of a catalog species (cached per species name)."""
@@ -290,31 +283,3 @@ def fk(skel: Skeleton, root_pos: np.ndarray, quats: np.ndarray, return_rotations
             glob[..., j, :, :] = glob[..., p, :, :] @ local[..., j, :, :]
             pos[..., j, :] = pos[..., p, :] + glob[..., p, :, :] @ skel.offsets[j]
     return (pos, glob) if return_rotations else pos
-
-
-def fk_torch(skel: Skeleton, root_pos: torch.Tensor, quats: torch.Tensor) -> torch.Tensor:
-    """Batched, differentiable forward kinematics in torch (same maths as :func:`fk`).
-
-    Args:
-        skel: the skeleton.
-        root_pos: (…, 3) root positions [m].
-        quats: (…, J, 4) local rotations wxyz (normalised inside).
-
-    Returns:
-        (…, J, 3) global joint positions, in ``quats``' dtype and device.
-    """
-    _check_fk_shapes(tuple(root_pos.shape), tuple(quats.shape), skel.num_joints)
-    local = torch_quat_to_matrix(quats)
-    offsets = torch.as_tensor(skel.offsets, dtype=quats.dtype, device=quats.device)
-    glob: list[torch.Tensor] = []
-    pos: list[torch.Tensor] = []
-    for j, p in enumerate(skel.parents):
-        if p < 0:
-            glob.append(local[..., j, :, :])
-            pos.append(root_pos.to(quats.dtype))
-        else:
-            glob.append(glob[p] @ local[..., j, :, :])
-            pos.append(pos[p] + (glob[p] @ offsets[j].unsqueeze(-1)).squeeze(-1))
-    return torch.stack(pos, dim=-2)
-
-

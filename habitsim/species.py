@@ -322,13 +322,17 @@ def _parse(data: dict[str, Any], path: Path | None) -> Species:
     girths = {k: _num(_req(girth_tbl, k, f"{where} [girths]"), f"{where} girths.{k}", True)
               for k in GIRTH_KEYS}
     incl = {
-        k: math.radians(_num(_req(posture_tbl, f"{k}_deg", f"{where} [posture]"), f"{where} posture.{k}_deg"))
+        k: math.radians(
+            _num(_req(posture_tbl, f"{k}_deg", f"{where} [posture]"), f"{where} posture.{k}_deg")
+        )
         for k in INCLINATION_KEYS
     }
     lim_tbl = _table(data, "joint_limits", where)
     limits: dict[str, tuple[float, float]] = {}
     for k in LIMIT_KEYS:
-        lo, hi = _pair(_req(lim_tbl, f"{k}_deg", f"{where} [joint_limits]"), f"{where} joint_limits.{k}_deg")
+        lo, hi = _pair(
+            _req(lim_tbl, f"{k}_deg", f"{where} [joint_limits]"), f"{where} joint_limits.{k}_deg"
+        )
         limits[k] = (math.radians(lo), math.radians(hi))
 
     gaits_tbl = _table(data, "gaits", where)

@@ -76,7 +76,11 @@ class PlausibilityBounds:
 
 
 def plausibility_violations(
-    motion: Motion, bounds: PlausibilityBounds | None = None, *, use_contacts: bool = False, **overrides: float | None
+    motion: Motion,
+    bounds: PlausibilityBounds | None = None,
+    *,
+    use_contacts: bool = False,
+    **overrides: float | None,
 ) -> dict[str, tuple[float, float]]:
     """The metrics of ``motion`` that exceed their bounds: ``{key: (value, bound)}``.
 
@@ -95,7 +99,9 @@ def plausibility_violations(
     b = asdict(bounds or PlausibilityBounds())
     unknown = set(overrides) - set(b)
     if unknown:
-        raise HabitsimError(f"unknown plausibility bound(s) {sorted(unknown)}; valid: {', '.join(b)}")
+        raise HabitsimError(
+            f"unknown plausibility bound(s) {sorted(unknown)}; valid: {', '.join(b)}"
+        )
     b.update(overrides)
     contacts = motion.contacts if use_contacts else None
     values = kinematic_metrics(motion, contacts=contacts)
@@ -110,7 +116,11 @@ def plausibility_violations(
 
 
 def assert_plausible(
-    motion: Motion, bounds: PlausibilityBounds | None = None, *, use_contacts: bool = False, **overrides: float | None
+    motion: Motion,
+    bounds: PlausibilityBounds | None = None,
+    *,
+    use_contacts: bool = False,
+    **overrides: float | None,
 ) -> None:
     """Fail (AssertionError) if any kinematic metric of ``motion`` exceeds its bound.
 
@@ -186,10 +196,14 @@ def compare_figures(
     out = []
     for key in sorted(set(golden) | set(actual)):
         if key not in actual:
-            out.append(Deviation(key, _as_number(golden[key], key), None, 0.0, False, "missing in actual"))
+            out.append(
+                Deviation(key, _as_number(golden[key], key), None, 0.0, False, "missing in actual")
+            )
             continue
         if key not in golden:
-            out.append(Deviation(key, None, _as_number(actual[key], key), 0.0, False, "not in golden"))
+            out.append(
+                Deviation(key, None, _as_number(actual[key], key), 0.0, False, "not in golden")
+            )
             continue
         g, a = _as_number(golden[key], key), _as_number(actual[key], key)
         t = tol.get(key, default)
@@ -212,7 +226,9 @@ def format_deviations(devs: list[Deviation], only_failures: bool = False) -> str
         rows.append((d.key, fmt(d.golden), fmt(d.actual), fmt(d.diff) if d.note == "" else "-",
                      f"{d.allowed:.3g}", "ok" if d.ok else f"MOVED {d.note}".strip()))
     widths = [max(len(r[i]) for r in rows) for i in range(6)]
-    return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows)
+    return "\n".join(
+        "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows
+    )
 
 
 def _versions() -> dict[str, str]:
@@ -249,7 +265,8 @@ def _read_golden(path: Path) -> _Golden:
     )
 
 
-def write_golden(path: str | Path, figures: Mapping[str, Any], tolerances: Mapping[str, Any] | None = None) -> None:
+def write_golden(path: str | Path, figures: Mapping[str, Any],
+                 tolerances: Mapping[str, Any] | None = None) -> None:
     """Record golden figures (atomically), with the current MuJoCo and habitsim versions."""
     clean = {}
     for k, v in figures.items():
@@ -296,6 +313,7 @@ def assert_matches_golden(
         if g.versions and g.versions != now:
             ver = f"\n(golden recorded with {g.versions}, running {now})"
         raise AssertionError(
-            f"{len(bad)} figure(s) moved against {p}:\n{format_deviations(devs, only_failures=True)}{ver}"
+            f"{len(bad)} figure(s) moved against {p}:\n"
+            f"{format_deviations(devs, only_failures=True)}{ver}"
         )
     return devs

@@ -12,6 +12,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+
 from habitsim.controllers import (
     BalanceController,
     ControllerError,

@@ -8,11 +8,6 @@ import time
 
 import numpy as np
 import pytest
-from habitsim.evaluation.kinematic import (
-    KINEMATIC_KEYS,
-    bone_length_error_mm,
-    kinematic_metrics,
-)
 
 from habitsim import get_skeleton, load_species
 from habitsim.cli import main
@@ -25,6 +20,11 @@ from habitsim.contacts import (
     touchdown_frames,
 )
 from habitsim.errors import InvalidMotionError
+from habitsim.evaluation.kinematic import (
+    KINEMATIC_KEYS,
+    bone_length_error_mm,
+    kinematic_metrics,
+)
 from habitsim.hinges import (
     HINGE_NAMES,
     compose_hinges,

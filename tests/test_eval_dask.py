@@ -17,10 +17,9 @@ distributed = pytest.importorskip(
     "distributed", reason="dask[distributed] is not installed (pip install 'habitsim[cluster]')"
 )
 
+from habitsim.dataset import build_dataset  # noqa: E402
 from habitsim.evaluation.executors import DaskExecutor, ExecutorError, make_executor  # noqa: E402
 from habitsim.evaluation.runner import VOLATILE_COLUMNS, EvalConfig, run_benchmark  # noqa: E402
-
-from habitsim.dataset import build_dataset  # noqa: E402
 
 
 def _rows(path: Path) -> list[dict[str, str]]:

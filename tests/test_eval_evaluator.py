@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from habitsim.dataset import build_dataset, iter_clips
 from habitsim.evaluation.evaluator import (
     DEFAULT_EVALUATOR_DIR,
     EvaluatorConfig,
@@ -19,8 +21,6 @@ from habitsim.evaluation.evaluator import (
     resample_motion,
     train_evaluator,
 )
-
-from habitsim.dataset import build_dataset, iter_clips
 from habitsim.motion import Motion
 from habitsim.rotations import quat_mul
 

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from habitsim.evaluation.biomech import BIOMECH_KEYS, biomech_metrics
 from habitsim.evaluation.distribution import (
     FIDError,

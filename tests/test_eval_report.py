@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from habitsim.evaluation.report import ReportError, write_report
-from habitsim.evaluation.runner import EvalConfig, run_benchmark
 
 from habitsim.dataset import build_dataset
+from habitsim.evaluation.report import ReportError, write_report
+from habitsim.evaluation.runner import EvalConfig, run_benchmark
 
 _CHECK = (
     '<script>window.addEventListener("load",()=>{const a=[...document.images];'

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from habitsim.dataset import build_dataset
 from habitsim.evaluation.methods import (
     MethodUnavailable,
     UnknownMethodError,
@@ -33,8 +35,6 @@ from habitsim.evaluation.runner import (
     run_benchmark,
     summarize,
 )
-
-from habitsim.dataset import build_dataset
 
 SPECIES = ["cat", "dog", "horse"]
 

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from habitsim.controllers import ControllerError
 from habitsim.controllers.base import Reference
 from habitsim.controllers.feedforward import InverseDynamicsFeedforward
 from habitsim.controllers.servo import ServoController
-
 from habitsim.gaits import generate
 from habitsim.sim import FOOT_GEOMS, _species_model, track
 

@@ -66,7 +66,8 @@ def test_compliant_foot_takes_up_reach_within_its_band(leg: str) -> None:
     ang = rng.uniform(-0.7, 0.7, t)
     dist = rng.uniform(0.55, 1.0, t) * (reach + geo.foot)
     zero = np.zeros(t)
-    shoulder = leg_fk("horse", leg, root, prot, zero, np.full(t, geo.girdle_flex0), zero, zero, zero)
+    girdle = np.full(t, geo.girdle_flex0)
+    shoulder = leg_fk("horse", leg, root, prot, zero, girdle, zero, zero, zero)
     shoulder = shoulder + np.array([0.0, 0.0, geo.upper + geo.lower + geo.foot])
     target = shoulder + np.stack([dist * np.sin(ang), zero, -dist * np.cos(ang)], -1)
     band = (0.7 * reach, 0.9 * reach)
@@ -136,7 +137,8 @@ def test_pose_from_targets_matches_full_skeleton_fk() -> None:
     ],
 )
 def test_ik_bad_inputs_raise(kwargs: dict) -> None:
-    args = {"girdle_root": np.zeros((2, 3)), "parent_rotation": np.eye(3), "target": np.zeros((2, 3)) - [0, 0, 0.3]}
+    args = {"girdle_root": np.zeros((2, 3)), "parent_rotation": np.eye(3),
+            "target": np.zeros((2, 3)) - [0, 0, 0.3]}
     args.update(kwargs)
     with pytest.raises(IKError):
         leg_ik("dog", "LF", **args)

@@ -6,7 +6,6 @@ import json
 
 import numpy as np
 import pytest
-import torch
 
 from habitsim.cli import main
 from habitsim.errors import HabitsimError, UnknownSpeciesError

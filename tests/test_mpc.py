@@ -8,8 +8,11 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from scipy.linalg import expm
+
 from habitsim.controllers import (
     CONTROLLER_NAMES,
+    CONTROLLERS,
     BalanceController,
     ControllerError,
     ConvexMPC,
@@ -22,7 +25,6 @@ from habitsim.controllers import (
 )
 from habitsim.controllers.mpc import NX, srb_matrices
 from habitsim.controllers.swing import SWING
-from scipy.linalg import expm
 
 ROBOT_XML = Path(__file__).parent / "data" / "quadruped12.xml"
 MASS, DT, MU = 19.5, 0.03, 0.6
@@ -246,7 +248,7 @@ def test_dog_mpc_unassisted(action: str, seed: int, max_mpjpe_per_leg: float,
 
 # --------------------------------------------------------------------------- API
 def test_make_controller(robot: mujoco.MjModel) -> None:
-    assert CONTROLLER_NAMES == ("pd", "balance", "mpc")
+    assert CONTROLLER_NAMES == CONTROLLERS and {"pd", "balance", "mpc"} <= set(CONTROLLERS)
     assert isinstance(make_controller("pd", robot), PDController)
     ctl = make_controller("balance", robot)
     assert isinstance(ctl, BalanceController) and ctl.plan is None
@@ -254,7 +256,7 @@ def test_make_controller(robot: mujoco.MjModel) -> None:
     ctl = make_controller("mpc", robot, qpos=qpos, fps=fps, contacts=contacts, rate_hz=40.0)
     assert isinstance(ctl, MPCController) and ctl.plan is not None
     assert ctl.dt_mpc == pytest.approx(1 / 40) and ctl.steps * ctl.dt_mpc >= 0.5 - 1e-9
-    with pytest.raises(ControllerError, match="valid: pd, balance, mpc"):
+    with pytest.raises(ControllerError, match="valid: balance, mpc, pd, servo"):
         make_controller("lqr", robot)
     with pytest.raises(ControllerError, match="unknown balance option"):
         make_controller("balance", robot, stiffness=3.0)

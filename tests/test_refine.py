@@ -14,10 +14,10 @@ import casadi as ca
 import mujoco
 import numpy as np
 import pytest
-from habitsim.evaluation.kinematic import jerk, kinematic_metrics, penetration_mm, skate_mm
 
 import habitsim
 from habitsim.cli import main
+from habitsim.evaluation.kinematic import jerk, kinematic_metrics, penetration_mm, skate_mm
 from habitsim.qpos import load_species_model, motion_to_qpos, qpos_joint_positions
 from habitsim.refine import (
     ARTEFACTS,

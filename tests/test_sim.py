@@ -7,12 +7,12 @@ import json
 import mujoco
 import numpy as np
 import pytest
+
+from habitsim import UnknownSpeciesError
 from habitsim.controllers import PDController
 from habitsim.evaluation.dynamic import DYNAMIC_KEYS
 from habitsim.evaluation.kinematic import KINEMATIC_KEYS, kinematic_metrics
 from habitsim.evaluation.simulated import SIMULATED_KEYS
-
-from habitsim import UnknownSpeciesError
 from habitsim.motion import Motion, load_motion
 from habitsim.qpos import QposTrajectory, load_species_model, qpos_to_motion
 from habitsim.sim import (

@@ -1,21 +1,19 @@
 """``habitsim bench ...``: benchmarks that print figures.
 
-This module owns the ``bench`` sub-commands. It adds ``data`` itself, then lets every
-module named in :data:`_EXTRA` that exists add its own (``register(sub)`` with the
-``bench`` sub-parsers), so later stages plug in benchmarks without editing this file.
+This module owns the ``bench`` sub-commands. It adds ``data`` itself, then each module of
+:data:`_EXTRA` adds its own (``register(sub)`` with the ``bench`` sub-parsers).
 
 ``habitsim bench data`` builds the default synthetic data set (every species, 40 clips
 each, in a temporary folder unless ``--out``) and prints synthetic clips per second, the
 build's wall time, and forward-kinematics throughput in frames per second over every
 frame of the built clips: numpy (:func:`habitsim.skeleton.fk`) and torch
-(:func:`habitsim.skeleton.fk_torch`, float32 and float64, no autograd), each batched per
+(:func:`habitsim.models.kinematics.fk_torch`, float32 and float64, no autograd), each batched per
 species. Target of the issue: the default data set builds in ≤ 120 s on 2 cores.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import tempfile
 import time
@@ -25,12 +23,11 @@ from pathlib import Path
 import numpy as np
 
 from ..dataset import DatasetBuild, build_dataset, iter_clips
+from . import bench_balance, bench_real, bench_refine, bench_sim, bench_train
 from .conventions import add_check_option, check_exit
 
-#: Modules of ``habitsim.cli`` that may add more ``bench`` sub-commands.
-_EXTRA: tuple[str, ...] = (
-    "bench_sim", "bench_refine", "bench_balance", "bench_train", "bench_real"
-)
+#: Modules of ``habitsim.cli`` that add more ``bench`` sub-commands, in help order.
+_EXTRA = (bench_sim, bench_refine, bench_balance, bench_train, bench_real)
 #: Build-time target of the default data set [s] (on 2 cores).
 TARGET_BUILD_S = 120.0
 _DEFAULT_CLIPS = 40
@@ -61,14 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                      f"the target ({TARGET_BUILD_S:.0f} s; default: print the verdict, exit 0)")
     p.set_defaults(func=_bench_data)
 
-    for name in _EXTRA:
-        module = f"{__package__}.{name}"
-        try:
-            mod = importlib.import_module(module)
-        except ModuleNotFoundError as e:
-            if e.name == module:  # that benchmark does not exist (yet)
-                continue
-            raise
+    for mod in _EXTRA:
         mod.register(sub)
 
 
@@ -95,7 +85,8 @@ def fk_throughput(out_dir: str | Path) -> dict[str, float]:
     """
     import torch
 
-    from ..skeleton import fk, fk_torch, get_skeleton
+    from ..models.kinematics import fk_torch
+    from ..skeleton import fk, get_skeleton
 
     roots: dict[str, list[np.ndarray]] = {}
     quats: dict[str, list[np.ndarray]] = {}

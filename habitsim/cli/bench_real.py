@@ -508,10 +508,11 @@ def plan(ns: argparse.Namespace) -> tuple[list[WindowTask], list[str]]:
     Raises:
         BenchRealError / UnknownSpeciesError / UnknownMethodError: see the module.
     """
+    from ..controllers import CONTROLLERS
     from ..evaluation.methods import get_method
     from ..motion import resample_motion
     from ..pipeline import refine_mode
-    from ..sim import CONTROLLERS, SimulationError
+    from ..sim import SimulationError
     from ..species import load_species
 
     if not (math.isfinite(ns.seconds) and ns.seconds > 0):

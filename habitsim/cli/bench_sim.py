@@ -68,7 +68,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--action", default="walk", help="synthetic action (default walk)")
     p.add_argument("--no-sway", action="store_true",
                    help="generate the walks with trunk_sway=0")
-    from ..sim import CONTROLLERS
+    from ..controllers import CONTROLLERS
 
     p.add_argument("--assisted-controller", default="servo", choices=CONTROLLERS,
                    help="controller of the assisted runs (default servo)")

@@ -27,6 +27,8 @@ def _csv(text: str | Sequence[str] | None) -> tuple[str, ...] | None:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the top-level ``eval`` command."""
+    from ..controllers import CONTROLLERS
+
     p = sub.add_parser(
         "eval",
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -58,8 +60,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--controller",
         default="servo",
+        choices=CONTROLLERS,
         metavar="NAME",
-        help="tracking controller (habitsim.sim.CONTROLLERS; default servo)",
+        help=f"tracking controller: {', '.join(CONTROLLERS)} (default servo)",
     )
     p.add_argument("--assist", action="store_true", help="track with root assistance")
     p.add_argument("--no-track", action="store_true", help="skip the MuJoCo tracking")

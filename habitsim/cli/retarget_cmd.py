@@ -37,7 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--track", action="store_true", help="track the result in MuJoCo")
     p.add_argument("--controller", default="mpc", choices=TRACK_CONTROLLERS,
                    help="controller of --track (default mpc)")
-    p.add_argument("--report", type=Path, metavar="JSON", help="write the tracking report (--track)")
+    p.add_argument("--report", type=Path, metavar="JSON",
+                   help="write the tracking report (--track)")
     p.add_argument("--video", type=Path, metavar="MP4", help="render the tracked run (--track)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=_retarget)

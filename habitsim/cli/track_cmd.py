@@ -38,7 +38,7 @@ from typing import Any
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the top-level ``track`` command."""
-    from ..sim import CONTROLLERS
+    from ..controllers import CONTROLLERS
 
     p = sub.add_parser(
         "track",

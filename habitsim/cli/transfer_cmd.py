@@ -59,9 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _transfer(ns: argparse.Namespace) -> int:
     from ..errors import MotionFileError
     from ..models.errors import UnknownMethodError
-    from ..models.transfer import METHODS, resolve_checkpoint, transfer
-    from ..motion import load_motion
-    from ..species import load_species
+    from ..models.transfer import METHODS, resolve_checkpoint
 
     if ns.list_methods:
         for m in METHODS.values():

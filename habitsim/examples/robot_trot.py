@@ -7,7 +7,8 @@ joint given with ``--robot`` and ``--feet``::
 
     python -m habitsim.examples.robot_trot                       # 10 s each, the Go1
     python -m habitsim.examples.robot_trot --speed 0.8 --video out/
-    python -m habitsim.examples.robot_trot --robot anymal_c/scene.xml --feet LF_FOOT,RF_FOOT,LH_FOOT,RH_FOOT
+    python -m habitsim.examples.robot_trot --robot anymal_c/scene.xml \
+        --feet LF_FOOT,RF_FOOT,LH_FOOT,RH_FOOT
 
 Each case is a reference made by :mod:`habitsim.retarget` (:func:`~habitsim.retarget.stand`,
 :func:`~habitsim.retarget.trot`) tracked by :func:`habitsim.sim.track` with

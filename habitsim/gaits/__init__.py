@@ -12,4 +12,11 @@ from __future__ import annotations
 from .actions import ACTIONS, LOCOMOTION_ACTIONS, action_gait, available_actions
 from .generator import GENERATOR_VERSION, generate
 
-__all__ = ["ACTIONS", "LOCOMOTION_ACTIONS", "GENERATOR_VERSION", "action_gait", "available_actions", "generate"]
+__all__ = [
+    "ACTIONS",
+    "LOCOMOTION_ACTIONS",
+    "GENERATOR_VERSION",
+    "action_gait",
+    "available_actions",
+    "generate",
+]

@@ -10,7 +10,6 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d, uniform_filter1d
 
 from ..body import center_of_mass
 from ..ik import (
@@ -126,13 +125,19 @@ class Trunk:
         t = self.root.shape[0]
         q = np.zeros((t, len(JOINT_NAMES), 4))
         q[..., 0] = 1.0
-        q[:, _J["pelvis"]] = quat_mul(quat_mul(rot_z(self.yaw), rot_y(-self.pitch)), rot_x(self.roll))
+        q[:, _J["pelvis"]] = quat_mul(
+            quat_mul(rot_z(self.yaw), rot_y(-self.pitch)), rot_x(self.roll)
+        )
         for i in range(3):
-            q[:, _J[f"spine{i + 1}"]] = quat_mul(rot_z(self.spine_yaw[:, i]), rot_y(self.spine_pitch[:, i]))
+            q[:, _J[f"spine{i + 1}"]] = quat_mul(
+                rot_z(self.spine_yaw[:, i]), rot_y(self.spine_pitch[:, i])
+            )
         q[:, _J["neck"]] = quat_mul(rot_z(self.neck_yaw), rot_y(self.neck_pitch))
         q[:, _J["head"]] = quat_mul(rot_z(self.head_yaw), rot_y(self.head_pitch))
         for i in range(2):
-            q[:, _J[f"tail{i + 1}"]] = quat_mul(rot_z(self.tail_yaw[:, i]), rot_y(self.tail_pitch[:, i]))
+            q[:, _J[f"tail{i + 1}"]] = quat_mul(
+                rot_z(self.tail_yaw[:, i]), rot_y(self.tail_pitch[:, i])
+            )
         return q
 
 
@@ -229,6 +234,8 @@ def upper_envelope(x: np.ndarray, window: int) -> np.ndarray:
     """Smooth function ≥ x (1-D): moving average of a moving maximum of one window."""
     if window <= 1 or x.size < 2:
         return x.copy()
+    from scipy.ndimage import maximum_filter1d, uniform_filter1d  # (on use: 0.3 s import)
+
     w = _odd(window)
     return uniform_filter1d(maximum_filter1d(x, w, mode="nearest"), w, mode="nearest")
 
@@ -283,7 +290,8 @@ def required_raising(sp: Species, legs: tuple[LegIKResult, ...]) -> np.ndarray:
 
 
 def fix_reach(
-    sp: Species, trunk: Trunk, plan: LegPlan, window: int, iterations: int = 30, mask: np.ndarray | None = None
+    sp: Species, trunk: Trunk, plan: LegPlan, window: int, iterations: int = 30,
+    mask: np.ndarray | None = None,
 ) -> tuple[Trunk, Solved]:
     """Lower the pelvis and withers (smoothly) until every leg keeps its reach reserve.
 
@@ -439,6 +447,8 @@ def respect_limits(sp: Species, trunk: Trunk, plan: LegPlan, base: Solved, windo
         turned = wrap_angle(finc0 - _nominal_inclination(sp, k, plan, frames))
         delta = best + turned
         if window > 1:
+            from scipy.ndimage import uniform_filter1d
+
             delta = uniform_filter1d(delta, _odd(window), mode="nearest")
         plan.foot_extra[:, k] += delta
     return solve(sp, trunk, plan)

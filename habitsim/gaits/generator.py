@@ -19,7 +19,7 @@ from ..errors import GaitError
 from ..motion import Motion
 from ..species import FEET, Species, load_species
 from ._pose import GRAVITY
-from .actions import ACTIONS, LOCOMOTION_ACTIONS, action_gait, available_actions
+from .actions import ACTIONS, LOCOMOTION_ACTIONS, action_gait
 from .jump import build_jump, min_jump_duration
 from .locomotion import build_locomotion, gait_numbers
 from .stationary import build_idle, build_sit
@@ -70,14 +70,16 @@ def draw_params(rng: np.random.Generator) -> dict[str, Any]:
     return p
 
 
-def _duty_from(gait_band: tuple[float, float], u_froude: float, noise: float) -> tuple[float, float]:
+def _duty_from(gait_band: tuple[float, float], u_froude: float,
+               noise: float) -> tuple[float, float]:
     """Duty factor in its band, falling with speed (u_froude) plus noise; returns (β, u)."""
     u = float(np.clip(1.0 - u_froude + noise, 0.08, 0.92))
     lo, hi = gait_band
     return lo + u * (hi - lo), u
 
 
-def _metadata_base(sp: Species, action: str, gait: str, seed: int | None, fps: float, n: int) -> dict[str, Any]:
+def _metadata_base(sp: Species, action: str, gait: str, seed: int | None, fps: float,
+                   n: int) -> dict[str, Any]:
     return {
         "generator": "habitsim.gaits",
         "generator_version": GENERATOR_VERSION,
@@ -114,7 +116,9 @@ def _build_cyclic(sp, action, gait, band, params, t, fps, froude, duty_factor, t
     if not math.isfinite(turn_rate):
         raise GaitError(f"turn_rate must be finite, got {turn_rate!r}")
     if action == "turn_left" and turn_rate <= 0 or action == "turn_right" and turn_rate >= 0:
-        raise GaitError(f"{action} needs a turn rate of the matching sign (left positive), got {turn_rate}")
+        raise GaitError(
+            f"{action} needs a turn rate of the matching sign (left positive), got {turn_rate}"
+        )
     phases = {f: (band.footfall[f] + params["phase_jitter"][f]) % 1.0 for f in FEET}
     if direction < 0:  # the walk run in reverse: the footfall sequence reverses
         phases = {f: (-v) % 1.0 for f, v in phases.items()}
@@ -177,11 +181,15 @@ def generate(
     if like is not None:
         meta = like.metadata or {}
         if meta.get("generator") != "habitsim.gaits" or "params" not in meta:
-            raise GaitError("the 'like' motion was not made by habitsim.gaits (no generator metadata)")
+            raise GaitError(
+                "the 'like' motion was not made by habitsim.gaits (no generator metadata)"
+            )
         if action is None:
             action = str(meta["action"])
         elif action != meta["action"]:
-            raise GaitError(f"action {action!r} differs from the 'like' clip's action {meta['action']!r}")
+            raise GaitError(
+                f"action {action!r} differs from the 'like' clip's action {meta['action']!r}"
+            )
         params = dict(meta["params"])
         seed = meta.get("seed")
         fps = float(like.fps)
@@ -241,7 +249,8 @@ def generate(
                                   turn_rate, direction, trunk_sway, shrink)
             g, tr, sol, plan = built
             err = sol.reach_error[plan.contacts]
-            if not (froude_drawn or turn_drawn) or err.size == 0 or err.max() <= FEASIBLE_STANCE_ERROR_M:
+            if (not (froude_drawn or turn_drawn) or err.size == 0
+                    or err.max() <= FEASIBLE_STANCE_ERROR_M):
                 break
         meta_out["attempts"] = attempt + 1
         meta_out.update(
@@ -261,7 +270,8 @@ def generate(
     else:
         heading = params["heading"]
         meta_out.update(speed_mps=0.0, velocity_mps=0.0, froude=0.0, duty_factor=1.0,
-                        stride_frequency_hz=0.0, stride_length_m=0.0, turn_rate=0.0, turn_rate_nd=0.0,
+                        stride_frequency_hz=0.0, stride_length_m=0.0, turn_rate=0.0,
+                        turn_rate_nd=0.0,
                         start_phase=params["start_phase"], heading=heading)
         if action == "idle":
             tr, sol, plan = build_idle(sp, t, fps, params, detail_rng)
@@ -271,11 +281,14 @@ def generate(
         else:
             tr, sol, plan, extra = build_jump(sp, t, fps, params)
             vx = extra["takeoff_speed_mps"][0]
-            meta_out.update(extra, speed_mps=vx, velocity_mps=vx, froude=vx * vx / (GRAVITY * sp.hip_height),
+            meta_out.update(extra, speed_mps=vx, velocity_mps=vx,
+                            froude=vx * vx / (GRAVITY * sp.hip_height),
                             duty_factor=float(plan.contacts.mean()))
     stance_err = sol.reach_error[plan.contacts]
     meta_out["max_reach_error_mm"] = float(sol.reach_error.max() * 1000.0)
-    meta_out["max_stance_reach_error_mm"] = float(stance_err.max() * 1000.0) if stance_err.size else 0.0
+    meta_out["max_stance_reach_error_mm"] = (
+        float(stance_err.max() * 1000.0) if stance_err.size else 0.0
+    )
     meta_out["params"] = params
     return Motion(
         species=sp.name,

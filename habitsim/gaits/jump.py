@@ -21,7 +21,16 @@ import numpy as np
 
 from ..errors import GaitError
 from ..species import Species
-from ._pose import GRAVITY, LegPlan, Solved, Trunk, min_jerk, required_lowering, solve, standing_info
+from ._pose import (
+    GRAVITY,
+    LegPlan,
+    Solved,
+    Trunk,
+    min_jerk,
+    required_lowering,
+    solve,
+    standing_info,
+)
 
 
 def jump_timing(sp: Species, p: dict) -> dict[str, float]:
@@ -59,7 +68,8 @@ def _trajectory(tm: dict, t: np.ndarray, z_s: float) -> tuple[np.ndarray, np.nda
     c, vz, vx, tp = tm["crouch_m"], tm["vz"], tm["vx"], tm["t_push"]
     az, ax = vz / tp, vx / tp
     g = GRAVITY
-    t0, t1, tto, tl, t3, te = tm["t0"], tm["t1"], tm["t_takeoff"], tm["t_land"], tm["t3"], tm["t_end"]
+    t0, t1, tto, tl = tm["t0"], tm["t1"], tm["t_takeoff"], tm["t_land"]
+    t3, te = tm["t3"], tm["t_end"]
     z_c = z_s - c
     x = np.zeros_like(t)
     z = np.full_like(t, z_s)

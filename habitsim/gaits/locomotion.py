@@ -95,7 +95,9 @@ def _root_path(g: GaitNumbers, tt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if abs(w) < 1e-9:
         xy = np.stack([v * math.cos(p0) * tt, v * math.sin(p0) * tt], -1)
     else:
-        xy = np.stack([(v / w) * (np.sin(psi) - math.sin(p0)), -(v / w) * (np.cos(psi) - math.cos(p0))], -1)
+        xy = np.stack(
+            [(v / w) * (np.sin(psi) - math.sin(p0)), -(v / w) * (np.cos(psi) - math.cos(p0))], -1
+        )
     return xy, psi
 
 
@@ -208,7 +210,8 @@ def build_locomotion(
     phi = g.start_phase + f * t  # gait phase [cycles]
     two_pi = 2.0 * math.pi
 
-    swing_h = hab.swing_height * sp.leg_length * style.get("swing_scale", 1.0) * (0.8 + 0.4 * u_speed)
+    swing_h = (hab.swing_height * sp.leg_length * style.get("swing_scale", 1.0)
+               * (0.8 + 0.4 * u_speed))
     plan = plan_feet(sp, g, t, swing_h)
 
     tr = Trunk.standing(sp, t.shape[0])
@@ -242,7 +245,8 @@ def build_locomotion(
     tr.tail_yaw[:, 1] = 0.7 * sway * np.sin(two_pi * (phi - 0.15))
     if abs(g.turn_rate) > 0:
         lim = max(abs(v) for v in sp.joint_limits["spine_yaw"])
-        bend = float(np.clip(g.turn_rate * info["trunk_span"] / max(abs(g.speed_mps), 1e-6), -2 * lim, 2 * lim))
+        bend = float(np.clip(g.turn_rate * info["trunk_span"] / max(abs(g.speed_mps), 1e-6),
+                            -2 * lim, 2 * lim))
         tr.spine_yaw += bend / 3.0
         tr.neck_yaw += 0.5 * bend
         tr.head_yaw += 0.25 * bend

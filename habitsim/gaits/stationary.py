@@ -22,7 +22,9 @@ from ._pose import GRAVITY, LegPlan, Solved, Trunk, fix_reach, min_jerk, smooth_
 def _planted_plan(sp: Species, t: int, heading: float) -> LegPlan:
     neutral = np.asarray(standing_info(sp)["neutral"])
     c, s = math.cos(heading), math.sin(heading)
-    holds = np.stack([c * neutral[:, 0] - s * neutral[:, 1], s * neutral[:, 0] + c * neutral[:, 1]], -1)
+    holds = np.stack(
+        [c * neutral[:, 0] - s * neutral[:, 1], s * neutral[:, 0] + c * neutral[:, 1]], -1
+    )
     targets = np.zeros((t, 4, 3))
     targets[:, :, :2] = holds[None]
     return LegPlan(targets=targets, contacts=np.ones((t, 4), dtype=bool), swing_s=np.zeros((t, 4)))
@@ -33,7 +35,8 @@ def breathing_rate_hz(sp: Species) -> float:
     return 53.5 * sp.mass_kg**-0.26 / 60.0
 
 
-def _idle_motion(sp: Species, tr: Trunk, t: np.ndarray, rng: np.random.Generator, amount: float) -> None:
+def _idle_motion(sp: Species, tr: Trunk, t: np.ndarray, rng: np.random.Generator,
+                 amount: float) -> None:
     """Breathing, head and tail motion in place (modifies ``tr``)."""
     h = sp.hip_height
     fb = breathing_rate_hz(sp)
@@ -79,7 +82,8 @@ def build_idle(
     return tr2, sol, plan
 
 
-def _sit_pose(sp: Species, heading: float, hip_frac: float, hind_foot_incl: float) -> dict[str, float]:
+def _sit_pose(sp: Species, heading: float, hip_frac: float,
+              hind_foot_incl: float) -> dict[str, float]:
     """Final sitting trunk (in the heading frame, root xy relative to standing).
 
     The fore legs straighten (shoulder 96 % of the fore reach above the planted fore
@@ -104,11 +108,15 @@ def _sit_pose(sp: Species, heading: float, hip_frac: float, hind_foot_incl: floa
     fr = axial_frames(sp, tr.root, tr.rotations())
     rg = np.array([[math.cos(gf.girdle_flex0), 0, math.sin(gf.girdle_flex0)], [0, 1, 0],
                    [-math.sin(gf.girdle_flex0), 0, math.cos(gf.girdle_flex0)]])
-    shoulder = fr.girdle_root[:, 0] + np.einsum("tij,j->ti", fr.parent_rotation[:, 0] @ rg, [0, 0, -gf.girdle])
+    shoulder = fr.girdle_root[:, 0] + np.einsum(
+        "tij,j->ti", fr.parent_rotation[:, 0] @ rg, [0, 0, -gf.girdle]
+    )
     gh = leg_geometry(sp, "LH")
     rh = np.array([[math.cos(gh.girdle_flex0), 0, math.sin(gh.girdle_flex0)], [0, 1, 0],
                    [-math.sin(gh.girdle_flex0), 0, math.cos(gh.girdle_flex0)]])
-    hip = fr.girdle_root[:, 2] + np.einsum("tij,j->ti", fr.parent_rotation[:, 2] @ rh, [0, 0, -gh.girdle])
+    hip = fr.girdle_root[:, 2] + np.einsum(
+        "tij,j->ti", fr.parent_rotation[:, 2] @ rh, [0, 0, -gh.girdle]
+    )
     root_x = sh[0] - shoulder[:, 0]
     root_z = sh[1] - shoulder[:, 2]
     hip_z = root_z + hip[:, 2]

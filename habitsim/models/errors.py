@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..errors import HabitsimError
+from ..errors import HabitsimError, UnknownMethodError
 
 __all__ = [
     "ModelError",
@@ -25,10 +25,6 @@ class ConfigError(ModelError):
 
 class CheckpointError(ModelError):
     """A checkpoint folder that is missing files, corrupt, or does not match its config."""
-
-
-class UnknownMethodError(ModelError):
-    """A transfer method name that is not registered (the message lists the valid ones)."""
 
 
 class MethodNotAvailableError(ModelError):

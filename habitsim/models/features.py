@@ -34,6 +34,7 @@ from ..motion import Motion
 from ..rotations import quat_fix_continuity, quat_mul
 from ..skeleton import JOINT_NAMES, get_skeleton
 from ..species import load_species
+from .kinematics import batched_fk
 
 __all__ = [
     "FEATURE_VERSION",
@@ -217,37 +218,6 @@ def features_to_motion(
     root[:, :2] = start[None] + np.cumsum(steps, axis=0)
     root[:, 2] = f[:, H_INDEX] * sp.hip_height
     return Motion(species, fps, root, q, None, dict(metadata or {}))
-
-
-def batched_fk(root: torch.Tensor, quats: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
-    """Forward kinematics of the shared topology with per-item bone offsets, differentiable.
-
-    Same maths as :func:`habitsim.skeleton.fk_torch`, but every batch item may have its own
-    species: one pass over the joints for a whole mixed-species batch.
-
-    Args:
-        root: (B, T, 3) pelvis positions [m].
-        quats: (B, T, J, 4) local rotations wxyz (normalised inside).
-        offsets: (B, J, 3) canonical-pose offsets from each joint's parent [m].
-
-    Returns:
-        (B, T, J, 3) global joint positions [m].
-    """
-    from ..rotations import torch_quat_to_matrix
-    from ..skeleton import PARENTS
-
-    local = torch_quat_to_matrix(quats).unbind(2)  # J × (B, T, 3, 3); one backward stack
-    off = offsets[:, None, :, :, None].to(quats.dtype).unbind(2)  # J × (B, 1, 3, 1)
-    glob: list[torch.Tensor] = []
-    pos: list[torch.Tensor] = []
-    for j, p in enumerate(PARENTS):
-        if p < 0:
-            glob.append(local[j])
-            pos.append(root.to(quats.dtype))
-        else:
-            glob.append(glob[p] @ local[j])
-            pos.append(pos[p] + (glob[p] @ off[j]).squeeze(-1))
-    return torch.stack(pos, dim=-2)
 
 
 def species_offsets(species: list[str], dtype: torch.dtype = torch.float32) -> torch.Tensor:
