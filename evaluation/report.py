@@ -262,6 +262,26 @@ class _Page:
         )
         self.md.append(f"![{alt}]({self.files.name}/{fname})\n")
 
+    def video(self, rel: str, alt: str) -> None:
+        """A video file next to the page (``rel``: its path relative to the page); linked,
+        not embedded, in both outputs."""
+        src = html.escape(rel, quote=True)
+        self.html.append(
+            f'<figure><video src="{src}" controls loop muted preload="metadata" '
+            f'width="480"></video><figcaption>{html.escape(alt)} '
+            f'(<a href="{src}">{html.escape(rel)}</a>)</figcaption></figure>'
+        )
+        self.md.append(f"[{alt}]({rel})\n")
+
+    def document(self, title: str) -> str:
+        """The HTML page (inline CSS, no scripts)."""
+        body = "\n".join(self.html)
+        return (
+            f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
+            f"<title>{html.escape(title)}</title><style>{_CSS}</style></head>"
+            f"<body>{body}</body></html>\n"
+        )
+
     def table(self, head: list[str], body: list[list[str]]) -> None:
         h = "".join(f"<th>{html.escape(x)}</th>" for x in head)
         b = "".join(
@@ -379,12 +399,7 @@ def write_report(out: str | Path) -> list[Path]:
         page.heading("Errors")
         page.table(["pair", "message"], [[r["key"], r["note"][:200]] for r in errors[:50]])
 
-    body = "\n".join(page.html)
-    doc = (
-        f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
-        f"<title>habitsim benchmark</title><style>{_CSS}</style></head><body>{body}</body></html>\n"
-    )
-    atomic_write_text(out / "report.html", doc)
+    atomic_write_text(out / "report.html", page.document("habitsim benchmark"))
     atomic_write_text(out / "report.md", "\n".join(page.md) + "\n")
     return [out / "report.html", out / "report.md"]
 

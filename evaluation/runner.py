@@ -108,6 +108,12 @@ __all__ = [
     "TABLE1_COLUMNS",
     "PHYSICAL_COLUMNS",
     "VOLATILE_COLUMNS",
+    "DEFAULT_METHODS",
+    "DEFAULT_CONTROLLER",
+    "DEFAULT_TARGETS",
+    "DEFAULT_CLIPS_PER_SOURCE",
+    "DEFAULT_DATA_CLIPS_PER_SPECIES",
+    "default_data",
     "plan_tasks",
     "evaluate_pair",
     "run_benchmark",
@@ -118,6 +124,21 @@ __all__ = [
 ]
 
 REFINE_MODES = ("none", "kinematic", "dynamics")
+
+#: What ``habitsim eval`` measures with no options: the product's own method beside the
+#: baseline and the paired ground truth, refinement stage A (``kinematic``) and the
+#: controller the README recommends, unassisted.
+DEFAULT_METHODS = ("habit", "direct", "ground_truth")
+DEFAULT_CONTROLLER = "mpc"
+#: The default run's size, chosen to finish within 20 min on 2 cores: the first
+#: validation clip of every training species (12 sources) to three targets of different
+#: build (small digitigrade, large unguligrade, pacer): 33 pairs per method, 99 in all.
+DEFAULT_TARGETS = ("cat", "horse", "camel")
+DEFAULT_CLIPS_PER_SOURCE = 1
+#: Clips per species of the data set ``habitsim eval`` builds when given no ``--data``
+#: (every species; 1–3 validation clips per training species, the first a trot for 8 of
+#: the 12, and 16–18 train clips as the set metrics' real references).
+DEFAULT_DATA_CLIPS_PER_SPECIES = 20
 RUN_FORMAT_VERSION = 1
 
 #: Identity / status columns of a row (strings), in order.
@@ -199,6 +220,8 @@ class EvalConfig:
         targets: target species (None: the data set's training species).
         include_self: also transfer a clip to its own species.
         max_clips: only the first N source clips (manifest order) — for quick runs.
+        clips_per_source: only the first N clips of each source species (manifest
+            order; None: all), applied before ``max_clips``.
         reference_split: comma-separated splits of the real clips for the set metrics
             (only the summary depends on it; it may change on ``--resume``).
         evaluator: evaluator folder (None: the shipped one).
@@ -210,9 +233,9 @@ class EvalConfig:
 
     data: str
     out: str
-    methods: tuple[str, ...] = ("direct", "ground_truth")
+    methods: tuple[str, ...] = DEFAULT_METHODS
     refine: str = "kinematic"
-    controller: str = "servo"
+    controller: str = DEFAULT_CONTROLLER
     assist: bool = False
     track: bool = True
     dynamic: bool = True
@@ -221,6 +244,7 @@ class EvalConfig:
     targets: tuple[str, ...] | None = None
     include_self: bool = False
     max_clips: int | None = None
+    clips_per_source: int | None = None
     reference_split: str = "train,val"
     evaluator: str | None = None
     seed: int = 0
@@ -255,6 +279,8 @@ class EvalConfig:
             raise EvalError(unknown_choice("controller", self.controller, CONTROLLERS))
         if self.max_clips is not None and self.max_clips < 1:
             raise EvalError(f"max_clips must be >= 1, got {self.max_clips}")
+        if self.clips_per_source is not None and self.clips_per_source < 1:
+            raise EvalError(f"clips_per_source must be >= 1, got {self.clips_per_source}")
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -305,6 +331,33 @@ class PairTask:
 # ---------------------------------------------------------------------------- planning
 
 
+def default_data(out: str | Path, *, workers: int | None = None, progress: bool = True,
+                 log: Callable[[str], None] | None = None) -> Path:
+    """The synthetic data set of a run given no data: ``OUT/data``, every species,
+    :data:`DEFAULT_DATA_CLIPS_PER_SPECIES` clips each, seed 0; built on the first run and
+    reused after (a folder holding another configuration is rebuilt).
+
+    Raises:
+        DatasetError: ``OUT/data`` cannot be written.
+    """
+    from habitsim.dataset import build_dataset, check_resumable
+    from habitsim.errors import DatasetError
+
+    folder = Path(out) / "data"
+    try:
+        check_resumable(folder, seed=0)
+        overwrite = False
+    except DatasetError:
+        overwrite = True  # another configuration (or not a data set): rebuild it
+    if log:
+        log(f"eval: no --data given: the default synthetic data set in {folder} "
+            f"({DEFAULT_DATA_CLIPS_PER_SPECIES} clips per species, seed 0)")
+    build_dataset(folder, clips_per_species=DEFAULT_DATA_CLIPS_PER_SPECIES, seed=0,
+                  workers=workers, progress=progress, overwrite=overwrite)
+    return folder
+
+
+
 def _manifest(cfg: EvalConfig):
     from habitsim.dataset import load_manifest
 
@@ -331,6 +384,14 @@ def plan_tasks(cfg: EvalConfig) -> list[PairTask]:
         get_method(m)  # raises UnknownMethodError listing the registered ones
     man = _manifest(cfg)
     clips = man.select(split=cfg.split, species=cfg.sources)
+    if cfg.clips_per_source is not None:
+        seen: dict[str, int] = {}
+        kept = []
+        for c in clips:
+            seen[c.species] = seen.get(c.species, 0) + 1
+            if seen[c.species] <= cfg.clips_per_source:
+                kept.append(c)
+        clips = kept
     if cfg.max_clips is not None:
         clips = clips[: cfg.max_clips]
     if not clips:
@@ -588,7 +649,8 @@ def _write_trace(task: PairTask, src: Motion, out: Motion, ref: Motion, sim_res:
 
 
 def _render(sim_res: Any, path: Path) -> None:
-    """A small GIF of the simulated run, if rendering works here (else nothing)."""
+    """A small GIF of the simulated run, if rendering works here (else nothing): the
+    reference as a ghost beside the body, stance feet marked."""
     from habitsim import render
 
     with contextlib.suppress(Exception):
@@ -603,6 +665,10 @@ def _render(sim_res: Any, path: Path) -> None:
             path,
             width=320,
             height=240,
+            reference=np.asarray(sim_res.reference_qpos)[: len(q)][::step],
+            contacts=np.asarray(sim_res.contacts)[::step],
+            reference_contacts=np.asarray(sim_res.reference_contacts)[: len(q)][::step],
+            species=sim_res.species,
         )
 
 

@@ -1,5 +1,14 @@
 """Headless video of a qpos trajectory (MP4 or GIF) with the model's tracking camera.
 
+Given the reference it tracked (``reference=``), the video shows it as a translucent ghost
+beside the simulated body (one body length behind it along the clip's heading, so the two
+never share a surface; a camera that follows the pair from their side frames both), with the
+feet that are in stance marked by discs on the floor (the simulation's contacts under the
+body, the reference's labels under the ghost), the body in its species' colour
+(:data:`SPECIES_COLOURS`) and the floor drawn a few millimetres low so soft-contact
+penetration of the feet does not flicker. All of it changes the rendering scene only
+(:class:`mujoco.MjvScene` geoms after ``update_scene``), never the model that was simulated.
+
 Rendering uses :class:`mujoco.Renderer` off-screen. MuJoCo picks its OpenGL backend from
 ``MUJOCO_GL`` when it is first imported; when that variable is unset and there is no
 display, :func:`render_frames` switches the renderer to EGL (GPU or Mesa) and then OSMesa
@@ -19,6 +28,8 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import os
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
@@ -35,6 +46,9 @@ __all__ = [
     "render_video",
     "VIDEO_FORMATS",
     "check_video_writer",
+    "SPECIES_COLOURS",
+    "GhostStyle",
+    "render_tracking",
 ]
 
 VIDEO_FORMATS = (".mp4", ".gif")
@@ -43,6 +57,56 @@ VIDEO_FORMATS = (".mp4", ".gif")
 class RenderError(HabitsimError, RuntimeError):
     """Rendering or video writing is impossible here (no OpenGL, no video writer), or a
     bad request (unknown camera, unsupported file type)."""
+
+
+#: Body colour (RGB in [0, 1]) per catalog species in videos with a reference ghost.
+SPECIES_COLOURS: dict[str, tuple[float, float, float]] = {
+    "bear": (0.45, 0.30, 0.20),
+    "camel": (0.85, 0.70, 0.45),
+    "cat": (0.95, 0.55, 0.20),
+    "cow": (0.30, 0.30, 0.30),
+    "deer": (0.70, 0.45, 0.25),
+    "dog": (0.80, 0.65, 0.40),
+    "elephant": (0.55, 0.55, 0.60),
+    "fox": (0.90, 0.40, 0.10),
+    "giraffe": (0.95, 0.80, 0.35),
+    "goat": (0.85, 0.85, 0.80),
+    "horse": (0.50, 0.25, 0.12),
+    "moose": (0.35, 0.22, 0.15),
+    "pig": (0.95, 0.70, 0.70),
+    "rabbit": (0.75, 0.72, 0.68),
+    "tiger": (0.95, 0.50, 0.05),
+    "wolf": (0.55, 0.55, 0.55),
+    "zebra": (0.90, 0.90, 0.90),
+}
+#: Colour of the body of a model that is not a catalog species.
+DEFAULT_COLOUR = (0.72, 0.58, 0.42)
+#: Foot geoms of the species models (LF, RF, LH, RH), where stance is marked.
+SPECIES_FEET = ("lf_foot", "rf_foot", "lh_foot", "rh_foot")
+
+
+@dataclass(frozen=True)
+class GhostStyle:
+    """How the reference ghost, the stance markers and the floor are drawn.
+
+    Attributes:
+        offset: distance of the ghost behind the body [m] along the clip's heading (the
+            reference's root displacement, or its first frame's facing for a clip that
+            stays in place); None: the model's extent (``model.stat.extent``), more than
+            a body length.
+        alpha: opacity of the ghost.
+        ghost_rgb: ghost colour.
+        stance_rgba: colour of the stance discs under the simulated body; the ghost's
+            discs use the same colour at the ghost's opacity.
+        floor_drop: how far the floor is drawn below z = 0 [m]; None: 0.5 % of the
+            model's extent, at least 2 mm.
+    """
+
+    offset: float | None = None
+    alpha: float = 0.35
+    ghost_rgb: tuple[float, float, float] = (0.55, 0.75, 1.0)
+    stance_rgba: tuple[float, float, float, float] = (0.9, 0.1, 0.1, 1.0)
+    floor_drop: float | None = None
 
 
 _BACKEND_CHECKED = False
@@ -88,6 +152,12 @@ def render_frames(
     width: int = 640,
     height: int = 480,
     camera: str | int = "track",
+    reference: np.ndarray | None = None,
+    contacts: np.ndarray | None = None,
+    reference_contacts: np.ndarray | None = None,
+    feet: Sequence[str] | None = None,
+    species: str | None = None,
+    style: GhostStyle | None = None,
 ) -> np.ndarray:
     """(T, height, width, 3) uint8 images of a qpos trajectory.
 
@@ -97,17 +167,50 @@ def render_frames(
         qpos: (T, nq) positions.
         width, height: image size [px].
         camera: camera name or id (default the species models' tracking camera ``track``;
-            falls back to the free camera when the model has no camera of that name).
+            a model without a camera of that name is followed by a tracking camera on its
+            first body, looking from the side). With a reference and the default, the pair
+            camera: it looks across the heading from 15° above at the midpoint of the
+            body's and the ghost's first bodies, from far enough to hold both.
+        reference: (≥ T, nq) reference positions, drawn as a translucent ghost beside the
+            body (:class:`GhostStyle`); frame k of the video shows reference frame k.
+        contacts: (T, F) bool feet in stance in the simulation, marked under the body.
+        reference_contacts: (≥ T, F) bool stance labels of the reference, marked under
+            the ghost.
+        feet: the F feet where stance is marked (geom, site or body names, in the
+            contacts' order); default the species models' foot geoms (LF, RF, LH, RH).
+        species: colour the body with :data:`SPECIES_COLOURS` (any other name gets
+            :data:`DEFAULT_COLOUR`); None keeps the model's colours. Also the floor is
+            drawn low (:attr:`GhostStyle.floor_drop`) whenever a reference, contacts or a
+            species is given.
+        style: the ghost's look (default :class:`GhostStyle`).
 
     Raises:
-        RenderError: no OpenGL backend, or a bad size/camera.
+        RenderError: no OpenGL backend, a bad size/camera, arrays of the wrong shape, a
+            foot name the model does not have.
     """
     q = np.atleast_2d(np.asarray(qpos, dtype=np.float64))
     if q.shape[1] != model.nq:
         raise RenderError(f"qpos must have shape (T, {model.nq}), got {q.shape}")
-    cam: str | int = camera
-    if isinstance(camera, str) and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera) < 0:
-        cam = -1
+    ref = None if reference is None else np.atleast_2d(np.asarray(reference, np.float64))
+    if ref is not None and (ref.shape[1] != model.nq or len(ref) < len(q)):
+        raise RenderError(
+            f"reference must have shape (>= {len(q)}, {model.nq}), got {ref.shape}"
+        )
+    marks = [_stance(c, len(q), name) for c, name in
+             ((contacts, "contacts"), (reference_contacts, "reference_contacts"))]
+    decorate = ref is not None or species is not None or any(m is not None for m in marks)
+    style = style or GhostStyle()
+    foot_points = _feet(model, feet, marks) if any(m is not None for m in marks) else None
+    cam: str | int | mujoco.MjvCamera = camera
+    pair_camera = ref is not None and camera == "track" and model.nbody > 1
+    if pair_camera:
+        cam = _tracking_camera(model)
+        cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+        h = _heading(model, ref[: len(q)])
+        cam.azimuth = float(np.degrees(np.arctan2(h[1], h[0]))) + 90.0
+    elif isinstance(camera, str) and mujoco.mj_name2id(
+            model, mujoco.mjtObj.mjOBJ_CAMERA, camera) < 0:
+        cam = _tracking_camera(model)
     _headless_context()
     try:
         renderer = mujoco.Renderer(model, height, width)
@@ -119,14 +222,159 @@ def render_frames(
             "MUJOCO_GL=osmesa and install the matching system library"
         ) from e
     data = mujoco.MjData(model)
+    dref = mujoco.MjData(model)
+    opt, pert = mujoco.MjvOption(), mujoco.MjvPerturb()
+    extent = float(model.stat.extent)
+    offset = extent if style.offset is None else float(style.offset)
+    shift = np.zeros(3)
+    if ref is not None:
+        shift = -offset * _heading(model, ref[: len(q)])
+    drop = max(0.002, 0.005 * extent) if style.floor_drop is None else float(style.floor_drop)
+    colour = None
+    if species is not None:
+        colour = SPECIES_COLOURS.get(species, DEFAULT_COLOUR)
+    floors = {
+        i for i in range(model.ngeom)
+        if model.geom_bodyid[i] == 0 and model.geom_type[i] == mujoco.mjtGeom.mjGEOM_PLANE
+    }
     out = np.empty((len(q), height, width, 3), dtype=np.uint8)
     with renderer:
+        scn = renderer.scene
         for k, row in enumerate(q):
             data.qpos[:] = row
             mujoco.mj_forward(model, data)
-            renderer.update_scene(data, camera=cam)
+            if ref is not None:
+                dref.qpos[:] = ref[k]
+                mujoco.mj_kinematics(model, dref)
+            if pair_camera:
+                assert isinstance(cam, mujoco.MjvCamera)
+                mid = 0.5 * (data.xpos[1] + dref.xpos[1] + shift)
+                cam.lookat[:] = (mid[0], mid[1], model.stat.center[2])
+                cam.distance = 1.3 * extent + offset
+            renderer.update_scene(data, camera=cam, scene_option=opt)
+            if decorate:
+                _restyle(model, scn, floors, drop, colour)
+            if ref is not None:
+                n0 = scn.ngeom
+                mujoco.mjv_addGeoms(model, dref, opt, pert, mujoco.mjtCatBit.mjCAT_DYNAMIC, scn)
+                for g in range(n0, scn.ngeom):
+                    geom = scn.geoms[g]
+                    geom.rgba[:] = (*style.ghost_rgb, style.alpha)
+                    geom.pos[:] += shift
+            if foot_points is not None:
+                # the body's own contacts under it; the reference's labels under the
+                # ghost (dref holds reference frame k, placed by mj_kinematics above)
+                for m, d, dx, a in ((marks[0], data, np.zeros(3), 1.0),
+                                    (marks[1], dref, shift, style.alpha)):
+                    if m is None or (d is dref and ref is None):
+                        continue
+                    for f in np.flatnonzero(m[k]):
+                        _disc(scn, foot_points[f](d), dx, foot_points.radius,
+                              (*style.stance_rgba[:3], style.stance_rgba[3] * a))
             out[k] = renderer.render()
     return out
+
+
+def _stance(c: np.ndarray | None, n: int, name: str) -> np.ndarray | None:
+    if c is None:
+        return None
+    a = np.asarray(c, dtype=bool)
+    if a.ndim != 2 or len(a) < n:
+        raise RenderError(f"{name} must have shape (>= {n}, F), got {a.shape}")
+    return a
+
+
+class _FootPoints(list):
+    """Per foot, a function MjData → world position; ``radius`` of the stance disc."""
+
+    radius: float = 0.01
+
+
+def _feet(model: mujoco.MjModel, feet: Sequence[str] | None,
+          marks: list[np.ndarray | None]) -> _FootPoints:
+    names = list(feet) if feet is not None else list(SPECIES_FEET)
+    width = max(m.shape[1] for m in marks if m is not None)
+    if len(names) != width:
+        raise RenderError(f"{width} stance columns but {len(names)} feet ({', '.join(names)})")
+    out = _FootPoints()
+    sizes = []
+    for name in names:
+        gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
+        sid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
+        bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if gid >= 0:
+            out.append(lambda d, i=gid: d.geom_xpos[i])
+            sizes.append(float(model.geom_size[gid][0]))
+        elif sid >= 0:
+            out.append(lambda d, i=sid: d.site_xpos[i])
+            sizes.append(float(model.site_size[sid][0]))
+        elif bid >= 0:
+            out.append(lambda d, i=bid: d.xpos[i])
+        else:
+            raise RenderError(
+                f"no foot geom, site or body {name!r} in the model to mark stance on"
+                + ("" if feet is not None else "; give feet=[...] for a model that is not "
+                   "a habitsim species")
+            )
+    out.radius = 3.0 * max(sizes) if sizes else 0.02 * float(model.stat.extent)
+    return out
+
+
+def _disc(scn: mujoco.MjvScene, at: np.ndarray, dx: np.ndarray, radius: float,
+          rgba: tuple[float, float, float, float]) -> None:
+    """A flat disc on the floor under a foot (1 mm thick, its top 1 mm above z = 0),
+    moved by ``dx``."""
+    if scn.ngeom >= scn.maxgeom:
+        return
+    pos = np.array([at[0] + dx[0], at[1] + dx[1], 0.0005])
+    mujoco.mjv_initGeom(scn.geoms[scn.ngeom], mujoco.mjtGeom.mjGEOM_CYLINDER,
+                        np.array([radius, 0.0005, 0.0]), pos, np.eye(3).ravel(),
+                        np.asarray(rgba, dtype=np.float32))
+    scn.ngeom += 1
+
+
+def _restyle(model: mujoco.MjModel, scn: mujoco.MjvScene, floors: set[int], drop: float,
+             colour: tuple[float, float, float] | None) -> None:
+    """Floor drawn ``drop`` low; the body's visible geoms in ``colour``."""
+    for g in range(scn.ngeom):
+        geom = scn.geoms[g]
+        if geom.objtype != mujoco.mjtObj.mjOBJ_GEOM:
+            continue
+        if geom.objid in floors:
+            geom.pos[2] -= drop
+        elif colour is not None and model.geom_bodyid[geom.objid] != 0:
+            geom.rgba[:3] = colour
+
+
+def _heading(model: mujoco.MjModel, ref: np.ndarray) -> np.ndarray:
+    """Unit horizontal heading of a reference: its first body's displacement over the clip,
+    or (moving less than a tenth of the model's extent) that body's facing at the start."""
+    d = mujoco.MjData(model)
+    ends = []
+    for row in (ref[0], ref[-1]):
+        d.qpos[:] = row
+        mujoco.mj_kinematics(model, d)
+        ends.append((d.xpos[1].copy(), d.xmat[1].reshape(3, 3)[:, 0].copy()))
+    h = ends[1][0] - ends[0][0]
+    h[2] = 0.0
+    if np.linalg.norm(h) < 0.1 * float(model.stat.extent):
+        h = ends[0][1]
+        h[2] = 0.0
+    n = float(np.linalg.norm(h))
+    return np.array([1.0, 0.0, 0.0]) if n < 1e-9 else h / n
+
+
+def _tracking_camera(model: mujoco.MjModel) -> mujoco.MjvCamera | int:
+    """A camera that follows the model's first body from its side (−y), or the free one."""
+    if model.nbody < 2:
+        return -1
+    cam = mujoco.MjvCamera()
+    cam.type = mujoco.mjtCamera.mjCAMERA_TRACKING
+    cam.trackbodyid = 1
+    cam.distance = 1.6 * float(model.stat.extent)
+    cam.azimuth = 90.0
+    cam.elevation = -15.0
+    return cam
 
 
 def _has(module: str) -> bool:
@@ -181,14 +429,24 @@ def render_video(
     width: int = 640,
     height: int = 480,
     camera: str | int = "track",
+    reference: np.ndarray | None = None,
+    contacts: np.ndarray | None = None,
+    reference_contacts: np.ndarray | None = None,
+    feet: Sequence[str] | None = None,
+    species: str | None = None,
+    style: GhostStyle | None = None,
 ) -> Path:
-    """Render a qpos trajectory and write it as MP4/GIF (see :func:`save_video`).
+    """Render a qpos trajectory and write it as MP4/GIF (see :func:`save_video`; the
+    reference ghost, stance marks and species colour as in :func:`render_frames`).
 
     The writer is checked BEFORE rendering, so a missing package fails fast.
     """
     path = Path(path)
     check_video_writer(path)
-    frames = render_frames(model, qpos, width=width, height=height, camera=camera)
+    frames = render_frames(model, qpos, width=width, height=height, camera=camera,
+                           reference=reference, contacts=contacts,
+                           reference_contacts=reference_contacts, feet=feet,
+                           species=species, style=style)
     return save_video(frames, fps, path)
 
 
@@ -205,3 +463,21 @@ def check_video_writer(path: Path) -> None:
         raise RenderError(
             "writing GIF needs the package 'Pillow' (pip install pillow) or 'imageio'"
         )
+
+
+def render_tracking(result, path: str | Path, *, width: int = 640, height: int = 480,
+                    camera: str | int = "track", feet: Sequence[str] | None = None,
+                    style: GhostStyle | None = None) -> Path:
+    """The video of a tracking run (:class:`habitsim.sim.TrackResult`): the simulated body
+    in its species' colour, the reference it tracked as a ghost beside it, stance marked
+    under both (the simulation's foot contacts, the reference's labels).
+
+    Raises:
+        RenderError: as :func:`render_video`.
+    """
+    return render_video(
+        result.model, result.qpos, result.fps, path, width=width, height=height,
+        camera=camera, reference=result.reference_qpos, contacts=result.contacts,
+        reference_contacts=result.reference_contacts, feet=feet,
+        species=result.species, style=style,
+    )

@@ -66,6 +66,17 @@ def test_demo_pipeline_two_sources_report_and_videos(
     assert "| dog_walk_bvh | tiger |" in report and "## Held-out targets" in report
     assert "## Refinement check" in report
     assert "| horse_trot | tiger |" in text  # the summary table is printed
+    # with its legend under it
+    table_end = text.index("| dog_walk_bvh | tiger |")
+    assert text.index("survival = share of the clip", table_end) > table_end
+    # the HTML report next to report.md: table, legend, plots (embedded PNG) and videos
+    page = (out / "report.html").read_text()
+    assert "<table>" in page and "survival = share of the clip" in page
+    assert page.count('src="data:image/png;base64,') >= 1 + 2 * len(rows)  # bars, gait, error
+    assert len(list((out / "report_files").glob("*.png"))) >= 1 + 2 * len(rows)
+    if render_available():
+        for r in rows:
+            assert f'<video src="pipeline/{r["video"]}"' in page
 
 
 def test_demo_on_a_file_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -47,7 +47,9 @@ def data(tmp_path_factory) -> Path:
 
 
 def _cfg(data: Path, out: Path, **kw) -> EvalConfig:
-    base = dict(methods=("direct", "ground_truth"), refine="none", report_pairs=1, videos=False)
+    # servo: a fast controller for the table's mechanics (the default is mpc)
+    base = dict(methods=("direct", "ground_truth"), refine="none", report_pairs=1, videos=False,
+                controller="servo")
     base.update(kw)
     return EvalConfig(data=str(data), out=str(out), **base)
 
@@ -144,6 +146,12 @@ def test_resume_after_kill_gives_the_same_table(data: Path, reference_run, tmp_p
         "direct,ground_truth",
         "--refine",
         "none",
+        "--controller",
+        "servo",
+        "--targets",
+        "all",
+        "--clips-per-source",
+        "all",
         "--workers",
         "1",
         "--report-pairs",
@@ -247,3 +255,50 @@ def test_refine_stage_runs(data: Path, tmp_path: Path) -> None:
     assert row["status"] == "ok", row["note"]
     assert row["refine_status"] not in ("", "none", "unavailable")
     assert row["time_refine_s"] > 0.0
+
+
+def test_defaults_measure_the_product(data: Path, tmp_path: Path, monkeypatch) -> None:
+    """With no options: habit beside the baselines, stage A, mpc; one clip per source."""
+    from habitsim.cli import build_parser
+    from habitsim.evaluation import runner
+
+    ns = build_parser().parse_args(["eval"])
+    assert ns.methods == ["habit", "direct", "ground_truth"] and ns.controller == "mpc"
+    assert ns.refine == "kinematic" and ns.out == "eval_out" and ns.data is None
+    assert ns.targets == ["cat", "horse", "camel"] and ns.clips_per_source == "1"
+    cfg = EvalConfig(data=str(data), out=str(tmp_path / "o"))
+    assert cfg.methods == ("habit", "direct", "ground_truth") and cfg.controller == "mpc"
+    assert cfg.refine == "kinematic"
+    every = plan_tasks(_cfg(data, tmp_path / "o", methods=("direct",)))
+    one = plan_tasks(_cfg(data, tmp_path / "o", methods=("direct",), clips_per_source=1))
+    per_source = {}
+    for t in one:
+        per_source.setdefault(t.source, set()).add(t.clip)
+    assert all(len(c) == 1 for c in per_source.values())
+    assert set(per_source) == {t.source for t in every} and len(one) < len(every)
+    first = {}
+    for t in every:  # the first clip of each species in manifest order
+        first.setdefault(t.source, t.clip)
+    assert {s: next(iter(c)) for s, c in per_source.items()} == first
+    with pytest.raises(EvalError, match="clips_per_source"):
+        _cfg(data, tmp_path / "o", clips_per_source=0)
+    # the default data set: built on the first run, reused after
+    monkeypatch.setattr(runner, "DEFAULT_DATA_CLIPS_PER_SPECIES", 1)
+    folder = runner.default_data(tmp_path / "run", workers=1, progress=False)
+    from habitsim.dataset import load_manifest
+    from habitsim.species import species_names
+
+    assert folder == tmp_path / "run" / "data"
+    assert load_manifest(folder).species_names == species_names()
+    clip = folder / load_manifest(folder).clips[0].path
+    stamp = clip.stat().st_mtime_ns
+    runner.default_data(tmp_path / "run", workers=1, progress=False)
+    assert clip.stat().st_mtime_ns == stamp  # reused, not generated again
+
+
+def test_cli_clips_per_source_must_be_a_count(tmp_path: Path, capsys) -> None:
+    from habitsim.cli import main
+
+    assert main(["eval", "--out", str(tmp_path / "o"), "--data", str(tmp_path),
+                 "--clips-per-source", "some", "--no-progress"]) == 2
+    assert "--clips-per-source" in capsys.readouterr().err

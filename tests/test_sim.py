@@ -215,6 +215,10 @@ def test_cli_track_writes_motion_and_report(tmp_path, walk) -> None:
     assert set(DYNAMIC_KEYS) == set(report["reference_dynamic"])
     assert set(KINEMATIC_KEYS) == set(report["simulated_kinematic"])
     assert report["frames_simulated"] == sim.num_frames
+    # the default controller is mpc, which keeps the walk up unassisted; servo on request
+    assert report["controller"] == "mpc" and report["metrics"]["survival"] == 1.0
+    assert main(["track", str(src), "--controller", "servo", "--report", str(rep)]) == 0
+    assert json.loads(rep.read_text())["controller"] == "servo"
     assert main(["track", str(src), "--assist", "root", "--report", str(rep)]) == 0
     assert json.loads(rep.read_text())["assist"]["assist_force_mg"] > 0
 

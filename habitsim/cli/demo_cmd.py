@@ -9,9 +9,14 @@
    imported with :func:`habitsim.bvh_mapping.import_bvh`) — transferred to a cat, a bear
    and the held-out tiger with the shipped ``habit`` model, refined (CasADi/IPOPT),
    tracked in MuJoCo unassisted (``mpc``) and with measured root assistance (one call of
-   :func:`habitsim.pipeline.run_clip` per pair, the stance labels passed along), each
-   unassisted run rendered to MP4 (where an OpenGL backend exists), and a summary table
-   printed and written to ``DIR/pipeline.json`` and the report ``DIR/report.md``.
+   :func:`habitsim.pipeline.run_clip` per pair, the stance labels passed along), with a
+   progress bar over the pairs that names the pair and stage; each unassisted run
+   rendered to MP4 (where an OpenGL backend exists) with the reference as a translucent
+   ghost beside the body and the stance feet marked (:func:`habitsim.render.render_tracking`);
+   a summary table printed with a legend under it and written to ``DIR/pipeline.json``,
+   the report ``DIR/report.md`` and, next to it, ``DIR/report.html`` (the eval report's
+   page writer: the table and legend, bar charts of survival and tracking error, a gait
+   diagram and a tracking-error curve per pair, the videos).
 """
 
 from __future__ import annotations
@@ -44,8 +49,10 @@ def register(sub: argparse._SubParsersAction) -> None:
             "measured gait statistics; then transfer a synthetic horse trot and the shipped "
             "BVH example (a dog walk) to a cat, a bear and a held-out species (tiger) with "
             "the shipped model, refine each transfer, track it in MuJoCo unassisted (mpc "
-            "controller) and with measured root assistance, render videos, and print a "
-            "summary table (also in DIR/pipeline.json and the report DIR/report.md)."
+            "controller) and with measured root assistance, render videos (the reference as "
+            "a ghost beside the body, stance feet marked), and print a summary table with "
+            "its legend (also in DIR/pipeline.json and the reports DIR/report.md and "
+            "DIR/report.html)."
         ),
     )
     p.add_argument(
@@ -57,7 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
     p.add_argument("--workers", type=int, metavar="W", help="worker processes (default: CPU count)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_list_option(p, "--targets", default=["cat", "bear", "tiger"], metavar="SPECIES",
                     help="target species of the transfer stage (default cat,bear,tiger)")
     p.add_argument("--no-video", action="store_true",
@@ -125,7 +132,7 @@ def _pipeline(ns: argparse.Namespace) -> None:
     """Transfer → refine → track → render for two sources and a few targets; a report."""
     from ..fileio import atomic_write_text
     from ..pipeline import run_clip, track_reference
-    from ..render import RenderError, render_available, render_video
+    from ..render import RenderError, render_available, render_tracking
     from ..species import load_species
 
     out = Path(ns.out) / "pipeline"
@@ -143,59 +150,205 @@ def _pipeline(ns: argparse.Namespace) -> None:
     if not ns.no_video and not videos:
         print("  (no OpenGL backend for off-screen rendering here: videos are skipped; "
               "install libegl1 and libgl1-mesa-dri, or libosmesa6)")
-    rows = []
-    for name, src in sources:
+    pairs = [(name, src, tgt) for name, src in sources for tgt in targets]
+    rows: list[dict] = []
+    figures: list[dict] = []
+    bar = _bar(len(pairs), ns.no_progress)
+    for name, src, tgt in pairs:
         src.save(out / f"{name}.npz")
-        for tgt in targets:
-            t1 = time.perf_counter()
-            # transfer → refine (stage A) → track unassisted, labels passed along;
-            # a refinement that makes the clip track worse is reported and not kept
-            run = run_clip(src, tgt, method="habit", refine="A", controller=ns.controller,
-                           seed=ns.seed)
-            moved, ref = run.transferred.motion, run.refine_result
-            info = moved.metadata.get("transfer", {})
-            moved.save(out / f"{name}_to_{tgt}.npz")
-            ref.motion.save(out / f"{name}_to_{tgt}_refined.npz")
-            plain = run.track_result
-            helped = track_reference(run, controller="servo", assist="root")
-            video = None
-            if videos and plain is not None:
-                video = out / f"{name}_to_{tgt}_{ns.controller}.mp4"
-                try:
-                    render_video(plain.model, plain.qpos, plain.fps, str(video))
-                except RenderError as e:
-                    print(f"  video of {name} → {tgt} skipped: {e}")
-                    video = None
-            pm = {} if plain is None else plain.metrics
-            hm = helped.metrics
-            retrieval = info.get("retrieval") or {}
-            rows.append({
-                "source": name,
-                "target": tgt,
-                "habit_from": info.get("habit_species", tgt),
-                "retrieval": retrieval.get("explanation"),
-                "contacts": run.transferred.contacts_method,
-                "refine_status": run.refined.status,
-                "refine_check": run.refine_verdict,
-                "refine_note": run.refine_note,
-                "skate_mm_before": run.transferred.metrics.get("skate_mm"),
-                "skate_mm_after": run.refined.metrics.get("skate_mm"),
-                "controller": ns.controller,
-                "survival_unassisted": pm.get("survival"),
-                "sim_mpjpe_per_leg_unassisted": pm.get("sim_mpjpe_per_leg"),
-                "survival_assisted": hm.get("survival"),
-                "sim_mpjpe_per_leg_assisted": hm.get("sim_mpjpe_per_leg"),
-                "assist_force_mg": hm.get("assist_force_mg"),
-                "video": None if video is None else video.name,
-                "seconds_per_stage": {k: round(v, 2) for k, v in run.times.items()},
-                "seconds": round(time.perf_counter() - t1, 1),
-            })
+        t1 = time.perf_counter()
+        _stage(bar, f"{name} → {tgt}", "transfer → refine → track")
+        # transfer → refine (stage A) → track unassisted, labels passed along;
+        # a refinement that makes the clip track worse is reported and not kept
+        run = run_clip(src, tgt, method="habit", refine="A", controller=ns.controller,
+                       seed=ns.seed)
+        moved, ref = run.transferred.motion, run.refine_result
+        info = moved.metadata.get("transfer", {})
+        moved.save(out / f"{name}_to_{tgt}.npz")
+        ref.motion.save(out / f"{name}_to_{tgt}_refined.npz")
+        plain = run.track_result
+        _stage(bar, f"{name} → {tgt}", "track with root assistance")
+        helped = track_reference(run, controller="servo", assist="root")
+        video = None
+        if videos and plain is not None:
+            _stage(bar, f"{name} → {tgt}", "video")
+            video = out / f"{name}_to_{tgt}_{ns.controller}.mp4"
+            try:
+                render_tracking(plain, video)
+            except RenderError as e:
+                _note(bar, f"  video of {name} → {tgt} skipped: {e}")
+                video = None
+        pm = {} if plain is None else plain.metrics
+        hm = helped.metrics
+        retrieval = info.get("retrieval") or {}
+        rows.append({
+            "source": name,
+            "target": tgt,
+            "habit_from": info.get("habit_species", tgt),
+            "retrieval": retrieval.get("explanation"),
+            "contacts": run.transferred.contacts_method,
+            "refine_status": run.refined.status,
+            "refine_check": run.refine_verdict,
+            "refine_note": run.refine_note,
+            "skate_mm_before": run.transferred.metrics.get("skate_mm"),
+            "skate_mm_after": run.refined.metrics.get("skate_mm"),
+            "controller": ns.controller,
+            "survival_unassisted": pm.get("survival"),
+            "sim_mpjpe_per_leg_unassisted": pm.get("sim_mpjpe_per_leg"),
+            "survival_assisted": hm.get("survival"),
+            "sim_mpjpe_per_leg_assisted": hm.get("sim_mpjpe_per_leg"),
+            "assist_force_mg": hm.get("assist_force_mg"),
+            "video": None if video is None else video.name,
+            "seconds_per_stage": {k: round(v, 2) for k, v in run.times.items()},
+            "seconds": round(time.perf_counter() - t1, 1),
+        })
+        figures.append(_traces(src, run, plain, helped))
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
     atomic_write_text(Path(ns.out) / "pipeline.json", json.dumps(rows, indent=2) + "\n")
     table = _table(rows)
     atomic_write_text(Path(ns.out) / "report.md", _report(rows, table, ns))
+    html = _html_report(Path(ns.out), rows, figures, table, ns)
     print(table)
-    print(f"motions and videos in {out}/; report in {ns.out}/report.md, "
+    print(LEGEND)
+    print(f"motions and videos in {out}/; report in {ns.out}/report.md and {html}, "
           f"table in {ns.out}/pipeline.json")
+
+
+def _bar(total: int, off: bool):
+    """The pipeline stage's progress bar over the pairs (stderr; None when switched off)."""
+    if off:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, unit="pair", desc="demo", dynamic_ncols=True)
+
+
+def _stage(bar, pair: str, stage: str) -> None:
+    if bar is not None:
+        bar.set_description(f"demo {pair}")
+        bar.set_postfix_str(stage)
+
+
+def _note(bar, text: str) -> None:
+    if bar is None:
+        print(text)
+    else:
+        bar.write(text)
+
+
+def _traces(src: Motion, run, plain, helped) -> dict:
+    """What the HTML report plots of one pair: stance timelines of every stage and the
+    tracking error over time (unassisted and assisted)."""
+    from ..evaluation.runner import _per_frame_error_mm
+
+    panels = [("source", src.contacts if src.contacts is not None else src.detect_contacts()),
+              ("transferred", run.transferred.contacts),
+              ("tracked ref.", run.reference_contacts)]  # refined, unless reverted
+    curves = []
+    if plain is not None:
+        panels.append((f"sim {plain.controller}", plain.contacts))
+        curves.append((f"{plain.controller} (unassisted)", _per_frame_error_mm(plain),
+                       plain.fps))
+    panels.append(("sim servo+assist", helped.contacts))
+    curves.append(("servo + root assistance", _per_frame_error_mm(helped), helped.fps))
+    return {"panels": [(n, c) for n, c in panels if c is not None],
+            "curves": curves, "fps": float(run.transferred.motion.fps)}
+
+
+def _html_report(out: Path, rows: list[dict], figures: list[dict], table: str,
+                 ns: argparse.Namespace) -> Path:
+    """``report.html`` next to ``report.md``: the table, its legend, a bar chart of the
+    tracking figures, per pair a gait diagram and the tracking error over time, and the
+    videos (with the eval report's page writer, :mod:`habitsim.evaluation.report`)."""
+    from ..evaluation.report import _error_curves, _gait_diagram, _Page
+    from ..fileio import atomic_write_text
+
+    page = _Page(out / "report_files")
+    for old in (out / "report_files").glob("*") if (out / "report_files").is_dir() else []:
+        old.unlink()
+    page.heading("habitsim demo report", 1)
+    page.para(_INTRO.format(bvh=BVH_EXAMPLE, controller=ns.controller))
+    lines = [ln for ln in table.splitlines() if not ln.startswith("|---")]
+    cells = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in lines]
+    page.table(cells[0], cells[1:])
+    page.para(LEGEND)
+    page.heading("Tracking per pair")
+    page.image(_tracking_bars(rows, ns.controller), "tracking",
+               "survival and simulated joint error (MPJPE / leg length) per pair, "
+               f"unassisted ({ns.controller}) and with root assistance (servo)")
+    page.heading("Gait diagrams and tracking error")
+    for r, fig in zip(rows, figures, strict=True):
+        title = f"{r['source']} → {r['target']}"
+        slug = f"{r['source']}_{r['target']}"
+        page.image(_gait_diagram(fig["panels"], fig["fps"], title), f"gait_{slug}",
+                   f"gait diagram (bars: foot in contact): {title}")
+        page.image(_error_curves(fig["curves"], title), f"err_{slug}",
+                   f"tracking error (simulated vs reference joints): {title}")
+    vids = [r for r in rows if r["video"]]
+    page.heading("Videos")
+    if not vids:
+        page.para("No videos (--no-video, or no OpenGL backend here).")
+    else:
+        page.para("The simulated body in its species' colour; the reference it tracks as a "
+                  "translucent blue ghost beside it; red discs under the feet in stance "
+                  "(solid: the simulation's foot contacts, faint: the reference's labels).")
+    for r in vids:
+        page.video(f"pipeline/{r['video']}",
+                   f"{r['source']} → {r['target']}, {r['controller']} unassisted")
+    atomic_write_text(out / "report.html", page.document("habitsim demo report"))
+    return out / "report.html"
+
+
+def _tracking_bars(rows: list[dict], controller: str) -> bytes:
+    from ..evaluation.report import _plt, _png
+
+    plt = _plt()
+    labels = [f"{r['source']} → {r['target']}" for r in rows]
+    x = range(len(rows))
+    fig, axes = plt.subplots(1, 2, figsize=(2.0 + 1.3 * len(rows), 3.4), squeeze=False)
+    for ax, key, title in ((axes[0, 0], "survival", "survival ↑"),
+                           (axes[0, 1], "sim_mpjpe_per_leg", "sim MPJPE / leg ↓")):
+        for j, (tag, colour) in enumerate((("unassisted", "#4477aa"),
+                                           ("assisted", "#ee6677"))):
+            vals = [r.get(f"{key}_{tag}") for r in rows]
+            vals = [float("nan") if v is None else float(v) for v in vals]
+            ax.bar([i + (j - 0.5) * 0.38 for i in x], [0.0 if v != v else v for v in vals],
+                   width=0.38, color=colour,
+                   label=f"{controller} unassisted" if tag == "unassisted" else "servo + assist")
+        ax.set_xticks(list(x))
+        ax.set_xticklabels(labels, fontsize=7, rotation=30, ha="right")
+        ax.set_title(title, fontsize=9)
+        ax.tick_params(axis="y", labelsize=7)
+    axes[0, 0].set_ylim(0, 1.05)
+    handles, names = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, names, fontsize=7, loc="upper center", ncol=2, frameon=False)
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.9))
+    return _png(fig)
+
+
+#: The legend printed under the console table (and under the table in the reports).
+LEGEND = (
+    "habit of = species whose habit prior was used (a held-out target borrows a training "
+    "species'); contacts = how\nthe stance labels were found (source footfalls, detected "
+    "resting feet, or the target's duty factor);\nrefine/check = solver status and "
+    "whether the refined clip was kept (reverted: it tracked worse); skate mm =\nfoot "
+    "skating before → after refinement; survival = share of the clip before a fall (1 = "
+    "no fall); MPJPE/leg =\nsimulated vs reference joint error / leg length (lower is "
+    "better); assist m·g = mean external force that\nheld the assisted run up, in body "
+    "weights; s = wall time of the pair. docs/metrics.md defines every metric."
+)
+
+_INTRO = (
+    "Sources: a synthetic horse trot (habitsim.generate) and the shipped BVH example "
+    "(habitsim/examples/{bvh}, imported onto the dog). Each is transferred with the "
+    "shipped habit model, refined by CasADi/IPOPT (stage A: planted stance feet, no "
+    "skating or penetration, joint limits) and tracked in MuJoCo: unassisted with the "
+    "{controller} controller (no external force) and with the servo controller plus "
+    "measured root assistance."
+)
 
 
 def _fmt(v: object, nd: int = 3) -> str:

@@ -2,7 +2,7 @@
 
 ::
 
-    habitsim track IN.npz --out SIM.npz --report R.json [--controller servo]
+    habitsim track IN.npz --out SIM.npz --report R.json [--controller mpc]
                           [--assist root] [--video V.mp4|V.gif] [--control-hz HZ]
                           [--settle S] [--no-stop] [--json]
 
@@ -20,8 +20,14 @@
 The output paths are checked before the simulation, and the files are written together
 or not at all (a failure leaves none of them).
 * ``--video``: MP4 (needs ``imageio`` + ``imageio-ffmpeg``) or GIF (needs ``Pillow``),
-  rendered headless with the model's tracking camera. The writer is checked before the
-  simulation runs.
+  rendered headless with the model's tracking camera: the simulated body in its species'
+  colour, the input drawn as a translucent ghost beside it, stance feet marked
+  (:func:`habitsim.render.render_tracking`). The writer is checked before the simulation
+  runs.
+* ``--controller``: ``mpc`` by default (convex MPC on the stance forces, trunk and swing
+  legs, the controller the README recommends: a synthetic walk of every training species
+  survives it unassisted); ``servo`` (in-engine position servos, no balance: most clips
+  fall within a second), ``pd`` and ``balance`` on request.
 
 A fall or an unstable simulation is a result (exit code 0, reported), not an error; bad
 input (unreadable file, unknown species or controller, NaN) is ``error: ...``, exit 2.
@@ -42,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "track",
-        help="track a motion in MuJoCo (PD servos), detect falls, report metrics",
+        help="track a motion in MuJoCo (mpc controller), detect falls, report metrics",
         description=(
             "Play a motion file through a controller in MuJoCo at the simulation rate, "
             "detect falls and instability, and report the simulated-tracking metrics."
@@ -51,8 +57,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("input", metavar="IN.npz", help="motion file")
     p.add_argument("--out", metavar="SIM.npz", help="write the simulated motion here")
     p.add_argument("--report", metavar="R.json", help="write the JSON report here")
-    p.add_argument("--controller", default="servo", choices=CONTROLLERS,
-                   help="controller (default servo: in-engine position servos)")
+    p.add_argument("--controller", default="mpc", choices=CONTROLLERS,
+                   help="controller (default mpc: convex MPC with balance; servo: in-engine "
+                        "position servos, no balance)")
     p.add_argument("--assist", choices=("root",), default=None,
                    help="external root assistance (a PD wrench on the trunk; reported)")
     p.add_argument("--video", metavar="V.mp4", help="render a video (.mp4 or .gif)")
@@ -155,9 +162,9 @@ def _track_outputs(ns: argparse.Namespace) -> int:
     if ns.report:
         atomic_write_text(ns.report, json.dumps(report, indent=2, allow_nan=False) + "\n")
     if ns.video:
-        from ..render import render_video
+        from ..render import render_tracking
 
-        render_video(result.model, result.qpos, result.fps, ns.video)
+        render_tracking(result, ns.video)
     if ns.json:
         print(json.dumps(report, allow_nan=False))
     else:

@@ -1,0 +1,89 @@
+"""Videos of tracking runs: the reference as a ghost beside the body, stance marks, species
+colours and the floor drawn low — all in the rendering scene, never in the model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from habitsim import render
+from habitsim.qpos import load_species_model
+
+pytestmark = pytest.mark.skipif(
+    not render.render_available(), reason="no OpenGL backend for off-screen rendering"
+)
+
+W, H = 320, 240
+
+
+@pytest.fixture(scope="module")
+def dog():
+    return load_species_model("dog")
+
+
+def _home(model, frames: int = 1) -> np.ndarray:
+    return np.tile(model.key_qpos[model.key("home").id], (frames, 1))
+
+
+def _mask(img: np.ndarray, rgb: tuple[int, int, int], tol: int = 40) -> np.ndarray:
+    return np.all(np.abs(img.astype(int) - np.array(rgb)) < tol, axis=-1)
+
+
+def test_ghost_is_drawn_beside_the_body(dog) -> None:
+    q = _home(dog)
+    green = render.GhostStyle(alpha=1.0, ghost_rgb=(0.0, 1.0, 0.0))
+    plain = render.render_frames(dog, q, width=W, height=H, reference=q, species="dog",
+                                 style=render.GhostStyle(alpha=0.0))[0]
+    ghost = render.render_frames(dog, q, width=W, height=H, reference=q, species="dog",
+                                 style=green)[0]
+    none = render.render_frames(dog, q, width=W, height=H, species="dog", camera=-1)[0]
+    g = _mask(ghost, (0, 255, 0), 90)
+    assert g.sum() > 500  # the ghost is there, in its colour
+    assert _mask(none, (0, 255, 0), 90).sum() == 0
+    # the body: pixels whose colour changes with the species' colour, same camera
+    tiger = render.render_frames(dog, q, width=W, height=H, reference=q, species="tiger",
+                                 style=render.GhostStyle(alpha=0.0))[0]
+    body = np.abs(tiger.astype(int) - plain.astype(int)).sum(-1) > 30
+    assert body.sum() > 500
+    # beside, not over: ghost and body barely share a pixel, and sit side by side
+    assert (g & body).sum() < 0.05 * g.sum()
+    gx = np.nonzero(g)[1].mean()
+    bx = np.nonzero(body)[1].mean()
+    assert abs(gx - bx) > W / 6
+
+
+def test_stance_discs_follow_the_contacts(dog) -> None:
+    q = _home(dog)
+    red = render.GhostStyle(stance_rgba=(1.0, 0.0, 0.0, 1.0))
+    # the flat discs are seen edge-on by the species camera: full size images
+    down = render.render_frames(dog, q, contacts=np.ones((1, 4), bool), style=red)[0]
+    up = render.render_frames(dog, q, contacts=np.zeros((1, 4), bool), style=red)[0]
+    one = render.render_frames(dog, q, contacts=np.array([[True, False, False, False]]),
+                               style=red)[0]
+    n_down, n_up, n_one = (_mask(x, (255, 0, 0), 60).sum() for x in (down, up, one))
+    assert n_up == 0 and n_down > 16 and 0 < n_one < n_down
+
+
+def test_species_colour_and_floor_only_in_the_scene(dog) -> None:
+    rgba, pos = dog.geom_rgba.copy(), dog.geom_pos.copy()
+    q = _home(dog)
+    a = render.render_frames(dog, q, width=W, height=H, species="tiger")[0]
+    b = render.render_frames(dog, q, width=W, height=H, species="zebra")[0]
+    assert np.abs(a.astype(int) - b.astype(int)).sum(-1).astype(bool).sum() > 500
+    np.testing.assert_array_equal(dog.geom_rgba, rgba)  # the model itself is untouched
+    np.testing.assert_array_equal(dog.geom_pos, pos)
+    assert render.SPECIES_COLOURS["tiger"] != render.SPECIES_COLOURS["zebra"]
+
+
+def test_bad_requests_are_render_errors(dog) -> None:
+    q = _home(dog, 3)
+    with pytest.raises(render.RenderError, match="reference must have shape"):
+        render.render_frames(dog, q, reference=q[:2], width=W, height=H)
+    with pytest.raises(render.RenderError, match="contacts must have shape"):
+        render.render_frames(dog, q, contacts=np.ones((2, 4), bool), width=W, height=H)
+    with pytest.raises(render.RenderError, match="'paw'"):
+        render.render_frames(dog, q, contacts=np.ones((3, 1), bool), feet=["paw"],
+                             width=W, height=H)
+    with pytest.raises(render.RenderError, match="4 stance columns but 1 feet"):
+        render.render_frames(dog, q, contacts=np.ones((3, 4), bool), feet=["lf_foot"],
+                             width=W, height=H)
