@@ -528,34 +528,36 @@ _SCENE = """<mujoco model="{name} scene">
 """
 
 
+def _species_file(species: str | Species, filename: str, root: str | Path | None) -> Path:
+    """``<root>/<species>/<filename>`` (root: the models folder); ``{name}`` in the
+    file name is the species name."""
+    sp = load_species(species)
+    return Path(root or MODELS_DIR) / sp.name / filename.format(name=sp.name)
+
+
 def model_path(species: str | Species, root: str | Path | None = None) -> Path:
     """Path of ``<species>/<species>.xml`` in the models folder (or ``root``)."""
-    sp = load_species(species)
-    return Path(root or MODELS_DIR) / sp.name / f"{sp.name}.xml"
+    return _species_file(species, "{name}.xml", root)
 
 
 def scene_path(species: str | Species, root: str | Path | None = None) -> Path:
     """Path of ``<species>/scene.xml`` in the models folder (or ``root``)."""
-    sp = load_species(species)
-    return Path(root or MODELS_DIR) / sp.name / "scene.xml"
+    return _species_file(species, "scene.xml", root)
 
 
 def position_model_path(species: str | Species, root: str | Path | None = None) -> Path:
     """Path of ``<species>/<species>_position.xml`` (the standing model, no floor)."""
-    sp = load_species(species)
-    return Path(root or MODELS_DIR) / sp.name / f"{sp.name}_position.xml"
+    return _species_file(species, "{name}_position.xml", root)
 
 
 def position_scene_path(species: str | Species, root: str | Path | None = None) -> Path:
     """Path of ``<species>/scene_position.xml``: floor, light and the standing model."""
-    sp = load_species(species)
-    return Path(root or MODELS_DIR) / sp.name / "scene_position.xml"
+    return _species_file(species, "scene_position.xml", root)
 
 
 def preview_path(species: str | Species, root: str | Path | None = None) -> Path:
     """Path of ``<species>/preview.png``."""
-    sp = load_species(species)
-    return Path(root or MODELS_DIR) / sp.name / "preview.png"
+    return _species_file(species, "preview.png", root)
 
 
 #: Size of the preview images [px].
