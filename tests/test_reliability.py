@@ -514,7 +514,7 @@ def test_manifest_bad_clip_path(tmp_path: Path, small_dataset: Path, path: str) 
 
 EVAL_ARGS = ["--methods", "direct", "--refine", "none", "--workers", "1", "--report-pairs",
              "0", "--no-videos", "--no-report", "--no-progress", "--max-clips", "1", "--split",
-             "train", "--no-track", "--no-dynamic"]
+             "train", "--no-track", "--no-dynamic", "--targets", "all"]
 
 
 @pytest.fixture(scope="module")
