@@ -699,6 +699,14 @@ class _Prepared:
     cleaning: dict[str, Any] | None
 
 
+def _inside_ranges(info: ModelInfo, hinges: np.ndarray) -> np.ndarray:
+    """Hinge angles clipped just inside their joint ranges (an initial guess on a bound
+    would start IPOPT's barrier at infinity)."""
+    span = np.where(np.isfinite(info.upper - info.lower), info.upper - info.lower, 1.0)
+    margin = np.minimum(1e-6, 1e-3 * span)
+    return np.clip(hinges, info.lower + margin, info.upper - margin)
+
+
 def _prepare(
     motion: Motion,
     contacts: np.ndarray | None,
@@ -737,9 +745,7 @@ def _prepare(
     x0 = np.zeros((len(q), nx))
     x0[:, :3] = q[:, fa : fa + 3]
     x0[:, 2] -= offset
-    span = np.where(np.isfinite(info.upper - info.lower), info.upper - info.lower, 1.0)
-    margin = np.minimum(1e-6, 1e-3 * span)
-    x0[:, 6:nv] = np.clip(href, info.lower + margin, info.upper - margin)
+    x0[:, 6:nv] = _inside_ranges(info, href)
     # initial guess only: put the feet in contact on the floor frame by frame (clipping
     # out-of-range angles and the smooth alignment leave them off it by centimetres)
     sole0 = np.asarray(pr.frame.map(len(q))(x0[:, :nv].T, qref.T)[1])[2].reshape(len(q), 4)
@@ -807,9 +813,7 @@ def _planted_start(
     qp = motion_to_qpos(planted, model).qpos
     out = x0.copy()
     out[:, :3] = qp[:, fa : fa + 3]
-    span = np.where(np.isfinite(info.upper - info.lower), info.upper - info.lower, 1.0)
-    margin = np.minimum(1e-6, 1e-3 * span)
-    out[:, 6:] = np.clip(qp[:, info.hinge_qposadr], info.lower + margin, info.upper - margin)
+    out[:, 6:] = _inside_ranges(info, qp[:, info.hinge_qposadr])
     bad = ~np.all(np.isfinite(out), axis=1)
     out[bad] = x0[bad]
     return out
