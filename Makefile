@@ -1,7 +1,8 @@
 # Two commands set everything up on a new machine:
 #   make demo   - run the main job on the embedded default data
 #   make test   - run the test suite
-# (make lint runs ruff on the code and the tests; CI runs it before the tests.)
+# (make lint runs ruff check and ruff format --check on the code and the tests; CI runs it
+# before the tests.)
 # Both create or reuse .venv, install the CPU build of torch 2.13.0 first, then the project.
 PYTHON ?= python3
 VENV   := .venv
@@ -32,8 +33,11 @@ test: $(STAMP)
 $(BIN)/ruff: $(BIN)/python
 	$(BIN)/python -m pip install --quiet "ruff>=0.5"
 
+LINTED := habitsim controllers evaluation mjcf_models tests
+
 lint: $(BIN)/ruff
-	$(BIN)/ruff check habitsim controllers evaluation tests
+	$(BIN)/ruff check $(LINTED)
+	$(BIN)/ruff format --check $(LINTED)
 
 # A long fuzzing campaign over the readers and the command line (counts by outcome).
 fuzz: $(STAMP)

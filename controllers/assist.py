@@ -41,8 +41,14 @@ class RootAssist:
 
     name = "root_assist"
 
-    def __init__(self, model: mujoco.MjModel, kp: float | tuple[float, float] | None = None,
-                 kd: float | tuple[float, float] | None = None, *, body: str | None = None) -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        kp: float | tuple[float, float] | None = None,
+        kd: float | tuple[float, float] | None = None,
+        *,
+        body: str | None = None,
+    ) -> None:
         if body is None:
             self.body = free_body(model)
         else:
@@ -89,21 +95,24 @@ class RootAssist:
 
     def remove(self, data: mujoco.MjData) -> None:
         """Zero the free-joint entries of ``qfrc_applied`` (stop assisting)."""
-        data.qfrc_applied[self._da:self._da + 6] = 0.0
+        data.qfrc_applied[self._da : self._da + 6] = 0.0
         self.last_wrench = np.zeros(6)
 
     def wrench(self, data: mujoco.MjData, ref: Reference) -> np.ndarray:
         """(6,) the assist's generalised force on the free joint for this state."""
         qa, da = self._qa, self._da
-        force = (self.kp_t * (ref.qpos[qa:qa + 3] - data.qpos[qa:qa + 3])
-                 + self.kd_t * (ref.qvel[da:da + 3] - data.qvel[da:da + 3]))
+        force = self.kp_t * (ref.qpos[qa : qa + 3] - data.qpos[qa : qa + 3]) + self.kd_t * (
+            ref.qvel[da : da + 3] - data.qvel[da : da + 3]
+        )
         err = np.zeros(3)
-        rq = ref.qpos[qa + 3:qa + 7] / max(np.linalg.norm(ref.qpos[qa + 3:qa + 7]), 1e-12)
-        q = data.qpos[qa + 3:qa + 7] / max(np.linalg.norm(data.qpos[qa + 3:qa + 7]), 1e-12)
+        rq = ref.qpos[qa + 3 : qa + 7] / max(np.linalg.norm(ref.qpos[qa + 3 : qa + 7]), 1e-12)
+        q = data.qpos[qa + 3 : qa + 7] / max(np.linalg.norm(data.qpos[qa + 3 : qa + 7]), 1e-12)
         mujoco.mju_subQuat(err, rq, q)  # body-frame rotation vector current → reference
         # reference angular velocity is in the reference body frame; close enough near
         # the reference pose (the assist is a PD, not an exact tracker)
-        torque = self.kp_r * err + self.kd_r * (ref.qvel[da + 3:da + 6] - data.qvel[da + 3:da + 6])
+        torque = self.kp_r * err + self.kd_r * (
+            ref.qvel[da + 3 : da + 6] - data.qvel[da + 3 : da + 6]
+        )
         return np.concatenate([force, torque])
 
     def apply(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:
@@ -113,7 +122,7 @@ class RootAssist:
             self._impulse += float(np.linalg.norm(self.last_wrench[:3])) * dt
             self._angular_impulse += float(np.linalg.norm(self.last_wrench[3:])) * dt
         w = self.wrench(data, ref)
-        data.qfrc_applied[self._da:self._da + 6] = w
+        data.qfrc_applied[self._da : self._da + 6] = w
         self.last_wrench = w
         f, t = float(np.linalg.norm(w[:3])), float(np.linalg.norm(w[3:]))
         self._calls += 1

@@ -125,13 +125,14 @@ def wrench_matrix(r: np.ndarray) -> np.ndarray:
     r = np.asarray(r, dtype=float).reshape(-1, 3)
     a = np.zeros((6, 3 * len(r)))
     for i, ri in enumerate(r):
-        a[:3, 3 * i:3 * i + 3] = np.eye(3)
-        a[3:, 3 * i:3 * i + 3] = _skew(ri)
+        a[:3, 3 * i : 3 * i + 3] = np.eye(3)
+        a[3:, 3 * i : 3 * i + 3] = _skew(ri)
     return a
 
 
-def centroidal_inertia(model: mujoco.MjModel, data: mujoco.MjData, bodies: np.ndarray,
-                       com: np.ndarray) -> np.ndarray:
+def centroidal_inertia(
+    model: mujoco.MjModel, data: mujoco.MjData, bodies: np.ndarray, com: np.ndarray
+) -> np.ndarray:
     """(3, 3) inertia [kg·m²] of ``bodies`` about ``com``, world frame, at ``data``'s pose."""
     r = data.xipos[bodies] - com
     rot = data.ximat[bodies].reshape(-1, 3, 3)
@@ -214,8 +215,9 @@ class BalanceConfig:
     extra: dict = field(default_factory=dict)
 
     @classmethod
-    def scaled(cls, mass: float, leg_length: float, gravity: float = 9.81,
-               **overrides: float) -> BalanceConfig:
+    def scaled(
+        cls, mass: float, leg_length: float, gravity: float = 9.81, **overrides: float
+    ) -> BalanceConfig:
         """The defaults for a body of ``mass`` [kg] and ``leg_length`` [m].
 
         Raises:
@@ -225,27 +227,53 @@ class BalanceConfig:
             if not (np.isfinite(v) and v > 0):
                 raise ControllerError(f"{name} must be finite and > 0, got {v}")
         w0 = float(np.sqrt(gravity / leg_length))
-        cfg = cls(mass=float(mass), leg_length=float(leg_length), gravity=float(gravity),
-                  trunk_omega=min(2.0 * w0, OMEGA_CAP), rot_omega=min(2.0 * w0, OMEGA_CAP),
-                  fz_max=1.5 * mass * gravity,
-                  swing_omega=8.0 * w0, capture_max=0.15 * leg_length,
-                  seek_depth=0.03 * leg_length, early_reach=0.1 * leg_length)
+        cfg = cls(
+            mass=float(mass),
+            leg_length=float(leg_length),
+            gravity=float(gravity),
+            trunk_omega=min(2.0 * w0, OMEGA_CAP),
+            rot_omega=min(2.0 * w0, OMEGA_CAP),
+            fz_max=1.5 * mass * gravity,
+            swing_omega=8.0 * w0,
+            capture_max=0.15 * leg_length,
+            seek_depth=0.03 * leg_length,
+            early_reach=0.1 * leg_length,
+        )
         known = set(cls.__dataclass_fields__) - {"mass", "leg_length", "gravity"}
         bad = sorted(set(overrides) - known)
         if bad:
-            raise ControllerError(f"unknown balance option(s) {', '.join(bad)}; valid: "
-                                  f"{', '.join(sorted(known))}")
-        cfg = replace(cfg, **{k: (v if isinstance(v, (dict, bool)) else float(v))
-                              for k, v in overrides.items()})
-        for name in known - {"extra", "null_space_posture", "fz_min", "capture_gain",
-                             "capture_pos_gain",
-                             "posture_body", "posture_leg", "leg_damping", "regularization",
-                             "smooth"}:
+            raise ControllerError(
+                f"unknown balance option(s) {', '.join(bad)}; valid: {', '.join(sorted(known))}"
+            )
+        cfg = replace(
+            cfg,
+            **{k: (v if isinstance(v, (dict, bool)) else float(v)) for k, v in overrides.items()},
+        )
+        for name in known - {
+            "extra",
+            "null_space_posture",
+            "fz_min",
+            "capture_gain",
+            "capture_pos_gain",
+            "posture_body",
+            "posture_leg",
+            "leg_damping",
+            "regularization",
+            "smooth",
+        }:
             v = getattr(cfg, name)
             if not (np.isfinite(v) and v > 0):
                 raise ControllerError(f"balance option {name} must be > 0, got {v}")
-        for name in ("fz_min", "capture_gain", "capture_pos_gain", "posture_body",
-                     "posture_leg", "leg_damping", "regularization", "smooth"):
+        for name in (
+            "fz_min",
+            "capture_gain",
+            "capture_pos_gain",
+            "posture_body",
+            "posture_leg",
+            "leg_damping",
+            "regularization",
+            "smooth",
+        ):
             v = getattr(cfg, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ControllerError(f"balance option {name} must be >= 0, got {v}")
@@ -279,8 +307,9 @@ class StanceQP:
     def __init__(self, n_feet: int, solver: str = "daqp", n_joints: int = 0) -> None:
         if solver not in STANCE_SOLVERS or not casadi.has_conic(solver):
             avail = [s for s in STANCE_SOLVERS if casadi.has_conic(s)]
-            raise ControllerError(f"stance QP solver {solver!r} is not available; "
-                                  f"available: {', '.join(avail)}")
+            raise ControllerError(
+                f"stance QP solver {solver!r} is not available; available: {', '.join(avail)}"
+            )
         if n_feet < 1:
             raise ControllerError("the stance QP needs at least one foot")
         self.n = int(n_feet)
@@ -291,20 +320,20 @@ class StanceQP:
         # parameters: r (3n), b (6), anchor (3n), S (6), alpha, eps, mu, Jᵀ (nj × 3n, by column)
         p = casadi.SX.sym("p", 3 * self.n + 6 + 3 * self.n + 6 + 3 + self.nj * nx)
         r = p[0:nx]
-        b = p[nx:nx + 6]
-        anchor = p[nx + 6:2 * nx + 6]
-        s = p[2 * nx + 6:2 * nx + 12]
+        b = p[nx : nx + 6]
+        anchor = p[nx + 6 : 2 * nx + 6]
+        s = p[2 * nx + 6 : 2 * nx + 12]
         alpha, eps, mu = p[2 * nx + 12], p[2 * nx + 13], p[2 * nx + 14]
         force = casadi.SX.zeros(3)
         torque = casadi.SX.zeros(3)
         g = []
         for i in range(self.n):
-            fi, ri = f[3 * i:3 * i + 3], r[3 * i:3 * i + 3]
+            fi, ri = f[3 * i : 3 * i + 3], r[3 * i : 3 * i + 3]
             force += fi
             torque += casadi.cross(ri, fi)
             g += [fi[0] - mu * fi[2], -fi[0] - mu * fi[2], fi[1] - mu * fi[2], -fi[1] - mu * fi[2]]
         if self.nj:
-            jt = casadi.reshape(p[2 * nx + 15:], self.nj, nx)
+            jt = casadi.reshape(p[2 * nx + 15 :], self.nj, nx)
             g += casadi.vertsplit(-(jt @ f))
         res = s * (casadi.vertcat(force, torque) - b)
         obj = casadi.sumsqr(res) + alpha * casadi.sumsqr(f - anchor) + eps * casadi.sumsqr(f)
@@ -313,8 +342,9 @@ class StanceQP:
             opts["printLevel"] = "none"
         elif solver == "osqp":
             opts["osqp"] = {"verbose": False, "eps_abs": 1e-6, "eps_rel": 1e-6}
-        self._fn = casadi.qpsol(f"stance_qp_{self.n}", solver,
-                                {"x": f, "p": p, "f": obj, "g": casadi.vertcat(*g)}, opts)
+        self._fn = casadi.qpsol(
+            f"stance_qp_{self.n}", solver, {"x": f, "p": p, "f": obj, "g": casadi.vertcat(*g)}, opts
+        )
         self._buf, self._eval = self._fn.buffer()
         self._in = [np.zeros(self._fn.nnz_in(i)) for i in range(self._fn.n_in())]
         self._out = [np.zeros(self._fn.nnz_out(i)) for i in range(self._fn.n_out())]
@@ -331,12 +361,23 @@ class StanceQP:
         self._bits = 1 << np.arange(self.n)
         self._bounds: dict = {}
 
-    def solve(self, r: np.ndarray, wrench: np.ndarray, stance: np.ndarray, *,
-              mu: float, fz_min: float, fz_max: float, row_scale: np.ndarray,
-              anchor: np.ndarray | None = None, smooth: float = 1e-3,
-              regularization: float = 1e-6, jac: np.ndarray | None = None,
-              tau_lo: np.ndarray | None = None,
-              tau_hi: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
+    def solve(
+        self,
+        r: np.ndarray,
+        wrench: np.ndarray,
+        stance: np.ndarray,
+        *,
+        mu: float,
+        fz_min: float,
+        fz_max: float,
+        row_scale: np.ndarray,
+        anchor: np.ndarray | None = None,
+        smooth: float = 1e-3,
+        regularization: float = 1e-6,
+        jac: np.ndarray | None = None,
+        tau_lo: np.ndarray | None = None,
+        tau_hi: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, bool]:
         """Ground forces ``(n, 3)`` [N] and whether the QP solution was used.
 
         Args:
@@ -355,25 +396,28 @@ class StanceQP:
         n, nj = self.n, self.nj
         st = np.asarray(stance, dtype=bool)
         prm, lbg, ubg = self._in[1], self._in[4], self._in[5]
-        prm[0:3 * n] = np.ravel(r)
-        prm[3 * n:3 * n + 6] = wrench
-        prm[3 * n + 6:6 * n + 6] = 0.0 if anchor is None else np.ravel(anchor)
-        prm[6 * n + 6:6 * n + 12] = row_scale
-        prm[6 * n + 12:6 * n + 15] = (smooth, regularization, mu)
+        prm[0 : 3 * n] = np.ravel(r)
+        prm[3 * n : 3 * n + 6] = wrench
+        prm[3 * n + 6 : 6 * n + 6] = 0.0 if anchor is None else np.ravel(anchor)
+        prm[6 * n + 6 : 6 * n + 12] = row_scale
+        prm[6 * n + 12 : 6 * n + 15] = (smooth, regularization, mu)
         if nj:
             if jac is None or tau_lo is None or tau_hi is None:
                 raise ControllerError(
-                    "this stance QP has joint torque bounds: pass jac, tau_lo, tau_hi")
+                    "this stance QP has joint torque bounds: pass jac, tau_lo, tau_hi"
+                )
             # column-major (nj × 3n) Jᵀ: entry (j, 3i+k) = jac[i, k, j]
-            prm[self._np:] = np.ravel(jac)
-            np.minimum(tau_lo, 0.0, out=lbg[4 * n:])
-            np.maximum(tau_hi, 0.0, out=ubg[4 * n:])
+            prm[self._np :] = np.ravel(jac)
+            np.minimum(tau_lo, 0.0, out=lbg[4 * n :])
+            np.maximum(tau_hi, 0.0, out=ubg[4 * n :])
         key = (int(st @ self._bits), fz_min, fz_max)
         bounds = self._bounds.get(key)
         if bounds is None:
             big = 10.0 * fz_max
-            bounds = (np.where(st[:, None], np.array([-big, -big, fz_min]), 0.0).ravel(),
-                      np.where(st[:, None], np.array([big, big, fz_max]), 0.0).ravel())
+            bounds = (
+                np.where(st[:, None], np.array([-big, -big, fz_min]), 0.0).ravel(),
+                np.where(st[:, None], np.array([big, big, fz_max]), 0.0).ravel(),
+            )
             if len(self._bounds) < 256:
                 self._bounds[key] = bounds
         lbx, ubx = bounds
@@ -403,7 +447,7 @@ class StanceQP:
         f = np.linalg.solve(a.T @ a + 1e-6 * np.eye(a.shape[1]), a.T @ (wrench * row_scale))
         out = np.zeros((self.n, 3))
         for k, i in enumerate(idx):
-            fi = f[3 * k:3 * k + 3]
+            fi = f[3 * k : 3 * k + 3]
             fz = float(np.clip(fi[2], fz_min, fz_max))
             out[i] = (np.clip(fi[0], -mu * fz, mu * fz), np.clip(fi[1], -mu * fz, mu * fz), fz)
         return out.reshape(-1)
@@ -414,8 +458,9 @@ class StanceQP:
         return float(np.median(self.times[:k]) * 1e3) if k else float("nan")
 
 
-def _posture_gains(model: mujoco.MjModel, names: Sequence[str],
-                   dt: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _posture_gains(
+    model: mujoco.MjModel, names: Sequence[str], dt: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """(kp, kd): torque rule (τmax / 0.15 rad) and critical damping, both capped at half
     the explicit-integration stability limit for a control period ``dt`` (the runner's
     default PD rule)."""
@@ -488,10 +533,19 @@ class BalanceController(BaseController):
     #: trunk body's own (see :meth:`_trunk_state`).
     centroidal_rate = False
 
-    def __init__(self, model: mujoco.MjModel, feet: Sequence[str] | None = None, *,
-                 plan: MotionPlan | None = None, leg_length: float | None = None,
-                 config: BalanceConfig | None = None, solver: str = "daqp", assist=None,
-                 control_dt: float | None = None, **options: float) -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        feet: Sequence[str] | None = None,
+        *,
+        plan: MotionPlan | None = None,
+        leg_length: float | None = None,
+        config: BalanceConfig | None = None,
+        solver: str = "daqp",
+        assist=None,
+        control_dt: float | None = None,
+        **options: float,
+    ) -> None:
         super().__init__(assist=assist)
         self.control_dt = float(model.opt.timestep if control_dt is None else control_dt)
         if not (np.isfinite(self.control_dt) and self.control_dt > 0):
@@ -509,8 +563,9 @@ class BalanceController(BaseController):
         gnorm = float(np.linalg.norm(model.opt.gravity))
         if config is None:
             length = model_leg_length(model, legs.feet) if leg_length is None else float(leg_length)
-            config = BalanceConfig.scaled(legs.mass, length, gnorm if gnorm > 0 else 9.81,
-                                          **options)
+            config = BalanceConfig.scaled(
+                legs.mass, length, gnorm if gnorm > 0 else 9.81, **options
+            )
         elif options:
             config = replace(config, **options)
         self.config = config
@@ -518,12 +573,18 @@ class BalanceController(BaseController):
         self._chain = np.flatnonzero(legs.on_chain.any(axis=0))
         self.qp = StanceQP(legs.n_feet, solver, n_joints=self._chain.size)
         self.tracker = ContactTracker(legs.n_feet, config.lost_s, config.early_phase)
-        self._reach2 = config.early_reach ** 2
+        self._reach2 = config.early_reach**2
         kp_sw, kd_sw = self._swing_gains(model)
-        self.swing = SwingLegs(legs, kp_sw, kd_sw, capture_gain=config.capture_gain,
-                               capture_pos_gain=config.capture_pos_gain,
-                               capture_max=config.capture_max, seek_depth=config.seek_depth,
-                               seek_speed=0.3 * float(np.sqrt(config.gravity * config.leg_length)))
+        self.swing = SwingLegs(
+            legs,
+            kp_sw,
+            kd_sw,
+            capture_gain=config.capture_gain,
+            capture_pos_gain=config.capture_pos_gain,
+            capture_max=config.capture_max,
+            seek_depth=config.seek_depth,
+            seek_speed=0.3 * float(np.sqrt(config.gravity * config.leg_length)),
+        )
         kp, kd = _posture_gains(model, jm.names, self.control_dt)
         leg = legs.own.any(axis=0)
         self.kp_post = np.where(leg, config.posture_leg, config.posture_body) * kp
@@ -614,8 +675,12 @@ class BalanceController(BaseController):
             kp[i] = min(kp[i], kp_lim)
         return kp, kd
 
-    def set_plan(self, plan_or_qpos: MotionPlan | np.ndarray | None, fps: float | None = None,
-                 contacts: np.ndarray | None = None) -> None:
+    def set_plan(
+        self,
+        plan_or_qpos: MotionPlan | np.ndarray | None,
+        fps: float | None = None,
+        contacts: np.ndarray | None = None,
+    ) -> None:
         """Give the controller the clip it will track (before :meth:`reset`).
 
         Args:
@@ -628,8 +693,14 @@ class BalanceController(BaseController):
             return
         if fps is None:
             raise ControllerError("set_plan with a qpos array needs fps")
-        self.plan = plan_from_qpos(self._model, plan_or_qpos, fps, contacts,
-                                   legs=self.legs, leg_length=self.config.leg_length)
+        self.plan = plan_from_qpos(
+            self._model,
+            plan_or_qpos,
+            fps,
+            contacts,
+            legs=self.legs,
+            leg_length=self.config.leg_length,
+        )
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
         super().reset(model, data)
@@ -644,8 +715,9 @@ class BalanceController(BaseController):
 
     def _refresh_inertia(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
         """Centroidal inertia ``I_c`` at the current pose and its inverse."""
-        self._inertia = centroidal_inertia(model, data, self._bodies,
-                                           data.subtree_com[self.legs.trunk])
+        self._inertia = centroidal_inertia(
+            model, data, self._bodies, data.subtree_com[self.legs.trunk]
+        )
         self._inertia_inv = np.linalg.inv(self._inertia)
 
     @property
@@ -669,18 +741,32 @@ class BalanceController(BaseController):
         rot = d.xmat[tr].reshape(3, 3)
         da = legs.dadr
         nf = legs.n_feet
-        contacts = (np.ones(nf, dtype=bool) if ref.contacts is None
-                    else np.asarray(ref.contacts, dtype=bool).reshape(-1))
+        contacts = (
+            np.ones(nf, dtype=bool)
+            if ref.contacts is None
+            else np.asarray(ref.contacts, dtype=bool).reshape(-1)
+        )
         if contacts.shape != (nf,):
-            raise ControllerError(f"ref.contacts has {contacts.size} entries, the controller "
-                                  f"has {nf} feet ({', '.join(legs.feet)})")
+            raise ControllerError(
+                f"ref.contacts has {contacts.size} entries, the controller "
+                f"has {nf} feet ({', '.join(legs.feet)})"
+            )
         nan = np.full(nf, np.nan)
         return PlanSample(
-            t=float(ref.time), com=d.subtree_com[tr].copy(), com_vel=self._jcom @ ref.qvel,
-            com_acc=np.array(ref.qacc[da:da + 3]), rpy=rpy_from_matrix(rot),
-            omega=rot @ ref.qvel[da + 3:da + 6], omega_dot=rot @ ref.qacc[da + 3:da + 6],
-            feet=feet, feet_vel=jac @ ref.qvel, contacts=contacts, phase=nan,
-            t_liftoff=nan, t_touchdown=nan, foothold=feet.copy(),
+            t=float(ref.time),
+            com=d.subtree_com[tr].copy(),
+            com_vel=self._jcom @ ref.qvel,
+            com_acc=np.array(ref.qacc[da : da + 3]),
+            rpy=rpy_from_matrix(rot),
+            omega=rot @ ref.qvel[da + 3 : da + 6],
+            omega_dot=rot @ ref.qacc[da + 3 : da + 6],
+            feet=feet,
+            feet_vel=jac @ ref.qvel,
+            contacts=contacts,
+            phase=nan,
+            t_liftoff=nan,
+            t_touchdown=nan,
+            foothold=feet.copy(),
         )
 
     def _trunk_state(self, model: mujoco.MjModel, data: mujoco.MjData):
@@ -699,7 +785,7 @@ class BalanceController(BaseController):
             omega = self._inertia_inv @ data.subtree_angmom[tr]
         else:
             da = self.legs.dadr
-            omega = rot @ data.qvel[da + 3:da + 6]
+            omega = rot @ data.qvel[da + 3 : da + 6]
         return com, com_vel, rot, omega
 
     @staticmethod
@@ -711,13 +797,21 @@ class BalanceController(BaseController):
         mujoco.mju_quat2Vel(err, quat, 1.0)
         return err
 
-    def _wanted(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference,
-                smp: PlanSample, com: np.ndarray, com_vel: np.ndarray, rot: np.ndarray,
-                omega: np.ndarray, r: np.ndarray,
-                stance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _wanted(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        ref: Reference,
+        smp: PlanSample,
+        com: np.ndarray,
+        com_vel: np.ndarray,
+        rot: np.ndarray,
+        omega: np.ndarray,
+        r: np.ndarray,
+        stance: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(wanted wrench b (6,), anchor forces (nf, 3)) of this tick."""
-        acc = (smp.com_acc + self.kp_pos * (smp.com - com)
-               + self.kd_pos * (smp.com_vel - com_vel))
+        acc = smp.com_acc + self.kp_pos * (smp.com - com) + self.kd_pos * (smp.com_vel - com_vel)
         e_rot = self._rotation_error(matrix_from_rpy(smp.rpy), rot)
         alpha = smp.omega_dot + self.kp_rot * e_rot + self.kd_rot * (smp.omega - omega)
         b = np.concatenate([self.config.mass * (acc - self.gravity_vec), self._inertia @ alpha])
@@ -750,8 +844,9 @@ class BalanceController(BaseController):
         r = p_force - com
         # swing feet
         height = max(float(com[2] - p[:, 2].min()), 1e-3)
-        delta = self.swing.correction(com, com_vel, smp.com, smp.com_vel, height, cfg.gravity,
-                                      float(smp.rpy[2]))
+        delta = self.swing.correction(
+            com, com_vel, smp.com, smp.com_vel, height, cfg.gravity, float(smp.rpy[2])
+        )
         p_des, v_des = self.swing.targets(smp, modes, delta)
         force_sw = self.swing.forces(p, v, p_des, v_des)
         force_sw[stance] = 0.0
@@ -762,11 +857,21 @@ class BalanceController(BaseController):
         b, anchor = self._wanted(model, data, ref, smp, com, com_vel, rot, omega, r, stance)
         ch = self._chain
         t0 = tau0[ch]
-        forces, ok = self.qp.solve(r, b, stance, mu=cfg.mu, fz_min=cfg.fz_min,
-                                   fz_max=cfg.fz_max, row_scale=self.row_scale, anchor=anchor,
-                                   smooth=cfg.smooth, regularization=cfg.regularization,
-                                   jac=jc[:, :, ch], tau_lo=-self._limit_ch - t0,
-                                   tau_hi=self._limit_ch - t0)
+        forces, ok = self.qp.solve(
+            r,
+            b,
+            stance,
+            mu=cfg.mu,
+            fz_min=cfg.fz_min,
+            fz_max=cfg.fz_max,
+            row_scale=self.row_scale,
+            anchor=anchor,
+            smooth=cfg.smooth,
+            regularization=cfg.regularization,
+            jac=jc[:, :, ch],
+            tau_lo=-self._limit_ch - t0,
+            tau_hi=self._limit_ch - t0,
+        )
         if not ok:
             self.stats.failures += 1
             self.stats.note(f"stance QP failed at t={ref.time:.3f}s; used clipped least squares")
@@ -787,8 +892,15 @@ class BalanceController(BaseController):
         f = self.last_forces
         return np.concatenate([f.sum(axis=0), _moment(self._r, f)])
 
-    def _other_torques(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference,
-                       jc: np.ndarray, force_sw: np.ndarray, modes: np.ndarray) -> np.ndarray:
+    def _other_torques(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        ref: Reference,
+        jc: np.ndarray,
+        force_sw: np.ndarray,
+        modes: np.ndarray,
+    ) -> np.ndarray:
         """(base, posture), each (n,): every torque but the stance forces' — ``base`` the
         bias, joint-damping compensation, inertial feed-forward and swing PD,
         ``posture`` the joint PD (null-space projected on the legs) and damping. ``jc``
@@ -805,8 +917,9 @@ class BalanceController(BaseController):
         key = int((modes == SWING) @ self._bits)
         moving = self._moving.get(key)
         if moving is None:
-            moving = self._moving[key] = (self.leg_free | legs.own[modes == SWING].any(axis=0)
-                                          ).astype(float)
+            moving = self._moving[key] = (
+                self.leg_free | legs.own[modes == SWING].any(axis=0)
+            ).astype(float)
         vec = self._qacc_buf
         vec[dof] = ref.qacc[dof] * moving
         mujoco.mj_mulM(model, data, self._mq_buf, vec)

@@ -223,8 +223,11 @@ def actuated_joints(model: mujoco.MjModel, names: Sequence[str] | None = None) -
 
 def check_reference(model: mujoco.MjModel, ref: Reference) -> None:
     """Raise :class:`ControllerError` unless ``ref`` fits ``model`` and is finite."""
-    for name, arr, size in (("qpos", ref.qpos, model.nq), ("qvel", ref.qvel, model.nv),
-                            ("qacc", ref.qacc, model.nv)):
+    for name, arr, size in (
+        ("qpos", ref.qpos, model.nq),
+        ("qvel", ref.qvel, model.nv),
+        ("qacc", ref.qacc, model.nv),
+    ):
         a = np.asarray(arr)
         if a.shape != (size,):
             raise ControllerError(f"reference {name} has shape {a.shape}, model needs ({size},)")
@@ -237,8 +240,9 @@ def check_reference(model: mujoco.MjModel, ref: Reference) -> None:
         raise ControllerError(f"reference time is not finite: {ref.time}")
 
 
-def joint_torques(component, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference,
-                  names: Sequence[str]) -> np.ndarray:
+def joint_torques(
+    component, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference, names: Sequence[str]
+) -> np.ndarray:
     """(n,) torques of a feed-forward ``component`` in the joint order ``names``.
 
     ``component`` is a callable ``(model, data, ref) -> (k,)``, or a list of them (summed).
@@ -365,8 +369,16 @@ class PDController(BaseController):
 
     name = "pd"
 
-    def __init__(self, model: mujoco.MjModel, kp: float | np.ndarray, kd: float | np.ndarray,
-                 joints: Sequence[str] | None = None, feedforward=None, *, assist=None) -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        kp: float | np.ndarray,
+        kd: float | np.ndarray,
+        joints: Sequence[str] | None = None,
+        feedforward=None,
+        *,
+        assist=None,
+    ) -> None:
         super().__init__(assist=assist)
         self.map = actuated_joints(model, joints)
         n = len(self.map.names)
@@ -375,8 +387,12 @@ class PDController(BaseController):
             self.kd = np.broadcast_to(np.asarray(kd, dtype=float), (n,)).copy()
         except ValueError as exc:
             raise ControllerError(f"PD gains must be scalars or have {n} entries: {exc}") from None
-        if (np.any(~np.isfinite(self.kp)) or np.any(~np.isfinite(self.kd))
-                or np.any(self.kp < 0) or np.any(self.kd < 0)):
+        if (
+            np.any(~np.isfinite(self.kp))
+            or np.any(~np.isfinite(self.kd))
+            or np.any(self.kp < 0)
+            or np.any(self.kd < 0)
+        ):
             raise ControllerError("PD gains must be finite and non-negative")
         biased = [nm for nm, b in zip(self.map.names, self.map.biased, strict=True) if b]
         if biased:
@@ -401,8 +417,9 @@ class PDController(BaseController):
     def _control(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:
         return self._control_with(model, data, ref, None)
 
-    def _control_with(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference,
-                      extra: np.ndarray | None) -> np.ndarray:
+    def _control_with(
+        self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference, extra: np.ndarray | None
+    ) -> np.ndarray:
         """Controls with ``extra`` (n,) joint torques added to PD + feed-forward."""
         m = self.map
         tau = self.torques(data, ref)

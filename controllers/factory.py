@@ -79,8 +79,12 @@ REGISTRY: Mapping[str, ControllerSpec] = {
         ControllerSpec("pd", "torque", False, "explicit PD torques on the motors"),
         ControllerSpec("servo+stance", "servo", False, "servos + stance-leg trunk stabiliser"),
         ControllerSpec("servo+id", "servo", False, "servos + inverse-dynamics feed-forward"),
-        ControllerSpec("servo+id+stance", "servo", False,
-                       "servos + inverse-dynamics feed-forward + trunk stabiliser"),
+        ControllerSpec(
+            "servo+id+stance",
+            "servo",
+            False,
+            "servos + inverse-dynamics feed-forward + trunk stabiliser",
+        ),
         ControllerSpec("balance", "torque", True, "stance-force QP + swing legs"),
         ControllerSpec("mpc", "torque", True, "convex MPC feeding the stance-force QP"),
     )
@@ -105,8 +109,9 @@ def controller_spec(name: str) -> ControllerSpec:
         raise ControllerError(unknown_choice("controller", name, CONTROLLERS)) from None
 
 
-def default_pd(model: mujoco.MjModel, joints: Sequence[str] | None = None,
-               dt: float | None = None) -> PDController:
+def default_pd(
+    model: mujoco.MjModel, joints: Sequence[str] | None = None, dt: float | None = None
+) -> PDController:
     """Explicit joint PD with the torque rule and critical damping, capped at half the
     explicit-integration stability limit for a control period ``dt`` (default: the
     model's time step)."""
@@ -127,10 +132,17 @@ def _leg_length(species) -> float | None:
     return float(load_species(species).leg_length)
 
 
-def make_controller(name: str, model: mujoco.MjModel, species=None, *,
-                    qpos: np.ndarray | None = None, fps: float | None = None,
-                    contacts: np.ndarray | None = None, feet: Sequence[str] | None = None,
-                    **options) -> Controller:
+def make_controller(
+    name: str,
+    model: mujoco.MjModel,
+    species=None,
+    *,
+    qpos: np.ndarray | None = None,
+    fps: float | None = None,
+    contacts: np.ndarray | None = None,
+    feet: Sequence[str] | None = None,
+    **options,
+) -> Controller:
     """A controller for ``model`` by name.
 
     Args:
@@ -165,8 +177,9 @@ def make_controller(name: str, model: mujoco.MjModel, species=None, *,
         kp, kd = options.pop("kp", None), options.pop("kd", None)
         joints, dt = options.pop("joints", None), options.pop("dt", None)
         if options:
-            raise ControllerError(f"unknown pd option(s): {', '.join(sorted(options))}; "
-                                  "valid: kp, kd, joints, dt")
+            raise ControllerError(
+                f"unknown pd option(s): {', '.join(sorted(options))}; valid: kp, kd, joints, dt"
+            )
         if kp is None and kd is None:
             return default_pd(model, joints, dt)
         if kp is None or kd is None:
@@ -190,8 +203,9 @@ def make_controller(name: str, model: mujoco.MjModel, species=None, *,
     return ctl
 
 
-def _servo_controller(name: str, model: mujoco.MjModel, feet: Sequence[str] | None,
-                      options: dict) -> Controller:
+def _servo_controller(
+    name: str, model: mujoco.MjModel, feet: Sequence[str] | None, options: dict
+) -> Controller:
     """``servo``, optionally ``+id`` (inverse-dynamics feed-forward) and ``+stance`` (the
     trunk stabiliser on ``feet``, default habitsim's foot geoms)."""
     if options:

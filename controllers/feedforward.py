@@ -76,12 +76,20 @@ class InverseDynamicsFeedforward:
             supply (``"stance"`` mode; the whole residual in the other modes).
     """
 
-    def __init__(self, model: mujoco.MjModel, joints: Sequence[str] | None = None, *,
-                 contacts: str = "ignore", scale: float = 1.0,
-                 feet: Sequence[str] | None = None, mu: float = 0.8) -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        joints: Sequence[str] | None = None,
+        *,
+        contacts: str = "ignore",
+        scale: float = 1.0,
+        feet: Sequence[str] | None = None,
+        mu: float = 0.8,
+    ) -> None:
         if contacts not in _CONTACTS:
             raise ControllerError(
-                f"unknown contacts mode {contacts!r}; valid: {', '.join(_CONTACTS)}")
+                f"unknown contacts mode {contacts!r}; valid: {', '.join(_CONTACTS)}"
+            )
         if not np.isfinite(scale):
             raise ControllerError(f"scale must be finite, got {scale}")
         if contacts == "stance":
@@ -163,13 +171,17 @@ class InverseDynamicsFeedforward:
             jac.append(self._jacp.copy())
         jt = np.stack(jac)  # (S, 3, nv)
         # free-joint effect of each cone edge of each stance foot
-        a = np.concatenate([(jt[i].T @ self._edges.T)[self._free_dofs] for i in range(len(jac))],
-                           axis=1)
+        a = np.concatenate(
+            [(jt[i].T @ self._edges.T)[self._free_dofs] for i in range(len(jac))], axis=1
+        )
         reg = np.sqrt(_FORCE_REG) * max(float(np.abs(a).max()), 1e-9)
         from scipy.optimize import nnls  # (scipy.optimize takes 0.1 s to import)
 
-        lam, _ = nnls(np.vstack([a, reg * np.eye(a.shape[1])]),
-                      np.concatenate([b, np.zeros(a.shape[1])]), maxiter=50 * a.shape[1])
+        lam, _ = nnls(
+            np.vstack([a, reg * np.eye(a.shape[1])]),
+            np.concatenate([b, np.zeros(a.shape[1])]),
+            maxiter=50 * a.shape[1],
+        )
         lam = lam.reshape(len(jac), _CONE_EDGES)
         forces = lam @ self._edges  # (S, 3)
         self.foot_forces[np.flatnonzero(stance)] = forces
@@ -205,7 +217,8 @@ class InverseDynamicsFeedforward:
         c = np.asarray(ref.contacts, dtype=bool).reshape(-1)
         if c.size != n:
             raise ControllerError(
-                f"reference has {c.size} contact flags, the feed-forward {n} feet")
+                f"reference has {c.size} contact flags, the feed-forward {n} feet"
+            )
         return c
 
     def __call__(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:

@@ -83,8 +83,13 @@ def joint_space_inertia(model: mujoco.MjModel, qpos: np.ndarray | None = None) -
     return mass
 
 
-def effective_inertia(model: mujoco.MjModel, joints: Sequence[str] | None = None, *,
-                      method: str = "fullM", qpos: np.ndarray | None = None) -> np.ndarray:
+def effective_inertia(
+    model: mujoco.MjModel,
+    joints: Sequence[str] | None = None,
+    *,
+    method: str = "fullM",
+    qpos: np.ndarray | None = None,
+) -> np.ndarray:
     """(n,) effective inertia [kg·m²] (hinges) or mass [kg] (slides) of each joint.
 
     Args:
@@ -109,8 +114,9 @@ def free_body(model: mujoco.MjModel) -> int:
     return -1
 
 
-def find_feet(model: mujoco.MjModel, qpos: np.ndarray | None = None, *,
-              tolerance: float | None = None) -> list[str]:
+def find_feet(
+    model: mujoco.MjModel, qpos: np.ndarray | None = None, *, tolerance: float | None = None
+) -> list[str]:
     """Names of the geoms touching the world's geoms (the ground) at ``qpos``
     (default: home), as ``"#<id>"`` for unnamed geoms.
 
@@ -144,8 +150,11 @@ def _resolve_points(model: mujoco.MjModel, names: Sequence[str]) -> list[tuple[s
         if n.startswith("#") and n[1:].isdigit() and int(n[1:]) < model.ngeom:
             out.append(("geom", int(n[1:])))
             continue
-        for kind, obj in (("site", mujoco.mjtObj.mjOBJ_SITE), ("geom", mujoco.mjtObj.mjOBJ_GEOM),
-                          ("body", mujoco.mjtObj.mjOBJ_BODY)):
+        for kind, obj in (
+            ("site", mujoco.mjtObj.mjOBJ_SITE),
+            ("geom", mujoco.mjtObj.mjOBJ_GEOM),
+            ("body", mujoco.mjtObj.mjOBJ_BODY),
+        ):
             i = mujoco.mj_name2id(model, obj, n)
             if i >= 0:
                 out.append((kind, i))
@@ -184,11 +193,18 @@ def _is_ancestor(model: mujoco.MjModel, anc: int, body: int) -> bool:
     return anc == 0
 
 
-def stiffness_rule(model: mujoco.MjModel, joints: Sequence[str] | None = None, *,
-                   mode: str = "gravity", deflection: float | None = None,
-                   feet: Sequence[str] | None = None, n_support: float = 2.0,
-                   frequency_hz: float = 8.0, method: str = "fullM",
-                   qpos: np.ndarray | None = None) -> np.ndarray:
+def stiffness_rule(
+    model: mujoco.MjModel,
+    joints: Sequence[str] | None = None,
+    *,
+    mode: str = "gravity",
+    deflection: float | None = None,
+    feet: Sequence[str] | None = None,
+    n_support: float = 2.0,
+    frequency_hz: float = 8.0,
+    method: str = "fullM",
+    qpos: np.ndarray | None = None,
+) -> np.ndarray:
     """(n,) joint stiffness kp [N·m/rad] from a physical rule (see the module docstring).
 
     Args:
@@ -223,7 +239,8 @@ def stiffness_rule(model: mujoco.MjModel, joints: Sequence[str] | None = None, *
         if not np.all(np.isfinite(tmax)):
             bad = [n for n, t in zip(jmap.names, tmax, strict=True) if not np.isfinite(t)]
             raise ControllerError(
-                f"torque rule needs limited actuators; unlimited: {', '.join(bad)}")
+                f"torque rule needs limited actuators; unlimited: {', '.join(bad)}"
+            )
         return tmax / defl
     if not n_support > 0:
         raise ControllerError(f"n_support must be > 0, got {n_support}")
@@ -248,9 +265,15 @@ def stiffness_rule(model: mujoco.MjModel, joints: Sequence[str] | None = None, *
     return load / defl
 
 
-def critical_damping(model: mujoco.MjModel, kp: float | np.ndarray,
-                     joints: Sequence[str] | None = None, ratio: float = 1.0, *,
-                     method: str = "fullM", qpos: np.ndarray | None = None) -> np.ndarray:
+def critical_damping(
+    model: mujoco.MjModel,
+    kp: float | np.ndarray,
+    joints: Sequence[str] | None = None,
+    ratio: float = 1.0,
+    *,
+    method: str = "fullM",
+    qpos: np.ndarray | None = None,
+) -> np.ndarray:
     """(n,) damping kd = 2 · ratio · sqrt(kp · M_ii) [N·m·s/rad].
 
     Args:
@@ -271,9 +294,14 @@ def critical_damping(model: mujoco.MjModel, kp: float | np.ndarray,
     return 2.0 * ratio * np.sqrt(kp_a * inertia)
 
 
-def max_stable_gains(model: mujoco.MjModel, dt: float | None = None,
-                     joints: Sequence[str] | None = None, *, margin: float = 0.5,
-                     method: str = "invweight0") -> tuple[np.ndarray, np.ndarray]:
+def max_stable_gains(
+    model: mujoco.MjModel,
+    dt: float | None = None,
+    joints: Sequence[str] | None = None,
+    *,
+    margin: float = 0.5,
+    method: str = "invweight0",
+) -> tuple[np.ndarray, np.ndarray]:
     """(kp_max, kd_max) per joint for an EXPLICIT PD law updated every ``dt``.
 
     A joint of inertia ``m`` under ``τ = −kp·e − kd·ė`` with the torque held over a step
@@ -295,8 +323,13 @@ def max_stable_gains(model: mujoco.MjModel, dt: float | None = None,
     return margin * 4.0 * inertia / step**2, margin * 2.0 * inertia / step
 
 
-def max_stable_kd(model: mujoco.MjModel, dt: float | None = None,
-                  joints: Sequence[str] | None = None, *, margin: float = 0.5) -> np.ndarray:
+def max_stable_kd(
+    model: mujoco.MjModel,
+    dt: float | None = None,
+    joints: Sequence[str] | None = None,
+    *,
+    margin: float = 0.5,
+) -> np.ndarray:
     """(n,) largest damping [N·m·s/rad] an explicit PD law tolerates (see
     :func:`max_stable_gains`)."""
     return max_stable_gains(model, dt, joints, margin=margin)[1]

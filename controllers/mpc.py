@@ -121,18 +121,29 @@ class MPCWeights:
         """(Q (13,), R) in SI units."""
         length, g = leg_length, gravity
         wo = length / g
-        q = np.array([
-            self.roll, self.pitch, self.yaw,
-            self.pos_xy / length**2, self.pos_xy / length**2, self.pos_z / length**2,
-            self.omega_xy * wo, self.omega_xy * wo, self.omega_z * wo,
-            self.vel_xy / (g * length), self.vel_xy / (g * length), self.vel_z / (g * length),
-            0.0,
-        ])
+        q = np.array(
+            [
+                self.roll,
+                self.pitch,
+                self.yaw,
+                self.pos_xy / length**2,
+                self.pos_xy / length**2,
+                self.pos_z / length**2,
+                self.omega_xy * wo,
+                self.omega_xy * wo,
+                self.omega_z * wo,
+                self.vel_xy / (g * length),
+                self.vel_xy / (g * length),
+                self.vel_z / (g * length),
+                0.0,
+            ]
+        )
         return q, self.force / (mass * g) ** 2
 
 
-def srb_matrices(yaw: float, inertia_inv: np.ndarray, r: np.ndarray, mass: float,
-                 dt: float) -> tuple[np.ndarray, np.ndarray]:
+def srb_matrices(
+    yaw: float, inertia_inv: np.ndarray, r: np.ndarray, mass: float, dt: float
+) -> tuple[np.ndarray, np.ndarray]:
     """(A_d (13, 13), B_d (13, 3k)) of the exact discretisation (see module docstring).
 
     Args:
@@ -150,8 +161,8 @@ def srb_matrices(yaw: float, inertia_inv: np.ndarray, r: np.ndarray, mass: float
     b = np.zeros((NX, 3 * k))
     for i, ri in enumerate(np.asarray(r).reshape(-1, 3)):
         skew = np.array([[0.0, -ri[2], ri[1]], [ri[2], 0.0, -ri[0]], [-ri[1], ri[0], 0.0]])
-        b[6:9, 3 * i:3 * i + 3] = iw @ skew
-        b[9:12, 3 * i:3 * i + 3] = np.eye(3) / mass
+        b[6:9, 3 * i : 3 * i + 3] = iw @ skew
+        b[9:12, 3 * i : 3 * i + 3] = np.eye(3) / mass
     ad = np.eye(NX) + a * dt + a @ a * (dt * dt / 2.0)
     bd = b * dt + a @ b * (dt * dt / 2.0)
     return ad, bd
@@ -191,12 +202,19 @@ class ConvexMPC:
         times: solve times [s] of the last up to 4096 solves (ring buffer); calls; failures.
     """
 
-    def __init__(self, horizon: int, n_feet: int = 4, solver: str = "osqp",
-                 tolerance: float = 1e-4, solver_options: dict | None = None) -> None:
+    def __init__(
+        self,
+        horizon: int,
+        n_feet: int = 4,
+        solver: str = "osqp",
+        tolerance: float = 1e-4,
+        solver_options: dict | None = None,
+    ) -> None:
         if solver not in MPC_SOLVERS or not casadi.has_conic(solver):
             avail = [s for s in MPC_SOLVERS if casadi.has_conic(s)]
-            raise ControllerError(f"MPC solver {solver!r} is not available; available: "
-                                  f"{', '.join(avail)}")
+            raise ControllerError(
+                f"MPC solver {solver!r} is not available; available: {', '.join(avail)}"
+            )
         if horizon < 1 or n_feet < 1:
             raise ControllerError("the MPC needs horizon >= 1 and n_feet >= 1")
         self.n, self.nf, self.solver = int(horizon), int(n_feet), solver
@@ -214,7 +232,7 @@ class ConvexMPC:
         step = NX + 4 * self.nf  # constraint rows per step: dynamics, friction
         lbg = np.zeros(self.n * step)
         for k in range(self.n):
-            lbg[k * step + NX:(k + 1) * step] = -np.inf
+            lbg[k * step + NX : (k + 1) * step] = -np.inf
         self._in[4][:] = lbg  # dynamics rows: = 0; friction rows: ≤ 0
         self._in[5][:] = 0.0
         self._warm = False
@@ -241,15 +259,16 @@ class ConvexMPC:
             u = fs * us
             xn = casadi.SX.sym(f"x{k + 1}", NX)
             c, s = casadi.cos(yaw[k]), casadi.sin(yaw[k])
-            rz = casadi.vertcat(casadi.horzcat(c, -s, 0), casadi.horzcat(s, c, 0),
-                                casadi.horzcat(0, 0, 1))
+            rz = casadi.vertcat(
+                casadi.horzcat(c, -s, 0), casadi.horzcat(s, c, 0), casadi.horzcat(0, 0, 1)
+            )
             iw = rz @ iinv @ rz.T
             force = casadi.SX.zeros(3)
             torque = casadi.SX.zeros(3)
             for i in range(nf):
-                fi = u[3 * i:3 * i + 3]
+                fi = u[3 * i : 3 * i + 3]
                 force += fi
-                torque += casadi.cross(r[3 * i:3 * i + 3, k], fi)
+                torque += casadi.cross(r[3 * i : 3 * i + 3, k], fi)
             wd = iw @ torque
             vd = force / mass - casadi.vertcat(0, 0, xk[12])
             nxt = casadi.vertcat(
@@ -261,34 +280,63 @@ class ConvexMPC:
             )
             g.append(xn - nxt)
             for i in range(nf):
-                fi = us[3 * i:3 * i + 3]
-                g.append(casadi.vertcat(fi[0] - mu * fi[2], -fi[0] - mu * fi[2],
-                                        fi[1] - mu * fi[2], -fi[1] - mu * fi[2]))
+                fi = us[3 * i : 3 * i + 3]
+                g.append(
+                    casadi.vertcat(
+                        fi[0] - mu * fi[2],
+                        -fi[0] - mu * fi[2],
+                        fi[1] - mu * fi[2],
+                        -fi[1] - mu * fi[2],
+                    )
+                )
             e = xn - xref[:, k]
             cost += casadi.sum1(q * e * e) + rw * casadi.sumsqr(u)
             z += [us, xn]
             xk = xn
-        p = casadi.vertcat(x0, casadi.vec(xref), casadi.vec(r), yaw, casadi.vec(iinv),
-                           mass, dt, mu, rw, q)
+        p = casadi.vertcat(
+            x0, casadi.vec(xref), casadi.vec(r), yaw, casadi.vec(iinv), mass, dt, mu, rw, q
+        )
         opts: dict = {"error_on_fail": False}
         if self.solver == "osqp":
-            opts["osqp"] = {"verbose": False, "eps_abs": tolerance, "eps_rel": tolerance,
-                            "polish": False, "max_iter": 4000, **extra}
+            opts["osqp"] = {
+                "verbose": False,
+                "eps_abs": tolerance,
+                "eps_rel": tolerance,
+                "polish": False,
+                "max_iter": 4000,
+                **extra,
+            }
         else:
             opts["proxqp"] = {"eps_abs": tolerance, **extra}
-        fn = casadi.qpsol(f"srb_mpc_{n}_{nf}", self.solver,
-                          {"x": casadi.vertcat(*z), "p": p, "f": cost, "g": casadi.vertcat(*g)},
-                          opts)
+        fn = casadi.qpsol(
+            f"srb_mpc_{n}_{nf}",
+            self.solver,
+            {"x": casadi.vertcat(*z), "p": p, "f": cost, "g": casadi.vertcat(*g)},
+            opts,
+        )
         layout = {"x0": 0, "xref": NX, "r": NX + NX * n, "yaw": NX + NX * n + nu * n}
         layout["iinv"] = layout["yaw"] + n
         layout["scal"] = layout["iinv"] + 9
         layout["q"] = layout["scal"] + 4
         return fn, layout
 
-    def solve(self, x0: np.ndarray, xref: np.ndarray, r: np.ndarray, yaw: np.ndarray,
-              inertia: np.ndarray, contacts: np.ndarray, *, mass: float, dt: float,
-              mu: float, fz_max: float, q: np.ndarray, rw: float,
-              t: float = 0.0) -> MPCSolution:
+    def solve(
+        self,
+        x0: np.ndarray,
+        xref: np.ndarray,
+        r: np.ndarray,
+        yaw: np.ndarray,
+        inertia: np.ndarray,
+        contacts: np.ndarray,
+        *,
+        mass: float,
+        dt: float,
+        mu: float,
+        fz_max: float,
+        q: np.ndarray,
+        rw: float,
+        t: float = 0.0,
+    ) -> MPCSolution:
         """Solve for one horizon.
 
         Args:
@@ -310,13 +358,13 @@ class ConvexMPC:
         xr = np.array(xref, dtype=float).reshape(n, NX).copy()
         xr[:, 3:6] -= origin
         fscale = mass * float(x0[12])
-        p[lay["x0"]:lay["x0"] + NX] = x0r
-        p[lay["xref"]:lay["r"]] = xr.ravel()
-        p[lay["r"]:lay["yaw"]] = np.asarray(r, dtype=float).reshape(n, nu).ravel()
-        p[lay["yaw"]:lay["iinv"]] = yaw
-        p[lay["iinv"]:lay["scal"]] = np.linalg.inv(inertia).T.ravel()  # column-major
-        p[lay["scal"]:lay["q"]] = (mass, dt, mu, rw)
-        p[lay["q"]:] = q
+        p[lay["x0"] : lay["x0"] + NX] = x0r
+        p[lay["xref"] : lay["r"]] = xr.ravel()
+        p[lay["r"] : lay["yaw"]] = np.asarray(r, dtype=float).reshape(n, nu).ravel()
+        p[lay["yaw"] : lay["iinv"]] = yaw
+        p[lay["iinv"] : lay["scal"]] = np.linalg.inv(inertia).T.ravel()  # column-major
+        p[lay["scal"] : lay["q"]] = (mass, dt, mu, rw)
+        p[lay["q"] :] = q
         st = np.asarray(contacts, dtype=bool).reshape(n, nf)
         fz_s = fz_max / fscale
         lo_u = np.where(st[:, :, None], np.array([-mu * fz_s, -mu * fz_s, 0.0]), 0.0).reshape(n, nu)
@@ -340,8 +388,10 @@ class ConvexMPC:
         raw = sol[:, :nu].reshape(n, nf, 3)
         # the solver meets the constraints to its tolerance: project onto them exactly
         fz = np.clip(raw[..., 2], 0.0, fz_s)
-        forces = np.stack([np.clip(raw[..., 0], -mu * fz, mu * fz),
-                           np.clip(raw[..., 1], -mu * fz, mu * fz), fz], axis=-1)
+        forces = np.stack(
+            [np.clip(raw[..., 0], -mu * fz, mu * fz), np.clip(raw[..., 1], -mu * fz, mu * fz), fz],
+            axis=-1,
+        )
         forces = np.where(st[:, :, None], forces, 0.0)
         ok = ok and float(np.max(np.abs(forces - raw), initial=0.0)) <= 50.0 * self.tolerance
         forces = forces * fscale
@@ -365,8 +415,16 @@ class ConvexMPC:
         return float(np.median(self.times[:k]) * 1e3) if k else float("nan")
 
     @staticmethod
-    def predict(x0: np.ndarray, forces: np.ndarray, r: np.ndarray, yaw: np.ndarray,
-                inertia: np.ndarray, *, mass: float, dt: float) -> np.ndarray:
+    def predict(
+        x0: np.ndarray,
+        forces: np.ndarray,
+        r: np.ndarray,
+        yaw: np.ndarray,
+        inertia: np.ndarray,
+        *,
+        mass: float,
+        dt: float,
+    ) -> np.ndarray:
         """(N, 13) states of the discrete model under ``forces`` (N, nf, 3) (numpy
         roll-out of the same equations the QP uses)."""
         iinv = np.linalg.inv(inertia)
@@ -421,13 +479,24 @@ class MPCController(BalanceController):
     #: walk oscillated at half the MPC rate until it fell).
     centroidal_rate = True
 
-    def __init__(self, model: mujoco.MjModel, feet: Sequence[str] | None = None, *,
-                 rate_hz: float = 30.0, horizon_s: float | None = None, max_steps: int = 24,
-                 mpc_solver: str = "osqp", weights: MPCWeights | None = None,
-                 feedback_scale: float = 1.0, mpc_tolerance: float = 1e-3,
-                 mpc_options: dict | None = None, resolve_on_contact: bool = True,
-                 integral_rate: float = 3.0, integral_max: float = 0.3,
-                 **kwargs) -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        feet: Sequence[str] | None = None,
+        *,
+        rate_hz: float = 30.0,
+        horizon_s: float | None = None,
+        max_steps: int = 24,
+        mpc_solver: str = "osqp",
+        weights: MPCWeights | None = None,
+        feedback_scale: float = 1.0,
+        mpc_tolerance: float = 1e-3,
+        mpc_options: dict | None = None,
+        resolve_on_contact: bool = True,
+        integral_rate: float = 3.0,
+        integral_max: float = 0.3,
+        **kwargs,
+    ) -> None:
         super().__init__(model, feet, **kwargs)
         if not (np.isfinite(rate_hz) and rate_hz > 0):
             raise ControllerError(f"rate_hz must be > 0, got {rate_hz}")
@@ -450,10 +519,16 @@ class MPCController(BalanceController):
         self._next = 0.0
         self._solved_stance: np.ndarray | None = None
         self.resolve_on_contact = bool(resolve_on_contact)
-        if not (np.isfinite(integral_rate) and integral_rate >= 0
-                and np.isfinite(integral_max) and integral_max >= 0):
-            raise ControllerError(f"integral_rate and integral_max must be finite and >= 0, "
-                                  f"got {integral_rate}, {integral_max}")
+        if not (
+            np.isfinite(integral_rate)
+            and integral_rate >= 0
+            and np.isfinite(integral_max)
+            and integral_max >= 0
+        ):
+            raise ControllerError(
+                f"integral_rate and integral_max must be finite and >= 0, "
+                f"got {integral_rate}, {integral_max}"
+            )
         self.integral_rate = float(integral_rate)
         self.integral_max = float(integral_max)
         self.integral = np.zeros(2)
@@ -463,8 +538,11 @@ class MPCController(BalanceController):
 
     def _setup_horizon(self) -> None:
         stride = self.plan.stride_s if self.plan is not None else float("nan")
-        span = self.horizon_s if self.horizon_s is not None else (
-            stride if np.isfinite(stride) else 0.5)
+        span = (
+            self.horizon_s
+            if self.horizon_s is not None
+            else (stride if np.isfinite(stride) else 0.5)
+        )
         span = max(float(span), 0.3)
         dt = 1.0 / self.rate_hz
         steps = int(math.ceil(span / dt - 1e-9))
@@ -480,8 +558,9 @@ class MPCController(BalanceController):
     @property
     def mpc(self) -> ConvexMPC:
         if self.steps not in self._mpcs:
-            self._mpcs[self.steps] = ConvexMPC(self.steps, self.legs.n_feet, self.mpc_solver,
-                                               self.mpc_tolerance, self.mpc_options)
+            self._mpcs[self.steps] = ConvexMPC(
+                self.steps, self.legs.n_feet, self.mpc_solver, self.mpc_tolerance, self.mpc_options
+            )
         return self._mpcs[self.steps]
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
@@ -494,8 +573,15 @@ class MPCController(BalanceController):
         self._t_int = None
 
     # ------------------------------------------------------------------ MPC problem
-    def _horizon(self, smp: PlanSample, hold: bool, com: np.ndarray, rpy_now: np.ndarray,
-                 p: np.ndarray, delta: np.ndarray):
+    def _horizon(
+        self,
+        smp: PlanSample,
+        hold: bool,
+        com: np.ndarray,
+        rpy_now: np.ndarray,
+        p: np.ndarray,
+        delta: np.ndarray,
+    ):
         """(times, xref, r, yaw, contacts) of the horizon starting at ``smp.t``."""
         n = self.steps
         dt = self.dt_mpc
@@ -513,7 +599,8 @@ class MPCController(BalanceController):
             xs[:, 9:12] = smp.com_vel
             sched = np.tile(smp.contacts, (n, 1))
             feet_ref = np.tile(smp.feet, (n, 1, 1)) + np.einsum(
-                "k,ij->kij", tk[:n] - smp.t, np.where(smp.contacts[:, None], 0.0, smp.feet_vel))
+                "k,ij->kij", tk[:n] - smp.t, np.where(smp.contacts[:, None], 0.0, smp.feet_vel)
+            )
         xs[:, 12] = g
         xs[:, 3:5] += self.integral  # integral action (see _integrate)
         modes = self.last_modes
@@ -537,9 +624,19 @@ class MPCController(BalanceController):
         yaw = xs[:n, 2].copy()
         return tk, xs, r, yaw, contacts
 
-    def _solve(self, model: mujoco.MjModel, data: mujoco.MjData, smp: PlanSample, hold: bool,
-               com: np.ndarray, com_vel: np.ndarray, rot: np.ndarray, omega: np.ndarray,
-               p: np.ndarray, delta: np.ndarray) -> None:
+    def _solve(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        smp: PlanSample,
+        hold: bool,
+        com: np.ndarray,
+        com_vel: np.ndarray,
+        rot: np.ndarray,
+        omega: np.ndarray,
+        p: np.ndarray,
+        delta: np.ndarray,
+    ) -> None:
         rpy = rpy_from_matrix(rot)
         rpy[2] = _unwrap_to(float(rpy[2]), float(smp.rpy[2]))
         tk, xs, r, yaw, contacts = self._horizon(smp, hold, com, rpy, p, delta)
@@ -550,28 +647,58 @@ class MPCController(BalanceController):
         cfg = self.config
         self._mpc_inputs = (x0, r, yaw, inertia_yaw)
         self._solved_stance = contacts[0].copy()
-        self.solution = self.mpc.solve(x0, xs[1:], r, yaw, inertia_yaw, contacts, mass=cfg.mass,
-                                       dt=self.dt_mpc, mu=cfg.mu, fz_max=cfg.fz_max, q=self.q,
-                                       rw=self.rw, t=smp.t)
+        self.solution = self.mpc.solve(
+            x0,
+            xs[1:],
+            r,
+            yaw,
+            inertia_yaw,
+            contacts,
+            mass=cfg.mass,
+            dt=self.dt_mpc,
+            mu=cfg.mu,
+            fz_max=cfg.fz_max,
+            q=self.q,
+            rw=self.rw,
+            t=smp.t,
+        )
         if not self.solution.ok:
             self.stats.note(f"MPC solve failed at t={smp.t:.3f}s; using the stance QP alone")
 
-    def _wanted(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference,
-                smp: PlanSample, com: np.ndarray, com_vel: np.ndarray, rot: np.ndarray,
-                omega: np.ndarray, r: np.ndarray,
-                stance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _wanted(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        ref: Reference,
+        smp: PlanSample,
+        com: np.ndarray,
+        com_vel: np.ndarray,
+        rot: np.ndarray,
+        omega: np.ndarray,
+        r: np.ndarray,
+        stance: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
         hold = ref.time == 0.0 and not np.any(ref.qvel)
         t = smp.t
         # a touch-down or lift-off between solves makes the first step's forces wrong
         # (planned for the old stance set): solve again at once
-        contact_event = (self.resolve_on_contact and self._solved_stance is not None
-                         and bool((stance != self._solved_stance).any()))
-        if (t >= self._next or self.solution is None or hold and self.solution.time != t
-                or contact_event):
+        contact_event = (
+            self.resolve_on_contact
+            and self._solved_stance is not None
+            and bool((stance != self._solved_stance).any())
+        )
+        if (
+            t >= self._next
+            or self.solution is None
+            or hold
+            and self.solution.time != t
+            or contact_event
+        ):
             p = r + com
             height = max(float(com[2] - np.min(p[:, 2])), 1e-3)
-            delta = self.swing.correction(com, com_vel, smp.com, smp.com_vel, height,
-                                          self.config.gravity, float(smp.rpy[2]))
+            delta = self.swing.correction(
+                com, com_vel, smp.com, smp.com_vel, height, self.config.gravity, float(smp.rpy[2])
+            )
             self._integrate(t, hold, com, smp.com, float(smp.rpy[2]))
             self._solve(model, data, smp, hold, com, com_vel, rot, omega, p, delta)
             self._next = (t if np.isfinite(self._next) else t) + 1.0 / self.rate_hz
@@ -587,12 +714,14 @@ class MPCController(BalanceController):
         acc = fb * (self.kp_pos * (x_pred[3:6] - com) + self.kd_pos * (x_pred[9:12] - com_vel))
         e_rot = self._rotation_error(matrix_from_rpy(x_pred[0:3]), rot)
         alpha = fb * (self.kp_rot * e_rot + self.kd_rot * (x_pred[6:9] - omega))
-        b = np.concatenate([f_mpc.sum(axis=0) + self.config.mass * acc,
-                            _moment(r, f_mpc) + self._inertia @ alpha])
+        b = np.concatenate(
+            [f_mpc.sum(axis=0) + self.config.mass * acc, _moment(r, f_mpc) + self._inertia @ alpha]
+        )
         return b, f_mpc
 
-    def _integrate(self, t: float, hold: bool, com: np.ndarray, com_ref: np.ndarray,
-                   heading: float) -> None:
+    def _integrate(
+        self, t: float, hold: bool, com: np.ndarray, com_ref: np.ndarray, heading: float
+    ) -> None:
         """Integral action on the CoM's lag along the reference heading.
 
         The single rigid body does not see the losses of a fast gait (touch-down impacts,

@@ -39,11 +39,13 @@ __all__ = ["ServoTorque", "torque_model", "foot_geoms", "is_position_servo"]
 def is_position_servo(model: mujoco.MjModel, actuator: int) -> bool:
     """True for a fixed-gain actuator with an affine bias and no activation dynamics on a
     joint (MuJoCo's ``<position>``, or a ``<general>`` written the same way)."""
-    return (int(model.actuator_gaintype[actuator]) == int(mujoco.mjtGain.mjGAIN_FIXED)
-            and int(model.actuator_biastype[actuator]) == int(mujoco.mjtBias.mjBIAS_AFFINE)
-            and int(model.actuator_dyntype[actuator]) == int(mujoco.mjtDyn.mjDYN_NONE)
-            and int(model.actuator_trntype[actuator]) == int(mujoco.mjtTrn.mjTRN_JOINT)
-            and float(model.actuator_gainprm[actuator, 0]) != 0.0)
+    return (
+        int(model.actuator_gaintype[actuator]) == int(mujoco.mjtGain.mjGAIN_FIXED)
+        and int(model.actuator_biastype[actuator]) == int(mujoco.mjtBias.mjBIAS_AFFINE)
+        and int(model.actuator_dyntype[actuator]) == int(mujoco.mjtDyn.mjDYN_NONE)
+        and int(model.actuator_trntype[actuator]) == int(mujoco.mjtTrn.mjTRN_JOINT)
+        and float(model.actuator_gainprm[actuator, 0]) != 0.0
+    )
 
 
 class ServoTorque:
@@ -66,12 +68,16 @@ class ServoTorque:
     def __init__(self, model: mujoco.MjModel, jmap: JointActuatorMap) -> None:
         acts = jmap.actuator_ids
         biased = np.zeros(len(acts), bool) if jmap.biased is None else np.asarray(jmap.biased)
-        bad = [n for n, a, b in zip(jmap.names, acts, biased, strict=True)
-               if b and not is_position_servo(model, int(a))]
+        bad = [
+            n
+            for n, a, b in zip(jmap.names, acts, biased, strict=True)
+            if b and not is_position_servo(model, int(a))
+        ]
         if bad:
             raise ControllerError(
                 "the controller drives torque motors or position servos; these joints have "
-                f"other biased actuators: {', '.join(bad[:8])}")
+                f"other biased actuators: {', '.join(bad[:8])}"
+            )
         self.servo = biased.astype(bool)
         self.gear = model.actuator_gear[acts, 0].copy()
         self.kp = model.actuator_gainprm[acts, 0].copy()
@@ -114,8 +120,11 @@ def torque_model(model: mujoco.MjModel) -> mujoco.MjModel:
 
     out = _copy(model)
     weak = []
-    cadr = (np.asarray(model.actuator_ctrladr, dtype=int) if hasattr(model, "actuator_ctrladr")
-            else np.arange(model.nu))
+    cadr = (
+        np.asarray(model.actuator_ctrladr, dtype=int)
+        if hasattr(model, "actuator_ctrladr")
+        else np.arange(model.nu)
+    )
     for a in range(int(getattr(model, "nactuator", model.nu))):
         if not is_position_servo(model, a):
             continue
@@ -134,7 +143,8 @@ def torque_model(model: mujoco.MjModel) -> mujoco.MjModel:
     if weak:
         raise ControllerError(
             f"position servos without a force range cannot become torque motors: "
-            f"{', '.join(weak[:8])}; give them forcerange=…")
+            f"{', '.join(weak[:8])}; give them forcerange=…"
+        )
     for k in range(model.nkey):  # a keyframe's ctrl held servo targets: no torque
         out.key_ctrl[k, :] = 0.0
     return out
@@ -167,8 +177,10 @@ def foot_geoms(model: mujoco.MjModel, feet: Sequence[str]) -> np.ndarray:
         body = _point_body(model, kind, i)
         cand = np.flatnonzero((model.geom_bodyid == body) & colliding)
         if cand.size == 0:
-            raise ControllerError(f"foot {name!r} (body {model.body(body).name!r}) has no "
-                                  "colliding geom to touch the ground with")
+            raise ControllerError(
+                f"foot {name!r} (body {model.body(body).name!r}) has no "
+                "colliding geom to touch the ground with"
+            )
         if kind == "body":  # the body's lowest colliding geom at home touches down
             from habitsim.sim import _lowest_z
 

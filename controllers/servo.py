@@ -127,8 +127,13 @@ class ServoMap:
         """(n,) largest |torque| [N·m] each servo can give."""
         return np.maximum(np.abs(self.torque_lo), np.abs(self.torque_hi))
 
-    def predicted_torque(self, model: mujoco.MjModel, data: mujoco.MjData,
-                         ctrl: np.ndarray, vel_ctrl: np.ndarray | None = None) -> np.ndarray:
+    def predicted_torque(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        ctrl: np.ndarray,
+        vel_ctrl: np.ndarray | None = None,
+    ) -> np.ndarray:
         """(n,) joint torque the servos will give for position targets ``ctrl`` (n,) (and
         velocity targets ``vel_ctrl`` where a servo takes one) at the current state.
 
@@ -167,8 +172,10 @@ def _torque_limits(jmap: JointActuatorMap) -> tuple[np.ndarray, np.ndarray]:
 def _check_convertible(model: mujoco.MjModel, jmap: JointActuatorMap) -> None:
     bad = []
     for name, a in zip(jmap.names, jmap.actuator_ids, strict=True):
-        motor = (model.actuator_gaintype[a] == mujoco.mjtGain.mjGAIN_FIXED
-                 and model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_NONE)
+        motor = (
+            model.actuator_gaintype[a] == mujoco.mjtGain.mjGAIN_FIXED
+            and model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_NONE
+        )
         servo = model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE
         dyn_ok = (int(mujoco.mjtDyn.mjDYN_NONE), int(getattr(mujoco.mjtDyn, "mjDYN_PID", -1)))
         if not (motor or servo) or int(model.actuator_dyntype[a]) not in dyn_ok:
@@ -180,8 +187,15 @@ def _check_convertible(model: mujoco.MjModel, jmap: JointActuatorMap) -> None:
         )
 
 
-def _gains(model: mujoco.MjModel, jmap: JointActuatorMap, kp, dampratio: float,
-           inertia: str, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _gains(
+    model: mujoco.MjModel,
+    jmap: JointActuatorMap,
+    kp,
+    dampratio: float,
+    inertia: str,
+    lo: np.ndarray,
+    hi: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     n = len(jmap.names)
     if kp is None:
         limited = np.isfinite(lo) & np.isfinite(hi)
@@ -205,11 +219,17 @@ def _gains(model: mujoco.MjModel, jmap: JointActuatorMap, kp, dampratio: float,
     return kp_a, kv
 
 
-def configure_servos(model: mujoco.MjModel | mujoco.MjSpec, joints: Sequence[str] | None = None,
-                     *, kp: float | np.ndarray | None = None, dampratio: float = 1.0,
-                     kind: str = "position", ki: float | np.ndarray = 0.0,
-                     imax: float | np.ndarray | None = None,
-                     inertia: str = "fullM") -> mujoco.MjModel:
+def configure_servos(
+    model: mujoco.MjModel | mujoco.MjSpec,
+    joints: Sequence[str] | None = None,
+    *,
+    kp: float | np.ndarray | None = None,
+    dampratio: float = 1.0,
+    kind: str = "position",
+    ki: float | np.ndarray = 0.0,
+    imax: float | np.ndarray | None = None,
+    inertia: str = "fullM",
+) -> mujoco.MjModel:
     """A copy of ``model`` whose joint motors are in-engine PD servos.
 
     Each chosen actuator becomes ``force = kp·(ctrl − q) − kv·q̇`` (``kind="position"``:
@@ -261,8 +281,9 @@ def configure_servos(model: mujoco.MjModel | mujoco.MjSpec, joints: Sequence[str
             f"which mujoco {mujoco.__version__} does not expose; use kind='position'"
         )
     if isinstance(model, mujoco.MjSpec):
-        return _configure_spec(model, joints, kp=kp, dampratio=dampratio, kind=kind, ki=ki,
-                               imax=imax, inertia=inertia)
+        return _configure_spec(
+            model, joints, kp=kp, dampratio=dampratio, kind=kind, ki=ki, imax=imax, inertia=inertia
+        )
     if kind == "pid":
         raise ControllerError(
             "kind='pid' adds an integral (activation) state to each actuator, which cannot "
@@ -311,8 +332,9 @@ def _copy(model: mujoco.MjModel) -> mujoco.MjModel:
     return out
 
 
-def _configure_spec(spec: mujoco.MjSpec, joints, *, kp, dampratio, kind, ki, imax,
-                    inertia) -> mujoco.MjModel:
+def _configure_spec(
+    spec: mujoco.MjSpec, joints, *, kp, dampratio, kind, ki, imax, inertia
+) -> mujoco.MjModel:
     work = spec.copy()
     model = work.compile()
     jmap = actuated_joints(model, joints)
@@ -455,8 +477,15 @@ class ServoController(BaseController):
 
     name = "servo"
 
-    def __init__(self, model: mujoco.MjModel, joints: Sequence[str] | None = None,
-                 feedforward=None, *, assist=None, velocity_lead: bool = True) -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        joints: Sequence[str] | None = None,
+        feedforward=None,
+        *,
+        assist=None,
+        velocity_lead: bool = True,
+    ) -> None:
         super().__init__(assist=assist)
         self.map = servo_map(model, joints)
         self.velocity_lead = bool(velocity_lead)
@@ -485,8 +514,9 @@ class ServoController(BaseController):
     def _control(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:
         return self._control_with(model, data, ref, None)
 
-    def _control_with(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference,
-                      extra: np.ndarray | None) -> np.ndarray:
+    def _control_with(
+        self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference, extra: np.ndarray | None
+    ) -> np.ndarray:
         m = self.map
         u = np.array(data.ctrl, copy=True)
         target = m.position_targets(ref.qpos, ref.qvel if self.velocity_lead else None)
@@ -497,8 +527,11 @@ class ServoController(BaseController):
             ids = m.vel_ctrl_ids[m.has_vel_target]
             lim = model.actuator_ctrllimited[ids].astype(bool)
             vt = vel_target[m.has_vel_target]
-            vt = np.where(lim, np.clip(vt, model.actuator_ctrlrange[ids, 0],
-                                       model.actuator_ctrlrange[ids, 1]), vt)
+            vt = np.where(
+                lim,
+                np.clip(vt, model.actuator_ctrlrange[ids, 0], model.actuator_ctrlrange[ids, 1]),
+                vt,
+            )
             u[ids] = vt
             vel_target[m.has_vel_target] = vt
         if self.feedforward is None and extra is None:
@@ -519,7 +552,7 @@ class ServoController(BaseController):
         self._ff_sum += mean_abs
         self._ff_ticks += 1
         self.stats.extra["ff_mean_abs_Nm"] = self._ff_sum / self._ff_ticks
-        self.stats.extra["ff_max_abs_Nm"] = max(self.stats.extra.get("ff_max_abs_Nm", 0.0),
-                                                float(np.max(np.abs(clipped), initial=0.0)))
+        self.stats.extra["ff_max_abs_Nm"] = max(
+            self.stats.extra.get("ff_max_abs_Nm", 0.0), float(np.max(np.abs(clipped), initial=0.0))
+        )
         return u
-

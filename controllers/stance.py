@@ -85,12 +85,16 @@ class WrenchQP:
             opts["printLevel"] = "none"
         elif solver in ("osqp",):
             opts["osqp"] = {"verbose": False}
-        self._solver = casadi.conic(f"stance_qp_{n_feet}", solver,
-                                    {"h": casadi.Sparsity.dense(nx, nx),
-                                     "a": casadi.Sparsity.dense(nc, nx)}, opts)
+        self._solver = casadi.conic(
+            f"stance_qp_{n_feet}",
+            solver,
+            {"h": casadi.Sparsity.dense(nx, nx), "a": casadi.Sparsity.dense(nc, nx)},
+            opts,
+        )
 
-    def solve(self, h: np.ndarray, g: np.ndarray, a: np.ndarray, lba: np.ndarray,
-              uba: np.ndarray) -> tuple[np.ndarray | None, bool]:
+    def solve(
+        self, h: np.ndarray, g: np.ndarray, a: np.ndarray, lba: np.ndarray, uba: np.ndarray
+    ) -> tuple[np.ndarray | None, bool]:
         """(x, success) of ``min ½xᵀhx + gᵀx s.t. lba ≤ a x ≤ uba``."""
         try:
             sol = self._solver(h=h, g=g, a=a, lba=lba, uba=uba)
@@ -101,14 +105,22 @@ class WrenchQP:
         return (x if ok and np.all(np.isfinite(x)) else None), ok and bool(np.all(np.isfinite(x)))
 
 
-def _problem(points: np.ndarray, com: np.ndarray, wrench: np.ndarray, up: np.ndarray,
-             mu: float, fz_max: float, length: float, eps: float):
+def _problem(
+    points: np.ndarray,
+    com: np.ndarray,
+    wrench: np.ndarray,
+    up: np.ndarray,
+    mu: float,
+    fz_max: float,
+    length: float,
+    eps: float,
+):
     """Matrices of the distribution QP (see module docstring)."""
     k = len(points)
     amat = np.zeros((6, 3 * k))
     for i, p in enumerate(points):
-        amat[:3, 3 * i:3 * i + 3] = np.eye(3)
-        amat[3:, 3 * i:3 * i + 3] = _skew(p - com)
+        amat[:3, 3 * i : 3 * i + 3] = np.eye(3)
+        amat[3:, 3 * i : 3 * i + 3] = _skew(p - com)
     s = np.array([1.0, 1.0, 1.0, 1 / length, 1 / length, 1 / length])
     a_s, w_s = amat * s[:, None], wrench * s
     h = 2.0 * (a_s.T @ a_s + eps * np.eye(3 * k))
@@ -127,26 +139,36 @@ def _problem(points: np.ndarray, com: np.ndarray, wrench: np.ndarray, up: np.nda
     return amat, h, g, cons, lba, uba
 
 
-def _fallback(amat: np.ndarray, wrench: np.ndarray, up: np.ndarray, mu: float,
-              fz_max: float, eps: float) -> np.ndarray:
+def _fallback(
+    amat: np.ndarray, wrench: np.ndarray, up: np.ndarray, mu: float, fz_max: float, eps: float
+) -> np.ndarray:
     """Regularised least squares, then each force clipped into its friction pyramid."""
     k = amat.shape[1] // 3
     f = np.linalg.solve(amat.T @ amat + max(eps, 1e-9) * np.eye(3 * k), amat.T @ wrench)
     t1, t2 = _frame(up)
     out = np.zeros_like(f)
     for i in range(k):
-        fi = f[3 * i:3 * i + 3]
+        fi = f[3 * i : 3 * i + 3]
         fn = float(np.clip(fi @ up, 0.0, fz_max))
         ft1 = float(np.clip(fi @ t1, -mu * fn, mu * fn))
         ft2 = float(np.clip(fi @ t2, -mu * fn, mu * fn))
-        out[3 * i:3 * i + 3] = fn * up + ft1 * t1 + ft2 * t2
+        out[3 * i : 3 * i + 3] = fn * up + ft1 * t1 + ft2 * t2
     return out
 
 
-def distribute_wrench(points: np.ndarray, com: np.ndarray, wrench: np.ndarray, *,
-                      mu: float = 0.8, fz_max: float = np.inf, up: np.ndarray | None = None,
-                      length: float = 0.3, regularization: float = 1e-4,
-                      qp: WrenchQP | None = None, solver: str = "daqp") -> tuple[np.ndarray, bool]:
+def distribute_wrench(
+    points: np.ndarray,
+    com: np.ndarray,
+    wrench: np.ndarray,
+    *,
+    mu: float = 0.8,
+    fz_max: float = np.inf,
+    up: np.ndarray | None = None,
+    length: float = 0.3,
+    regularization: float = 1e-4,
+    qp: WrenchQP | None = None,
+    solver: str = "daqp",
+) -> tuple[np.ndarray, bool]:
     """Ground forces ``(k, 3)`` on ``k`` stance points giving ``wrench`` about ``com``.
 
     Args:
@@ -171,8 +193,9 @@ def distribute_wrench(points: np.ndarray, com: np.ndarray, wrench: np.ndarray, *
     n = np.array([0.0, 0.0, 1.0]) if up is None else np.asarray(up, dtype=float)
     n = n / np.linalg.norm(n)
     fmax = float(fz_max) if np.isfinite(fz_max) else 1e9
-    amat, h, g, cons, lba, uba = _problem(pts, np.asarray(com, float), np.asarray(wrench, float),
-                                          n, mu, fmax, length, regularization)
+    amat, h, g, cons, lba, uba = _problem(
+        pts, np.asarray(com, float), np.asarray(wrench, float), n, mu, fmax, length, regularization
+    )
     solver_qp = qp if qp is not None else WrenchQP(k, solver)
     x, ok = solver_qp.solve(h, g, cons, lba, uba)
     if x is None:
@@ -215,12 +238,24 @@ class TrunkStabilizer:
 
     name = "stance"
 
-    def __init__(self, model: mujoco.MjModel, feet: Sequence[str], trunk: str | None = None,
-                 joints: Sequence[str] | None = None, *, frequency_hz: float = 1.5,
-                 damping_ratio: float = 1.0, kp_pos: float | None = None,
-                 kd_pos: float | None = None, kp_rot: float | None = None,
-                 kd_rot: float | None = None, mu: float = 0.8, fz_max: float | None = None,
-                 regularization: float = 1e-4, solver: str = "daqp") -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        feet: Sequence[str],
+        trunk: str | None = None,
+        joints: Sequence[str] | None = None,
+        *,
+        frequency_hz: float = 1.5,
+        damping_ratio: float = 1.0,
+        kp_pos: float | None = None,
+        kd_pos: float | None = None,
+        kp_rot: float | None = None,
+        kd_rot: float | None = None,
+        mu: float = 0.8,
+        fz_max: float | None = None,
+        regularization: float = 1e-4,
+        solver: str = "daqp",
+    ) -> None:
         if not feet:
             raise ControllerError("TrunkStabilizer needs at least one foot name")
         self.points = _resolve_points(model, list(feet))
@@ -241,18 +276,28 @@ class TrunkStabilizer:
         if joints is None:
             all_j = actuated_joints(model)
             foot_bodies = [_point_body(model, k, i) for k, i in self.points]
-            joints = [n for n, j in zip(all_j.names, all_j.joint_ids, strict=True)
-                      if any(self._on_chain(model, int(model.jnt_bodyid[j]), fb)
-                             for fb in foot_bodies)]
+            joints = [
+                n
+                for n, j in zip(all_j.names, all_j.joint_ids, strict=True)
+                if any(self._on_chain(model, int(model.jnt_bodyid[j]), fb) for fb in foot_bodies)
+            ]
             if not joints:
                 raise ControllerError("no actuated joint lies between the trunk and the feet")
         self.map = actuated_joints(model, joints)
-        for name, val in (("mu", mu), ("frequency_hz", frequency_hz),
-                          ("damping_ratio", damping_ratio), ("regularization", regularization)):
+        for name, val in (
+            ("mu", mu),
+            ("frequency_hz", frequency_hz),
+            ("damping_ratio", damping_ratio),
+            ("regularization", regularization),
+        ):
             if not (np.isfinite(val) and val >= 0):
                 raise ControllerError(f"{name} must be finite and >= 0, got {val}")
-        for name, val in (("kp_pos", kp_pos), ("kd_pos", kd_pos), ("kp_rot", kp_rot),
-                          ("kd_rot", kd_rot)):
+        for name, val in (
+            ("kp_pos", kp_pos),
+            ("kd_pos", kd_pos),
+            ("kp_rot", kp_rot),
+            ("kd_rot", kd_rot),
+        ):
             if val is not None and not (np.isfinite(val) and val >= 0):
                 raise ControllerError(f"{name} must be finite and >= 0, got {val}")
         omega = 2 * np.pi * frequency_hz
@@ -322,12 +367,13 @@ class TrunkStabilizer:
         self.last_forces[:] = 0.0
         self.last_torque[:] = 0.0
 
-    def desired_wrench(self, model: mujoco.MjModel, data: mujoco.MjData,
-                       ref: Reference) -> np.ndarray:
+    def desired_wrench(
+        self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference
+    ) -> np.ndarray:
         """(6,) wanted [force N; torque N·m] about the CoM, world frame."""
         qa, da = self._qa, self._da
-        pos, quat = data.qpos[qa:qa + 3], data.qpos[qa + 3:qa + 7]
-        rpos, rquat = ref.qpos[qa:qa + 3], ref.qpos[qa + 3:qa + 7]
+        pos, quat = data.qpos[qa : qa + 3], data.qpos[qa + 3 : qa + 7]
+        rpos, rquat = ref.qpos[qa : qa + 3], ref.qpos[qa + 3 : qa + 7]
         rot = np.zeros(9)
         mujoco.mju_quat2Mat(rot, quat)
         rot = rot.reshape(3, 3)
@@ -335,15 +381,19 @@ class TrunkStabilizer:
         rquat_n = rquat / max(np.linalg.norm(rquat), 1e-12)
         mujoco.mju_quat2Mat(rrot, rquat_n)
         rrot = rrot.reshape(3, 3)
-        a_des = (ref.qacc[da:da + 3] + self.kp_pos * (rpos - pos)
-                 + self.kd_pos * (ref.qvel[da:da + 3] - data.qvel[da:da + 3]))
+        a_des = (
+            ref.qacc[da : da + 3]
+            + self.kp_pos * (rpos - pos)
+            + self.kd_pos * (ref.qvel[da : da + 3] - data.qvel[da : da + 3])
+        )
         err_local = np.zeros(3)
         mujoco.mju_subQuat(err_local, rquat_n, quat / max(np.linalg.norm(quat), 1e-12))
         err = rot @ err_local
-        omega = rot @ data.qvel[da + 3:da + 6]
-        omega_ref = rrot @ ref.qvel[da + 3:da + 6]
-        alpha = (rrot @ ref.qacc[da + 3:da + 6] + self.kp_rot * err
-                 + self.kd_rot * (omega_ref - omega))
+        omega = rot @ data.qvel[da + 3 : da + 6]
+        omega_ref = rrot @ ref.qvel[da + 3 : da + 6]
+        alpha = (
+            rrot @ ref.qacc[da + 3 : da + 6] + self.kp_rot * err + self.kd_rot * (omega_ref - omega)
+        )
         inertia = rot @ self._inertia_body @ rot.T
         return np.concatenate([self.mass * (a_des - self.gravity), inertia @ alpha])
 
@@ -359,8 +409,10 @@ class TrunkStabilizer:
         else:
             stance = np.asarray(ref.contacts, dtype=bool).reshape(-1)
             if stance.shape != (nf,):
-                raise ControllerError(f"ref.contacts has {stance.size} entries; the stabiliser has "
-                                      f"{nf} feet ({', '.join(self.feet)})")
+                raise ControllerError(
+                    f"ref.contacts has {stance.size} entries; the stabiliser has "
+                    f"{nf} feet ({', '.join(self.feet)})"
+                )
         wrench = self.desired_wrench(model, data, ref)
         self.last_wrench = wrench
         self.last_forces = np.zeros((nf, 3))
@@ -372,9 +424,17 @@ class TrunkStabilizer:
             k = idx.size
             if k not in self._qps:
                 self._qps[k] = WrenchQP(k, self.solver)
-            forces, ok = distribute_wrench(pts, com, wrench, mu=self.mu, fz_max=self.fz_max,
-                                           up=self.up, length=self.length,
-                                           regularization=self.regularization, qp=self._qps[k])
+            forces, ok = distribute_wrench(
+                pts,
+                com,
+                wrench,
+                mu=self.mu,
+                fz_max=self.fz_max,
+                up=self.up,
+                length=self.length,
+                regularization=self.regularization,
+                qp=self._qps[k],
+            )
             if not ok:
                 self.stats.failures += 1
                 self.stats.extra["qp_failures"] = self.stats.failures

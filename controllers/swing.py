@@ -66,10 +66,12 @@ SEEK = 2
 
 #: Foot names of the habitsim species models (order LF, RF, LH, RH).
 HABITSIM_FEET = ("lf_foot", "rf_foot", "lh_foot", "rh_foot")
-_ROBOT_FEET = (("FL_foot", "FR_foot", "RL_foot", "RR_foot"),
-               ("LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"),
-               ("fl_foot", "fr_foot", "rl_foot", "rr_foot"),
-               ("FL", "FR", "RL", "RR"))  # MuJoCo Menagerie's Unitree robots
+_ROBOT_FEET = (
+    ("FL_foot", "FR_foot", "RL_foot", "RR_foot"),
+    ("LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"),
+    ("fl_foot", "fr_foot", "rl_foot", "rr_foot"),
+    ("FL", "FR", "RL", "RR"),
+)  # MuJoCo Menagerie's Unitree robots
 
 
 def default_feet(model: mujoco.MjModel) -> tuple[str, ...]:
@@ -89,8 +91,10 @@ def default_feet(model: mujoco.MjModel) -> tuple[str, ...]:
 
 
 def _has_point(model: mujoco.MjModel, name: str) -> bool:
-    return any(mujoco.mj_name2id(model, o, name) >= 0 for o in
-               (mujoco.mjtObj.mjOBJ_SITE, mujoco.mjtObj.mjOBJ_GEOM, mujoco.mjtObj.mjOBJ_BODY))
+    return any(
+        mujoco.mj_name2id(model, o, name) >= 0
+        for o in (mujoco.mjtObj.mjOBJ_SITE, mujoco.mjtObj.mjOBJ_GEOM, mujoco.mjtObj.mjOBJ_BODY)
+    )
 
 
 def model_leg_length(model: mujoco.MjModel, feet: Sequence[str] | None = None) -> float:
@@ -129,11 +133,13 @@ def matrix_from_rpy(rpy: np.ndarray) -> np.ndarray:
     cr, sr = np.cos(rpy[0]), np.sin(rpy[0])
     cp, sp = np.cos(rpy[1]), np.sin(rpy[1])
     cy, sy = np.cos(rpy[2]), np.sin(rpy[2])
-    return np.array([
-        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-        [-sp, cp * sr, cp * cr],
-    ])
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
 
 
 # --------------------------------------------------------------------------- legs
@@ -201,8 +207,12 @@ class LegSet:
                 self.radius[i] = float(model.geom_size[oid, 0])
             # every colliding geom of the foot's body is "the foot" (a paw's toe capsule
             # or a plantigrade sole touches the ground as well as the foot sphere)
-            geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == self.bodies[i]
-                     and (model.geom_contype[g] or model.geom_conaffinity[g])]
+            geoms = [
+                g
+                for g in range(model.ngeom)
+                if model.geom_bodyid[g] == self.bodies[i]
+                and (model.geom_contype[g] or model.geom_conaffinity[g])
+            ]
             if kind == "geom":
                 geoms.append(oid)
             self.geom_lut[geoms] = i
@@ -211,7 +221,7 @@ class LegSet:
         self.own_idx = np.full((nf, width), n, dtype=int)  # n = a zero column
         for i in range(nf):
             k = np.flatnonzero(self.own[i])
-            self.own_idx[i, :k.size] = k
+            self.own_idx[i, : k.size] = k
         kinds = {k for k, _ in self.points}
         self._kind = kinds.pop() if len(kinds) == 1 else "mixed"
         self._ids = np.array([i for _, i in self.points], dtype=int)
@@ -238,8 +248,13 @@ class LegSet:
             return data.site_xpos[self._ids]
         return np.array([_point_pos_now(data, k, i) for k, i in self.points])
 
-    def jacobians(self, model: mujoco.MjModel, data: mujoco.MjData, points: np.ndarray,
-                  out: np.ndarray | None = None) -> np.ndarray:
+    def jacobians(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        points: np.ndarray,
+        out: np.ndarray | None = None,
+    ) -> np.ndarray:
         """(nf, 3, nv) translational Jacobians of the foot points (into ``out``)."""
         if out is None:
             out = np.empty((self.n_feet, 3, model.nv))
@@ -391,9 +406,19 @@ class MotionPlan:
         # every interpolated per-frame quantity packed in one (T, D) array, so a sample
         # is one interpolation (the controllers sample the plan at every tick)
         t = self.n_frames
-        pack = np.concatenate([self.com, self.com_vel, self.com_acc, self.rpy, self.omega,
-                               self.omega_dot, self.feet.reshape(t, -1),
-                               self.feet_vel.reshape(t, -1)], axis=1)
+        pack = np.concatenate(
+            [
+                self.com,
+                self.com_vel,
+                self.com_acc,
+                self.rpy,
+                self.omega,
+                self.omega_dot,
+                self.feet.reshape(t, -1),
+                self.feet_vel.reshape(t, -1),
+            ],
+            axis=1,
+        )
         object.__setattr__(self, "_pack", pack)
         nf = self.contacts.shape[1]
         swing = ~self.contacts
@@ -432,16 +457,26 @@ class MotionPlan:
         if swing.any():
             a_, b_ = t_lo[swing], t_td[swing]
             phase[swing] = np.clip((now - a_) / np.maximum(b_ - a_, 1e-6), 0.0, 1.0)
-        feet = v[18:18 + 3 * nf].reshape(nf, 3)
+        feet = v[18 : 18 + 3 * nf].reshape(nf, 3)
         foothold = np.where(swing[:, None], self._foothold[k, feet_idx], feet)
         if hold:
             v[3:9] = 0.0
             v[12:18] = 0.0
-            v[18 + 3 * nf:] = 0.0
+            v[18 + 3 * nf :] = 0.0
         return PlanSample(
-            t=now, com=v[0:3], com_vel=v[3:6], com_acc=v[6:9], rpy=v[9:12], omega=v[12:15],
-            omega_dot=v[15:18], feet=feet, feet_vel=v[18 + 3 * nf:].reshape(nf, 3),
-            contacts=contacts, phase=phase, t_liftoff=t_lo, t_touchdown=t_td,
+            t=now,
+            com=v[0:3],
+            com_vel=v[3:6],
+            com_acc=v[6:9],
+            rpy=v[9:12],
+            omega=v[12:15],
+            omega_dot=v[15:18],
+            feet=feet,
+            feet_vel=v[18 + 3 * nf :].reshape(nf, 3),
+            contacts=contacts,
+            phase=phase,
+            t_liftoff=t_lo,
+            t_touchdown=t_td,
             foothold=foothold,
         )
 
@@ -471,10 +506,18 @@ def _segments(contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     return liftoff, touchdown, float(np.mean(strides)) if strides else float("nan")
 
 
-def plan_from_qpos(model: mujoco.MjModel, qpos: np.ndarray, fps: float,
-                   contacts: np.ndarray | None = None, feet: Sequence[str] | None = None,
-                   *, legs: LegSet | None = None, leg_length: float | None = None,
-                   smooth_s: float = 0.08, smooth_fast_s: float = 0.05) -> MotionPlan:
+def plan_from_qpos(
+    model: mujoco.MjModel,
+    qpos: np.ndarray,
+    fps: float,
+    contacts: np.ndarray | None = None,
+    feet: Sequence[str] | None = None,
+    *,
+    legs: LegSet | None = None,
+    leg_length: float | None = None,
+    smooth_s: float = 0.08,
+    smooth_fast_s: float = 0.05,
+) -> MotionPlan:
     """Build a :class:`MotionPlan` from a reference qpos trajectory.
 
     Args:
@@ -535,9 +578,9 @@ def plan_from_qpos(model: mujoco.MjModel, qpos: np.ndarray, fps: float,
         # pad by point reflection (2·x0 − x_k) so a linear trend is kept at the ends
         pad = min(int(np.ceil(4 * sigma)), t - 1)
         head = 2.0 * x[0] - x[pad:0:-1]
-        tail = 2.0 * x[-1] - x[-2:-pad - 2:-1]
+        tail = 2.0 * x[-1] - x[-2 : -pad - 2 : -1]
         y = gaussian_filter1d(np.concatenate([head, x, tail]), sigma, axis=0, mode="nearest")
-        return y[pad:pad + t]
+        return y[pad : pad + t]
 
     def deriv(x: np.ndarray) -> np.ndarray:
         return np.gradient(x, dt, axis=0) if t > 1 else np.zeros_like(x)
@@ -569,9 +612,18 @@ def plan_from_qpos(model: mujoco.MjModel, qpos: np.ndarray, fps: float,
     com_vel = deriv(com)
     feet_vel = deriv(feet_pos)
     return MotionPlan(
-        fps=float(fps), com=com, com_vel=com_vel, com_acc=deriv(com_vel), rpy=rpy,
-        omega=omega, omega_dot=deriv(omega), feet=feet_pos, feet_vel=feet_vel,
-        contacts=cont.copy(), liftoff=liftoff, touchdown=touchdown,
+        fps=float(fps),
+        com=com,
+        com_vel=com_vel,
+        com_acc=deriv(com_vel),
+        rpy=rpy,
+        omega=omega,
+        omega_dot=deriv(omega),
+        feet=feet_pos,
+        feet_vel=feet_vel,
+        contacts=cont.copy(),
+        liftoff=liftoff,
+        touchdown=touchdown,
         stride_s=stride / fps if np.isfinite(stride) else float("nan"),
     )
 
@@ -611,8 +663,14 @@ class ContactTracker:
         self.last_touch = [-math.inf] * self.n
         self.events = {"early_touchdown": 0, "lost_contact": 0}
 
-    def update(self, t: float, scheduled: np.ndarray, touching: np.ndarray,
-               phase: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+    def update(
+        self,
+        t: float,
+        scheduled: np.ndarray,
+        touching: np.ndarray,
+        phase: np.ndarray,
+        near: np.ndarray | None = None,
+    ) -> np.ndarray:
         """(nf,) modes at time ``t`` [s] from the scheduled stance, actual touch and swing
         phase (NaN in stance or unknown); ``near`` (nf,) bool: the swing foot is close to
         its swing target, so a touch counts as an early touch-down (default: all)."""
@@ -632,8 +690,11 @@ class ContactTracker:
                         self.events["lost_contact"] += 1
             elif early[i]:
                 new[i] = STANCE
-            elif (touch and phase[i] >= self.early_phase  # NaN compares False
-                  and (near is None or near[i])):
+            elif (
+                touch
+                and phase[i] >= self.early_phase  # NaN compares False
+                and (near is None or near[i])
+            ):
                 early[i] = True
                 new[i] = STANCE
                 self.events["early_touchdown"] += 1
@@ -670,10 +731,18 @@ class SwingLegs:
         seek_speed: downward speed wanted of a SEEK foot [m/s].
     """
 
-    def __init__(self, legs: LegSet, kp: float | np.ndarray, kd: float | np.ndarray, *,
-                 capture_gain: float = 1.0, capture_pos_gain: float = 0.3,
-                 capture_max: float = 0.1, seek_depth: float = 0.02,
-                 seek_speed: float = 0.3) -> None:
+    def __init__(
+        self,
+        legs: LegSet,
+        kp: float | np.ndarray,
+        kd: float | np.ndarray,
+        *,
+        capture_gain: float = 1.0,
+        capture_pos_gain: float = 0.3,
+        capture_max: float = 0.1,
+        seek_depth: float = 0.02,
+        seek_speed: float = 0.3,
+    ) -> None:
         nf = legs.n_feet
         self.legs = legs
         self.kp = np.broadcast_to(np.asarray(kp, dtype=float), (nf,)).copy()
@@ -686,9 +755,16 @@ class SwingLegs:
         self.last_target = np.zeros((nf, 3))
         self.d_lo = np.zeros((nf, 3))
 
-    def correction(self, com: np.ndarray, com_vel: np.ndarray, com_ref: np.ndarray,
-                   com_vel_ref: np.ndarray, height: float, gravity: float,
-                   heading: float | None = None) -> np.ndarray:
+    def correction(
+        self,
+        com: np.ndarray,
+        com_vel: np.ndarray,
+        com_ref: np.ndarray,
+        com_vel_ref: np.ndarray,
+        height: float,
+        gravity: float,
+        heading: float | None = None,
+    ) -> np.ndarray:
         """(3,) horizontal foothold correction Δ [m]::
 
             Δ = e + clip(k_v·ė·sqrt(h/g) + k_p·e, capture_max),   e = c − c_ref
@@ -738,8 +814,9 @@ class SwingLegs:
         just lifted off."""
         self.d_lo[feet] = actual[feet] - reference[feet]
 
-    def targets(self, sample: PlanSample, modes: np.ndarray,
-                delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def targets(
+        self, sample: PlanSample, modes: np.ndarray, delta: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(p_des, v_des), each (nf, 3), for the SWING and SEEK feet (others: reference).
 
         Without swing timing (NaN phase: no plan) the swing foot follows its reference
@@ -771,7 +848,8 @@ class SwingLegs:
         self.last_target = p
         return p, v
 
-    def forces(self, p: np.ndarray, v: np.ndarray, p_des: np.ndarray,
-               v_des: np.ndarray) -> np.ndarray:
+    def forces(
+        self, p: np.ndarray, v: np.ndarray, p_des: np.ndarray, v_des: np.ndarray
+    ) -> np.ndarray:
         """(nf, 3) Cartesian PD forces [N] on the feet (applied by the leg)."""
         return self.kp[:, None] * (p_des - p) + self.kd[:, None] * (v_des - v)

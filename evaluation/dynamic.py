@@ -169,8 +169,9 @@ def inverse_dynamics(
                 forces[k, f] += b * e
         root_f[k], root_t[k] = tau[r0 : r0 + 3], tau[r0 + 3 : r0 + 6]
         joint_tau[k] = tau[amap.dof_adr]
-    return InverseDynamics(root_f, root_t, joint_tau, forces, amap.torque_limit,
-                           amap.names, mg, float(leg_length))
+    return InverseDynamics(
+        root_f, root_t, joint_tau, forces, amap.torque_limit, amap.names, mg, float(leg_length)
+    )
 
 
 def dynamic_metrics(
@@ -194,6 +195,5 @@ def dynamic_metrics(
     traj = motion_to_qpos(motion, model)
     if contacts is None:
         contacts = motion.contacts if motion.contacts is not None else motion.detect_contacts()
-    inv = inverse_dynamics(model, traj.qpos, motion.fps, contacts,
-                           motion.species_info.leg_length)
+    inv = inverse_dynamics(model, traj.qpos, motion.fps, contacts, motion.species_info.leg_length)
     return inv.metrics()

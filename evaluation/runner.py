@@ -331,8 +331,13 @@ class PairTask:
 # ---------------------------------------------------------------------------- planning
 
 
-def default_data(out: str | Path, *, workers: int | None = None, progress: bool = True,
-                 log: Callable[[str], None] | None = None) -> Path:
+def default_data(
+    out: str | Path,
+    *,
+    workers: int | None = None,
+    progress: bool = True,
+    log: Callable[[str], None] | None = None,
+) -> Path:
     """The synthetic data set of a run given no data: ``OUT/data``, every species,
     :data:`DEFAULT_DATA_CLIPS_PER_SPECIES` clips each, seed 0; built on the first run and
     reused after (a folder holding another configuration is rebuilt).
@@ -350,12 +355,19 @@ def default_data(out: str | Path, *, workers: int | None = None, progress: bool 
     except DatasetError:
         overwrite = True  # another configuration (or not a data set): rebuild it
     if log:
-        log(f"eval: no --data given: the default synthetic data set in {folder} "
-            f"({DEFAULT_DATA_CLIPS_PER_SPECIES} clips per species, seed 0)")
-    build_dataset(folder, clips_per_species=DEFAULT_DATA_CLIPS_PER_SPECIES, seed=0,
-                  workers=workers, progress=progress, overwrite=overwrite)
+        log(
+            f"eval: no --data given: the default synthetic data set in {folder} "
+            f"({DEFAULT_DATA_CLIPS_PER_SPECIES} clips per species, seed 0)"
+        )
+    build_dataset(
+        folder,
+        clips_per_species=DEFAULT_DATA_CLIPS_PER_SPECIES,
+        seed=0,
+        workers=workers,
+        progress=progress,
+        overwrite=overwrite,
+    )
     return folder
-
 
 
 def _manifest(cfg: EvalConfig):
@@ -908,8 +920,9 @@ def _fmt(v: Any) -> str:
     return f"{v:.3f}"
 
 
-def format_table(summary: dict[str, dict[str, Any]], markdown: bool = True,
-                 controller: str | None = None) -> str:
+def format_table(
+    summary: dict[str, dict[str, Any]], markdown: bool = True, controller: str | None = None
+) -> str:
     """The summary in the paper's Table 1 layout plus the physical columns (and, given the
     run's tracking ``controller``, a column naming it, so tables of runs with different
     controllers can be stacked)."""
@@ -1014,13 +1027,11 @@ class BenchmarkResult:
 
     @property
     def table_markdown(self) -> str:
-        return format_table(self.summary, markdown=True,
-                            controller=_controller_label(self.config))
+        return format_table(self.summary, markdown=True, controller=_controller_label(self.config))
 
     @property
     def table_text(self) -> str:
-        return format_table(self.summary, markdown=False,
-                            controller=_controller_label(self.config))
+        return format_table(self.summary, markdown=False, controller=_controller_label(self.config))
 
 
 def _check_out(cfg: EvalConfig, resume: bool, overwrite: bool) -> None:

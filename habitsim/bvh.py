@@ -529,9 +529,7 @@ def _parse_lines(lines: Iterator[str], source: str, strict: bool) -> BVHData:
     except ValueError:
         n_frames = None
     if n_frames is None:
-        raise BVHParseError(
-            f"{source}:{ln}: frame count {brief(m.group(1))} is not an integer"
-        )
+        raise BVHParseError(f"{source}:{ln}: frame count {brief(m.group(1))} is not an integer")
     if not 1 <= n_frames <= MAX_FRAMES:
         raise BVHParseError(
             f"{source}:{ln}: the file declares {n_frames} frames; valid: 1 to {MAX_FRAMES}"

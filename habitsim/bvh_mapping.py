@@ -336,8 +336,9 @@ class JointMapping:
             head.append(f"  frame: {self.frame.describe()}; root scale {self.root_scale:.4g}")
         body = ["  " + s for s in self.lines()]
         if self.confidence:
-            body.append("  leg confidence: " + ", ".join(
-                f"{k} {v:.2f}" for k, v in self.confidence.items()))
+            body.append(
+                "  leg confidence: " + ", ".join(f"{k} {v:.2f}" for k, v in self.confidence.items())
+            )
         tail = ["  note: " + n for n in self.notes]
         tail += ["  WARNING: " + w for w in self.warnings]
         return "\n".join(head + body + tail)
@@ -1023,9 +1024,7 @@ def detect_frame(
         if len(plausible) == 1:
             uname = plausible[0]
         else:
-            uname = min(
-                DETECTED_UNITS, key=lambda u: abs(math.log(leg * UNIT_SCALES[u] / target))
-            )
+            uname = min(DETECTED_UNITS, key=lambda u: abs(math.log(leg * UNIT_SCALES[u] / target)))
         scale = UNIT_SCALES[uname]
 
     # Up.
@@ -1313,8 +1312,9 @@ def retarget(
         feet_src = smooth_path(src[:, foot_idx], bvh.fps)
         feet_src[..., 2] = st.heights
         target_len = np.array([sp.fore_leg_length] * 2 + [sp.hind_leg_length] * 2)
-        motion, pr = plant_legs(motion, feet_src, src[:, anchor_idx], st.contacts,
-                                target_len / limb_len)
+        motion, pr = plant_legs(
+            motion, feet_src, src[:, anchor_idx], st.contacts, target_len / limb_len
+        )
         report["planted"] = pr.to_dict(sp.leg_length)
     else:
         motion = motion.with_contacts(st.contacts)
@@ -1329,7 +1329,10 @@ def retarget(
 
 
 def _limb_confidence(
-    t: _Tree, j2s: Mapping[str, str], st: SourceStance, limb_len: np.ndarray,
+    t: _Tree,
+    j2s: Mapping[str, str],
+    st: SourceStance,
+    limb_len: np.ndarray,
     mapping: JointMapping,
 ) -> None:
     """Fill ``mapping.confidence`` and ``mapping.warnings`` (see :data:`CONFIDENCE_CHECKS`)."""
@@ -1341,8 +1344,9 @@ def _limb_confidence(
         if by_hand:
             name = 1.0
         else:
-            vote = sum(_fore_vote(t.cues[t.bvh.index(j2s[n])][1])
-                       for n in _LEG_CHAINS[prefix] if n in j2s)
+            vote = sum(
+                _fore_vote(t.cues[t.bvh.index(j2s[n])][1]) for n in _LEG_CHAINS[prefix] if n in j2s
+            )
             name = 0.5 if vote == 0 else float((vote > 0) == fore)
         partner = ("r" if prefix[0] == "l" else "l") + prefix[1]
         kp = ("lf", "rf", "lh", "rh").index(partner)
@@ -1418,6 +1422,7 @@ def _source_stance(
 
 # ---------------------------------------------------------------------- entry point
 
+
 def describe_hierarchy(bvh: BVHData, mapping: JointMapping | None = None) -> str:
     """The source hierarchy as an indented tree, each joint with its proposed habitsim joint.
 
@@ -1483,7 +1488,6 @@ def read_source(
     raise SkeletonMappingError(
         f"{p.name}: unknown source file type {p.suffix!r}; valid: {', '.join(SOURCE_SUFFIXES)}"
     )
-
 
 
 def import_bvh(
@@ -1554,7 +1558,8 @@ def import_bvh(
             joints = validate_joint_map(base, bvh, where=str(joint_map))
             notes = an.notes + [f"joints set by hand: {', '.join(sorted(spec['map']))}"]
             geometric = [
-                (lp, rp) for lp, rp in an.geometric_sides
+                (lp, rp)
+                for lp, rp in an.geometric_sides
                 if not any(n in spec["map"] for n in _LEG_CHAINS[lp] + _LEG_CHAINS[rp])
             ]
             method = f"auto, overridden by map file {joint_map}"

@@ -207,12 +207,25 @@ class ClipEntry:
         if not isinstance(d, dict):
             raise DatasetError(f"{where}: a clip entry must be a JSON object")
         kinds: dict[str, tuple[type, ...]] = {
-            "path": (str,), "split": (str,), "species": (str,), "held_out": (bool,),
-            "action": (str,), "gait": (str,), "index": (int,), "pair_index": (int,),
-            "pair_key": (str,), "seed": (int,), "speed_mps": (int, float),
-            "froude": (int, float), "duty_factor": (int, float), "turn_rate": (int, float),
-            "turn_rate_nd": (int, float), "duration_s": (int, float), "frames": (int,),
-            "fps": (int, float), "measured": (dict,),
+            "path": (str,),
+            "split": (str,),
+            "species": (str,),
+            "held_out": (bool,),
+            "action": (str,),
+            "gait": (str,),
+            "index": (int,),
+            "pair_index": (int,),
+            "pair_key": (str,),
+            "seed": (int,),
+            "speed_mps": (int, float),
+            "froude": (int, float),
+            "duty_factor": (int, float),
+            "turn_rate": (int, float),
+            "turn_rate_nd": (int, float),
+            "duration_s": (int, float),
+            "frames": (int,),
+            "fps": (int, float),
+            "measured": (dict,),
         }
         missing = [k for k in kinds if k not in d]
         if missing:
@@ -283,7 +296,8 @@ class DatasetManifest:
                     f"it has: {', '.join(self.species_names)}"
                 )
         return [
-            c for c in self.clips
+            c
+            for c in self.clips
             if (split is None or c.split == split) and (wanted is None or c.species in wanted)
         ]
 
@@ -419,8 +433,18 @@ def plan_clips(
         acts = available_actions(sp)
         for idx in range(clips_per_species):
             action, k = acts[idx % len(acts)], idx // len(acts)
-            jobs.append(ClipJob(sp.name, action, idx, k, clip_seed(seed, action, k),
-                                clip_split(action, k, sp.held_out), sp.held_out, float(fps)))
+            jobs.append(
+                ClipJob(
+                    sp.name,
+                    action,
+                    idx,
+                    k,
+                    clip_seed(seed, action, k),
+                    clip_split(action, k, sp.held_out),
+                    sp.held_out,
+                    float(fps),
+                )
+            )
     return jobs
 
 
@@ -501,12 +525,24 @@ def _make_clip(root: str, job: ClipJob, resume: bool) -> tuple[dict[str, Any], b
             m = load_motion(path)
         meta = m.metadata
         entry = ClipEntry(
-            path=job.path, split=job.split, species=job.species, held_out=job.held_out,
-            action=job.action, gait=str(meta["gait"]), index=job.index, pair_index=job.pair_index,
-            pair_key=job.pair_key, seed=job.seed, speed_mps=float(meta["speed_mps"]),
-            froude=float(meta["froude"]), duty_factor=float(meta["duty_factor"]),
-            turn_rate=float(meta["turn_rate"]), turn_rate_nd=float(meta["turn_rate_nd"]),
-            duration_s=float(meta["duration_s"]), frames=int(meta["frames"]), fps=job.fps,
+            path=job.path,
+            split=job.split,
+            species=job.species,
+            held_out=job.held_out,
+            action=job.action,
+            gait=str(meta["gait"]),
+            index=job.index,
+            pair_index=job.pair_index,
+            pair_key=job.pair_key,
+            seed=job.seed,
+            speed_mps=float(meta["speed_mps"]),
+            froude=float(meta["froude"]),
+            duty_factor=float(meta["duty_factor"]),
+            turn_rate=float(meta["turn_rate"]),
+            turn_rate_nd=float(meta["turn_rate_nd"]),
+            duration_s=float(meta["duration_s"]),
+            frames=int(meta["frames"]),
+            fps=job.fps,
             measured=_measure(m),
         )
     except Exception as e:  # noqa: BLE001 - re-raised typed, with the clip named
@@ -652,9 +688,7 @@ def build_dataset(
         UnknownSpeciesError: an unknown species name.
     """
     t0 = time.perf_counter()
-    clips_per_species = _check_int(
-        "clips_per_species", clips_per_species, 1, MAX_CLIPS_PER_SPECIES
-    )
+    clips_per_species = _check_int("clips_per_species", clips_per_species, 1, MAX_CLIPS_PER_SPECIES)
     seed = _check_int("seed", seed, 0, MAX_SEED)
     number = isinstance(fps, int | float) and not isinstance(fps, bool)
     if not (number and math.isfinite(fps) and fps > 0):
@@ -726,8 +760,12 @@ def build_dataset(
         clips_per_species=clips_per_species,
         generator_version=GENERATOR_VERSION,
         species=tuple(
-            {"name": n, "held_out": load_species(n).held_out, "cousin": load_species(n).cousin,
-             "actions": available_actions(n)}
+            {
+                "name": n,
+                "held_out": load_species(n).held_out,
+                "cousin": load_species(n).cousin,
+                "actions": available_actions(n),
+            }
             for n in names
         ),
         clips=clips,
@@ -754,8 +792,13 @@ def build_dataset(
 def _safe_relpath(p: str, where: str) -> str:
     pp = PurePosixPath(p)
     if (
-        pp.is_absolute() or ".." in pp.parts or "\\" in p or "\x00" in p or not p.endswith(".npz")
-        or len(p) > 1024 or any(len(part) > 255 for part in pp.parts)
+        pp.is_absolute()
+        or ".." in pp.parts
+        or "\\" in p
+        or "\x00" in p
+        or not p.endswith(".npz")
+        or len(p) > 1024
+        or any(len(part) > 255 for part in pp.parts)
     ):
         raise DatasetError(
             f"{where}: clip path {brief(p)} must be a relative .npz path inside the data set"
@@ -786,8 +829,14 @@ def load_manifest(dataset_dir: str | Path, *, check_files: bool = True) -> Datas
             "run the build again to finish it)"
         )
     data = _read_manifest_json(mpath)
-    for key, types in (("seed", (int,)), ("fps", (int, float)), ("clips_per_species", (int,)),
-                       ("generator_version", (int,)), ("species", (list,)), ("clips", (list,))):
+    for key, types in (
+        ("seed", (int,)),
+        ("fps", (int, float)),
+        ("clips_per_species", (int,)),
+        ("generator_version", (int,)),
+        ("species", (list,)),
+        ("clips", (list,)),
+    ):
         if key not in data or not isinstance(data[key], types) or isinstance(data[key], bool):
             raise DatasetError(f"{mpath}: missing or invalid {key!r}")
     species: list[dict[str, Any]] = []
@@ -890,14 +939,24 @@ def stats_rows(manifest: DatasetManifest) -> list[StatsRow]:
         def m(key: str, cs: list[ClipEntry] = cs) -> float:
             return _mean(c.measured.get(key) for c in cs)
 
-        rows.append(StatsRow(
-            species=sp, action=action, gait=cs[0].gait, held_out=cs[0].held_out, clips=len(cs),
-            froude_target=_mean(c.froude for c in cs), froude=m("froude"),
-            duty_factor_target=_mean(c.duty_factor for c in cs), duty_factor=m("duty_factor"),
-            relative_stride_length=m("relative_stride_length"), phase_error=m("phase_error"),
-            skate_mm=m("skate_mm"), penetration_mm=m("penetration_mm"),
-            statically_stable_fraction=m("statically_stable_fraction"),
-        ))
+        rows.append(
+            StatsRow(
+                species=sp,
+                action=action,
+                gait=cs[0].gait,
+                held_out=cs[0].held_out,
+                clips=len(cs),
+                froude_target=_mean(c.froude for c in cs),
+                froude=m("froude"),
+                duty_factor_target=_mean(c.duty_factor for c in cs),
+                duty_factor=m("duty_factor"),
+                relative_stride_length=m("relative_stride_length"),
+                phase_error=m("phase_error"),
+                skate_mm=m("skate_mm"),
+                penetration_mm=m("penetration_mm"),
+                statically_stable_fraction=m("statically_stable_fraction"),
+            )
+        )
     return rows
 
 
@@ -984,5 +1043,6 @@ def _stats_markdown(rows: list[StatsRow], man: DatasetManifest) -> str:
         "between measured and planned footfall phases [stride], '-' = undefined "
         "(e.g. no steps). For `jump`, 'Fr plan' is the take-off Froude number while 'Fr' "
         "averages the whole clip (stand, jump, land).\n\n"
-        + format_stats_table(rows, markdown=True) + "\n"
+        + format_stats_table(rows, markdown=True)
+        + "\n"
     )

@@ -108,7 +108,6 @@ def bounded(message: str, limit: int = MAX_MESSAGE_CHARS) -> str:
     return message[:limit] + f"… ({len(message)} characters)"
 
 
-
 def brief_path(path: object, limit: int = 160) -> str:
     """A path for a message: only its last ``limit`` characters when longer (the file
     name is the informative end)."""

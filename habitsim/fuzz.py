@@ -46,7 +46,14 @@ import numpy as np
 from .errors import HabitsimError
 
 __all__ = [
-    "TARGETS", "Case", "Workspace", "CampaignResult", "make_case", "run_case", "campaign", "main"
+    "TARGETS",
+    "Case",
+    "Workspace",
+    "CampaignResult",
+    "make_case",
+    "run_case",
+    "campaign",
+    "main",
 ]
 
 #: Inputs of each kind, in the proportions of a campaign.
@@ -61,27 +68,113 @@ TARGETS: dict[str, float] = {
 
 #: Hostile number-like tokens.
 NUMBERS = [
-    "0", "-0", "1", "-1", "0.0333333", "1e-320", "5e-324", "1e-300", "1e300", "-1e300",
-    "1e308", "1e309", "nan", "-nan", "inf", "-inf", "NaN", "1e7", "1e8", "123456789012345678901",
-    "0x10", "1_000", "1e", "--1", "+1", "3.", ".5", "1e-9", "100000", "0.001", "2e9",
+    "0",
+    "-0",
+    "1",
+    "-1",
+    "0.0333333",
+    "1e-320",
+    "5e-324",
+    "1e-300",
+    "1e300",
+    "-1e300",
+    "1e308",
+    "1e309",
+    "nan",
+    "-nan",
+    "inf",
+    "-inf",
+    "NaN",
+    "1e7",
+    "1e8",
+    "123456789012345678901",
+    "0x10",
+    "1_000",
+    "1e",
+    "--1",
+    "+1",
+    "3.",
+    ".5",
+    "1e-9",
+    "100000",
+    "0.001",
+    "2e9",
 ]
 #: Hostile words and structure tokens of a BVH file.
 WORDS = [
-    "", "{", "}", "ROOT", "JOINT", "End", "Site", "OFFSET", "CHANNELS", "MOTION", "HIERARCHY",
-    "Frames:", "Frame", "Time:", "Xrotation", "Yposition", "Wrotation", "\x00", "\u2028", "é",
-    "x" * 100_000, "9" * 5000,
+    "",
+    "{",
+    "}",
+    "ROOT",
+    "JOINT",
+    "End",
+    "Site",
+    "OFFSET",
+    "CHANNELS",
+    "MOTION",
+    "HIERARCHY",
+    "Frames:",
+    "Frame",
+    "Time:",
+    "Xrotation",
+    "Yposition",
+    "Wrotation",
+    "\x00",
+    "\u2028",
+    "é",
+    "x" * 100_000,
+    "9" * 5000,
 ]
 #: Hostile TOML values.
 TOML_VALUES = [
-    "5", "-1", "0", '"x"', '""', "[]", "[1]", "[1, 2, 3]", '["a", "b"]', "[[1, 2], [3]]",
-    "{ a = 1 }", "{}", "1e300", "-1e300", "inf", "nan", "true", "100000000000000000000",
-    "9223372036854775807", "[1e300, 1e301]", "[-1, 1]", "[1, -1]", "0.5", "1979-05-27",
+    "5",
+    "-1",
+    "0",
+    '"x"',
+    '""',
+    "[]",
+    "[1]",
+    "[1, 2, 3]",
+    '["a", "b"]',
+    "[[1, 2], [3]]",
+    "{ a = 1 }",
+    "{}",
+    "1e300",
+    "-1e300",
+    "inf",
+    "nan",
+    "true",
+    "100000000000000000000",
+    "9223372036854775807",
+    "[1e300, 1e301]",
+    "[-1, 1]",
+    "[1, -1]",
+    "0.5",
+    "1979-05-27",
     '"' + "x" * 10_000 + '"',
 ]
 #: Hostile JSON values.
 JSON_VALUES: list[Any] = [
-    None, True, False, 0, -1, 1.5, 1e300, -1e300, float("nan"), "x", "", "x" * 10_000, [],
-    [1], {}, {"a": 1}, 2**70, "../up.npz", "/abs.npz", "a\x00b.npz",
+    None,
+    True,
+    False,
+    0,
+    -1,
+    1.5,
+    1e300,
+    -1e300,
+    float("nan"),
+    "x",
+    "",
+    "x" * 10_000,
+    [],
+    [1],
+    {},
+    {"a": 1},
+    2**70,
+    "../up.npz",
+    "/abs.npz",
+    "a\x00b.npz",
 ]
 
 
@@ -125,8 +218,9 @@ class Workspace:
         self.motion_file = p
         self.toml_seed = load_species("dog").path.read_text(encoding="utf-8")
         data = self.root / "dataset"
-        build_dataset(data, clips_per_species=1, seed=0, species=["cat", "dog"], workers=1,
-                      progress=False)
+        build_dataset(
+            data, clips_per_species=1, seed=0, species=["cat", "dog"], workers=1, progress=False
+        )
         self.dataset = data
         self.manifest_seed = json.loads((data / "manifest.json").read_text(encoding="utf-8"))
         self.blocker = self.root / "blocker"
@@ -189,9 +283,7 @@ Frame Time: 0.033333
 # ---------------------------------------------------------------------- text mutations
 
 
-def _mutate_lines(
-    text: str, rnd: random.Random, tokens: list[str], extra_lines: list[str]
-) -> str:
+def _mutate_lines(text: str, rnd: random.Random, tokens: list[str], extra_lines: list[str]) -> str:
     """1–3 random edits of a text: a token replaced, a line dropped / doubled / inserted,
     the text cut or random characters spliced in."""
     lines = text.split("\n")
@@ -251,15 +343,34 @@ def _bvh_text(ws: Workspace, rnd: random.Random) -> str:
             f"Frame Time: {ft}" if ln.startswith("Frame Time") else ln for ln in text.split("\n")
         )
     if r < 0.30:  # joints renamed: the mapping works from the hierarchy alone
-        for name in {ln.split()[1] for ln in text.split("\n")
-                     if ln.strip().split()[:1] in (["JOINT"], ["ROOT"]) and len(ln.split()) > 1}:
+        for name in {
+            ln.split()[1]
+            for ln in text.split("\n")
+            if ln.strip().split()[:1] in (["JOINT"], ["ROOT"]) and len(ln.split()) > 1
+        }:
             text = text.replace(f" {name}\n", f" j{rnd.randrange(10**6)}\n")
         return text
-    return _mutate_lines(text, rnd, NUMBERS + WORDS, [
-        "{", "}", "End Site", "MOTION", "Frames: 3", "Frame Time: 0.1", "ROOT r", "JOINT j",
-        "OFFSET 1 2 3", "CHANNELS 3 Xrotation Yrotation Zrotation", "CHANNELS 7", "",
-        "0 " * 15, "1e300 " * 15,
-    ])
+    return _mutate_lines(
+        text,
+        rnd,
+        NUMBERS + WORDS,
+        [
+            "{",
+            "}",
+            "End Site",
+            "MOTION",
+            "Frames: 3",
+            "Frame Time: 0.1",
+            "ROOT r",
+            "JOINT j",
+            "OFFSET 1 2 3",
+            "CHANNELS 3 Xrotation Yrotation Zrotation",
+            "CHANNELS 7",
+            "",
+            "0 " * 15,
+            "1e300 " * 15,
+        ],
+    )
 
 
 # ---------------------------------------------------------------------- arrays
@@ -297,8 +408,11 @@ def _npz_file(ws: Workspace, rnd: random.Random) -> Path:
         elif op in (1, 2):
             arrays[key] = _hostile_array(rnd)
         elif (
-            op == 3 and key in ("root_positions", "rotations") and key in arrays
-            and arrays[key].dtype.kind == "f" and arrays[key].size
+            op == 3
+            and key in ("root_positions", "rotations")
+            and key in arrays
+            and arrays[key].dtype.kind == "f"
+            and arrays[key].size
         ):
             a = np.array(arrays[key], dtype=float)
             a.flat[rnd.randrange(a.size)] = rnd.choice([np.nan, 1e300, -1e300, 0.0, 1e6])
@@ -338,8 +452,18 @@ def _npz_file(ws: Workspace, rnd: random.Random) -> Path:
 def _species_text(ws: Workspace, rnd: random.Random) -> str:
     text = ws.toml_seed
     if rnd.random() < 0.15:  # a table replaced by a value, written at the top
-        table = rnd.choice(["posture", "segments", "girths", "joint_limits", "gaits", "habits",
-                            "gaits.walk", "gaits.walk.footfall"])
+        table = rnd.choice(
+            [
+                "posture",
+                "segments",
+                "girths",
+                "joint_limits",
+                "gaits",
+                "habits",
+                "gaits.walk",
+                "gaits.walk.footfall",
+            ]
+        )
         text = text.replace(f"[{table}]", f"[x{table}]").replace(f"[{table}.", f"[x{table}.")
         return f"{table.split('.')[0]} = {rnd.choice(TOML_VALUES)}\n{text}"
     lines = text.split("\n")
@@ -349,9 +473,9 @@ def _species_text(ws: Workspace, rnd: random.Random) -> str:
             key = lines[k].split("=", 1)[0]
             lines[k] = f"{key}= {rnd.choice(TOML_VALUES)}"
         else:
-            lines = _mutate_lines("\n".join(lines), rnd, TOML_VALUES, ["[gaits.trot]", "[x]",
-                                                                       "name = 5", "a = ["]
-                                  ).split("\n")
+            lines = _mutate_lines(
+                "\n".join(lines), rnd, TOML_VALUES, ["[gaits.trot]", "[x]", "name = 5", "a = ["]
+            ).split("\n")
     return "\n".join(lines)
 
 
@@ -411,8 +535,11 @@ def _cli_argv(ws: Workspace, rnd: random.Random) -> list[str]:
             return rnd.choice([str(ws.root / "missing.bvh"), str(ws.blocker)])
         p = ws.path(".bvh")
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(rnd.choice(ws.bvh_seeds) if rnd.random() < 0.3 else _bvh_text(ws, rnd),
-                     encoding="utf-8", errors="surrogatepass")
+        p.write_text(
+            rnd.choice(ws.bvh_seeds) if rnd.random() < 0.3 else _bvh_text(ws, rnd),
+            encoding="utf-8",
+            errors="surrogatepass",
+        )
         return str(p)
 
     def out(suffix: str) -> str:
@@ -425,17 +552,42 @@ def _cli_argv(ws: Workspace, rnd: random.Random) -> list[str]:
 
     c = rnd.randrange(7)
     if c == 0:
-        argv = ["transfer", motion_in(), "--to", rnd.choice(species), "--out", out(".npz"),
-                "--method", rnd.choice(["direct", "direct", "nope"]), "--seed", rnd.choice(seeds),
-                "--temperature", rnd.choice(temps)]
+        argv = [
+            "transfer",
+            motion_in(),
+            "--to",
+            rnd.choice(species),
+            "--out",
+            out(".npz"),
+            "--method",
+            rnd.choice(["direct", "direct", "nope"]),
+            "--seed",
+            rnd.choice(seeds),
+            "--temperature",
+            rnd.choice(temps),
+        ]
         if rnd.random() < 0.4:
             argv += ["--bvh", out(".bvh")]
     elif c == 1:
-        argv = ["data", "export-bvh", motion_in(), "--out", out(".bvh"),
-                "--order", rnd.choice(["ZXY", "XYZ", "abc", "", "XXY"])]
+        argv = [
+            "data",
+            "export-bvh",
+            motion_in(),
+            "--out",
+            out(".bvh"),
+            "--order",
+            rnd.choice(["ZXY", "XYZ", "abc", "", "XXY"]),
+        ]
     elif c == 2:
-        argv = ["data", "import-bvh", bvh_in(), "--species", rnd.choice(species),
-                "--out", out(".npz")]
+        argv = [
+            "data",
+            "import-bvh",
+            bvh_in(),
+            "--species",
+            rnd.choice(species),
+            "--out",
+            out(".npz"),
+        ]
         if rnd.random() < 0.5:
             argv += ["--fps", rnd.choice(fpss)]
     elif c == 3:
@@ -445,15 +597,38 @@ def _cli_argv(ws: Workspace, rnd: random.Random) -> list[str]:
     elif c == 5:
         argv = ["species", "show", rnd.choice(species)]
     else:  # argument bounds of the heavy commands (refused before any work)
-        argv = rnd.choice([
-            ["track", motion_in(), "--settle", rnd.choice(["1e9", "-1", "nan", "61"])],
-            ["track", motion_in(), "--control-hz", rnd.choice(["0", "-1", "inf", "1e6"])],
-            ["data", "synth", "--out", out(""), "--fps", rnd.choice(["100000", "0.001", "nan"])],
-            ["data", "synth", "--out", out(""), "--seed", rnd.choice(["-1", str(2**64)])],
-            ["eval", "--data", str(ws.dataset), "--out", out(""), "--workers",
-             rnd.choice(["0", "100000"])],
-            ["refine", motion_in(), "--out", out(".npz"), "--report", str(ws.blocker / "r.json")],
-        ])
+        argv = rnd.choice(
+            [
+                ["track", motion_in(), "--settle", rnd.choice(["1e9", "-1", "nan", "61"])],
+                ["track", motion_in(), "--control-hz", rnd.choice(["0", "-1", "inf", "1e6"])],
+                [
+                    "data",
+                    "synth",
+                    "--out",
+                    out(""),
+                    "--fps",
+                    rnd.choice(["100000", "0.001", "nan"]),
+                ],
+                ["data", "synth", "--out", out(""), "--seed", rnd.choice(["-1", str(2**64)])],
+                [
+                    "eval",
+                    "--data",
+                    str(ws.dataset),
+                    "--out",
+                    out(""),
+                    "--workers",
+                    rnd.choice(["0", "100000"]),
+                ],
+                [
+                    "refine",
+                    motion_in(),
+                    "--out",
+                    out(".npz"),
+                    "--report",
+                    str(ws.blocker / "r.json"),
+                ],
+            ]
+        )
     return argv
 
 
@@ -593,8 +768,12 @@ class CampaignResult:
 
 
 def campaign(
-    n: int, seed: int = 0, targets: list[str] | None = None, keep: int = 5,
-    progress: bool = False, workspace: Workspace | None = None,
+    n: int,
+    seed: int = 0,
+    targets: list[str] | None = None,
+    keep: int = 5,
+    progress: bool = False,
+    workspace: Workspace | None = None,
 ) -> CampaignResult:
     """Run ``n`` fuzzed inputs (targets drawn in the proportions of :data:`TARGETS`)."""
     names = targets or list(TARGETS)
@@ -616,8 +795,10 @@ def campaign(
             if outcome == "raw" and len(raw) < keep:
                 raw.append((case, exc, "".join(traceback.format_exception(exc)[-4:])))
             if progress and (i + 1) % 500 == 0:
-                print(f"  {i + 1}/{n} inputs, {sum(c['raw'] for c in counts.values())} raw",
-                      file=sys.stderr)
+                print(
+                    f"  {i + 1}/{n} inputs, {sum(c['raw'] for c in counts.values())} raw",
+                    file=sys.stderr,
+                )
             if (i + 1) % 200 == 0:  # keep the scratch folder small
                 shutil.rmtree(ws.root / "cases", ignore_errors=True)
     finally:
@@ -642,8 +823,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--n", type=int, default=10_000, help="inputs to try (default 10000)")
     p.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
-    p.add_argument("--targets", default=None,
-                   help=f"comma-separated targets (default all: {','.join(TARGETS)})")
+    p.add_argument(
+        "--targets",
+        default=None,
+        help=f"comma-separated targets (default all: {','.join(TARGETS)})",
+    )
     p.add_argument("--show", type=int, default=5, help="raw exceptions to show (default 5)")
     ns = p.parse_args(argv)
     targets = [t.strip() for t in ns.targets.split(",")] if ns.targets else None

@@ -276,9 +276,7 @@ def gait_statistics(motion: Motion, contacts: np.ndarray | None = None) -> GaitS
             continue
         tdk, pi = td[ok], prev_i[ok]
         nxt = pi + 1
-        local = np.where(
-            nxt < lh.size, (lh[np.minimum(nxt, lh.size - 1)] - lh[pi]) / fps, period
-        )
+        local = np.where(nxt < lh.size, (lh[np.minimum(nxt, lh.size - 1)] - lh[pi]) / fps, period)
         phases[foot] = circular_mean(((tdk - lh[pi]) / fps) / local)
 
     # Static stability.

@@ -58,8 +58,10 @@ __all__ = [
 #: Leg names, the order of :data:`habitsim.species.FEET`.
 LEGS: tuple[str, ...] = FEET
 _J = {n: i for i, n in enumerate(JOINT_NAMES)}
-_SEGS = {"fore": ("scapula", "shoulder", "elbow", "wrist", "toe"),
-         "hind": ("ilium", "hip", "knee", "hock", "toe")}
+_SEGS = {
+    "fore": ("scapula", "shoulder", "elbow", "wrist", "toe"),
+    "hind": ("ilium", "hip", "knee", "hock", "toe"),
+}
 
 
 @dataclass(frozen=True)
@@ -330,8 +332,13 @@ def leg_ik(
     beta_down = np.arctan2(-w[:, 0], -w[:, 2])
     b3 = beta_down - finc
     if distal_band is not None:
-        b3 = _comply_foot(p[:, [0, 2]], b3, geo.foot, distal_band,
-                          _as_frames(max_inclination_change, t, "max_inclination_change"))
+        b3 = _comply_foot(
+            p[:, [0, 2]],
+            b3,
+            geo.foot,
+            distal_band,
+            _as_frames(max_inclination_change, t, "max_inclination_change"),
+        )
     foot_dir = np.stack([-np.sin(b3), -np.cos(b3)], -1)
     wx = p[:, [0, 2]] - geo.foot * foot_dir  # demanded wrist/hock in plane coords (x, z)
     dist = np.linalg.norm(wx, axis=-1)
@@ -363,8 +370,9 @@ def leg_ik(
     )
 
 
-def _comply_foot(p: np.ndarray, b3: np.ndarray, foot: float, band: tuple[float, float],
-                 limit: np.ndarray) -> np.ndarray:
+def _comply_foot(
+    p: np.ndarray, b3: np.ndarray, foot: float, band: tuple[float, float], limit: np.ndarray
+) -> np.ndarray:
     """Foot angle b3 turned (least angle, at most ``limit``) so |p − foot·u(b3)| is in ``band``.
 
     In leg-plane coordinates (x, z) a direction of angle b is u(b) = (−sin b, −cos b); the
@@ -382,8 +390,11 @@ def _comply_foot(p: np.ndarray, b3: np.ndarray, foot: float, band: tuple[float, 
     # of reach of any foot angle gives the closest one)
     ang_hi = np.arccos(np.clip((r**2 + foot**2 - hi**2) / den, -1.0, 1.0))
     ang_lo = np.arccos(np.clip((r**2 + foot**2 - lo**2) / den, -1.0, 1.0))
-    new = np.where(dist > hi, side * np.minimum(np.abs(rel), ang_hi),
-                   np.where(dist < lo, side * np.maximum(np.abs(rel), ang_lo), rel))
+    new = np.where(
+        dist > hi,
+        side * np.minimum(np.abs(rel), ang_hi),
+        np.where(dist < lo, side * np.maximum(np.abs(rel), ang_lo), rel),
+    )
     change = np.clip(new - rel, -limit, limit)
     return b3 + change
 
@@ -448,8 +459,9 @@ class AxialFrames:
     parent_rotation: np.ndarray
 
 
-def axial_frames(species: str | Species, root_positions: np.ndarray,
-                 rotations: np.ndarray) -> AxialFrames:
+def axial_frames(
+    species: str | Species, root_positions: np.ndarray, rotations: np.ndarray
+) -> AxialFrames:
     """Girdle roots and parent rotations from the root and the axial joint rotations.
 
     Args:

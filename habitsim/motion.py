@@ -432,7 +432,12 @@ def load_motion(path: str | Path) -> Motion:
             f"{brief_path(p)}: not a readable .npz motion file ({brief(str(e))})"
         ) from None
     except (
-        OSError, zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, MemoryError
+        OSError,
+        zipfile.BadZipFile,
+        zlib.error,
+        EOFError,
+        NotImplementedError,
+        MemoryError,
     ) as e:
         raise MotionFileError(
             f"{brief_path(p)}: not a readable .npz motion file ({brief(str(e))})"

@@ -84,9 +84,7 @@ def refine_mode(mode: str) -> str:
     """
     m = REFINE_ALIASES.get(str(mode), str(mode))
     if m not in REFINE_MODES:
-        raise PipelineError(
-            unknown_choice("refine mode", mode, (*REFINE_MODES, *REFINE_ALIASES))
-        )
+        raise PipelineError(unknown_choice("refine mode", mode, (*REFINE_MODES, *REFINE_ALIASES)))
     return m
 
 
@@ -253,8 +251,9 @@ def _transfer(source: Motion, target: str, method: str, seed: int) -> Stage:
         contacts, info = transfer_contacts(out, source)
         how = str(info["method"])
     wall = time.perf_counter() - t0
-    return Stage("transfer", out, contacts, how, wall, _motion_metrics(out, contacts),
-                 species=out.species)
+    return Stage(
+        "transfer", out, contacts, how, wall, _motion_metrics(out, contacts), species=out.species
+    )
 
 
 def _refine(
@@ -262,8 +261,17 @@ def _refine(
 ) -> tuple[Stage, RefineResult | None]:
     if mode == "none":
         return (
-            Stage("refine", stage.motion, stage.contacts, stage.contacts_method, 0.0,
-                  dict(stage.metrics), "none", stage.species, stage._qpos),
+            Stage(
+                "refine",
+                stage.motion,
+                stage.contacts,
+                stage.contacts_method,
+                0.0,
+                dict(stage.metrics),
+                "none",
+                stage.species,
+                stage._qpos,
+            ),
             None,
         )
     from dataclasses import replace
@@ -276,14 +284,23 @@ def _refine(
     res = refine(stage.motion, opts, contacts=stage.contacts, model=model)
     wall = time.perf_counter() - t0
     contacts = np.asarray(res.contacts, dtype=bool)
-    st = Stage("refine", res.motion, contacts, stage.contacts_method, wall,
-               _motion_metrics(res.motion, contacts), str(res.status), stage.species,
-               np.asarray(res.qpos))
+    st = Stage(
+        "refine",
+        res.motion,
+        contacts,
+        stage.contacts_method,
+        wall,
+        _motion_metrics(res.motion, contacts),
+        str(res.status),
+        stage.species,
+        np.asarray(res.qpos),
+    )
     return st, res
 
 
-def _run_track(motion: Motion, contacts: np.ndarray | None, controller: str,
-               assist: bool | str, seed: int) -> tuple[TrackResult | None, str, float]:
+def _run_track(
+    motion: Motion, contacts: np.ndarray | None, controller: str, assist: bool | str, seed: int
+) -> tuple[TrackResult | None, str, float]:
     """(result, status, wall time); a tracking failure is a status, not an exception."""
     from .sim import track
 
@@ -306,16 +323,24 @@ def _worse(refined: TrackResult, plain: TrackResult) -> str | None:
     ep = float(plain.metrics.get("sim_mpjpe_per_leg", math.nan))
     if abs(sr - sp) <= 1e-9 and math.isfinite(er) and math.isfinite(ep):
         if er > ep * WORSE_MPJPE_RATIO + WORSE_MPJPE_MARGIN_PER_LEG:
-            return (f"equal survival {sr:.2f}, sim MPJPE {er:.3f} > {ep:.3f} leg lengths "
-                    "unrefined")
+            return f"equal survival {sr:.2f}, sim MPJPE {er:.3f} > {ep:.3f} leg lengths unrefined"
     return None
 
 
 def _sim_stage(res: TrackResult | None, status: str, wall: float, species: str) -> Stage:
     if res is None:
         return Stage("track", None, None, "none", wall, {}, status, species)
-    st = Stage("track", res.motion(), np.asarray(res.contacts, bool), "simulated", wall,
-               dict(res.metrics), status, species, np.asarray(res.qpos))
+    st = Stage(
+        "track",
+        res.motion(),
+        np.asarray(res.contacts, bool),
+        "simulated",
+        wall,
+        dict(res.metrics),
+        status,
+        species,
+        np.asarray(res.qpos),
+    )
     return st
 
 
@@ -372,13 +397,31 @@ def run_clip(
     tgt = load_species(target).name
     model = species_model(tgt)
     src_how = "labels" if source.contacts is not None else "none"
-    src = Stage("source", source, source.contacts, src_how, 0.0,
-                _motion_metrics(source, source.contacts), species=source.species)
+    src = Stage(
+        "source",
+        source,
+        source.contacts,
+        src_how,
+        0.0,
+        _motion_metrics(source, source.contacts),
+        species=source.species,
+    )
     moved = _transfer(source, tgt, method, seed)
     refined, rres = _refine(moved, mode, model, refine_options)
-    run = ClipRun(tgt, method, mode, controller, assist, int(seed), model, src, moved,
-                  refined, Stage("track", None, None, "none", 0.0, {}, "off", tgt),
-                  refine_result=rres)
+    run = ClipRun(
+        tgt,
+        method,
+        mode,
+        controller,
+        assist,
+        int(seed),
+        model,
+        src,
+        moved,
+        refined,
+        Stage("track", None, None, "none", 0.0, {}, "off", tgt),
+        refine_result=rres,
+    )
     if mode == "none":
         run.refine_verdict, run.refine_note = "none", "no refinement"
     elif rres is not None and not rres.success:
@@ -395,8 +438,7 @@ def run_clip(
     run.tracked = _sim_stage(res, status, wall, tgt)
     if guard and run.refine_verdict == "unchecked" and res is not None:
         assert moved.motion is not None
-        plain, pstatus, pwall = _run_track(moved.motion, moved.contacts, controller, assist,
-                                           seed)
+        plain, pstatus, pwall = _run_track(moved.motion, moved.contacts, controller, assist, seed)
         run.input_track_result = plain
         if plain is None:
             run.refine_verdict = "kept"
@@ -421,11 +463,17 @@ def run_clip(
     return run
 
 
-def track_reference(run: ClipRun, *, controller: str, assist: bool | str = False,
-                    seed: int | None = None) -> TrackResult:
+def track_reference(
+    run: ClipRun, *, controller: str, assist: bool | str = False, seed: int | None = None
+) -> TrackResult:
     """Track a run's kept reference again (another controller, with assistance), with the
     same reference contact labels."""
     from .sim import track
 
-    return track(run.reference, controller=controller, assist=assist,
-                 seed=run.seed if seed is None else seed, contacts=run.reference_contacts)
+    return track(
+        run.reference,
+        controller=controller,
+        assist=assist,
+        seed=run.seed if seed is None else seed,
+        contacts=run.reference_contacts,
+    )

@@ -219,8 +219,9 @@ class PlantReport:
     def to_dict(self, leg_length: float) -> dict[str, object]:
         """JSON-ready summary, lengths also per leg length of the target."""
         return {
-            "stance_toe_height_per_leg": [round(float(h) / leg_length, 5)
-                                          for h in self.stance_toe_height],
+            "stance_toe_height_per_leg": [
+                round(float(h) / leg_length, 5) for h in self.stance_toe_height
+            ],
             "min_toe_height_per_leg": round(self.min_toe_height / leg_length, 5),
             "max_pelvis_drop_per_leg": round(float(self.pelvis_drop.max()) / leg_length, 5),
             "max_reach_error_per_leg": round(float(self.reach_error.max()) / leg_length, 5),
@@ -241,10 +242,10 @@ def _planted_targets(raw: np.ndarray, contacts: np.ndarray) -> np.ndarray:
         if not segs:
             continue
         runs = [(a, b - 1) for a, b in segs]  # inclusive last stance frame
-        holds = [np.median(raw[a:b + 1, k, :2], axis=0) for a, b in runs]
+        holds = [np.median(raw[a : b + 1, k, :2], axis=0) for a, b in runs]
         for (a, b), h in zip(runs, holds, strict=True):
-            out[a:b + 1, k, :2] = h
-            out[a:b + 1, k, 2] = 0.0
+            out[a : b + 1, k, :2] = h
+            out[a : b + 1, k, 2] = 0.0
         # swing phases (lo, hi exclusive of both): before the first run, between runs,
         # after the last
         bounds = [(-1, runs[0][0], None, 0)]
@@ -259,7 +260,7 @@ def _planted_targets(raw: np.ndarray, contacts: np.ndarray) -> np.ndarray:
             d0 = d1 if d0 is None else d0
             d1 = d0 if d1 is None else d1
             w = _smoothstep(n)[:, None]
-            out[lo + 1:hi, k, :2] = raw[lo + 1:hi, k, :2] + (1.0 - w) * d0 + w * d1
+            out[lo + 1 : hi, k, :2] = raw[lo + 1 : hi, k, :2] + (1.0 - w) * d0 + w * d1
     return out
 
 
@@ -302,8 +303,10 @@ def plant_legs(
     # often sideways in a biped-style rig).
     rot_std = motion.rotations.copy()
     stand = get_skeleton(motion.species).standing_pose()[1]
-    girdles = [_IDX[f"{p}_{g}"] for p, g in zip(("lf", "rf", "lh", "rh"),
-                                                 ("scapula",) * 2 + ("ilium",) * 2, strict=True)]
+    girdles = [
+        _IDX[f"{p}_{g}"]
+        for p, g in zip(("lf", "rf", "lh", "rh"), ("scapula",) * 2 + ("ilium",) * 2, strict=True)
+    ]
     rot_std[:, girdles] = stand[girdles]
     std = Motion(motion.species, motion.fps, motion.root_positions, rot_std)
     anchors_t = std.global_positions()[:, [_IDX[n] for n in FOOT_ANCHORS]]
@@ -334,8 +337,9 @@ def _solve_planted(
     leg = sp.leg_length
     drop = np.zeros(t)
     sigma = max(1.0, 0.05 * motion.fps)
-    pose = pose_from_targets(sp, root, rot, targets, girdle_flex, foot_inclination,
-                             limit_abduction=limit_abduction)
+    pose = pose_from_targets(
+        sp, root, rot, targets, girdle_flex, foot_inclination, limit_abduction=limit_abduction
+    )
     if limit_abduction:
         # A foothold the leg cannot reach within its abduction range would make the toe
         # slide over the stance: move each stance run's foothold to where the leg does
@@ -345,8 +349,9 @@ def _solve_planted(
         moved = targets.copy()
         moved[..., :2] = np.where(c[..., None], solved[..., :2], targets[..., :2])
         targets = _planted_targets(moved, c)
-        pose = pose_from_targets(sp, root, rot, targets, girdle_flex, foot_inclination,
-                                 limit_abduction=True)
+        pose = pose_from_targets(
+            sp, root, rot, targets, girdle_flex, foot_inclination, limit_abduction=True
+        )
     for _ in range(iterations):
         # how far each stance toe hangs above its foothold (a lateral miss of a leg at
         # its abduction limit is not helped by a lower pelvis)
@@ -358,8 +363,9 @@ def _solve_planted(
         drop += np.maximum(need, short)
         root = motion.root_positions.copy()
         root[:, 2] -= drop
-        pose = pose_from_targets(sp, root, rot, targets, girdle_flex, foot_inclination,
-                             limit_abduction=limit_abduction)
+        pose = pose_from_targets(
+            sp, root, rot, targets, girdle_flex, foot_inclination, limit_abduction=limit_abduction
+        )
     for _ in range(4):  # a toe the IK could not hold on its target must not sink
         toe_z = np.stack([lg.toe[:, 2] for lg in pose.legs], axis=1)
         under = toe_z < -1e-6 * leg  # below round-off: an IK miss, lifted with a margin
@@ -367,13 +373,14 @@ def _solve_planted(
             break
         targets = targets.copy()
         targets[..., 2] += np.where(under, -toe_z * 1.05 + 0.001 * leg, 0.0)
-        pose = pose_from_targets(sp, root, rot, targets, girdle_flex, foot_inclination,
-                                 limit_abduction=limit_abduction)
-    out = Motion(motion.species, motion.fps, root, pose.rotations, c.copy(),
-                 dict(motion.metadata))
+        pose = pose_from_targets(
+            sp, root, rot, targets, girdle_flex, foot_inclination, limit_abduction=limit_abduction
+        )
+    out = Motion(motion.species, motion.fps, root, pose.rotations, c.copy(), dict(motion.metadata))
     toes = out.foot_positions()[..., 2]
-    stance_h = np.array([np.median(toes[c[:, k], k]) if c[:, k].any() else np.nan
-                         for k in range(4)])
+    stance_h = np.array(
+        [np.median(toes[c[:, k], k]) if c[:, k].any() else np.nan for k in range(4)]
+    )
     report = PlantReport(pose.reach_error, drop, stance_h, float(toes.min()))
     return out, report
 
@@ -391,14 +398,20 @@ def leg_pose_angles(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
     frames = axial_frames(motion.species, motion.root_positions, motion.rotations)
     girdle = np.empty((motion.num_frames, 4))
     incl = np.empty((motion.num_frames, 4))
-    for k, (prefix, segs) in enumerate(zip(
-        ("lf", "rf", "lh", "rh"), [_FORE] * 2 + [_HIND] * 2, strict=True
-    )):
+    for k, (prefix, segs) in enumerate(
+        zip(("lf", "rf", "lh", "rh"), [_FORE] * 2 + [_HIND] * 2, strict=True)
+    ):
         g, up, lo, ft = (f"{prefix}_{s}" for s in segs)
         girdle[:, k] = h[f"{g}_flex"]
         abd = h[f"{up}_abd"] * ABDUCTION_SIGN[prefix[0]]
-        incl[:, k] = foot_inclination(frames.parent_rotation[:, k], abd, girdle[:, k],
-                                      h[f"{up}_flex"], h[f"{lo}_flex"], h[f"{ft}_flex"])
+        incl[:, k] = foot_inclination(
+            frames.parent_rotation[:, k],
+            abd,
+            girdle[:, k],
+            h[f"{up}_flex"],
+            h[f"{lo}_flex"],
+            h[f"{ft}_flex"],
+        )
     return girdle, incl
 
 
@@ -449,4 +462,3 @@ def plant_motion(
                 targets[frames, k, :2] = targets[near, k, :2]
     girdle, incl = leg_pose_angles(motion)
     return _solve_planted(motion, targets, c, girdle, incl, iterations, limit_abduction=True)
-

@@ -79,8 +79,9 @@ def habitsim_golden(request: pytest.FixtureRequest) -> Callable[..., Any]:
     test_path = Path(str(request.node.path))
     folder = test_path.parent / "goldens" / test_path.stem
 
-    def check(figures: dict[str, Any], name: str | None = None,
-              tolerances: dict[str, Any] | None = None):
+    def check(
+        figures: dict[str, Any], name: str | None = None, tolerances: dict[str, Any] | None = None
+    ):
         stem = name or re.sub(r"[^A-Za-z0-9_.-]+", "_", request.node.name)
         return assert_matches_golden(figures, folder / f"{stem}.json", tolerances, update=update)
 

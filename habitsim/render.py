@@ -193,11 +193,11 @@ def render_frames(
         raise RenderError(f"qpos must have shape (T, {model.nq}), got {q.shape}")
     ref = None if reference is None else np.atleast_2d(np.asarray(reference, np.float64))
     if ref is not None and (ref.shape[1] != model.nq or len(ref) < len(q)):
-        raise RenderError(
-            f"reference must have shape (>= {len(q)}, {model.nq}), got {ref.shape}"
-        )
-    marks = [_stance(c, len(q), name) for c, name in
-             ((contacts, "contacts"), (reference_contacts, "reference_contacts"))]
+        raise RenderError(f"reference must have shape (>= {len(q)}, {model.nq}), got {ref.shape}")
+    marks = [
+        _stance(c, len(q), name)
+        for c, name in ((contacts, "contacts"), (reference_contacts, "reference_contacts"))
+    ]
     decorate = ref is not None or species is not None or any(m is not None for m in marks)
     style = style or GhostStyle()
     foot_points = _feet(model, feet, marks) if any(m is not None for m in marks) else None
@@ -208,8 +208,9 @@ def render_frames(
         cam.type = mujoco.mjtCamera.mjCAMERA_FREE
         h = _heading(model, ref[: len(q)])
         cam.azimuth = float(np.degrees(np.arctan2(h[1], h[0]))) + 90.0
-    elif isinstance(camera, str) and mujoco.mj_name2id(
-            model, mujoco.mjtObj.mjOBJ_CAMERA, camera) < 0:
+    elif (
+        isinstance(camera, str) and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera) < 0
+    ):
         cam = _tracking_camera(model)
     _headless_context()
     try:
@@ -234,7 +235,8 @@ def render_frames(
     if species is not None:
         colour = SPECIES_COLOURS.get(species, DEFAULT_COLOUR)
     floors = {
-        i for i in range(model.ngeom)
+        i
+        for i in range(model.ngeom)
         if model.geom_bodyid[i] == 0 and model.geom_type[i] == mujoco.mjtGeom.mjGEOM_PLANE
     }
     out = np.empty((len(q), height, width, 3), dtype=np.uint8)
@@ -264,13 +266,20 @@ def render_frames(
             if foot_points is not None:
                 # the body's own contacts under it; the reference's labels under the
                 # ghost (dref holds reference frame k, placed by mj_kinematics above)
-                for m, d, dx, a in ((marks[0], data, np.zeros(3), 1.0),
-                                    (marks[1], dref, shift, style.alpha)):
+                for m, d, dx, a in (
+                    (marks[0], data, np.zeros(3), 1.0),
+                    (marks[1], dref, shift, style.alpha),
+                ):
                     if m is None or (d is dref and ref is None):
                         continue
                     for f in np.flatnonzero(m[k]):
-                        _disc(scn, foot_points[f](d), dx, foot_points.radius,
-                              (*style.stance_rgba[:3], style.stance_rgba[3] * a))
+                        _disc(
+                            scn,
+                            foot_points[f](d),
+                            dx,
+                            foot_points.radius,
+                            (*style.stance_rgba[:3], style.stance_rgba[3] * a),
+                        )
             out[k] = renderer.render()
     return out
 
@@ -290,8 +299,9 @@ class _FootPoints(list):
     radius: float = 0.01
 
 
-def _feet(model: mujoco.MjModel, feet: Sequence[str] | None,
-          marks: list[np.ndarray | None]) -> _FootPoints:
+def _feet(
+    model: mujoco.MjModel, feet: Sequence[str] | None, marks: list[np.ndarray | None]
+) -> _FootPoints:
     names = list(feet) if feet is not None else list(SPECIES_FEET)
     width = max(m.shape[1] for m in marks if m is not None)
     if len(names) != width:
@@ -313,28 +323,46 @@ def _feet(model: mujoco.MjModel, feet: Sequence[str] | None,
         else:
             raise RenderError(
                 f"no foot geom, site or body {name!r} in the model to mark stance on"
-                + ("" if feet is not None else "; give feet=[...] for a model that is not "
-                   "a habitsim species")
+                + (
+                    ""
+                    if feet is not None
+                    else "; give feet=[...] for a model that is not a habitsim species"
+                )
             )
     out.radius = 3.0 * max(sizes) if sizes else 0.02 * float(model.stat.extent)
     return out
 
 
-def _disc(scn: mujoco.MjvScene, at: np.ndarray, dx: np.ndarray, radius: float,
-          rgba: tuple[float, float, float, float]) -> None:
+def _disc(
+    scn: mujoco.MjvScene,
+    at: np.ndarray,
+    dx: np.ndarray,
+    radius: float,
+    rgba: tuple[float, float, float, float],
+) -> None:
     """A flat disc on the floor under a foot (1 mm thick, its top 1 mm above z = 0),
     moved by ``dx``."""
     if scn.ngeom >= scn.maxgeom:
         return
     pos = np.array([at[0] + dx[0], at[1] + dx[1], 0.0005])
-    mujoco.mjv_initGeom(scn.geoms[scn.ngeom], mujoco.mjtGeom.mjGEOM_CYLINDER,
-                        np.array([radius, 0.0005, 0.0]), pos, np.eye(3).ravel(),
-                        np.asarray(rgba, dtype=np.float32))
+    mujoco.mjv_initGeom(
+        scn.geoms[scn.ngeom],
+        mujoco.mjtGeom.mjGEOM_CYLINDER,
+        np.array([radius, 0.0005, 0.0]),
+        pos,
+        np.eye(3).ravel(),
+        np.asarray(rgba, dtype=np.float32),
+    )
     scn.ngeom += 1
 
 
-def _restyle(model: mujoco.MjModel, scn: mujoco.MjvScene, floors: set[int], drop: float,
-             colour: tuple[float, float, float] | None) -> None:
+def _restyle(
+    model: mujoco.MjModel,
+    scn: mujoco.MjvScene,
+    floors: set[int],
+    drop: float,
+    colour: tuple[float, float, float] | None,
+) -> None:
     """Floor drawn ``drop`` low; the body's visible geoms in ``colour``."""
     for g in range(scn.ngeom):
         geom = scn.geoms[g]
@@ -399,8 +427,9 @@ def save_video(frames: np.ndarray, fps: float, path: str | Path) -> Path:
 
         # the ffmpeg writer needs a file name: a temporary file, renamed when complete
         with atomic_path(path, suffix=".mp4") as tmp:
-            with iio.get_writer(tmp, format="FFMPEG", mode="I", fps=float(fps),
-                                codec="libx264", macro_block_size=8) as w:
+            with iio.get_writer(
+                tmp, format="FFMPEG", mode="I", fps=float(fps), codec="libx264", macro_block_size=8
+            ) as w:
                 for f in frames:
                     w.append_data(f)
         return path
@@ -410,8 +439,14 @@ def save_video(frames: np.ndarray, fps: float, path: str | Path) -> Path:
 
         images = [Image.fromarray(f) for f in frames]
         with atomic_write(path, "wb") as fh:
-            images[0].save(fh, format="GIF", save_all=True, append_images=images[1:],
-                           duration=duration_ms, loop=0)
+            images[0].save(
+                fh,
+                format="GIF",
+                save_all=True,
+                append_images=images[1:],
+                duration=duration_ms,
+                loop=0,
+            )
         return path
     import imageio.v2 as iio
 
@@ -443,10 +478,19 @@ def render_video(
     """
     path = Path(path)
     check_video_writer(path)
-    frames = render_frames(model, qpos, width=width, height=height, camera=camera,
-                           reference=reference, contacts=contacts,
-                           reference_contacts=reference_contacts, feet=feet,
-                           species=species, style=style)
+    frames = render_frames(
+        model,
+        qpos,
+        width=width,
+        height=height,
+        camera=camera,
+        reference=reference,
+        contacts=contacts,
+        reference_contacts=reference_contacts,
+        feet=feet,
+        species=species,
+        style=style,
+    )
     return save_video(frames, fps, path)
 
 
@@ -465,9 +509,16 @@ def check_video_writer(path: Path) -> None:
         )
 
 
-def render_tracking(result, path: str | Path, *, width: int = 640, height: int = 480,
-                    camera: str | int = "track", feet: Sequence[str] | None = None,
-                    style: GhostStyle | None = None) -> Path:
+def render_tracking(
+    result,
+    path: str | Path,
+    *,
+    width: int = 640,
+    height: int = 480,
+    camera: str | int = "track",
+    feet: Sequence[str] | None = None,
+    style: GhostStyle | None = None,
+) -> Path:
     """The video of a tracking run (:class:`habitsim.sim.TrackResult`): the simulated body
     in its species' colour, the reference it tracked as a ghost beside it, stance marked
     under both (the simulation's foot contacts, the reference's labels).
@@ -476,8 +527,17 @@ def render_tracking(result, path: str | Path, *, width: int = 640, height: int =
         RenderError: as :func:`render_video`.
     """
     return render_video(
-        result.model, result.qpos, result.fps, path, width=width, height=height,
-        camera=camera, reference=result.reference_qpos, contacts=result.contacts,
-        reference_contacts=result.reference_contacts, feet=feet,
-        species=result.species, style=style,
+        result.model,
+        result.qpos,
+        result.fps,
+        path,
+        width=width,
+        height=height,
+        camera=camera,
+        reference=result.reference_qpos,
+        contacts=result.contacts,
+        reference_contacts=result.reference_contacts,
+        feet=feet,
+        species=result.species,
+        style=style,
     )

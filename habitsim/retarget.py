@@ -148,13 +148,17 @@ def robot_legs(model: mujoco.MjModel, feet: Sequence[str]) -> RobotLegs:
     if len(set(feet)) != len(feet):
         raise RetargetError(f"a foot is named twice: {', '.join(feet)}")
     if free_body(model) < 0:
-        raise RetargetError("the robot has no free joint: retargeting moves its trunk, which "
-                            "needs a <freejoint/> on the trunk body")
+        raise RetargetError(
+            "the robot has no free joint: retargeting moves its trunk, which "
+            "needs a <freejoint/> on the trunk body"
+        )
     valid = _point_names(model)
     unknown = [f for f in feet if f not in valid]
     if unknown:
-        raise RetargetError(f"unknown foot name(s) {', '.join(map(repr, unknown))}; the "
-                            f"robot's sites, geoms and bodies: {', '.join(valid)}")
+        raise RetargetError(
+            f"unknown foot name(s) {', '.join(map(repr, unknown))}; the "
+            f"robot's sites, geoms and bodies: {', '.join(valid)}"
+        )
     try:
         legs = LegSet(model, feet)
     except ControllerError as e:
@@ -179,19 +183,30 @@ def robot_legs(model: mujoco.MjModel, feet: Sequence[str]) -> RobotLegs:
         dadr.append(jm.dof_adr[own].copy())
         lo.append(np.where(lim, model.jnt_range[jid, 0], -np.inf))
         hi.append(np.where(lim, model.jnt_range[jid, 1], np.inf))
-    return RobotLegs(model=model, feet=feet, legs=legs, home=home,
-                     height=float(d.xpos[tr, 2] - ground), nominal=nominal,
-                     radius=legs.radius.copy(),
-                     leg_length=float(max(d.xpos[tr, 2] - pts[:, 2].mean(), 1e-3)),
-                     qadr=tuple(qadr), dadr=tuple(dadr), lo=tuple(lo), hi=tuple(hi))
+    return RobotLegs(
+        model=model,
+        feet=feet,
+        legs=legs,
+        home=home,
+        height=float(d.xpos[tr, 2] - ground),
+        nominal=nominal,
+        radius=legs.radius.copy(),
+        leg_length=float(max(d.xpos[tr, 2] - pts[:, 2].mean(), 1e-3)),
+        qadr=tuple(qadr),
+        dadr=tuple(dadr),
+        lo=tuple(lo),
+        hi=tuple(hi),
+    )
 
 
 def _point_names(model: mujoco.MjModel) -> list[str]:
     """Names of the sites, geoms and bodies that could be feet (none on the world body)."""
     names: list[str] = []
-    for n, get, body in ((model.nsite, model.site, model.site_bodyid),
-                         (model.ngeom, model.geom, model.geom_bodyid),
-                         (model.nbody, model.body, np.arange(model.nbody))):
+    for n, get, body in (
+        (model.nsite, model.site, model.site_bodyid),
+        (model.ngeom, model.geom, model.geom_bodyid),
+        (model.nbody, model.body, np.arange(model.nbody)),
+    ):
         for i in range(n):
             nm = get(i).name
             if nm and nm not in names and body[i] != 0:
@@ -200,9 +215,16 @@ def _point_names(model: mujoco.MjModel) -> list[str]:
 
 
 # --------------------------------------------------------------------------- IK
-def leg_ik(robot: RobotLegs, qpos: np.ndarray, targets: np.ndarray, *, iterations: int = 30,
-           tolerance: float = 1e-5, damping: float | None = None,
-           data: mujoco.MjData | None = None) -> tuple[np.ndarray, np.ndarray]:
+def leg_ik(
+    robot: RobotLegs,
+    qpos: np.ndarray,
+    targets: np.ndarray,
+    *,
+    iterations: int = 30,
+    tolerance: float = 1e-5,
+    damping: float | None = None,
+    data: mujoco.MjData | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Leg joint angles putting each foot point at its target, trunk as in ``qpos``.
 
     Damped least squares per leg on the leg's own joints,
@@ -247,8 +269,9 @@ def leg_ik(robot: RobotLegs, qpos: np.ndarray, targets: np.ndarray, *, iteration
     return q, res
 
 
-def _solve_frames(robot: RobotLegs, trunk_pos: np.ndarray, trunk_quat: np.ndarray,
-                  feet: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _solve_frames(
+    robot: RobotLegs, trunk_pos: np.ndarray, trunk_quat: np.ndarray, feet: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(qpos (T, nq), residual (T, nf)) of trunk poses and foot targets per frame."""
     t = len(trunk_pos)
     m = robot.model
@@ -258,8 +281,8 @@ def _solve_frames(robot: RobotLegs, trunk_pos: np.ndarray, trunk_quat: np.ndarra
     out = np.empty((t, m.nq))
     res = np.empty((t, len(robot.feet)))
     for k in range(t):
-        q[a:a + 3] = trunk_pos[k]
-        q[a + 3:a + 7] = trunk_quat[k]
+        q[a : a + 3] = trunk_pos[k]
+        q[a + 3 : a + 7] = trunk_quat[k]
         q, res[k] = leg_ik(robot, q, feet[k], iterations=60 if k == 0 else 30, data=d)
         out[k] = q
     return out, res
@@ -291,8 +314,9 @@ class RobotClip:
         :func:`habitsim.sim.track`)."""
         from .qpos import QposTrajectory
 
-        return QposTrajectory(qpos=self.qpos, fps=self.fps,
-                              residual_rad=np.zeros(len(self.qpos)), missing=())
+        return QposTrajectory(
+            qpos=self.qpos, fps=self.fps, residual_rad=np.zeros(len(self.qpos)), missing=()
+        )
 
     def save(self, path: str | Path) -> Path:
         """Write the clip as ``.npz`` atomically (a temporary file renamed over ``path``)."""
@@ -300,10 +324,15 @@ class RobotClip:
 
         path = Path(path)
         with atomic_write(path) as fh:
-            np.savez_compressed(fh, version=np.array(CLIP_VERSION), qpos=self.qpos,
-                                fps=np.array(self.fps), contacts=self.contacts,
-                                feet=np.array(self.feet),
-                                metadata=np.array(json.dumps(json_safe(self.metadata))))
+            np.savez_compressed(
+                fh,
+                version=np.array(CLIP_VERSION),
+                qpos=self.qpos,
+                fps=np.array(self.fps),
+                contacts=self.contacts,
+                feet=np.array(self.feet),
+                metadata=np.array(json.dumps(json_safe(self.metadata))),
+            )
         return path
 
 
@@ -319,12 +348,17 @@ def load_robot_clip(path: str | Path) -> RobotClip:
             if "qpos" not in z or "feet" not in z:
                 raise RetargetError(f"{str(p)!r} is not a robot clip (no qpos/feet arrays)")
             if int(z["version"]) != CLIP_VERSION:
-                raise RetargetError(f"{str(p)!r} has robot clip version {int(z['version'])}, "
-                                    f"this habitsim reads {CLIP_VERSION}")
-            return RobotClip(qpos=z["qpos"].astype(float), fps=float(z["fps"]),
-                             contacts=z["contacts"].astype(bool),
-                             feet=tuple(str(f) for f in z["feet"]),
-                             metadata=json.loads(str(z["metadata"])))
+                raise RetargetError(
+                    f"{str(p)!r} has robot clip version {int(z['version'])}, "
+                    f"this habitsim reads {CLIP_VERSION}"
+                )
+            return RobotClip(
+                qpos=z["qpos"].astype(float),
+                fps=float(z["fps"]),
+                contacts=z["contacts"].astype(bool),
+                feet=tuple(str(f) for f in z["feet"]),
+                metadata=json.loads(str(z["metadata"])),
+            )
     except (OSError, ValueError, KeyError) as e:
         raise RetargetError(f"cannot read robot clip {str(p)!r}: {e}") from e
 
@@ -339,8 +373,11 @@ def _source_paths(motion: Motion) -> dict[str, np.ndarray]:
     model = species_model(motion.species)
     q = motion_to_qpos(motion, model).qpos
     feet = foot_geoms(model)
-    trunk = int(model.jnt_bodyid[[j for j in range(model.njnt)
-                                  if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE][0]])
+    trunk = int(
+        model.jnt_bodyid[
+            [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE][0]
+        ]
+    )
     d = mujoco.MjData(model)
     t = len(q)
     pos, rot, sole = np.empty((t, 3)), np.empty((t, 3, 3)), np.empty((t, 4, 3))
@@ -361,8 +398,9 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
-def retarget(motion: Motion, robot: mujoco.MjModel | RobotLegs,
-             feet: Sequence[str] | None = None) -> RobotClip:
+def retarget(
+    motion: Motion, robot: mujoco.MjModel | RobotLegs, feet: Sequence[str] | None = None
+) -> RobotClip:
     """Map a habitsim motion onto a legged robot (see the module docstring).
 
     Args:
@@ -382,11 +420,16 @@ def retarget(motion: Motion, robot: mujoco.MjModel | RobotLegs,
 
     rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet))
     if len(rl.feet) != 4:
-        raise RetargetError(f"a habitsim motion has 4 feet (LF, RF, LH, RH); got "
-                            f"{len(rl.feet)}: {', '.join(rl.feet)}")
+        raise RetargetError(
+            f"a habitsim motion has 4 feet (LF, RF, LH, RH); got "
+            f"{len(rl.feet)}: {', '.join(rl.feet)}"
+        )
     src = _source_paths(motion)
-    contacts = (np.asarray(motion.contacts, bool) if motion.contacts is not None
-                else motion.detect_contacts())
+    contacts = (
+        np.asarray(motion.contacts, bool)
+        if motion.contacts is not None
+        else motion.detect_contacts()
+    )
     k_scale = rl.leg_length / float(motion.species_info.leg_length)
     pos, rot, sole = src["pos"], src["rot"], src["sole"]
     t = len(pos)
@@ -422,10 +465,23 @@ def retarget(motion: Motion, robot: mujoco.MjModel | RobotLegs,
             target[a:b, i, 2] = 0.0
     target[:, :, 2] += rl.radius[None, :]  # foot point = sphere centre
     qpos, res = _solve_frames(rl, trunk, quat, target)
-    return RobotClip(qpos=qpos, fps=float(motion.fps), contacts=contacts.copy(), feet=rl.feet,
-                     metadata=_fit_figures(rl, qpos, res, {
-                         "source": "habitsim.retarget.retarget", "species": motion.species,
-                         "scale": k_scale, "frames": t}))
+    return RobotClip(
+        qpos=qpos,
+        fps=float(motion.fps),
+        contacts=contacts.copy(),
+        feet=rl.feet,
+        metadata=_fit_figures(
+            rl,
+            qpos,
+            res,
+            {
+                "source": "habitsim.retarget.retarget",
+                "species": motion.species,
+                "scale": k_scale,
+                "frames": t,
+            },
+        ),
+    )
 
 
 def _yaw_matrix(yaw: float) -> np.ndarray:
@@ -435,27 +491,43 @@ def _yaw_matrix(yaw: float) -> np.ndarray:
 
 def _need_feet(feet: Sequence[str] | None) -> Sequence[str]:
     if feet is None:
-        raise RetargetError("name the robot's feet (feet=[...], --feet FL,FR,RL,RR) in the "
-                            "order LF, RF, LH, RH")
+        raise RetargetError(
+            "name the robot's feet (feet=[...], --feet FL,FR,RL,RR) in the order LF, RF, LH, RH"
+        )
     return feet
 
 
-def _fit_figures(rl: RobotLegs, qpos: np.ndarray, res: np.ndarray,
-                 extra: dict[str, Any]) -> dict[str, Any]:
+def _fit_figures(
+    rl: RobotLegs, qpos: np.ndarray, res: np.ndarray, extra: dict[str, Any]
+) -> dict[str, Any]:
     at_limit = []
     for i in range(len(rl.feet)):
         v = qpos[:, rl.qadr[i]]
         span = np.where(np.isfinite(rl.hi[i] - rl.lo[i]), rl.hi[i] - rl.lo[i], np.inf)
         at_limit.append(((v - rl.lo[i] < 1e-3 * span) | (rl.hi[i] - v < 1e-3 * span)).mean())
-    return {**extra, "ik_residual_max_m": float(res.max()), "ik_residual_mean_m": float(res.mean()),
-            "joints_at_limit_share": float(np.mean(at_limit)), "robot_leg_length_m": rl.leg_length}
+    return {
+        **extra,
+        "ik_residual_max_m": float(res.max()),
+        "ik_residual_mean_m": float(res.mean()),
+        "joints_at_limit_share": float(np.mean(at_limit)),
+        "robot_leg_length_m": rl.leg_length,
+    }
 
 
 # --------------------------------------------------------------------------- trot
-def trot(robot: mujoco.MjModel | RobotLegs, feet: Sequence[str] | None = None, *,
-         speed: float = 0.0, duration_s: float = 10.0, fps: float = 100.0,
-         period_s: float | None = None, duty: float = 0.6, step_height: float | None = None,
-         stand_s: float = 0.5, ramp_s: float = 1.0) -> RobotClip:
+def trot(
+    robot: mujoco.MjModel | RobotLegs,
+    feet: Sequence[str] | None = None,
+    *,
+    speed: float = 0.0,
+    duration_s: float = 10.0,
+    fps: float = 100.0,
+    period_s: float | None = None,
+    duty: float = 0.6,
+    step_height: float | None = None,
+    stand_s: float = 0.5,
+    ramp_s: float = 1.0,
+) -> RobotClip:
     """A trot reference for a robot: stand, then trot at ``speed`` (0: in place).
 
     The trunk stays at its standing height and orientation and moves forward (its x
@@ -478,8 +550,9 @@ def trot(robot: mujoco.MjModel | RobotLegs, feet: Sequence[str] | None = None, *
     """
     rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet))
     if len(rl.feet) != 4:
-        raise RetargetError(f"a trot needs 4 feet in the order LF, RF, LH, RH; got "
-                            f"{', '.join(rl.feet)}")
+        raise RetargetError(
+            f"a trot needs 4 feet in the order LF, RF, LH, RH; got {', '.join(rl.feet)}"
+        )
     g = float(np.linalg.norm(rl.model.opt.gravity)) or 9.81
     period = 2.4 * math.sqrt(rl.leg_length / g) if period_s is None else float(period_s)
     height = 0.25 * rl.leg_length if step_height is None else float(step_height)
@@ -501,9 +574,9 @@ def trot(robot: mujoco.MjModel | RobotLegs, feet: Sequence[str] | None = None, *
         return speed * (ramp_int + after)
 
     a = rl.trunk_qadr
-    x0 = rl.home[a:a + 3].copy()
+    x0 = rl.home[a : a + 3].copy()
     x0[2] = rl.height
-    quat0 = rl.home[a + 3:a + 7] / np.linalg.norm(rl.home[a + 3:a + 7])
+    quat0 = rl.home[a + 3 : a + 7] / np.linalg.norm(rl.home[a + 3 : a + 7])
     rot0 = np.zeros(9)
     mujoco.mju_quat2Mat(rot0, quat0)
     rot0 = rot0.reshape(3, 3)
@@ -536,15 +609,34 @@ def trot(robot: mujoco.MjModel | RobotLegs, feet: Sequence[str] | None = None, *
             pos = hold
             lift = land + duty * period
     qpos, res = _solve_frames(rl, trunk, quat, target)
-    return RobotClip(qpos=qpos, fps=float(fps), contacts=contacts, feet=rl.feet,
-                     metadata=_fit_figures(rl, qpos, res, {
-                         "source": "habitsim.retarget.trot", "speed_m_s": float(speed),
-                         "period_s": period, "duty": float(duty), "step_height_m": height,
-                         "frames": n}))
+    return RobotClip(
+        qpos=qpos,
+        fps=float(fps),
+        contacts=contacts,
+        feet=rl.feet,
+        metadata=_fit_figures(
+            rl,
+            qpos,
+            res,
+            {
+                "source": "habitsim.retarget.trot",
+                "speed_m_s": float(speed),
+                "period_s": period,
+                "duty": float(duty),
+                "step_height_m": height,
+                "frames": n,
+            },
+        ),
+    )
 
 
-def stand(robot: mujoco.MjModel | RobotLegs, feet: Sequence[str] | None = None, *,
-          duration_s: float = 10.0, fps: float = 100.0) -> RobotClip:
+def stand(
+    robot: mujoco.MjModel | RobotLegs,
+    feet: Sequence[str] | None = None,
+    *,
+    duration_s: float = 10.0,
+    fps: float = 100.0,
+) -> RobotClip:
     """A standing reference: the ``home`` pose with the feet on the ground, held.
 
     Raises:
@@ -558,18 +650,30 @@ def stand(robot: mujoco.MjModel | RobotLegs, feet: Sequence[str] | None = None, 
     q = rl.home.copy()
     q[rl.trunk_qadr + 2] = rl.height
     qpos = np.tile(q, (n, 1))
-    return RobotClip(qpos=qpos, fps=float(fps), contacts=np.ones((n, len(rl.feet)), bool),
-                     feet=rl.feet, metadata={"source": "habitsim.retarget.stand", "frames": n})
+    return RobotClip(
+        qpos=qpos,
+        fps=float(fps),
+        contacts=np.ones((n, len(rl.feet)), bool),
+        feet=rl.feet,
+        metadata={"source": "habitsim.retarget.stand", "frames": n},
+    )
 
 
-def track_clip(clip: RobotClip, robot: mujoco.MjModel, *, controller: str | Any = "mpc",
-               **options: Any):
+def track_clip(
+    clip: RobotClip, robot: mujoco.MjModel, *, controller: str | Any = "mpc", **options: Any
+):
     """Track a :class:`RobotClip` on ``robot`` with :func:`habitsim.sim.track` (its feet,
     its contact labels; ``options`` are passed on, e.g. ``stop_on_fall``)."""
     from .sim import track
 
-    return track(clip.trajectory(), model=robot, feet=clip.feet, contacts=clip.contacts,
-                 controller=controller, **options)
+    return track(
+        clip.trajectory(),
+        model=robot,
+        feet=clip.feet,
+        contacts=clip.contacts,
+        controller=controller,
+        **options,
+    )
 
 
 def drawable(model: mujoco.MjModel) -> mujoco.MjModel:

@@ -323,8 +323,9 @@ def servo_model(model: mujoco.MjModel) -> mujoco.MjModel:
     return configure_servos(model)
 
 
-def servo_targets(model: mujoco.MjModel, qpos: np.ndarray,
-                  qvel: np.ndarray | None = None) -> np.ndarray:
+def servo_targets(
+    model: mujoco.MjModel, qpos: np.ndarray, qvel: np.ndarray | None = None
+) -> np.ndarray:
     """(N, nu) controls of in-engine servos for reference positions (N, nq) and, for the
     velocity lead, velocities (N, nv).
 
@@ -349,8 +350,9 @@ def servo_targets(model: mujoco.MjModel, qpos: np.ndarray,
     return u
 
 
-def _servo_power(model: mujoco.MjModel, q: np.ndarray, v: np.ndarray, v_next: np.ndarray,
-                 ctrl: np.ndarray) -> np.ndarray:
+def _servo_power(
+    model: mujoco.MjModel, q: np.ndarray, v: np.ndarray, v_next: np.ndarray, ctrl: np.ndarray
+) -> np.ndarray:
     """(N,) Σ|τ·q̇| of the servos per step: torque at (q, v) under ``ctrl`` (vectorised
     :meth:`~habitsim.controllers.servo.ServoMap.predicted_torque`) times ``v_next``."""
     from .controllers.servo import servo_map
@@ -364,8 +366,12 @@ def _servo_power(model: mujoco.MjModel, q: np.ndarray, v: np.ndarray, v_next: np
 
 
 # --------------------------------------------------------------------------- controllers
-def _make_controller(controller: Any, model: mujoco.MjModel, clip: _Clip | None = None,
-                     control_dt: float | None = None) -> Any:
+def _make_controller(
+    controller: Any,
+    model: mujoco.MjModel,
+    clip: _Clip | None = None,
+    control_dt: float | None = None,
+) -> Any:
     """A controller instance for a name (on ``model``, already servo-configured when the
     name asks for servos) or the given instance. The balance-aware controllers
     (``balance``, ``mpc``) get the clip's reference plan (qpos, fps, contact table)."""
@@ -437,8 +443,7 @@ def root_assist(model: mujoco.MjModel, frequency_hz: float = ASSIST_FREQUENCY_HZ
     w = 2.0 * math.pi * frequency_hz
     i0 = 1.0 / float(model.dof_invweight0[dof + 3 : dof + 6].max())
     inertia = float(min(rot.max(), i0 / (2.0 * w * model.opt.timestep)))
-    return RootAssist(model, kp=(mass * w**2, inertia * w**2),
-                      kd=(2 * mass * w, 2 * inertia * w))
+    return RootAssist(model, kp=(mass * w**2, inertia * w**2), kd=(2 * mass * w, 2 * inertia * w))
 
 
 def _make_assist(assist: Any, model: mujoco.MjModel) -> Any:
@@ -455,8 +460,9 @@ def _make_assist(assist: Any, model: mujoco.MjModel) -> Any:
 
 
 # --------------------------------------------------------------------------- falls
-def _lowest_z(model: mujoco.MjModel, geoms: np.ndarray, pos: np.ndarray,
-              mat: np.ndarray) -> np.ndarray:
+def _lowest_z(
+    model: mujoco.MjModel, geoms: np.ndarray, pos: np.ndarray, mat: np.ndarray
+) -> np.ndarray:
     """(..., n) height [m] of the lowest point of each geom (exact for spheres, capsules,
     boxes, ellipsoids; other shapes by their bounding sphere).
 
@@ -501,8 +507,14 @@ class FallDetector:
         feet: foot names of a robot (default habitsim's foot geoms, see :func:`foot_geoms`).
     """
 
-    def __init__(self, model: mujoco.MjModel, ref_qpos: np.ndarray, fps: float,
-                 leg_length: float, feet: Sequence[str] | None = None) -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        ref_qpos: np.ndarray,
+        fps: float,
+        leg_length: float,
+        feet: Sequence[str] | None = None,
+    ) -> None:
         self.model = model
         self.fps = float(fps)
         self.trunk = _free_body(model)
@@ -714,7 +726,8 @@ def _resolve(
             raise SimulationError(
                 "a Motion is tracked on habitsim's own models; for a robot (feet=...) "
                 "retarget it first (habitsim.retarget.retarget or `habitsim retarget`) and "
-                "track the qpos trajectory")
+                "track the qpos trajectory"
+            )
         if model is None:
             raise SimulationError("feet=... names a robot's feet: pass the robot as model=")
     if isinstance(motion_or_qpos, Motion):
@@ -735,8 +748,14 @@ def _resolve(
         else:
             contacts = motion.detect_contacts()
         sp = motion.species_info
-        return _Clip(sp.name, base, _check_qpos(base, traj.qpos), motion.fps,
-                     np.asarray(contacts, bool), sp.leg_length)
+        return _Clip(
+            sp.name,
+            base,
+            _check_qpos(base, traj.qpos),
+            motion.fps,
+            np.asarray(contacts, bool),
+            sp.leg_length,
+        )
     if isinstance(motion_or_qpos, QposTrajectory | np.ndarray):
         if species is None and model is None:
             raise SimulationError("a qpos trajectory needs species= (or model=)")
@@ -773,8 +792,9 @@ def _model_leg_length(model: mujoco.MjModel) -> float:
     return float(max(d.xpos[_free_body(model), 2], 1e-3))
 
 
-def _foot_points(model: mujoco.MjModel, qpos: np.ndarray,
-                 names: Sequence[str] | None = None) -> np.ndarray:
+def _foot_points(
+    model: mujoco.MjModel, qpos: np.ndarray, names: Sequence[str] | None = None
+) -> np.ndarray:
     """(T, nf, 3) lowest points of the foot spheres."""
     feet = foot_geoms(model, names)
     d = mujoco.MjData(model)
@@ -808,8 +828,11 @@ def _sim_model(controller: Any, clip: _Clip, given: mujoco.MjModel | None) -> mu
     """The model to simulate: servos for the servo controllers (unless already there);
     torque motors for ``pd``, ``balance`` and ``mpc`` by name on a model with position
     servos (a robot's: :func:`habitsim.controllers.robot.torque_model`, same limits)."""
-    if isinstance(controller, str) and REGISTRY.get(controller) is not None \
-            and REGISTRY[controller].actuators == "servo":
+    if (
+        isinstance(controller, str)
+        and REGISTRY.get(controller) is not None
+        and REGISTRY[controller].actuators == "servo"
+    ):
         if given is None:
             return _species_model(clip.species, True)
         return given if _has_servos(given) else servo_model(given)
@@ -827,8 +850,9 @@ def _sim_model(controller: Any, clip: _Clip, given: mujoco.MjModel | None) -> mu
 def _has_position_servos(model: mujoco.MjModel) -> bool:
     from .controllers.robot import is_position_servo
 
-    return any(is_position_servo(model, a)
-               for a in range(int(getattr(model, "nactuator", model.nu))))
+    return any(
+        is_position_servo(model, a) for a in range(int(getattr(model, "nactuator", model.nu)))
+    )
 
 
 # --------------------------------------------------------------------------- running
@@ -854,8 +878,9 @@ def _warning_names(data: mujoco.MjData) -> str:
     return ", ".join(names) or "NaN state"
 
 
-def _touch(model: mujoco.MjModel, data: mujoco.MjData, adr: np.ndarray | None,
-           feet: np.ndarray) -> np.ndarray:
+def _touch(
+    model: mujoco.MjModel, data: mujoco.MjData, adr: np.ndarray | None, feet: np.ndarray
+) -> np.ndarray:
     if adr is not None:
         return np.asarray(data.sensordata[adr], dtype=float).copy()
     return _foot_forces(model, data, feet)
@@ -888,8 +913,14 @@ class _Run:
 
 
 def _run_python(
-    model: mujoco.MjModel, clip: _Clip, ctl: Any, assist: Any, control_every: int,
-    settle_s: float, stop_on_fall: bool, detector: FallDetector,
+    model: mujoco.MjModel,
+    clip: _Clip,
+    ctl: Any,
+    assist: Any,
+    control_every: int,
+    settle_s: float,
+    stop_on_fall: bool,
+    detector: FallDetector,
 ) -> _Run:
     """Step-by-step loop with the controller (and assistance) called in Python."""
     from .controllers import Reference
@@ -917,8 +948,9 @@ def _run_python(
         if hold:
             return Reference(0.0, ref.qpos[0], zeros, zeros, clip.contacts[0])
         k = min(int(ref.time[i] * clip.fps + 0.5), len(clip.contacts) - 1)
-        return Reference(float(ref.time[i]), ref.qpos[i], ref.qvel[i], ref.qacc[i],
-                         clip.contacts[k])
+        return Reference(
+            float(ref.time[i]), ref.qpos[i], ref.qvel[i], ref.qacc[i], clip.contacts[k]
+        )
 
     def tick(r: Any) -> None:
         data.ctrl[:] = ctl.control(model, data, r)
@@ -971,13 +1003,27 @@ def _run_python(
     rep: dict[str, Any] = {}
     if assist is not None:
         rep = dict(assist.report(data))
-    return _Run(np.array(qs), np.array(touches).reshape(-1, len(feet)), fall, fall_reason, unstable,
-                unstable_reason, work_at_end, wall, float(data.time), rep)
+    return _Run(
+        np.array(qs),
+        np.array(touches).reshape(-1, len(feet)),
+        fall,
+        fall_reason,
+        unstable,
+        unstable_reason,
+        work_at_end,
+        wall,
+        float(data.time),
+        rep,
+    )
 
 
 def _run_rollout(
-    model: mujoco.MjModel, clips: Sequence[_Clip], threads: int, settle_s: float,
-    stop_on_fall: bool, detectors: Sequence[FallDetector],
+    model: mujoco.MjModel,
+    clips: Sequence[_Clip],
+    threads: int,
+    settle_s: float,
+    stop_on_fall: bool,
+    detectors: Sequence[FallDetector],
 ) -> list[_Run]:
     """All clips of one servo model in one ``mujoco.rollout`` call (no Python per step).
 
@@ -1053,8 +1099,19 @@ def _run_rollout(
         v_post = st[sl, off["QVEL"] : off["QVEL"] + model.nv]
         work = float(_servo_power(model, q_pre, v_pre, v_post, ctrl[b, sl]).sum() * dt)
         sim_t = (n_settle + int(fsteps[b][len(qs) - 1]) - n_settle) * dt
-        runs.append(_Run(np.array(qs), np.array(touches), fall, fall_reason, unstable,
-                         unstable_reason, work, 0.0, sim_t))
+        runs.append(
+            _Run(
+                np.array(qs),
+                np.array(touches),
+                fall,
+                fall_reason,
+                unstable,
+                unstable_reason,
+                work,
+                0.0,
+                sim_t,
+            )
+        )
     # wall time per clip: the shared rollout and all pre/post-processing, split evenly
     per_clip = (time.perf_counter() - wall0) / len(clips)
     for r in runs:
@@ -1063,7 +1120,11 @@ def _run_rollout(
 
 
 def _finish(
-    clip: _Clip, model: mujoco.MjModel, run: _Run, controller: str, stats: dict[str, Any],
+    clip: _Clip,
+    model: mujoco.MjModel,
+    run: _Run,
+    controller: str,
+    stats: dict[str, Any],
 ) -> TrackResult:
     from .evaluation.simulated import simulated_metrics
 
@@ -1079,26 +1140,52 @@ def _finish(
     report = dict(run.assist_report) if run.assist_report else {"assist_on": False}
     report.setdefault("assist_force_mg", 0.0)
     res = TrackResult(
-        species=clip.species, fps=clip.fps, model=model, qpos=run.qpos,
-        reference_qpos=clip.qpos, contacts=contacts, touch=run.touch,
-        reference_contacts=clip.contacts, fell=run.fall_frame is not None, fall_time=fall_t,
-        fall_reason=run.fall_reason, unstable=run.unstable_frame is not None,
-        unstable_reason=run.unstable_reason, survival=float(survival), controller=controller,
-        controller_stats=stats, assist=report, work_j=run.work_j, wall_time_s=run.wall_time_s,
+        species=clip.species,
+        fps=clip.fps,
+        model=model,
+        qpos=run.qpos,
+        reference_qpos=clip.qpos,
+        contacts=contacts,
+        touch=run.touch,
+        reference_contacts=clip.contacts,
+        fell=run.fall_frame is not None,
+        fall_time=fall_t,
+        fall_reason=run.fall_reason,
+        unstable=run.unstable_frame is not None,
+        unstable_reason=run.unstable_reason,
+        survival=float(survival),
+        controller=controller,
+        controller_stats=stats,
+        assist=report,
+        work_j=run.work_j,
+        wall_time_s=run.wall_time_s,
         sim_time_s=run.sim_time_s,
     )
     res.metrics = simulated_metrics(
-        model, res.qpos, clip.qpos, res.contacts, clip.contacts,
-        leg_length=clip.leg_length, survival=res.survival, fell=res.failed,
-        work_j=run.work_j, assist_force_mg=float(report["assist_force_mg"]),
-        sim_time_s=run.sim_time_s, wall_time_s=run.wall_time_s,
+        model,
+        res.qpos,
+        clip.qpos,
+        res.contacts,
+        clip.contacts,
+        leg_length=clip.leg_length,
+        survival=res.survival,
+        fell=res.failed,
+        work_j=run.work_j,
+        assist_force_mg=float(report["assist_force_mg"]),
+        sim_time_s=run.sim_time_s,
+        wall_time_s=run.wall_time_s,
     )
     return res
 
 
 def _rollout_stats(threads: int) -> dict[str, Any]:
-    return {"calls": 0, "mean_time_ms": 0.0, "max_time_ms": 0.0, "failures": 0,
-            "notes": [f"in-engine servos via mujoco.rollout ({threads} thread(s))"]}
+    return {
+        "calls": 0,
+        "mean_time_ms": 0.0,
+        "max_time_ms": 0.0,
+        "failures": 0,
+        "notes": [f"in-engine servos via mujoco.rollout ({threads} thread(s))"],
+    }
 
 
 def _control_every(model: mujoco.MjModel, control_hz: float | None) -> int:
@@ -1208,8 +1295,9 @@ def track(
     if use_rollout if use_rollout is not None else fast:
         run = _run_rollout(sim_model, [clip], 1, settle_s, stop_on_fall, [detector])[0]
         return _finish(clip, sim_model, run, "servo", _rollout_stats(1))
-    ctl = _make_controller(controller, sim_model, clip,
-                           None if every == 1 else every * sim_model.opt.timestep)
+    ctl = _make_controller(
+        controller, sim_model, clip, None if every == 1 else every * sim_model.opt.timestep
+    )
     run = _run_python(sim_model, clip, ctl, asst, every, settle_s, stop_on_fall, detector)
     name = controller if isinstance(controller, str) else str(getattr(ctl, "name", "custom"))
     return _finish(clip, sim_model, run, name, ctl.stats.to_dict())
@@ -1256,15 +1344,24 @@ def track_many(
         return []
     fast = controller == "servo" and not assist and control_hz is None
     if not fast:
+
         def one(m: Motion | QposTrajectory) -> TrackResult:
             ctl: Any = controller
             mdl = None
             if not isinstance(controller, str):
                 mdl = _resolve(m, species, None).base
                 ctl = controller(mdl)
-            return track(m, species=species, controller=ctl, assist=assist, model=mdl,
-                         control_hz=control_hz, settle_s=settle_s, stop_on_fall=stop_on_fall,
-                         use_rollout=False)
+            return track(
+                m,
+                species=species,
+                controller=ctl,
+                assist=assist,
+                model=mdl,
+                control_hz=control_hz,
+                settle_s=settle_s,
+                stop_on_fall=stop_on_fall,
+                use_rollout=False,
+            )
 
         with ThreadPoolExecutor(max_workers=threads) as ex:
             return list(ex.map(one, motions))

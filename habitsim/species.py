@@ -213,8 +213,7 @@ class Species:
     def _vertical_extent(self, limb: str, with_girdle: bool) -> float:
         keys = ("girdle", "upper", "lower", "foot") if with_girdle else ("upper", "lower", "foot")
         return sum(
-            self.segments[f"{limb}_{k}"] * math.cos(self.inclinations[f"{limb}_{k}"])
-            for k in keys
+            self.segments[f"{limb}_{k}"] * math.cos(self.inclinations[f"{limb}_{k}"]) for k in keys
         )
 
     @property
@@ -316,11 +315,15 @@ def _parse(data: dict[str, Any], path: Path | None) -> Species:
         )
 
     segs_tbl = _table(data, "segments", where)
-    segments = {k: _num(_req(segs_tbl, k, f"{where} [segments]"), f"{where} segments.{k}", True)
-                for k in SEGMENT_KEYS}
+    segments = {
+        k: _num(_req(segs_tbl, k, f"{where} [segments]"), f"{where} segments.{k}", True)
+        for k in SEGMENT_KEYS
+    }
     girth_tbl = _table(data, "girths", where)
-    girths = {k: _num(_req(girth_tbl, k, f"{where} [girths]"), f"{where} girths.{k}", True)
-              for k in GIRTH_KEYS}
+    girths = {
+        k: _num(_req(girth_tbl, k, f"{where} [girths]"), f"{where} girths.{k}", True)
+        for k in GIRTH_KEYS
+    }
     incl = {
         k: math.radians(
             _num(_req(posture_tbl, f"{k}_deg", f"{where} [posture]"), f"{where} posture.{k}_deg")
@@ -422,8 +425,14 @@ def _check_limits_hold_posture(sp: Species, where: str) -> None:
     standing = standing_leg_angles(sp)
     # Joints resting at 0 in the standing pose: tail2 (tail_pitch), spine, yaws, abductions.
     rest_zero = {
-        "tail_pitch", "spine_pitch", "spine_yaw", "neck_yaw", "head_yaw", "tail_yaw",
-        "fore_upper_abd", "hind_upper_abd",
+        "tail_pitch",
+        "spine_pitch",
+        "spine_yaw",
+        "neck_yaw",
+        "head_yaw",
+        "tail_yaw",
+        "fore_upper_abd",
+        "hind_upper_abd",
     }
     for role, angle in [*standing.items(), *((r, 0.0) for r in sorted(rest_zero))]:
         lo, hi = sp.joint_limits[role]

@@ -223,8 +223,16 @@ def format_deviations(devs: list[Deviation], only_failures: bool = False) -> str
         if only_failures and d.ok:
             continue
         fmt = lambda x: "-" if x is None else f"{x:.6g}"  # noqa: E731
-        rows.append((d.key, fmt(d.golden), fmt(d.actual), fmt(d.diff) if d.note == "" else "-",
-                     f"{d.allowed:.3g}", "ok" if d.ok else f"MOVED {d.note}".strip()))
+        rows.append(
+            (
+                d.key,
+                fmt(d.golden),
+                fmt(d.actual),
+                fmt(d.diff) if d.note == "" else "-",
+                f"{d.allowed:.3g}",
+                "ok" if d.ok else f"MOVED {d.note}".strip(),
+            )
+        )
     widths = [max(len(r[i]) for r in rows) for i in range(6)]
     return "\n".join(
         "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows
@@ -265,8 +273,9 @@ def _read_golden(path: Path) -> _Golden:
     )
 
 
-def write_golden(path: str | Path, figures: Mapping[str, Any],
-                 tolerances: Mapping[str, Any] | None = None) -> None:
+def write_golden(
+    path: str | Path, figures: Mapping[str, Any], tolerances: Mapping[str, Any] | None = None
+) -> None:
     """Record golden figures (atomically), with the current MuJoCo and habitsim versions."""
     clean = {}
     for k, v in figures.items():

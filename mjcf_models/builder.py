@@ -155,7 +155,11 @@ def hinge_joints() -> list[HingeJoint]:
         if name == "pelvis" or name in END_POINTS:
             continue
         if name.startswith("spine") or name in ("neck", "head") or name.startswith("tail"):
-            base = "spine" if name.startswith("spine") else ("tail" if name.startswith("tail") else name)
+            base = (
+                "spine"
+                if name.startswith("spine")
+                else ("tail" if name.startswith("tail") else name)
+            )
             out.append(HingeJoint(f"{name}_yaw", name, _Z, "yaw", f"{base}_yaw", base))
             out.append(HingeJoint(f"{name}_pitch", name, _Y, "pitch", f"{base}_pitch", base))
             continue
@@ -164,8 +168,15 @@ def hinge_joints() -> list[HingeJoint]:
         part, trole = _LEG_SEG_ROLE[seg]
         if seg in ("shoulder", "hip"):
             out.append(
-                HingeJoint(f"{name}_abd", name, _X, "abd", f"{limb}_upper_abd", "upper_abd",
-                           ABDUCTION_SIGN[name[0]])
+                HingeJoint(
+                    f"{name}_abd",
+                    name,
+                    _X,
+                    "abd",
+                    f"{limb}_upper_abd",
+                    "upper_abd",
+                    ABDUCTION_SIGN[name[0]],
+                )
             )
         out.append(HingeJoint(f"{name}_flex", name, _Y, "flex", f"{limb}_{part}_flex", trole))
     return out
@@ -207,7 +218,9 @@ def _body_meshes(sp: Species) -> dict[str, trimesh.Trimesh]:
     }
 
 
-def _gravity_moments(sp: Species, solids: dict[str, trimesh.Trimesh], density: float) -> dict[str, float]:
+def _gravity_moments(
+    sp: Species, solids: dict[str, trimesh.Trimesh], density: float
+) -> dict[str, float]:
     """Largest gravity moment [N·m] about each joint from the bodies distal to it.
 
     Computed in the canonical pose with the distal subtree's centre of mass at its
@@ -266,7 +279,9 @@ def _home_qpos(sp: Species, joints: list[HingeJoint], spec: mujoco.MjSpec) -> np
     q[3:7] = quats[0]
     for h in joints:
         angle = 0.0
-        if h.kind == "flex" or (h.kind == "pitch" and h.skeleton_joint in ("neck", "head", "tail1")):
+        if h.kind == "flex" or (
+            h.kind == "pitch" and h.skeleton_joint in ("neck", "head", "tail1")
+        ):
             angle = loc[h.role]
         q[adr[h.name]] = angle
     return q
@@ -344,17 +359,25 @@ def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mu
         if parent < 0:
             body = spec.worldbody.add_body(name=name, pos=list(root_pos), childclass=sp.name)
             body.add_freejoint(name="root")
-            body.add_camera(name="track", mode=mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM,
-                            pos=[0.0, -4.0 * sp.hip_height, 1.0 * sp.hip_height],
-                            xyaxes=[1, 0, 0, 0, 0.25, 1])
+            body.add_camera(
+                name="track",
+                mode=mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM,
+                pos=[0.0, -4.0 * sp.hip_height, 1.0 * sp.hip_height],
+                xyaxes=[1, 0, 0, 0, 0.25, 1],
+            )
         else:
             body = bodies[JOINT_NAMES[parent]].add_body(name=name, pos=list(skel.offsets[j]))
         bodies[name] = body
         for h in by_joint.get(name, []):
             lo, hi = sp.joint_limits[h.role]
             rng = [lo, hi] if h.sign > 0 else [-hi, -lo]
-            body.add_joint(classes[h.torque_role], name=h.name, axis=list(h.axis), range=rng,
-                           limited=mujoco.mjtLimited.mjLIMITED_TRUE)
+            body.add_joint(
+                classes[h.torque_role],
+                name=h.name,
+                axis=list(h.axis),
+                range=rng,
+                limited=mujoco.mjtLimited.mjLIMITED_TRUE,
+            )
         # mass properties from the trimesh solids of this body's bones
         if name in solids:
             mesh = solids[name]
@@ -375,14 +398,19 @@ def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mu
                 r_foot = _foot_radius(sp, child)
                 end = end + home_rot[j].T @ np.array([0.0, 0.0, r_foot])
                 radius = min(radius, 0.8 * r_foot)
-            body.add_geom(collision, name=f"{name}_{child}_col",
-                          type=mujoco.mjtGeom.mjGEOM_CAPSULE, size=[radius, 0, 0],
-                          fromto=[0, 0, 0, *end])
+            body.add_geom(
+                collision,
+                name=f"{name}_{child}_col",
+                type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                size=[radius, 0, 0],
+                fromto=[0, 0, 0, *end],
+            )
         if mesh_dir is not None and name in solids:
             mname = f"{name}_mesh"
             spec.add_mesh(name=mname, file=f"{name}.stl")
-            body.add_geom(visual, name=f"{name}_visual", type=mujoco.mjtGeom.mjGEOM_MESH,
-                          meshname=mname)
+            body.add_geom(
+                visual, name=f"{name}_visual", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=mname
+            )
     # end-point sites, feet; foot spheres sit straight above the toe in the home pose
     for j, name in enumerate(JOINT_NAMES):
         if name not in END_POINTS:
@@ -392,21 +420,31 @@ def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mu
         parent_body.add_site(name=name, pos=list(off), size=[0.01 * sp.leg_length, 0, 0], group=4)
         if name in FOOT_JOINTS:
             leg = name[:2]
-            limb = "fore" if leg[1] == "f" else "hind"
             r = _foot_radius(sp, name)
             up_local = home_rot[PARENTS[j]].T @ np.array([0.0, 0.0, r])
             centre = off + up_local  # sole tangent to the ground at the toe end point
-            parent_body.add_geom(foot, name=f"{leg}_foot", type=mujoco.mjtGeom.mjGEOM_SPHERE,  # noqa: E501
-                                 size=[r, 0, 0], pos=list(centre))
-            parent_body.add_site(name=f"{leg}_foot_touch", pos=list(centre),
-                                 size=[1.05 * r, 0, 0], group=4)
-            spec.add_sensor(name=f"{leg}_touch", type=mujoco.mjtSensor.mjSENS_TOUCH,
-                            objtype=mujoco.mjtObj.mjOBJ_SITE, objname=f"{leg}_foot_touch")
+            parent_body.add_geom(
+                foot,
+                name=f"{leg}_foot",
+                type=mujoco.mjtGeom.mjGEOM_SPHERE,  # noqa: E501
+                size=[r, 0, 0],
+                pos=list(centre),
+            )
+            parent_body.add_site(
+                name=f"{leg}_foot_touch", pos=list(centre), size=[1.05 * r, 0, 0], group=4
+            )
+            spec.add_sensor(
+                name=f"{leg}_touch",
+                type=mujoco.mjtSensor.mjSENS_TOUCH,
+                objtype=mujoco.mjtObj.mjOBJ_SITE,
+                objname=f"{leg}_foot_touch",
+            )
     # ---- actuators: one torque motor per hinge --------------------------------------
     load = _gravity_moments(sp, solids, density)
     for h in joints:
-        act = spec.add_actuator(classes[h.torque_role], name=h.name, target=h.name,
-                                trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act = spec.add_actuator(
+            classes[h.torque_role], name=h.name, target=h.name, trntype=mujoco.mjtTrn.mjTRN_JOINT
+        )
         act.set_to_motor()
         tau = max(ROLE_TORQUE[h.torque_role] * mgl, LOAD_FACTOR * load[h.skeleton_joint])
         if tau > ROLE_TORQUE[h.torque_role] * mgl:
@@ -469,11 +507,18 @@ def to_position_actuators(
     ctrl = []
     for act in spec.actuators:
         joint = joints.get(act.target)
-        motor = (act.gaintype == mujoco.mjtGain.mjGAIN_FIXED
-                 and act.biastype == mujoco.mjtBias.mjBIAS_NONE)
-        if (act.trntype != mujoco.mjtTrn.mjTRN_JOINT or joint is None
-                or joint.type != mujoco.mjtJoint.mjJNT_HINGE or not motor
-                or act.gear[0] != 1.0 or tau_of(act) <= 0):
+        motor = (
+            act.gaintype == mujoco.mjtGain.mjGAIN_FIXED
+            and act.biastype == mujoco.mjtBias.mjBIAS_NONE
+        )
+        if (
+            act.trntype != mujoco.mjtTrn.mjTRN_JOINT
+            or joint is None
+            or joint.type != mujoco.mjtJoint.mjJNT_HINGE
+            or not motor
+            or act.gear[0] != 1.0
+            or tau_of(act) <= 0
+        ):
             raise ModelBuildError(
                 f"actuator {act.name!r} is not a gear-1 torque motor on a hinge with a "
                 "control range; only those can become position actuators"
@@ -512,7 +557,8 @@ _SCENE = """<mujoco model="{name} scene">
   </visual>
 
   <asset>
-    <texture type="skybox" builtin="gradient" rgb1="0.3 0.5 0.7" rgb2="0 0 0" width="512" height="3072"/>
+    <texture type="skybox" builtin="gradient" rgb1="0.3 0.5 0.7" rgb2="0 0 0" width="512"
+      height="3072"/>
     <texture type="2d" name="groundplane" builtin="checker" mark="edge" rgb1="0.2 0.3 0.4"
       rgb2="0.1 0.2 0.3" markrgb="0.8 0.8 0.8" width="300" height="300"/>
     <material name="groundplane" texture="groundplane" texuniform="true" texrepeat="5 5"
@@ -670,8 +716,9 @@ def _readme(sp: Species, model: mujoco.MjModel, density: float) -> str:
     return "\n".join(lines)
 
 
-def write_model(species: str | Species, root: str | Path | None = None,
-                preview: bool = False) -> Path:
+def write_model(
+    species: str | Species, root: str | Path | None = None, preview: bool = False
+) -> Path:
     """Write ``<root>/<species>/{<species>.xml, scene.xml, <species>_position.xml,
     scene_position.xml, README.md, assets/*.stl}`` (and ``preview.png`` with ``preview``).
 
@@ -705,11 +752,17 @@ def write_model(species: str | Species, root: str | Path | None = None,
         solids = _body_meshes(sp)
         density = sp.mass_kg / sum(m.volume for m in solids.values())
         extent = 2.0 * sp.segments["trunk"] + sp.segments["neck"] + sp.segments["head"]
-        for scene, animal in (("scene.xml", sp.name),
-                              ("scene_position.xml", f"{sp.name}_position")):
+        for scene, animal in (
+            ("scene.xml", sp.name),
+            ("scene_position.xml", f"{sp.name}_position"),
+        ):
             (tmp / scene).write_text(
-                _SCENE.format(name=animal, cz=0.6 * sp.hip_height, extent=extent,
-                              light=3.0 * sp.hip_height + 1.0),
+                _SCENE.format(
+                    name=animal,
+                    cz=0.6 * sp.hip_height,
+                    extent=extent,
+                    light=3.0 * sp.hip_height + 1.0,
+                ),
                 encoding="utf-8",
             )
         try:
@@ -736,8 +789,9 @@ def write_model(species: str | Species, root: str | Path | None = None,
     return final / "scene.xml"
 
 
-def build_all(root: str | Path | None = None, species: list[str] | None = None,
-              preview: bool = False) -> list[Path]:
+def build_all(
+    root: str | Path | None = None, species: list[str] | None = None, preview: bool = False
+) -> list[Path]:
     """Write the models of the given (default: all catalog) species."""
     from habitsim.species import species_names
 

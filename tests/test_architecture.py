@@ -21,8 +21,9 @@ def test_core_imports_without_torch() -> None:
         "import habitsim, habitsim.controllers, habitsim.bvh, habitsim.sim\n"
         "print(sorted(m for m in ('torch', 'roma') if m in sys.modules))\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True, cwd=ROOT / "tests")
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT / "tests"
+    )
     assert out.stdout.strip() == "[]"
 
 
@@ -56,10 +57,13 @@ def test_no_bare_top_level_imports() -> None:
                 names = [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
                 names = [node.module]
-            elif (isinstance(node, ast.Call) and node.args
-                  and isinstance(node.args[0], ast.Constant)
-                  and isinstance(node.args[0].value, str)
-                  and getattr(node.func, "attr", getattr(node.func, "id", "")) == "import_module"):
+            elif (
+                isinstance(node, ast.Call)
+                and node.args
+                and isinstance(node.args[0], ast.Constant)
+                and isinstance(node.args[0].value, str)
+                and getattr(node.func, "attr", getattr(node.func, "id", "")) == "import_module"
+            ):
                 names = [node.args[0].value]
             for n in names:
                 if n.split(".")[0] in BARE:

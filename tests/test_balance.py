@@ -37,16 +37,19 @@ def qp4() -> StanceQP:
     return StanceQP(4, "daqp")
 
 
-FEET_R = np.array([[0.19, 0.13, -0.28], [0.19, -0.13, -0.28],
-                   [-0.19, 0.13, -0.28], [-0.19, -0.13, -0.28]])  # foot − CoM [m]
+FEET_R = np.array(
+    [[0.19, 0.13, -0.28], [0.19, -0.13, -0.28], [-0.19, 0.13, -0.28], [-0.19, -0.13, -0.28]]
+)  # foot − CoM [m]
 SCALE = np.array([1.0, 1.0, 1.0, 4.0, 4.0, 4.0])
 
 
 def in_cone(f: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Random forces (k, 3) strictly inside the friction pyramid."""
     fz = rng.uniform(20.0, 80.0, len(f))
-    return np.stack([rng.uniform(-0.8, 0.8, len(f)) * MU * fz,
-                     rng.uniform(-0.8, 0.8, len(f)) * MU * fz, fz], axis=1)
+    return np.stack(
+        [rng.uniform(-0.8, 0.8, len(f)) * MU * fz, rng.uniform(-0.8, 0.8, len(f)) * MU * fz, fz],
+        axis=1,
+    )
 
 
 @pytest.mark.parametrize("stance", [(1, 1, 1, 1), (1, 1, 1, 0), (1, 0, 0, 1), (0, 1, 1, 0)])
@@ -56,8 +59,17 @@ def test_qp_reproduces_a_wanted_wrench(qp4: StanceQP, stance) -> None:
     f_true = np.zeros((4, 3))
     f_true[st] = in_cone(f_true[st], rng)
     wrench = wrench_matrix(FEET_R) @ f_true.ravel()
-    f, ok = qp4.solve(FEET_R, wrench, st, mu=MU, fz_min=0.0, fz_max=500.0, row_scale=SCALE,
-                      smooth=0.0, regularization=1e-9)
+    f, ok = qp4.solve(
+        FEET_R,
+        wrench,
+        st,
+        mu=MU,
+        fz_min=0.0,
+        fz_max=500.0,
+        row_scale=SCALE,
+        smooth=0.0,
+        regularization=1e-9,
+    )
     assert ok
     np.testing.assert_allclose(wrench_matrix(FEET_R) @ f.ravel(), wrench, atol=1e-3)
     assert np.all(f[~st] == 0.0)  # swing feet carry no force
@@ -85,12 +97,32 @@ def test_qp_keeps_joint_torques_within_bounds() -> None:
     jac = rng.normal(0.0, 0.2, (4, 3, 5))
     wrench = np.array([0.0, 0.0, 250.0, 0.0, 0.0, 0.0])
     st = np.ones(4, dtype=bool)
-    free, _ = qp.solve(FEET_R, wrench, st, mu=MU, fz_min=0.0, fz_max=400.0, row_scale=SCALE,
-                       jac=jac, tau_lo=np.full(5, -1e4), tau_hi=np.full(5, 1e4))
+    free, _ = qp.solve(
+        FEET_R,
+        wrench,
+        st,
+        mu=MU,
+        fz_min=0.0,
+        fz_max=400.0,
+        row_scale=SCALE,
+        jac=jac,
+        tau_lo=np.full(5, -1e4),
+        tau_hi=np.full(5, 1e4),
+    )
     tau_free = -np.einsum("fkn,fk->n", jac, free)
     lim = 0.5 * np.abs(tau_free).max()
-    f, ok = qp.solve(FEET_R, wrench, st, mu=MU, fz_min=0.0, fz_max=400.0, row_scale=SCALE,
-                     jac=jac, tau_lo=np.full(5, -lim), tau_hi=np.full(5, lim))
+    f, ok = qp.solve(
+        FEET_R,
+        wrench,
+        st,
+        mu=MU,
+        fz_min=0.0,
+        fz_max=400.0,
+        row_scale=SCALE,
+        jac=jac,
+        tau_lo=np.full(5, -lim),
+        tau_hi=np.full(5, lim),
+    )
     assert ok
     tau = -np.einsum("fkn,fk->n", jac, f)
     assert np.all(np.abs(tau) <= lim + 1e-6)
@@ -101,8 +133,9 @@ def test_qp_solvers_agree() -> None:
     st = np.array([1, 1, 0, 1], dtype=bool)
     out = []
     for solver in ("daqp", "qpoases"):
-        f, ok = StanceQP(4, solver).solve(FEET_R, wrench, st, mu=MU, fz_min=0.0, fz_max=400.0,
-                                         row_scale=SCALE)
+        f, ok = StanceQP(4, solver).solve(
+            FEET_R, wrench, st, mu=MU, fz_min=0.0, fz_max=400.0, row_scale=SCALE
+        )
         assert ok
         out.append(f)
     np.testing.assert_allclose(out[0], out[1], atol=1e-4)
@@ -115,8 +148,16 @@ def home(model: mujoco.MjModel) -> np.ndarray:
     return model.key("home").qpos.copy()
 
 
-def stand(model: mujoco.MjModel, ctl, seconds: float, *, drop: float = 0.0,
-          push_mg: float = 0.0, push_at: float = 0.5, push_s: float = 0.1):
+def stand(
+    model: mujoco.MjModel,
+    ctl,
+    seconds: float,
+    *,
+    drop: float = 0.0,
+    push_mg: float = 0.0,
+    push_at: float = 0.5,
+    push_s: float = 0.1,
+):
     """Hold the home pose; optional drop height [m] and a lateral push (the disturbance:
     ``xfrc_applied`` on the trunk for ``push_s`` seconds, push_mg · m·g newtons)."""
     q0 = home(model)
@@ -237,7 +278,9 @@ def test_controller_rejects_bad_models() -> None:
     no_free = mujoco.MjModel.from_xml_string(
         "<mujoco><worldbody><body><joint type='hinge'/><geom size='.1' name='f'/></body>"
         "</worldbody><actuator><motor joint='' /></actuator></mujoco>".replace(
-            "<motor joint='' />", ""))
+            "<motor joint='' />", ""
+        )
+    )
     with pytest.raises(ControllerError):
         BalanceController(no_free, ["f"])
     robot = mujoco.MjModel.from_xml_path(str(ROBOT_XML))

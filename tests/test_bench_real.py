@@ -31,20 +31,51 @@ def folder(tmp_path_factory) -> Path:
 
 def test_bench_real_rows_and_json(folder: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "rows.json"
-    args = ["bench", "real", "--data", str(folder), "--targets", "cat", "--methods", "direct",
-            "--seconds", "2", "--refine", "A", "--controller", "servo", "--workers", "1",
-            "--json", str(out)]
+    args = [
+        "bench",
+        "real",
+        "--data",
+        str(folder),
+        "--targets",
+        "cat",
+        "--methods",
+        "direct",
+        "--seconds",
+        "2",
+        "--refine",
+        "A",
+        "--controller",
+        "servo",
+        "--workers",
+        "1",
+        "--json",
+        str(out),
+    ]
     code = main(args)
     text = capsys.readouterr().out
     doc = json.loads(out.read_text())
     (row,) = doc["rows"]
     assert row["status"] == "ok", row["note"]
-    assert (row["clip"], row["target"], row["method"], row["frames"]) == ("walk.bvh", "cat",
-                                                                         "direct", 60)
+    assert (row["clip"], row["target"], row["method"], row["frames"]) == (
+        "walk.bvh",
+        "cat",
+        "direct",
+        60,
+    )
     assert row["import_contact_f1"] is None  # the importer reports none (yet): "-"
-    for k in ("skate_mm_before", "skate_mm_after", "jerk_before", "jerk_after",
-              "penetration_mm_before", "penetration_mm_after", "survival",
-              "sim_mpjpe_per_leg", "time_transfer_s", "time_refine_s", "time_track_s"):
+    for k in (
+        "skate_mm_before",
+        "skate_mm_after",
+        "jerk_before",
+        "jerk_after",
+        "penetration_mm_before",
+        "penetration_mm_after",
+        "survival",
+        "sim_mpjpe_per_leg",
+        "time_transfer_s",
+        "time_refine_s",
+        "time_track_s",
+    ):
         assert isinstance(row[k], float), k
     assert row["refine_check"] in ("kept", "reverted", "fallback")
     names = [t["name"] for t in doc["targets"]]
@@ -54,18 +85,44 @@ def test_bench_real_rows_and_json(folder: Path, tmp_path: Path, capsys) -> None:
 
 
 def test_bench_real_no_track_no_refine_meets_what_applies(folder: Path, capsys) -> None:
-    args = ["bench", "real", "--data", str(folder), "--targets", "cat", "--methods", "direct",
-            "--seconds", "2", "--refine", "none", "--no-track", "--workers", "1"]
+    args = [
+        "bench",
+        "real",
+        "--data",
+        str(folder),
+        "--targets",
+        "cat",
+        "--methods",
+        "direct",
+        "--seconds",
+        "2",
+        "--refine",
+        "none",
+        "--no-track",
+        "--workers",
+        "1",
+    ]
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "n/a" in text and "MISSED" not in text
 
 
 def _row(method: str, survival: float, **kw) -> dict:
-    r = {"status": "ok", "method": method, "survival": survival, "sim_mpjpe_per_leg": 0.05,
-         "skate_mm_before": 20.0, "skate_mm_after": 0.5, "jerk_before": 100.0,
-         "jerk_after": 50.0, "penetration_mm_before": 5.0, "penetration_mm_after": 0.0,
-         "time_transfer_s": 0.5, "time_refine_s": 1.0, "time_track_s": 2.0}
+    r = {
+        "status": "ok",
+        "method": method,
+        "survival": survival,
+        "sim_mpjpe_per_leg": 0.05,
+        "skate_mm_before": 20.0,
+        "skate_mm_after": 0.5,
+        "jerk_before": 100.0,
+        "jerk_after": 50.0,
+        "penetration_mm_before": 5.0,
+        "penetration_mm_after": 0.0,
+        "time_transfer_s": 0.5,
+        "time_refine_s": 1.0,
+        "time_track_s": 2.0,
+    }
     r.update(kw)
     return r
 

@@ -12,8 +12,11 @@ from habitsim.cli import EXIT_CLOSED_PIPE, build_parser, main
 from habitsim.cli.conventions import ListAction, check_exit, split_names
 
 #: Options that take ONE species (the skeleton a BVH is imported onto or sized against).
-_SINGLE = {("bench real", "--species"), ("data import-bvh", "--species"),
-           ("data inspect-bvh", "--species")}
+_SINGLE = {
+    ("bench real", "--species"),
+    ("data import-bvh", "--species"),
+    ("data inspect-bvh", "--species"),
+}
 _LIST_FLAGS = ("--species", "--targets", "--sources", "--methods")
 
 
@@ -29,8 +32,11 @@ def _commands(parser: argparse.ArgumentParser, prefix: str = ""):
 
 def test_closed_pipe_exits_quietly() -> None:
     """``habitsim species list | head -1``: no BrokenPipeError traceback."""
-    proc = subprocess.Popen([sys.executable, "-m", "habitsim", "species", "list"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "habitsim", "species", "list"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     proc.stdout.close()  # the reader goes away before the command writes a byte
     err = proc.stderr.read().decode()
     proc.stderr.close()
@@ -40,8 +46,13 @@ def test_closed_pipe_exits_quietly() -> None:
 
 
 def test_open_pipe_still_prints_everything() -> None:
-    done = subprocess.run([sys.executable, "-m", "habitsim", "species", "list"],
-                          capture_output=True, text=True, timeout=120, check=True)
+    done = subprocess.run(
+        [sys.executable, "-m", "habitsim", "species", "list"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
     assert done.stdout.count("\n") >= 18 and not done.stderr
 
 
@@ -54,29 +65,43 @@ def test_every_list_option_takes_both_syntaxes() -> None:
                 if flag in _LIST_FLAGS and (path, flag) not in _SINGLE:
                     assert isinstance(action, ListAction), f"habitsim {path} {flag}"
                     seen.add((path, flag))
-    for needed in [("bench sim", "--species"), ("bench refine", "--species"),
-                   ("bench balance", "--species"), ("bench real", "--targets"),
-                   ("models build", "--species"), ("data synth", "--species"),
-                   ("demo", "--targets"), ("eval", "--sources"), ("eval", "--targets")]:
+    for needed in [
+        ("bench sim", "--species"),
+        ("bench refine", "--species"),
+        ("bench balance", "--species"),
+        ("bench real", "--targets"),
+        ("models build", "--species"),
+        ("data synth", "--species"),
+        ("demo", "--targets"),
+        ("eval", "--sources"),
+        ("eval", "--targets"),
+    ]:
         assert needed in seen, needed
 
 
-@pytest.mark.parametrize("argv", [
-    ["bench", "refine", "--species", "{}"],
-    ["bench", "balance", "--species", "{}"],
-    ["models", "build", "--species", "{}"],
-    ["data", "synth", "--out", "x", "--species", "{}"],
-    ["demo", "--targets", "{}"],
-    ["eval", "--out", "x", "--targets", "{}"],
-    ["bench", "real", "--data", "x", "--targets", "{}"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["bench", "refine", "--species", "{}"],
+        ["bench", "balance", "--species", "{}"],
+        ["models", "build", "--species", "{}"],
+        ["data", "synth", "--out", "x", "--species", "{}"],
+        ["demo", "--targets", "{}"],
+        ["eval", "--out", "x", "--targets", "{}"],
+        ["bench", "real", "--data", "x", "--targets", "{}"],
+    ],
+)
 def test_comma_and_space_give_the_same_list(argv: list[str]) -> None:
     parser = build_parser()
     i = argv.index("{}")
     results = []
-    for names in (["cat,dog,horse"], ["cat", "dog", "horse"], ["cat,dog", "horse"],
-                  ["cat, dog", "horse,"]):
-        ns = parser.parse_args(argv[:i] + names + argv[i + 1:])
+    for names in (
+        ["cat,dog,horse"],
+        ["cat", "dog", "horse"],
+        ["cat,dog", "horse"],
+        ["cat, dog", "horse,"],
+    ):
+        ns = parser.parse_args(argv[:i] + names + argv[i + 1 :])
         results.append(getattr(ns, argv[i - 1].lstrip("-")))
     assert all(r == ["cat", "dog", "horse"] for r in results), results
 
@@ -121,8 +146,21 @@ def test_bench_check_exits_1_on_a_miss(monkeypatch, capsys) -> None:
     import habitsim.cli.bench_sim as bench_sim
 
     monkeypatch.setattr(bench_sim, "TARGET_BATCH_RATIO", 1e9)  # unreachable
-    argv = ["bench", "sim", "--species", "cat", "--skip-quality", "--duration", "0.2",
-            "--batch", "1", "--repeats", "1", "--threads", "1"]
+    argv = [
+        "bench",
+        "sim",
+        "--species",
+        "cat",
+        "--skip-quality",
+        "--duration",
+        "0.2",
+        "--batch",
+        "1",
+        "--repeats",
+        "1",
+        "--threads",
+        "1",
+    ]
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "MISSED" in out and "b/raw: batch/s ÷ raw/s" in out.replace("\n", " ")
@@ -134,8 +172,13 @@ def test_bench_check_exits_1_on_a_miss(monkeypatch, capsys) -> None:
 def test_balance_missed_targets() -> None:
     from habitsim.cli.bench_balance import missed_targets
 
-    good = {"stance_qp_median_ms": 0.1, "mpc_median_ms": 1.0, "realtime_factor_mpc": 9.0,
-            "survival_share_mpc": 1.0, "mpjpe_per_leg_mpc": 0.05}
+    good = {
+        "stance_qp_median_ms": 0.1,
+        "mpc_median_ms": 1.0,
+        "realtime_factor_mpc": 9.0,
+        "survival_share_mpc": 1.0,
+        "mpjpe_per_leg_mpc": 0.05,
+    }
     assert missed_targets(good, ["pd", "balance", "mpc"]) == []
     slow = {**good, "mpc_median_ms": 7.0, "survival_share_mpc": float("nan")}
     assert len(missed_targets(slow, ["mpc"])) == 2

@@ -14,8 +14,17 @@ from habitsim.species import species_names
 
 def test_demo_runs_and_reruns(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "demo_out"
-    args = ["demo", "--out", str(out), "--clips-per-species", "1", "--workers", "1",
-            "--no-progress", "--data-only"]
+    args = [
+        "demo",
+        "--out",
+        str(out),
+        "--clips-per-species",
+        "1",
+        "--workers",
+        "1",
+        "--no-progress",
+        "--data-only",
+    ]
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "phase err" in text and str(out) in text
@@ -28,8 +37,12 @@ def test_demo_runs_and_reruns(tmp_path: Path, capsys: pytest.CaptureFixture[str]
 def test_demo_rebuilds_other_configuration(tmp_path: Path) -> None:
     out = tmp_path / "demo_out"
     build_dataset(out, clips_per_species=1, seed=5, species=["cat"], workers=1, progress=False)
-    assert main(["demo", "--out", str(out), "--clips-per-species", "1", "--no-progress",
-                 "--data-only"]) == 0
+    assert (
+        main(
+            ["demo", "--out", str(out), "--clips-per-species", "1", "--no-progress", "--data-only"]
+        )
+        == 0
+    )
     man = load_manifest(out)
     assert man.seed == 0 and len(man.species) == len(species_names())
     assert not list(out.glob("*/cat/*_0001.npz"))
@@ -43,12 +56,28 @@ def test_demo_pipeline_two_sources_report_and_videos(
     from habitsim.render import render_available
 
     out = tmp_path / "demo_out"
-    assert main(["demo", "--out", str(out), "--clips-per-species", "1", "--workers", "1",
-                 "--no-progress", "--targets", "tiger"]) == 0
+    assert (
+        main(
+            [
+                "demo",
+                "--out",
+                str(out),
+                "--clips-per-species",
+                "1",
+                "--workers",
+                "1",
+                "--no-progress",
+                "--targets",
+                "tiger",
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     rows = json.loads((out / "pipeline.json").read_text())
     assert [(r["source"], r["target"]) for r in rows] == [
-        ("horse_trot", "tiger"), ("dog_walk_bvh", "tiger")
+        ("horse_trot", "tiger"),
+        ("dog_walk_bvh", "tiger"),
     ]
     for r in rows:
         assert r["habit_from"] != "tiger" and "tiger" in r["retrieval"]  # held out: retrieved
@@ -88,12 +117,25 @@ def test_demo_on_a_file_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixtur
 
 def test_bench_data_small(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "bench"
-    args = ["bench", "data", "--clips-per-species", "1", "--workers", "1", "--no-progress",
-            "--out", str(out)]
+    args = [
+        "bench",
+        "data",
+        "--clips-per-species",
+        "1",
+        "--workers",
+        "1",
+        "--no-progress",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     text = capsys.readouterr().out
-    for key in ("build wall time", "synthetic clips/s", "FK numpy frames/s",
-                "FK torch f32 frames/s"):
+    for key in (
+        "build wall time",
+        "synthetic clips/s",
+        "FK numpy frames/s",
+        "FK torch f32 frames/s",
+    ):
         assert key in text
     assert (out / MANIFEST_NAME).is_file()
     assert main(args) == 0  # --out replaces the earlier build, regenerating every clip

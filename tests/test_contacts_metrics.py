@@ -204,8 +204,15 @@ def test_hinge_limits_map_roles() -> None:
 def test_standing_pose_is_perfectly_plausible() -> None:
     km = kinematic_metrics(standing())
     assert set(km) == set(KINEMATIC_KEYS)
-    for k in ("penetration_mm", "float_mm", "skate_mm", "skate_ratio", "jerk",
-              "bone_length_error_mm", "joint_limit_violation_rad"):
+    for k in (
+        "penetration_mm",
+        "float_mm",
+        "skate_mm",
+        "skate_ratio",
+        "jerk",
+        "bone_length_error_mm",
+        "joint_limit_violation_rad",
+    ):
         assert abs(km[k]) < 1e-6, k
 
 
@@ -326,9 +333,16 @@ def test_metrics_are_fast() -> None:
 
 
 REQUIRED = (
-    "duration_s", "speed_mps", "froude", "duty_factor", "duty_factor_per_foot",
-    "phase_offsets", "stability_margin_min_m", "stability_margin_mean_m",
-    "statically_stable_fraction", *KINEMATIC_KEYS,
+    "duration_s",
+    "speed_mps",
+    "froude",
+    "duty_factor",
+    "duty_factor_per_foot",
+    "phase_offsets",
+    "stability_margin_min_m",
+    "stability_margin_mean_m",
+    "statically_stable_fraction",
+    *KINEMATIC_KEYS,
 )
 
 
@@ -351,8 +365,14 @@ def test_cli_stats_table(tmp_path, capsys) -> None:
     path = standing(30).save(tmp_path / "m.npz")
     assert main(["motion", "stats", str(path)]) == 0
     out = capsys.readouterr().out
-    for k in ("froude", "duty_factor", "phase_offsets", "skate_mm", "penetration_mm",
-              "stability_margin_min_m"):
+    for k in (
+        "froude",
+        "duty_factor",
+        "phase_offsets",
+        "skate_mm",
+        "penetration_mm",
+        "stability_margin_min_m",
+    ):
         assert k in out
     assert "LF=" in out
 

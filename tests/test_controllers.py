@@ -71,8 +71,13 @@ def hold(model: mujoco.MjModel, controller, seconds: float) -> dict[str, float]:
         worst_dz = max(worst_dz, abs(data.qpos[2] - z0) / z0)
         worst_tilt = max(worst_tilt, quat_angle_deg(data.qpos[3:7], quat0))
         free_force = max(free_force, float(np.abs(data.qfrc_applied[:6]).max()))
-    return {"height": data.qpos[2] / z0, "worst_dz": worst_dz, "tilt": worst_tilt,
-            "free_force": free_force, "data": data}
+    return {
+        "height": data.qpos[2] / z0,
+        "worst_dz": worst_dz,
+        "tilt": worst_tilt,
+        "free_force": free_force,
+        "data": data,
+    }
 
 
 def assert_holds(res: dict, height_tol: float = 0.05, tilt_deg: float = 5.0) -> None:
@@ -161,9 +166,18 @@ def test_dog_servos_with_stabiliser_hold_home() -> None:
 
 
 def test_configure_servos_copies_and_keeps_torque_limits(robot) -> None:
-    before = {k: getattr(robot, k).copy() for k in (
-        "actuator_gainprm", "actuator_biasprm", "actuator_gear", "actuator_ctrlrange",
-        "actuator_forcerange", "actuator_forcelimited", "actuator_biastype")}
+    before = {
+        k: getattr(robot, k).copy()
+        for k in (
+            "actuator_gainprm",
+            "actuator_biasprm",
+            "actuator_gear",
+            "actuator_ctrlrange",
+            "actuator_forcerange",
+            "actuator_forcelimited",
+            "actuator_biastype",
+        )
+    }
     model = configure_servos(robot, dampratio=1.0)
     for k, v in before.items():
         np.testing.assert_array_equal(getattr(robot, k), v, err_msg=k)  # input untouched
@@ -215,12 +229,16 @@ def _swing_tracking_error(servo: mujoco.MjModel, velocity_lead: bool) -> float:
     err = []
     for k in range(int(2.0 / dt)):
         t = k * dt
-        ref = Reference(t, np.array([amp * np.sin(w * t)]), np.array([amp * w * np.cos(w * t)]),
-                        np.array([-amp * w * w * np.sin(w * t)]))
+        ref = Reference(
+            t,
+            np.array([amp * np.sin(w * t)]),
+            np.array([amp * w * np.cos(w * t)]),
+            np.array([-amp * w * w * np.sin(w * t)]),
+        )
         data.ctrl[:] = ctrl.control(servo, data, ref)
         mujoco.mj_step(servo, data)
         err.append(data.qpos[0] - amp * np.sin(w * (t + dt)))
-    return float(np.sqrt(np.mean(np.square(err[len(err) // 4:]))))
+    return float(np.sqrt(np.mean(np.square(err[len(err) // 4 :]))))
 
 
 def test_servo_velocity_lead_damps_the_velocity_error_not_the_motion() -> None:
@@ -325,8 +343,13 @@ def test_standing_stance_forces_sum_to_weight(robot) -> None:
     np.testing.assert_allclose(stab.last_forces[:, 2], weight / 4, rtol=0.05)  # symmetric robot
     # in simulation the real contact forces then carry the weight too
     kp = stiffness_rule(robot)
-    res = hold(robot, StabilizedController(PDController(robot, kp, critical_damping(robot, kp)),
-                                           TrunkStabilizer(robot, FEET)), 1.5)
+    res = hold(
+        robot,
+        StabilizedController(
+            PDController(robot, kp, critical_damping(robot, kp)), TrunkStabilizer(robot, FEET)
+        ),
+        1.5,
+    )
     data = res["data"]
     normal = sum(_contact_world(robot, data, i)[2] for i in range(data.ncon))
     assert normal == pytest.approx(weight, rel=0.02)
@@ -409,8 +432,10 @@ def test_root_assist_off_by_default_everywhere(robot) -> None:
     for c in ctrls:
         assert c.assist is None
         assert hold(robot, c, 0.2)["free_force"] == 0.0
-    for c in (ServoController(servo), StabilizedController(ServoController(servo),
-                                                           TrunkStabilizer(servo, FEET))):
+    for c in (
+        ServoController(servo),
+        StabilizedController(ServoController(servo), TrunkStabilizer(servo, FEET)),
+    ):
         assert c.assist is None
         assert hold(servo, c, 0.2)["free_force"] == 0.0
 
@@ -459,7 +484,8 @@ def test_gain_rules_on_a_pendulum() -> None:
     assert kp[0] == pytest.approx(2 * 9.81 * 0.5 / 0.1, rel=1e-6)
     assert stiffness_rule(model, mode="torque")[0] == pytest.approx(30 / 0.15)
     assert stiffness_rule(model, mode="inertia", frequency_hz=2.0)[0] == pytest.approx(
-        inertia * (4 * np.pi) ** 2)
+        inertia * (4 * np.pi) ** 2
+    )
     assert critical_damping(model, 100.0, ratio=0.5)[0] == pytest.approx(np.sqrt(100 * inertia))
     kd_max = max_stable_kd(model, 0.002, margin=1.0)[0]
     assert kd_max == pytest.approx(2 * inertia / 0.002, rel=1e-3)
@@ -519,5 +545,6 @@ def test_nan_or_misshaped_reference_rejected(robot) -> None:
         ctrl.control(robot, data, Reference(0.0, ref.qpos[:-1], ref.qvel, ref.qacc))
     servo = configure_servos(robot)
     with pytest.raises(ControllerError, match="not finite"):
-        ServoController(servo).control(servo, home_data(servo),
-                                       Reference(0.0, ref.qpos, ref.qvel * np.nan, ref.qacc))
+        ServoController(servo).control(
+            servo, home_data(servo), Reference(0.0, ref.qpos, ref.qvel * np.nan, ref.qacc)
+        )

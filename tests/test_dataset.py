@@ -76,8 +76,15 @@ def test_layout_and_manifest_fields(built: Built) -> None:
     for name in (MANIFEST_NAME, "stats.csv", "stats.md"):
         assert (root / name).is_file()
     data = json.loads((root / MANIFEST_NAME).read_text())
-    for key in ("format_version", "generator_version", "seed", "clips_per_species", "species",
-                "clips", "fps"):
+    for key in (
+        "format_version",
+        "generator_version",
+        "seed",
+        "clips_per_species",
+        "species",
+        "clips",
+        "fps",
+    ):
         assert key in data
     assert data["seed"] == SEED and data["clips_per_species"] == CLIPS
     assert [s["name"] for s in data["species"]] == sorted(SPECIES)
@@ -86,13 +93,31 @@ def test_layout_and_manifest_fields(built: Built) -> None:
     files = {p.relative_to(root).as_posix() for p in root.glob("*/*/*.npz")}
     assert files == {c["path"] for c in data["clips"]}
     for c in data["clips"]:
-        for key in ("path", "split", "species", "held_out", "action", "gait", "speed_mps", "froude",
-                    "duty_factor", "turn_rate", "duration_s", "frames", "seed", "pair_key"):
+        for key in (
+            "path",
+            "split",
+            "species",
+            "held_out",
+            "action",
+            "gait",
+            "speed_mps",
+            "froude",
+            "duty_factor",
+            "turn_rate",
+            "duration_s",
+            "frames",
+            "seed",
+            "pair_key",
+        ):
             assert key in c, key
         m = pattern.match(c["path"])
         assert m, c["path"]
         assert (m.group(1), m.group(2), m.group(3), int(m.group(4))) == (
-            c["split"], c["species"], c["action"], c["index"])
+            c["split"],
+            c["species"],
+            c["action"],
+            c["index"],
+        )
         assert c["held_out"] == load_species(c["species"]).held_out
         assert all(v is None or math.isfinite(v) for v in c["measured"].values())
 
@@ -203,8 +228,10 @@ def test_different_seed_differs(built: Built, tmp_path: Path) -> None:
     a, b = arrays(root), arrays(tmp_path / "s")
     assert a.keys() == b.keys()
     for path in a:
-        assert not np.array_equal(a[path]["rotations"], b[path]["rotations"]) or \
-            a[path]["rotations"].shape != b[path]["rotations"].shape
+        assert (
+            not np.array_equal(a[path]["rotations"], b[path]["rotations"])
+            or a[path]["rotations"].shape != b[path]["rotations"].shape
+        )
 
 
 # ---------------------------------------------------------------------------- resume
@@ -363,8 +390,23 @@ def test_load_manifest_validation(built: Built, tmp_path: Path) -> None:
 
 def test_cli_synth(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "cli"
-    code = main(["data", "synth", "--out", str(out), "--clips-per-species", "2", "--seed", "1",
-                 "--species", "cat, wolf", "--workers", "1", "--no-progress"])
+    code = main(
+        [
+            "data",
+            "synth",
+            "--out",
+            str(out),
+            "--clips-per-species",
+            "2",
+            "--seed",
+            "1",
+            "--species",
+            "cat, wolf",
+            "--workers",
+            "1",
+            "--no-progress",
+        ]
+    )
     assert code == 0
     man = load_manifest(out)
     assert man.species_names == ["cat", "wolf"] and len(man.clips) == 4 and man.seed == 1
@@ -395,8 +437,19 @@ def test_cli_synth_other_seed_keeps_existing_manifest(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "cli"
-    args = ["data", "synth", "--out", str(out), "--clips-per-species", "1", "--species", "cat",
-            "--workers", "1", "--no-progress"]
+    args = [
+        "data",
+        "synth",
+        "--out",
+        str(out),
+        "--clips-per-species",
+        "1",
+        "--species",
+        "cat",
+        "--workers",
+        "1",
+        "--no-progress",
+    ]
     assert main(args) == 0
     before = (out / MANIFEST_NAME).read_text()
     assert main([*args, "--seed", "9"]) == 2

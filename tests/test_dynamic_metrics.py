@@ -153,8 +153,20 @@ def test_weak_motors_saturate(dog) -> None:
 def test_simulated_metrics_of_a_perfect_run(dog) -> None:
     q = _home(dog, 31)
     c = np.ones((31, 4), bool)
-    m = simulated_metrics(dog, q, q, c, c, leg_length=_leg(), survival=1.0, fell=False,
-                          work_j=0.0, assist_force_mg=0.0, sim_time_s=1.0, wall_time_s=0.5)
+    m = simulated_metrics(
+        dog,
+        q,
+        q,
+        c,
+        c,
+        leg_length=_leg(),
+        survival=1.0,
+        fell=False,
+        work_j=0.0,
+        assist_force_mg=0.0,
+        sim_time_s=1.0,
+        wall_time_s=0.5,
+    )
     assert list(m) == list(SIMULATED_KEYS)
     assert m["sim_mpjpe_mm"] == 0.0 and m["root_drift_mm"] == 0.0
     assert m["contact_f1"] == 1.0 and m["survival"] == 1.0 and m["fell"] is False

@@ -48,8 +48,13 @@ def data(tmp_path_factory) -> Path:
 
 def _cfg(data: Path, out: Path, **kw) -> EvalConfig:
     # servo: a fast controller for the table's mechanics (the default is mpc)
-    base = dict(methods=("direct", "ground_truth"), refine="none", report_pairs=1, videos=False,
-                controller="servo")
+    base = dict(
+        methods=("direct", "ground_truth"),
+        refine="none",
+        report_pairs=1,
+        videos=False,
+        controller="servo",
+    )
     base.update(kw)
     return EvalConfig(data=str(data), out=str(out), **base)
 
@@ -299,6 +304,19 @@ def test_defaults_measure_the_product(data: Path, tmp_path: Path, monkeypatch) -
 def test_cli_clips_per_source_must_be_a_count(tmp_path: Path, capsys) -> None:
     from habitsim.cli import main
 
-    assert main(["eval", "--out", str(tmp_path / "o"), "--data", str(tmp_path),
-                 "--clips-per-source", "some", "--no-progress"]) == 2
+    assert (
+        main(
+            [
+                "eval",
+                "--out",
+                str(tmp_path / "o"),
+                "--data",
+                str(tmp_path),
+                "--clips-per-source",
+                "some",
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
     assert "--clips-per-source" in capsys.readouterr().err

@@ -18,7 +18,10 @@ from habitsim.bvh import parse_bvh
 from habitsim.errors import HabitsimError
 
 FAST = settings(
-    max_examples=40, deadline=None, derandomize=True, database=None,
+    max_examples=40,
+    deadline=None,
+    derandomize=True,
+    database=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
 
@@ -73,9 +76,35 @@ def test_arbitrary_text_as_bvh(text: str) -> None:
 
 
 _BVH_TOKENS = st.sampled_from(
-    ["HIERARCHY", "ROOT", "JOINT", "End", "Site", "{", "}", "OFFSET", "CHANNELS", "MOTION",
-     "Frames:", "Frame", "Time:", "3", "6", "0", "1", "-1", "1e-320", "1e300", "nan",
-     "Xrotation", "Yrotation", "Zrotation", "Xposition", "a", "\n"]
+    [
+        "HIERARCHY",
+        "ROOT",
+        "JOINT",
+        "End",
+        "Site",
+        "{",
+        "}",
+        "OFFSET",
+        "CHANNELS",
+        "MOTION",
+        "Frames:",
+        "Frame",
+        "Time:",
+        "3",
+        "6",
+        "0",
+        "1",
+        "-1",
+        "1e-320",
+        "1e300",
+        "nan",
+        "Xrotation",
+        "Yrotation",
+        "Zrotation",
+        "Xposition",
+        "a",
+        "\n",
+    ]
 )
 
 

@@ -174,8 +174,12 @@ def test_stability_margin_geometry() -> None:
     ]
     # Last case: edges y = 0 (2.5), x = 0 (2.0), (4,0)-(9,9): |5·2.5 − 9·(2−4)| / √106,
     # (9,9)-(0,3): |(−9)(2.5−9) − (−6)(2−9)| / √117.
-    last = min(2.5, 2.0, abs(5 * 2.5 - 9 * (2 - 4)) / math.sqrt(106),
-               abs(-9 * (2.5 - 9) + 6 * (2 - 9)) / math.sqrt(117))
+    last = min(
+        2.5,
+        2.0,
+        abs(5 * 2.5 - 9 * (2 - 4)) / math.sqrt(106),
+        abs(-9 * (2.5 - 9) + 6 * (2 - 9)) / math.sqrt(117),
+    )
     com = np.array([c[0] for c in cases])
     feet = np.stack([c[1] for c in cases])
     con = np.array([c[2] for c in cases], bool)
@@ -220,8 +224,12 @@ def test_three_legged_and_two_legged_support_on_the_dog() -> None:
     out_tri = -_line_dist(com, rh, lf)
     seg = -_seg_dist(com, lf, lh)
     in_tri = min(_line_dist(com, rf, lh), _line_dist(com, lf, rf), _line_dist(com, lh, lf))
-    full = min(_line_dist(com, lf, rf), _line_dist(com, rf, rh), _line_dist(com, rh, lh),
-               _line_dist(com, lh, lf))
+    full = min(
+        _line_dist(com, lf, rf),
+        _line_dist(com, rf, rh),
+        _line_dist(com, rh, lh),
+        _line_dist(com, lh, lf),
+    )
     assert out_tri < 0 < in_tri
     assert s.stability_margin_min_m == pytest.approx(min(out_tri, seg), abs=1e-12)
     mean = (out_tri + seg + in_tri + full) / 4

@@ -157,10 +157,15 @@ def test_same_seed_identical_different_seed_differs() -> None:
     assert a.num_frames != c.num_frames or not np.allclose(a.rotations, c.rotations)
 
 
-@pytest.mark.parametrize(("src", "dst", "action"), [("dog", "horse", "trot"),
-                                                    ("cat", "elephant", "walk"),
-                                                    ("horse", "cow", "turn_left"),
-                                                    ("dog", "pig", "sit")])
+@pytest.mark.parametrize(
+    ("src", "dst", "action"),
+    [
+        ("dog", "horse", "trot"),
+        ("cat", "elephant", "walk"),
+        ("horse", "cow", "turn_left"),
+        ("dog", "pig", "sit"),
+    ],
+)
 def test_paired_generation(src: str, dst: str, action: str) -> None:
     a = generate(src, action, seed=5)
     b = generate(dst, like=a)

@@ -47,8 +47,17 @@ def test_ik_reaches_fk_targets_within_1mm(species: str, leg: str) -> None:
     res = leg_ik(species, leg, root, prot, target, gflex, incl)
     assert res.reach_error.max() < 1e-3
     # the solution is a real pose: its own FK lands on the target
-    toe = leg_fk(species, leg, root, prot, res.abduction, res.girdle_flex, res.upper_flex,
-                 res.lower_flex, res.foot_flex)
+    toe = leg_fk(
+        species,
+        leg,
+        root,
+        prot,
+        res.abduction,
+        res.girdle_flex,
+        res.upper_flex,
+        res.lower_flex,
+        res.foot_flex,
+    )
     np.testing.assert_allclose(toe, target, atol=1e-3)
     np.testing.assert_allclose(res.toe, toe, atol=1e-9)
 
@@ -85,14 +94,17 @@ def test_compliant_foot_takes_up_reach_within_its_band(leg: str) -> None:
     assert res.reach_error[inside].max() < 1e-6
     # frames already in the band keep the nominal foot angle (the same solution)
     keep = ~outside
+
     def total(r):  # the foot segment's angle in the leg plane
         return r.foot_flex[keep] + r.lower_flex[keep] + r.upper_flex[keep]
 
     np.testing.assert_allclose(total(res), total(plain), atol=1e-9)
     # the turn is bounded
     small = leg_ik("horse", leg, root, prot, target, distal_band=band, max_inclination_change=0.05)
-    turn = np.abs((small.upper_flex + small.lower_flex + small.foot_flex)
-                  - (plain.upper_flex + plain.lower_flex + plain.foot_flex))
+    turn = np.abs(
+        (small.upper_flex + small.lower_flex + small.foot_flex)
+        - (plain.upper_flex + plain.lower_flex + plain.foot_flex)
+    )
     assert np.all(np.minimum(turn, 2 * np.pi - turn) <= 0.05 + 1e-9)
 
 
@@ -137,8 +149,11 @@ def test_pose_from_targets_matches_full_skeleton_fk() -> None:
     ],
 )
 def test_ik_bad_inputs_raise(kwargs: dict) -> None:
-    args = {"girdle_root": np.zeros((2, 3)), "parent_rotation": np.eye(3),
-            "target": np.zeros((2, 3)) - [0, 0, 0.3]}
+    args = {
+        "girdle_root": np.zeros((2, 3)),
+        "parent_rotation": np.eye(3),
+        "target": np.zeros((2, 3)) - [0, 0, 0.3],
+    }
     args.update(kwargs)
     with pytest.raises(IKError):
         leg_ik("dog", "LF", **args)

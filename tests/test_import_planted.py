@@ -21,18 +21,32 @@ from habitsim.errors import SkeletonMappingError
 from habitsim.planting import contact_f1, label_source_stance
 
 RENAME = {
-    "pelvis": "Hips_jnt", "spine1": "SpineA", "spine2": "SpineB", "spine3": "Chest",
-    "neck": "NeckA", "head": "Skull", "snout": "Nose",
-    "tail1": "TailBase", "tail2": "TailMid", "tail3": "TailTip",
+    "pelvis": "Hips_jnt",
+    "spine1": "SpineA",
+    "spine2": "SpineB",
+    "spine3": "Chest",
+    "neck": "NeckA",
+    "head": "Skull",
+    "snout": "Nose",
+    "tail1": "TailBase",
+    "tail2": "TailMid",
+    "tail3": "TailTip",
 }
 for _s, _S in (("l", "L"), ("r", "R")):
-    RENAME.update({
-        f"{_s}f_scapula": f"{_S}_Collar", f"{_s}f_shoulder": f"{_S}_UpperArm",
-        f"{_s}f_elbow": f"{_S}_LowerArm", f"{_s}f_wrist": f"{_S}_Paw",
-        f"{_s}f_toe": f"{_S}_Digits",
-        f"{_s}h_ilium": f"{_S}_Ilium", f"{_s}h_hip": f"{_S}_Thigh", f"{_s}h_knee": f"{_S}_Shin",
-        f"{_s}h_hock": f"{_S}_Hock", f"{_s}h_toe": f"{_S}_Toes",
-    })
+    RENAME.update(
+        {
+            f"{_s}f_scapula": f"{_S}_Collar",
+            f"{_s}f_shoulder": f"{_S}_UpperArm",
+            f"{_s}f_elbow": f"{_S}_LowerArm",
+            f"{_s}f_wrist": f"{_S}_Paw",
+            f"{_s}f_toe": f"{_S}_Digits",
+            f"{_s}h_ilium": f"{_S}_Ilium",
+            f"{_s}h_hip": f"{_S}_Thigh",
+            f"{_s}h_knee": f"{_S}_Shin",
+            f"{_s}h_hock": f"{_S}_Hock",
+            f"{_s}h_toe": f"{_S}_Toes",
+        }
+    )
 CM = 100.0
 
 
@@ -44,8 +58,9 @@ def _foreign_rig(motion, CM: float = CM) -> BVHData:  # noqa: N803 - the unit fa
     nodes: list[dict] = []  # name, parent name, offset (cm), values (F, 6) or None
 
     def add(name, parent, offset, values=None):
-        nodes.append({"name": name, "parent": parent, "offset": np.asarray(offset, float),
-                      "values": values})
+        nodes.append(
+            {"name": name, "parent": parent, "offset": np.asarray(offset, float), "values": values}
+        )
 
     add("Rig_Root", None, [0, 0, 0], np.zeros((f, 6)))
     add("Rig_Footsteps", "Rig_Root", [0, 0, 0], np.zeros((f, 6)))
@@ -53,8 +68,12 @@ def _foreign_rig(motion, CM: float = CM) -> BVHData:  # noqa: N803 - the unit fa
         if h.is_end_site[j]:
             parent = h.names[h.parents[j]]
             if parent.endswith("_toe"):  # a toe nub pointing into the ground instead
-                add(RENAME[parent] + "_Nub", RENAME[parent], [0.05 * CM, 0.0, -0.25 * CM],
-                    np.zeros((f, 6)))
+                add(
+                    RENAME[parent] + "_Nub",
+                    RENAME[parent],
+                    [0.05 * CM, 0.0, -0.25 * CM],
+                    np.zeros((f, 6)),
+                )
             else:
                 add(RENAME[parent] + "_End", RENAME[parent], h.offsets[j] * CM)
             continue
@@ -95,8 +114,9 @@ def _foreign_rig(motion, CM: float = CM) -> BVHData:  # noqa: N803 - the unit fa
         lines.append(f"{pad}{'ROOT' if n['parent'] is None else 'JOINT'} {n['name']}")
         lines.append(f"{pad}{{")
         lines.append(f"{pad}  OFFSET " + " ".join(f"{v:.6f}" for v in n["offset"]))
-        lines.append(f"{pad}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation "
-                     "Yrotation")
+        lines.append(
+            f"{pad}  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"
+        )
         columns.append(n["values"])
         for c in kids.get(n["name"], []):
             emit(c, depth + 1)
@@ -120,8 +140,15 @@ def rig(walk):
 
 
 def test_helper_names():
-    for n in ("Dog_LeftTail001", "Bip01_L_Toe0Nub", "Bip01_Footsteps", "Dog_LeftArmor002",
-              "LeftLegIKTarget", "forearm_twist.L", "L_TailHelper01"):
+    for n in (
+        "Dog_LeftTail001",
+        "Bip01_L_Toe0Nub",
+        "Bip01_Footsteps",
+        "Dog_LeftArmor002",
+        "LeftLegIKTarget",
+        "forearm_twist.L",
+        "L_TailHelper01",
+    ):
         assert is_helper_name(n), n
     for n in ("b_LeftLegUpper", "LeftUpLeg", "L_Toes", "b__LeftFinger", "RightAnkle", "Hips"):
         assert not is_helper_name(n), n
@@ -133,9 +160,19 @@ def test_foreign_rig_maps_legs_not_helpers(rig):
     assert (mapping.frame.units, mapping.frame.up) == ("cm", "+z")
     assert j["pelvis"] == "Hips_jnt"
     assert [j[f"lh_{s}"] for s in ("ilium", "hip", "knee", "hock", "toe")] == [
-        "L_Ilium", "L_Thigh", "L_Shin", "L_Hock", "L_Toes"]
+        "L_Ilium",
+        "L_Thigh",
+        "L_Shin",
+        "L_Hock",
+        "L_Toes",
+    ]
     assert [j[f"rf_{s}"] for s in ("scapula", "shoulder", "elbow", "wrist", "toe")] == [
-        "R_Collar", "R_UpperArm", "R_LowerArm", "R_Paw", "R_Digits"]
+        "R_Collar",
+        "R_UpperArm",
+        "R_LowerArm",
+        "R_Paw",
+        "R_Digits",
+    ]
     assert not any(v and ("Helper" in v or "Nub" in v or "Armor" in v) for v in j.values())
     assert set(mapping.confidence) == {"lf", "rf", "lh", "rh"}
     assert min(mapping.confidence.values()) >= 0.67 and mapping.warnings == []
@@ -185,9 +222,16 @@ def test_unplanted_import_hovers_or_sinks(rig):
 
 
 def test_map_file_overrides_joints_and_warns(rig, tmp_path):
-    bad = {"extends": "auto", "map": {
-        "lh_hip": "L_TailHelper01", "lh_knee": "L_TailHelper02", "lh_hock": "L_TailHelper03",
-        "lh_toe": "L_TailHelper04", "lh_ilium": None}}
+    bad = {
+        "extends": "auto",
+        "map": {
+            "lh_hip": "L_TailHelper01",
+            "lh_knee": "L_TailHelper02",
+            "lh_hock": "L_TailHelper03",
+            "lh_toe": "L_TailHelper04",
+            "lh_ilium": None,
+        },
+    }
     p = tmp_path / "map.json"
     p.write_text(json.dumps(bad))
     spec = load_joint_map(p)
@@ -258,13 +302,23 @@ def test_cli_inspect_and_import_with_warning(rig, tmp_path, capsys):
     assert "L_Thigh" in out and "-> lh_hip" in out
     assert '"extends": "auto"' in out
     m = tmp_path / "m.json"
-    m.write_text(json.dumps({"extends": "auto", "map": {"lh_hip": "L_TailHelper01",
-                                                          "lh_knee": "L_TailHelper02",
-                                                          "lh_hock": "L_TailHelper03",
-                                                          "lh_toe": "L_TailHelper04"}}))
+    m.write_text(
+        json.dumps(
+            {
+                "extends": "auto",
+                "map": {
+                    "lh_hip": "L_TailHelper01",
+                    "lh_knee": "L_TailHelper02",
+                    "lh_hock": "L_TailHelper03",
+                    "lh_toe": "L_TailHelper04",
+                },
+            }
+        )
+    )
     out_npz = tmp_path / "o.npz"
-    rc = main(["data", "import-bvh", str(p), "--species", "dog", "--out", str(out_npz),
-               "--map", str(m)])
+    rc = main(
+        ["data", "import-bvh", str(p), "--species", "dog", "--out", str(out_npz), "--map", str(m)]
+    )
     assert rc == 0 and out_npz.is_file()
     err = capsys.readouterr().err
     assert "warning: lh leg" in err

@@ -47,8 +47,12 @@ def test_compiles_with_conventions(loaded) -> None:
     for leg in ("lf", "rf", "lh", "rh"):
         assert m.geom(f"{leg}_foot").type == mujoco.mjtGeom.mjGEOM_SPHERE
         assert m.sensor(f"{leg}_touch").type == mujoco.mjtSensor.mjSENS_TOUCH
-    for kind, count in ((mujoco.mjtObj.mjOBJ_BODY, m.nbody), (mujoco.mjtObj.mjOBJ_GEOM, m.ngeom),
-                        (mujoco.mjtObj.mjOBJ_SITE, m.nsite), (mujoco.mjtObj.mjOBJ_JOINT, m.njnt)):
+    for kind, count in (
+        (mujoco.mjtObj.mjOBJ_BODY, m.nbody),
+        (mujoco.mjtObj.mjOBJ_GEOM, m.ngeom),
+        (mujoco.mjtObj.mjOBJ_SITE, m.nsite),
+        (mujoco.mjtObj.mjOBJ_JOINT, m.njnt),
+    ):
         for i in range(1 if kind == mujoco.mjtObj.mjOBJ_BODY else 0, count):
             assert mujoco.mj_id2name(m, kind, i), f"unnamed {kind} {i} in {name}"
     # visual geoms never collide
@@ -114,8 +118,11 @@ def standing(request):
     name = request.param
     path = position_scene_path(name)
     assert path.is_file(), f"{path} missing: run `habitsim models build`"
-    return name, mujoco.MjModel.from_xml_path(str(path)), mujoco.MjModel.from_xml_path(
-        str(scene_path(name)))
+    return (
+        name,
+        mujoco.MjModel.from_xml_path(str(path)),
+        mujoco.MjModel.from_xml_path(str(scene_path(name))),
+    )
 
 
 def test_position_model_stands_on_home(standing) -> None:
@@ -131,7 +138,8 @@ def test_position_model_stands_on_home(standing) -> None:
         mujoco.mj_step(m, d)
         lowest = min(lowest, d.xpos[pelvis][2])
     assert all(w.number == 0 for w in d.warning), {
-        mujoco.mjtWarning(i).name: w.number for i, w in enumerate(d.warning) if w.number}
+        mujoco.mjtWarning(i).name: w.number for i, w in enumerate(d.warning) if w.number
+    }
     assert lowest >= STAND_HEIGHT_SHARE * z0, f"{name}: pelvis {z0:.3f} -> {lowest:.3f} m"
     assert np.linalg.norm(d.qvel[:3]) < 0.05 * z0, f"{name} still moving after {STAND_S} s"
     # upright: the pelvis' z axis within 20° of vertical
@@ -146,8 +154,16 @@ def test_position_model_is_the_torque_model_with_servos(standing) -> None:
     np.testing.assert_allclose(m.opt.gravity, t.opt.gravity)
     assert m.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     assert m.opt.timestep == t.opt.timestep
-    for field in ("body_mass", "body_inertia", "geom_size", "geom_friction", "jnt_range",
-                  "dof_damping", "dof_armature", "key_qpos"):
+    for field in (
+        "body_mass",
+        "body_inertia",
+        "geom_size",
+        "geom_friction",
+        "jnt_range",
+        "dof_damping",
+        "dof_armature",
+        "key_qpos",
+    ):
         np.testing.assert_array_equal(getattr(m, field), getattr(t, field), err_msg=field)
     assert m.nu == t.nu
     for i in range(m.nu):

@@ -47,8 +47,9 @@ def problem(n: int = 10, seed: int = 0):
         t = DT * (k + 1)
         xref[k] = np.r_[0, 0, 0.3 + 0.5 * t, 0.4 * t, 0, 0.28, 0, 0, 0.5, 0.4, 0, 0, 9.81]
     yaw = xref[:, 2].copy()
-    r = np.array([FEET + rng.normal(0, 0.01, FEET.shape) - [0.4 * DT * k, 0, 0.28]
-                  for k in range(n)])
+    r = np.array(
+        [FEET + rng.normal(0, 0.01, FEET.shape) - [0.4 * DT * k, 0, 0.28] for k in range(n)]
+    )
     contacts = np.ones((n, 4), dtype=bool)
     for k in range(n):
         if (k // 3) % 2:
@@ -73,8 +74,8 @@ def test_discretisation_is_exact() -> None:
     iw = rz @ np.linalg.inv(INERTIA) @ rz.T
     for i, ri in enumerate(r):
         skew = np.array([[0, -ri[2], ri[1]], [ri[2], 0, -ri[0]], [-ri[1], ri[0], 0]])
-        b[6:9, 3 * i:3 * i + 3] = iw @ skew
-        b[9:12, 3 * i:3 * i + 3] = np.eye(3) / MASS
+        b[6:9, 3 * i : 3 * i + 3] = iw @ skew
+        b[9:12, 3 * i : 3 * i + 3] = np.eye(3) / MASS
     big = np.zeros((NX + 12, NX + 12))
     big[:NX, :NX], big[:NX, NX:] = a, b
     e = expm(big * DT)
@@ -91,8 +92,20 @@ def test_prediction_matches_forward_simulation(solver: str) -> None:
     x0, xref, r, yaw, contacts = problem(n)
     q, rw = MPCWeights().scaled(MASS, 0.27, 9.81)
     mpc = ConvexMPC(n, 4, solver, tolerance=1e-6)
-    sol = mpc.solve(x0, xref, r, yaw, INERTIA, contacts, mass=MASS, dt=DT, mu=MU,
-                    fz_max=2.0 * MASS * 9.81, q=q, rw=rw)
+    sol = mpc.solve(
+        x0,
+        xref,
+        r,
+        yaw,
+        INERTIA,
+        contacts,
+        mass=MASS,
+        dt=DT,
+        mu=MU,
+        fz_max=2.0 * MASS * 9.81,
+        q=q,
+        rw=rw,
+    )
     assert sol.ok
     pred = ConvexMPC.predict(x0, sol.forces, r, yaw, INERTIA, mass=MASS, dt=DT)
     np.testing.assert_allclose(sol.states, pred, atol=2e-4)
@@ -120,8 +133,9 @@ def test_mpc_forces_follow_schedule_friction_and_bounds() -> None:
     x0, xref, r, yaw, contacts = problem(n, seed=1)
     q, rw = MPCWeights().scaled(MASS, 0.27, 9.81)
     fz_max = 1.2 * MASS * 9.81
-    sol = ConvexMPC(n, 4).solve(x0, xref, r, yaw, INERTIA, contacts, mass=MASS, dt=DT,
-                                mu=MU, fz_max=fz_max, q=q, rw=rw)
+    sol = ConvexMPC(n, 4).solve(
+        x0, xref, r, yaw, INERTIA, contacts, mass=MASS, dt=DT, mu=MU, fz_max=fz_max, q=q, rw=rw
+    )
     assert sol.ok
     f = sol.forces
     assert np.all(f[~contacts] == 0.0)
@@ -136,8 +150,19 @@ def test_mpc_standing_equilibrium() -> None:
     r = np.tile(FEET - [0, 0, 0.28], (n, 1, 1))
     q, rw = MPCWeights().scaled(MASS, 0.27, 9.81)
     sol = ConvexMPC(n, 4, tolerance=1e-6).solve(
-        x, np.tile(x, (n, 1)), r, np.zeros(n), INERTIA, np.ones((n, 4), bool), mass=MASS,
-        dt=DT, mu=MU, fz_max=MASS * 9.81, q=q, rw=rw)
+        x,
+        np.tile(x, (n, 1)),
+        r,
+        np.zeros(n),
+        INERTIA,
+        np.ones((n, 4), bool),
+        mass=MASS,
+        dt=DT,
+        mu=MU,
+        fz_max=MASS * 9.81,
+        q=q,
+        rw=rw,
+    )
     f0 = sol.forces[0]
     np.testing.assert_allclose(f0.sum(axis=0), [0, 0, MASS * 9.81], atol=0.01 * MASS * 9.81)
     np.testing.assert_allclose(np.cross(r[0], f0).sum(axis=0), 0.0, atol=0.05)
@@ -146,8 +171,14 @@ def test_mpc_standing_equilibrium() -> None:
 
 
 # --------------------------------------------------------------------------- robot
-def trot_in_place(model: mujoco.MjModel, seconds: float = 3.0, fps: float = 100.0,
-                  stride_hz: float = 2.0, duty: float = 0.6, lift: float = 0.3):
+def trot_in_place(
+    model: mujoco.MjModel,
+    seconds: float = 3.0,
+    fps: float = 100.0,
+    stride_hz: float = 2.0,
+    duty: float = 0.6,
+    lift: float = 0.3,
+):
     """Diagonal pairs (FL+RR, FR+RL) step in place: a swing leg bends thigh +d, calf −2d
     (its foot rises straight under the hip). Standing for the first 0.5 s."""
     q0 = model.key("home").qpos.copy()
@@ -204,14 +235,15 @@ def test_robot_trots_in_place_under_mpc(robot: mujoco.MjModel) -> None:
     assert np.linalg.norm(q[-1, :2] - qpos[0, :2]) < 0.05  # in place
     tilt = np.degrees(2 * np.arccos(np.clip(np.abs(q[:, 3]), 0, 1)))
     assert tilt.max() < 8.0
-    late = touch[int(0.6 / robot.opt.timestep):]
+    late = touch[int(0.6 / robot.opt.timestep) :]
     # every foot really steps: it leaves the ground ≥ 4 times, about as long as planned
     for f in range(4):
         lifts = np.count_nonzero(late[1:, f] < late[:-1, f])
         assert lifts >= 4, f"foot {f} lifted {lifts} times"
     share = late.mean(axis=0)
-    np.testing.assert_allclose(share, sched[int(0.6 / robot.opt.timestep):].mean(axis=0),
-                               atol=0.15)
+    np.testing.assert_allclose(
+        share, sched[int(0.6 / robot.opt.timestep) :].mean(axis=0), atol=0.15
+    )
     st = ctl.stats.to_dict()
     assert st["mpc_solves"] >= 80 and st["mpc_failures"] == 0
     assert st["mpc_horizon_steps"] * st["mpc_dt_s"] >= 0.5 - 1e-9  # ≥ one stride
@@ -225,10 +257,13 @@ def test_robot_trots_in_place_under_balance(robot: mujoco.MjModel) -> None:
     assert np.linalg.norm(log["q"][-1, :2] - qpos[0, :2]) < 0.05
 
 
-@pytest.mark.parametrize(("action", "seed", "max_mpjpe_per_leg", "min_solves"),
-                         [("walk", 2, 0.10, 80), ("trot", 0, 0.12, 80)])
-def test_dog_mpc_unassisted(action: str, seed: int, max_mpjpe_per_leg: float,
-                            min_solves: int) -> None:
+@pytest.mark.parametrize(
+    ("action", "seed", "max_mpjpe_per_leg", "min_solves"),
+    [("walk", 2, 0.10, 80), ("trot", 0, 0.12, 80)],
+)
+def test_dog_mpc_unassisted(
+    action: str, seed: int, max_mpjpe_per_leg: float, min_solves: int
+) -> None:
     """The issue's cases: a dog's walk and (flying) trot under the MPC, no external force."""
     from habitsim.gaits import generate
     from habitsim.qpos import load_species_model, motion_to_qpos
@@ -236,8 +271,14 @@ def test_dog_mpc_unassisted(action: str, seed: int, max_mpjpe_per_leg: float,
 
     dog = load_species_model("dog")
     motion = generate("dog", action, seed=seed, duration_s=3.0)
-    ctl = make_controller("mpc", dog, "dog", qpos=motion_to_qpos(motion, dog).qpos,
-                          fps=motion.fps, contacts=motion.contacts)
+    ctl = make_controller(
+        "mpc",
+        dog,
+        "dog",
+        qpos=motion_to_qpos(motion, dog).qpos,
+        fps=motion.fps,
+        contacts=motion.contacts,
+    )
     res = track(motion, controller=ctl, model=dog)
     assert res.survival == 1.0, res.fall_reason
     assert res.metrics["assist_force_mg"] == 0.0
@@ -274,8 +315,7 @@ def test_plan_contact_schedule(robot: mujoco.MjModel) -> None:
     assert not s.contacts[1] and s.contacts[0]
     assert 0.0 < s.phase[1] < 1.0 and np.isnan(s.phase[0])
     assert s.t_liftoff[1] < s.t < s.t_touchdown[1]
-    np.testing.assert_allclose(s.foothold[1], plan.feet[plan.frame(s.t_touchdown[1]), 1],
-                               atol=1e-9)
+    np.testing.assert_allclose(s.foothold[1], plan.feet[plan.frame(s.t_touchdown[1]), 1], atol=1e-9)
     # the default contact rule (foot heights) finds the same schedule
     auto = plan_from_qpos(robot, qpos, fps)
     assert np.mean(auto.contacts == contacts) > 0.9
@@ -361,8 +401,9 @@ def test_joint_damping_is_compensated(robot: mujoco.MjModel) -> None:
         ctl.reset(m, data)
         nf, n = ctl.legs.n_feet, len(ctl.joint_names)
         ref = Reference(0.1, data.qpos.copy(), data.qvel.copy(), np.zeros(m.nv), None)
-        tau, _ = ctl._other_torques(m, data, ref, np.zeros((nf, 3, n + 1)),
-                                    np.zeros((nf, 3)), np.full(nf, STANCE))
+        tau, _ = ctl._other_torques(
+            m, data, ref, np.zeros((nf, 3, n + 1)), np.zeros((nf, 3)), np.full(nf, STANCE)
+        )
         out.append((tau, data.qvel.copy(), ctl._dof))
     (tau_d, qvel, dof), (tau_p, _, _) = out
     np.testing.assert_allclose(tau_d - tau_p, robot.dof_damping[dof] * qvel[dof], atol=1e-9)
@@ -386,10 +427,11 @@ def test_mpc_uses_the_centroidal_angular_velocity() -> None:
     _, _, rot, w_mpc = mpc._trunk_state(dog, data)
     _, _, _, w_bal = bal._trunk_state(dog, data)
     tr = mpc.legs.trunk
-    np.testing.assert_allclose(w_mpc, np.linalg.solve(mpc._inertia, data.subtree_angmom[tr]),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        w_mpc, np.linalg.solve(mpc._inertia, data.subtree_angmom[tr]), atol=1e-9
+    )
     da = mpc.legs.dadr
-    np.testing.assert_allclose(w_bal, rot @ data.qvel[da + 3:da + 6], atol=1e-12)
+    np.testing.assert_allclose(w_bal, rot @ data.qvel[da + 3 : da + 6], atol=1e-12)
     assert np.linalg.norm(w_mpc - w_bal) > 0.1  # the legs and spine move: they differ
 
 

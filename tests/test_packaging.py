@@ -31,6 +31,10 @@ def test_every_shipped_data_folder_is_a_package() -> None:
                 continue  # e.g. a build's temporary ".cat.tmp" folder: not shipped
             pkg = ".".join((name, *rel.parts))
             assert pkg in packages, f"{data.relative_to(ROOT)}: {pkg} missing from packages"
-    for needed in ("habitsim.mjcf_models.cat", "habitsim.mjcf_models.cat.assets",
-                   "habitsim.evaluation.evaluator", "habitsim.models.checkpoints.habit"):
+    for needed in (
+        "habitsim.mjcf_models.cat",
+        "habitsim.mjcf_models.cat.assets",
+        "habitsim.evaluation.evaluator",
+        "habitsim.models.checkpoints.habit",
+    ):
         assert needed in packages

@@ -39,8 +39,9 @@ def servo_runs() -> dict[str, dict]:
 
 @pytest.mark.parametrize("species", species_names())
 def test_servo_walk_matches_golden(servo_runs, habitsim_golden, species: str) -> None:
-    habitsim_golden(_figures(servo_runs[species]), name=f"servo_walk_{species}",
-                    tolerances=TOLERANCES)
+    habitsim_golden(
+        _figures(servo_runs[species]), name=f"servo_walk_{species}", tolerances=TOLERANCES
+    )
 
 
 @pytest.mark.parametrize("species", ["dog", "horse", "cow"])

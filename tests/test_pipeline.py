@@ -60,8 +60,9 @@ def test_transfer_contacts_time_warped_when_the_length_changes(trot) -> None:
     labels, info = transfer_contacts(slower, trot)
     assert info == {"method": "source", "source_frames": trot.num_frames, "time_warped": True}
     assert labels.shape == (slower.num_frames, 4)
-    np.testing.assert_array_equal(labels, drop_short_runs(warp_contacts(trot.contacts,
-                                                                        slower.num_frames)))
+    np.testing.assert_array_equal(
+        labels, drop_short_runs(warp_contacts(trot.contacts, slower.num_frames))
+    )
     # the same footfall schedule: the stance share of every foot is kept
     np.testing.assert_allclose(labels.mean(0), trot.contacts.mean(0), atol=0.03)
 
@@ -81,7 +82,11 @@ def test_transfer_without_source_labels_falls_back_and_says_so(trot) -> None:
 
 def test_refine_modes() -> None:
     assert [refine_mode(m) for m in ("none", "A", "B", "kinematic", "dynamics")] == [
-        "none", "A", "B", "A", "B"
+        "none",
+        "A",
+        "B",
+        "A",
+        "B",
     ]
     with pytest.raises(PipelineError, match="valid: .*A"):
         refine_mode("fast")
@@ -119,8 +124,7 @@ def test_refined_labels_reach_tracking_and_a_worse_refinement_is_reverted(
     bad = run_clip(walk, "cat", method="direct", refine="A", controller="servo")
     assert bad.refine_verdict == "reverted" and "kept the unrefined" in bad.refine_note
     assert bad.track_result is bad.input_track_result and bad.reference is bad.transferred.motion
-    np.testing.assert_array_equal(bad.track_result.reference_contacts,
-                                  bad.transferred.contacts)
+    np.testing.assert_array_equal(bad.track_result.reference_contacts, bad.transferred.contacts)
 
 
 def test_worse_rule() -> None:

@@ -338,8 +338,7 @@ def test_plan_windows_cover_and_share_one_length():
 def test_clip_lengths_map_to_two_window_lengths():
     opts = RefineOptions()
     lengths = {t: {w.length for w in opts.plan(t)} for t in (40, 64, 72, 97, 100, 171, 1000)}
-    assert lengths == {40: {40}, 64: {64}, 72: {64}, 97: {64}, 100: {100}, 171: {100},
-                       1000: {100}}
+    assert lengths == {40: {40}, 64: {64}, 72: {64}, 97: {64}, 100: {100}, 171: {100}, 1000: {100}}
     assert {w.length for w in RefineOptions(short_window=None).plan(72)} == {72}
     with pytest.raises(RefineInputError):
         RefineOptions(short_window=4)
@@ -586,11 +585,29 @@ def test_bench_refine_draws_success_clips_from_the_test_split(tmp_path, capsys):
     from habitsim.dataset import build_dataset
 
     # wolf is held out: all its clips are in the test split
-    build_dataset(tmp_path / "d", clips_per_species=1, seed=2, species=["wolf"], workers=1,
-                  progress=False)
-    code = main(["bench", "refine", "--species", "dog", "--stages", "A", "--clips", "1",
-                 "--lengths", "100", "--success-clips", "2", "--data", str(tmp_path / "d"),
-                 "--survival-controller", "servo"])
+    build_dataset(
+        tmp_path / "d", clips_per_species=1, seed=2, species=["wolf"], workers=1, progress=False
+    )
+    code = main(
+        [
+            "bench",
+            "refine",
+            "--species",
+            "dog",
+            "--stages",
+            "A",
+            "--clips",
+            "1",
+            "--lengths",
+            "100",
+            "--success-clips",
+            "2",
+            "--data",
+            str(tmp_path / "d"),
+            "--survival-controller",
+            "servo",
+        ]
+    )
     assert code == 0
     text = capsys.readouterr().out
     assert "test-split clips of" in text and "stage A: 2/2" in text

@@ -160,8 +160,18 @@ def test_transfer_unwritable_bvh_leaves_nothing(tmp_path: Path, motion_file: Pat
     blocker = tmp_path / "blocker"
     blocker.write_text("x")
     code, err = run_cli(
-        ["transfer", motion_file, "--to", "cat", "--method", "direct",
-         "--out", tmp_path / "ok.npz", "--bvh", blocker / "x.bvh"],
+        [
+            "transfer",
+            motion_file,
+            "--to",
+            "cat",
+            "--method",
+            "direct",
+            "--out",
+            tmp_path / "ok.npz",
+            "--bvh",
+            blocker / "x.bvh",
+        ],
         capsys,
     )
     assert code == 2 and "file where a folder" in err
@@ -170,8 +180,18 @@ def test_transfer_unwritable_bvh_leaves_nothing(tmp_path: Path, motion_file: Pat
 
 def test_transfer_writes_both_outputs(tmp_path: Path, motion_file: Path, capsys) -> None:
     code, _ = run_cli(
-        ["transfer", motion_file, "--to", "cat", "--method", "direct",
-         "--out", tmp_path / "ok.npz", "--bvh", tmp_path / "x.bvh"],
+        [
+            "transfer",
+            motion_file,
+            "--to",
+            "cat",
+            "--method",
+            "direct",
+            "--out",
+            tmp_path / "ok.npz",
+            "--bvh",
+            tmp_path / "x.bvh",
+        ],
         capsys,
     )
     assert code == 0
@@ -280,8 +300,18 @@ def test_bvh_cli_error_is_exit_2(tmp_path: Path, capsys) -> None:
     p = tmp_path / "bad.bvh"
     p.write_text(small_bvh(frame_time="1e-320"))
     code, err = run_cli(
-        ["transfer", p, "--from", "dog", "--to", "cat", "--method", "direct",
-         "--out", tmp_path / "o.npz"],
+        [
+            "transfer",
+            p,
+            "--from",
+            "dog",
+            "--to",
+            "cat",
+            "--method",
+            "direct",
+            "--out",
+            tmp_path / "o.npz",
+        ],
         capsys,
     )
     assert code == 2 and err.startswith("error: ") and "frame time" in err
@@ -408,8 +438,14 @@ def test_npz_zip_bomb_is_refused_from_the_headers(tmp_path: Path, arrays) -> Non
 
 @pytest.mark.parametrize(
     "kw",
-    [dict(fps=1e300), dict(fps=1e-300), dict(fps="30"), dict(fps=np.array([30.0])),
-     dict(root=1e300), dict(root="x")],
+    [
+        dict(fps=1e300),
+        dict(fps=1e-300),
+        dict(fps="30"),
+        dict(fps=np.array([30.0])),
+        dict(root=1e300),
+        dict(root="x"),
+    ],
 )
 def test_motion_absurd_but_finite(kw) -> None:
     from habitsim.motion import Motion
@@ -470,8 +506,9 @@ def small_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from habitsim.dataset import build_dataset
 
     out = tmp_path_factory.mktemp("data")
-    build_dataset(out, clips_per_species=1, seed=0, species=["cat", "dog"], workers=1,
-                  progress=False)
+    build_dataset(
+        out, clips_per_species=1, seed=0, species=["cat", "dog"], workers=1, progress=False
+    )
     return out
 
 
@@ -493,9 +530,7 @@ def test_manifest_non_numeric_measured(tmp_path: Path, small_dataset: Path, valu
         load_manifest(d)
 
 
-@pytest.mark.parametrize(
-    "path", ["a\x00b.npz", "x" * 300 + ".npz", "/abs.npz", "../up.npz"]
-)
+@pytest.mark.parametrize("path", ["a\x00b.npz", "x" * 300 + ".npz", "/abs.npz", "../up.npz"])
 def test_manifest_bad_clip_path(tmp_path: Path, small_dataset: Path, path: str) -> None:
     import json
     import shutil
@@ -512,9 +547,27 @@ def test_manifest_bad_clip_path(tmp_path: Path, small_dataset: Path, path: str) 
         load_manifest(d)
 
 
-EVAL_ARGS = ["--methods", "direct", "--refine", "none", "--workers", "1", "--report-pairs",
-             "0", "--no-videos", "--no-report", "--no-progress", "--max-clips", "1", "--split",
-             "train", "--no-track", "--no-dynamic", "--targets", "all"]
+EVAL_ARGS = [
+    "--methods",
+    "direct",
+    "--refine",
+    "none",
+    "--workers",
+    "1",
+    "--report-pairs",
+    "0",
+    "--no-videos",
+    "--no-report",
+    "--no-progress",
+    "--max-clips",
+    "1",
+    "--split",
+    "train",
+    "--no-track",
+    "--no-dynamic",
+    "--targets",
+    "all",
+]
 
 
 @pytest.fixture(scope="module")
@@ -526,8 +579,15 @@ def eval_run(small_dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> P
 
 @pytest.mark.parametrize(
     "tamper",
-    ["run_list", "run_config_str", "run_deep", "row_list", "row_no_key", "row_wrong_key",
-     "row_deep"],
+    [
+        "run_list",
+        "run_config_str",
+        "run_deep",
+        "row_list",
+        "row_no_key",
+        "row_wrong_key",
+        "row_deep",
+    ],
 )
 def test_eval_resume_tampered_state(
     tmp_path: Path, small_dataset: Path, eval_run: Path, capsys, tamper: str
@@ -568,12 +628,18 @@ def test_eval_resume_tampered_state(
     [
         (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--seed", str(2**64)], "--seed"),
         (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--seed", "-1"], "--seed"),
-        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--temperature", "0"],
-         "--temperature"),
-        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--temperature", "-1"],
-         "--temperature"),
-        (["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--temperature", "nan"],
-         "--temperature"),
+        (
+            ["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--temperature", "0"],
+            "--temperature",
+        ),
+        (
+            ["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--temperature", "-1"],
+            "--temperature",
+        ),
+        (
+            ["transfer", "{m}", "--to", "cat", "--out", "{t}/o.npz", "--temperature", "nan"],
+            "--temperature",
+        ),
         (["track", "{m}", "--settle", "1e9"], "--settle"),
         (["track", "{m}", "--control-hz", "inf"], "--control-hz"),
         (["data", "synth", "--out", "{t}/d", "--fps", "100000"], "fps"),
@@ -596,8 +662,14 @@ def test_build_dataset_fps_bounds(tmp_path: Path) -> None:
 
     for fps in (100000.0, 0.001):
         with pytest.raises(DatasetError, match="valid"):
-            build_dataset(tmp_path / "d", clips_per_species=1, fps=fps, species=["cat"],
-                          workers=1, progress=False)
+            build_dataset(
+                tmp_path / "d",
+                clips_per_species=1,
+                fps=fps,
+                species=["cat"],
+                workers=1,
+                progress=False,
+            )
 
 
 def test_npz_corrupt_array_header(tmp_path: Path, arrays) -> None:
@@ -625,8 +697,19 @@ def test_output_folder_under_a_file(tmp_path: Path, small_dataset: Path, capsys,
     blocker = tmp_path / "blocker"
     blocker.write_text("x")
     if command == "synth":
-        argv = ["data", "synth", "--out", blocker / "d", "--species", "cat",
-                "--clips-per-species", "1", "--workers", "1", "--no-progress"]
+        argv = [
+            "data",
+            "synth",
+            "--out",
+            blocker / "d",
+            "--species",
+            "cat",
+            "--clips-per-species",
+            "1",
+            "--workers",
+            "1",
+            "--no-progress",
+        ]
     else:
         argv = ["eval", "--data", small_dataset, "--out", blocker / "e", *EVAL_ARGS]
     code, err = run_cli(argv, capsys)

@@ -32,17 +32,20 @@ def _mask(img: np.ndarray, rgb: tuple[int, int, int], tol: int = 40) -> np.ndarr
 def test_ghost_is_drawn_beside_the_body(dog) -> None:
     q = _home(dog)
     green = render.GhostStyle(alpha=1.0, ghost_rgb=(0.0, 1.0, 0.0))
-    plain = render.render_frames(dog, q, width=W, height=H, reference=q, species="dog",
-                                 style=render.GhostStyle(alpha=0.0))[0]
-    ghost = render.render_frames(dog, q, width=W, height=H, reference=q, species="dog",
-                                 style=green)[0]
+    plain = render.render_frames(
+        dog, q, width=W, height=H, reference=q, species="dog", style=render.GhostStyle(alpha=0.0)
+    )[0]
+    ghost = render.render_frames(
+        dog, q, width=W, height=H, reference=q, species="dog", style=green
+    )[0]
     none = render.render_frames(dog, q, width=W, height=H, species="dog", camera=-1)[0]
     g = _mask(ghost, (0, 255, 0), 90)
     assert g.sum() > 500  # the ghost is there, in its colour
     assert _mask(none, (0, 255, 0), 90).sum() == 0
     # the body: pixels whose colour changes with the species' colour, same camera
-    tiger = render.render_frames(dog, q, width=W, height=H, reference=q, species="tiger",
-                                 style=render.GhostStyle(alpha=0.0))[0]
+    tiger = render.render_frames(
+        dog, q, width=W, height=H, reference=q, species="tiger", style=render.GhostStyle(alpha=0.0)
+    )[0]
     body = np.abs(tiger.astype(int) - plain.astype(int)).sum(-1) > 30
     assert body.sum() > 500
     # beside, not over: ghost and body barely share a pixel, and sit side by side
@@ -58,8 +61,9 @@ def test_stance_discs_follow_the_contacts(dog) -> None:
     # the flat discs are seen edge-on by the species camera: full size images
     down = render.render_frames(dog, q, contacts=np.ones((1, 4), bool), style=red)[0]
     up = render.render_frames(dog, q, contacts=np.zeros((1, 4), bool), style=red)[0]
-    one = render.render_frames(dog, q, contacts=np.array([[True, False, False, False]]),
-                               style=red)[0]
+    one = render.render_frames(dog, q, contacts=np.array([[True, False, False, False]]), style=red)[
+        0
+    ]
     n_down, n_up, n_one = (_mask(x, (255, 0, 0), 60).sum() for x in (down, up, one))
     assert n_up == 0 and n_down > 16 and 0 < n_one < n_down
 
@@ -82,8 +86,10 @@ def test_bad_requests_are_render_errors(dog) -> None:
     with pytest.raises(render.RenderError, match="contacts must have shape"):
         render.render_frames(dog, q, contacts=np.ones((2, 4), bool), width=W, height=H)
     with pytest.raises(render.RenderError, match="'paw'"):
-        render.render_frames(dog, q, contacts=np.ones((3, 1), bool), feet=["paw"],
-                             width=W, height=H)
+        render.render_frames(
+            dog, q, contacts=np.ones((3, 1), bool), feet=["paw"], width=W, height=H
+        )
     with pytest.raises(render.RenderError, match="4 stance columns but 1 feet"):
-        render.render_frames(dog, q, contacts=np.ones((3, 4), bool), feet=["lf_foot"],
-                             width=W, height=H)
+        render.render_frames(
+            dog, q, contacts=np.ones((3, 4), bool), feet=["lf_foot"], width=W, height=H
+        )

@@ -60,8 +60,9 @@ def test_dog_walk_on_go1_reference(go1, walk, clip):
     assert k == pytest.approx(rl.leg_length / walk.species_info.leg_length)
     # trunk path kept, scaled: the same displacement times k, standing at the robot's height
     src = walk.root_positions
-    assert np.allclose(clip.qpos[-1, :2] - clip.qpos[0, :2], k * (src[-1, :2] - src[0, :2]),
-                       atol=1e-9)
+    assert np.allclose(
+        clip.qpos[-1, :2] - clip.qpos[0, :2], k * (src[-1, :2] - src[0, :2]), atol=1e-9
+    )
     assert abs(clip.qpos[:, 2].mean() - rl.height) < 1e-9
     # stance feet stand still on the ground; swing feet leave it
     feet = _feet_world(go1, clip.qpos, FEET)
@@ -130,8 +131,22 @@ def test_bad_input_is_typed(go1, walk, tmp_path):
 
 def test_cli_retarget_and_track(walk, tmp_path, capsys):
     src, out = walk.save(tmp_path / "walk.npz"), tmp_path / "go1_walk.npz"
-    code = main(["retarget", str(src), "--robot", str(GO1), "--feet", "FL,FR,RL,RR",
-                 "--out", str(out), "--track", "--report", str(tmp_path / "r.json"), "--json"])
+    code = main(
+        [
+            "retarget",
+            str(src),
+            "--robot",
+            str(GO1),
+            "--feet",
+            "FL,FR,RL,RR",
+            "--out",
+            str(out),
+            "--track",
+            "--report",
+            str(tmp_path / "r.json"),
+            "--json",
+        ]
+    )
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["track"]["survival"] == 1.0 and summary["track"]["controller"] == "mpc"
@@ -139,9 +154,27 @@ def test_cli_retarget_and_track(walk, tmp_path, capsys):
     assert json.loads((tmp_path / "r.json").read_text())["metrics"]["survival"] == 1.0
     # bad input: exit 2 with the valid names, nothing written
     bad = tmp_path / "bad.npz"
-    assert main(["retarget", str(src), "--robot", str(GO1), "--feet", "FL,FR,RL,toe",
-                 "--out", str(bad)]) == 2
+    assert (
+        main(
+            ["retarget", str(src), "--robot", str(GO1), "--feet", "FL,FR,RL,toe", "--out", str(bad)]
+        )
+        == 2
+    )
     assert "unknown foot name(s) 'toe'" in capsys.readouterr().err and not bad.exists()
-    assert main(["retarget", str(src), "--robot", str(GO1.with_name("go1.xml")), "--feet",
-                 "FL,FR,RL,RR", "--out", str(bad), "--track"]) == 2
+    assert (
+        main(
+            [
+                "retarget",
+                str(src),
+                "--robot",
+                str(GO1.with_name("go1.xml")),
+                "--feet",
+                "FL,FR,RL,RR",
+                "--out",
+                str(bad),
+                "--track",
+            ]
+        )
+        == 2
+    )
     assert "no floor" in capsys.readouterr().err

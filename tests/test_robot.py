@@ -134,8 +134,7 @@ def test_go1_trots_under_mpc_through_track(go1, speed):
     the robot keeps up with the reference, the metrics are those of any species."""
     clip = trot(go1, FEET, speed=speed, duration_s=3.0)
     assert clip.metadata["ik_residual_max_m"] < 1e-4
-    res = track(clip.trajectory(), model=go1, feet=FEET, contacts=clip.contacts,
-                controller="mpc")
+    res = track(clip.trajectory(), model=go1, feet=FEET, contacts=clip.contacts, controller="mpc")
     assert not res.failed and res.survival == 1.0
     assert res.assist["assist_force_mg"] == 0.0
     assert res.contacts.shape == (len(clip.qpos), 4)
@@ -191,8 +190,9 @@ def test_mpc_trots_the_robot_on_its_own_servos(go1):
     from habitsim.sim import build_reference
 
     clip = trot(go1, FEET, speed=0.5, duration_s=2.5)
-    ctl = make_controller("mpc", go1, feet=FEET, qpos=clip.qpos, fps=clip.fps,
-                          contacts=clip.contacts)
+    ctl = make_controller(
+        "mpc", go1, feet=FEET, qpos=clip.qpos, fps=clip.fps, contacts=clip.contacts
+    )
     ref = build_reference(go1, clip.qpos, clip.fps)
     d = mujoco.MjData(go1)
     d.qpos[:] = clip.qpos[0]
@@ -218,10 +218,8 @@ def test_drawable_shows_collision_geoms_only_for_drawing(go1):
     assert np.array_equal(vis.geom_size, go1.geom_size)
     assert np.array_equal(vis.geom_contype, go1.geom_contype)
     if render_available():
-        frames = render_frames(vis, _home(go1).qpos[None], camera="tracking", width=160,
-                               height=120)
-        hidden = render_frames(go1, _home(go1).qpos[None], camera="tracking", width=160,
-                               height=120)
+        frames = render_frames(vis, _home(go1).qpos[None], camera="tracking", width=160, height=120)
+        hidden = render_frames(go1, _home(go1).qpos[None], camera="tracking", width=160, height=120)
         assert np.abs(frames.astype(int) - hidden).sum() > 0  # the robot is drawn
 
 

@@ -103,8 +103,10 @@ def test_fall_detector_rules(dog) -> None:
     nose[dog.joint("neck_pitch").qposadr[0]] = 0.5
     nose[dog.joint("head_pitch").qposadr[0]] = 2.0
     head = dog.body("head").id
-    while not any(dog.geom_bodyid[c.geom1] == head or dog.geom_bodyid[c.geom2] == head
-                  for c in at(nose).contact[: d.ncon]):
+    while not any(
+        dog.geom_bodyid[c.geom1] == head or dog.geom_bodyid[c.geom2] == head
+        for c in at(nose).contact[: d.ncon]
+    ):
         nose[2] -= 0.005  # lower the trunk until the head touches the floor
     assert nose[2] > 0.5 * q[2]  # still high: only the ground-contact rule can fire
     det.reset()
@@ -120,8 +122,12 @@ def test_unstable_run_is_reported_not_raised(dog) -> None:
     wild.actuator_biasprm[:, 2] = 0.0
     wild.actuator_forcelimited[:] = 0
     wild.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
-    traj = QposTrajectory(np.tile(dog.key_qpos[0], (31, 1)) + np.r_[np.zeros(7), np.full(34, 0.1)],
-                          FPS, np.zeros(31), ())
+    traj = QposTrajectory(
+        np.tile(dog.key_qpos[0], (31, 1)) + np.r_[np.zeros(7), np.full(34, 0.1)],
+        FPS,
+        np.zeros(31),
+        (),
+    )
     for use_rollout in (True, False):
         r = track(traj, species="dog", model=wild, use_rollout=use_rollout)
         assert r.unstable and r.unstable_reason
@@ -196,7 +202,8 @@ def test_bad_inputs_are_typed_errors(dog, walk) -> None:
         track(walk, control_hz=10_000.0)
     # a model without the habitsim joints
     box = mujoco.MjModel.from_xml_string(
-        "<mujoco><worldbody><body><freejoint/><geom size='0.1'/></body></worldbody></mujoco>")
+        "<mujoco><worldbody><body><freejoint/><geom size='0.1'/></body></worldbody></mujoco>"
+    )
     with pytest.raises(SimulationError, match="does not fit"):
         track(walk, model=box)
 
@@ -223,8 +230,7 @@ def test_cli_track_writes_motion_and_report(tmp_path, walk) -> None:
     assert json.loads(rep.read_text())["assist"]["assist_force_mg"] > 0
 
 
-def test_cli_missing_video_writer_fails_before_writing(tmp_path, walk, capsys,
-                                                      monkeypatch) -> None:
+def test_cli_missing_video_writer_fails_before_writing(tmp_path, walk, capsys, monkeypatch) -> None:
     from habitsim import render
     from habitsim.cli import main
 

@@ -55,8 +55,9 @@ def test_numpy_and_torch_fk_agree(species: str) -> None:
     p_t = fk_torch(sk, torch.tensor(root), torch.tensor(q)).numpy()
     assert np.abs(p_np - p_t).max() < 1e-6
     # float32 torch too, within 1e-6 of the float64 result relative to body size
-    p32 = fk_torch(sk, torch.tensor(root, dtype=torch.float32),
-                   torch.tensor(q, dtype=torch.float32))
+    p32 = fk_torch(
+        sk, torch.tensor(root, dtype=torch.float32), torch.tensor(q, dtype=torch.float32)
+    )
     assert np.abs(p32.numpy() - p_np).max() < 1e-5 * max(1.0, np.abs(p_np).max())
 
 

@@ -31,8 +31,9 @@ def test_sliding_feet_are_caught_with_a_readable_message() -> None:
     root[:, 0] += 0.01 * np.arange(m.num_frames)  # the whole body slides 1 cm per frame
     from habitsim.motion import Motion
 
-    bad = Motion(species="dog", fps=m.fps, root_positions=root, rotations=m.rotations,
-                 contacts=m.contacts)
+    bad = Motion(
+        species="dog", fps=m.fps, root_positions=root, rotations=m.rotations, contacts=m.contacts
+    )
     viol = plausibility_violations(bad, use_contacts=True)
     assert "skate_per_leg" in viol
     with pytest.raises(AssertionError, match=r"skate_per_leg = .* > 0.002"):
@@ -48,11 +49,14 @@ def test_unknown_bound_is_a_typed_error() -> None:
 
 
 def test_compare_figures_tolerances_and_nan() -> None:
-    devs = {d.key: d for d in compare_figures(
-        {"a": 1.05, "b": 2.0, "c": math.nan, "new": 1.0},
-        {"a": 1.0, "b": 2.0, "c": math.nan, "gone": 3.0},
-        {"a": Tolerance(abs=0.0, rel=0.1)},
-    )}
+    devs = {
+        d.key: d
+        for d in compare_figures(
+            {"a": 1.05, "b": 2.0, "c": math.nan, "new": 1.0},
+            {"a": 1.0, "b": 2.0, "c": math.nan, "gone": 3.0},
+            {"a": Tolerance(abs=0.0, rel=0.1)},
+        )
+    }
     assert devs["a"].ok and devs["b"].ok and devs["c"].ok
     assert not devs["new"].ok and not devs["gone"].ok
     devs = {d.key: d for d in compare_figures({"a": 1.2}, {"a": 1.0}, {"a": (0.0, 0.1)})}
@@ -63,8 +67,11 @@ def test_golden_round_trip_and_diff(tmp_path) -> None:
     path = tmp_path / "g.json"
     with pytest.raises(GoldenMissingError, match="update-goldens"):
         assert_matches_golden({"survival": 1.0}, path)
-    write_golden(path, {"survival": 1.0, "sim_mpjpe_mm": 20.0, "jerk": math.nan},
-                 {"sim_mpjpe_mm": {"abs": 1.0}})
+    write_golden(
+        path,
+        {"survival": 1.0, "sim_mpjpe_mm": 20.0, "jerk": math.nan},
+        {"sim_mpjpe_mm": {"abs": 1.0}},
+    )
     doc = json.loads(path.read_text())
     assert "mujoco" in doc["versions"] and doc["figures"]["jerk"] is None
     assert_matches_golden({"survival": 1.0, "sim_mpjpe_mm": 20.9, "jerk": math.nan}, path)

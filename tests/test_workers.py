@@ -20,7 +20,10 @@ def _start(args: list[str], tmp_path: Path) -> tuple[subprocess.Popen, list]:
     env = dict(os.environ, OMP_NUM_THREADS="1")
     proc = subprocess.Popen(
         [sys.executable, "-m", "habitsim", *args],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        env=env,
+        cwd=tmp_path,
     )
     parent = psutil.Process(proc.pid)
     deadline = time.monotonic() + 30
@@ -42,8 +45,17 @@ def _assert_all_gone(workers: list, within_s: float = 5.0) -> None:
 
 
 def _synth(tmp_path: Path) -> list[str]:
-    return ["data", "synth", "--out", str(tmp_path / "d"), "--clips-per-species", "40",
-            "--workers", "2", "--no-progress"]
+    return [
+        "data",
+        "synth",
+        "--out",
+        str(tmp_path / "d"),
+        "--clips-per-species",
+        "40",
+        "--workers",
+        "2",
+        "--no-progress",
+    ]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])

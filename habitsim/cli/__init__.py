@@ -28,9 +28,20 @@ _GROUPS: list[tuple[str | None, str, tuple[str, ...]]] = [
     ("motion", "inspect motion files", ("motion_cmd",)),
     ("models", "per-species MuJoCo (MJCF) models", ("models_cmd",)),
     ("bench", "benchmarks that print figures", ("bench_cmd",)),
-    (None, "", ("demo_cmd", "track_cmd", "eval_cmd", "train_evaluator_cmd", "train_cmd",
-               "transfer_cmd", "refine_cmd",
-           "retarget_cmd")),
+    (
+        None,
+        "",
+        (
+            "demo_cmd",
+            "track_cmd",
+            "eval_cmd",
+            "train_evaluator_cmd",
+            "train_cmd",
+            "transfer_cmd",
+            "refine_cmd",
+            "retarget_cmd",
+        ),
+    ),
 ]
 
 

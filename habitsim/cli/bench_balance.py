@@ -56,27 +56,58 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     add_list_option(p, "--species", help="species (default: the training species)")
-    add_list_option(p, "--actions", default=list(DEFAULT_ACTIONS), metavar="ACTION",
-                    help="actions (default: walk trot pace turn; 'turn' = turn_left)")
-    add_list_option(p, "--controllers", default=list(CONTROLLERS), choices=CONTROLLERS,
-                    metavar="CONTROLLER", help="controllers (default: all three)")
-    p.add_argument("--clips", type=int, default=1, metavar="N",
-                   help="clips per species and action (default 1)")
-    p.add_argument("--duration", type=float, default=5.0, metavar="S",
-                   help="clip length [s] (default 5)")
+    add_list_option(
+        p,
+        "--actions",
+        default=list(DEFAULT_ACTIONS),
+        metavar="ACTION",
+        help="actions (default: walk trot pace turn; 'turn' = turn_left)",
+    )
+    add_list_option(
+        p,
+        "--controllers",
+        default=list(CONTROLLERS),
+        choices=CONTROLLERS,
+        metavar="CONTROLLER",
+        help="controllers (default: all three)",
+    )
+    p.add_argument(
+        "--clips", type=int, default=1, metavar="N", help="clips per species and action (default 1)"
+    )
+    p.add_argument(
+        "--duration", type=float, default=5.0, metavar="S", help="clip length [s] (default 5)"
+    )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="first seed (default 0)")
-    p.add_argument("--mpc-hz", type=float, default=30.0, metavar="HZ",
-                   help="MPC solves per second (default 30)")
-    p.add_argument("--control-hz", type=float, metavar="HZ",
-                   help="control rate of the runner (default: every simulation step; mpc: "
-                   "habitsim.sim.MPC_CONTROL_HZ)")
-    p.add_argument("--refine", nargs="?", const="A", choices=("A", "B"), metavar="STAGE",
-                   help="refine every clip first (habitsim.refine): stage A (kinematic, the "
-                   "default of --refine) or B (centroidal dynamics, --refine B)")
+    p.add_argument(
+        "--mpc-hz",
+        type=float,
+        default=30.0,
+        metavar="HZ",
+        help="MPC solves per second (default 30)",
+    )
+    p.add_argument(
+        "--control-hz",
+        type=float,
+        metavar="HZ",
+        help="control rate of the runner (default: every simulation step; mpc: "
+        "habitsim.sim.MPC_CONTROL_HZ)",
+    )
+    p.add_argument(
+        "--refine",
+        nargs="?",
+        const="A",
+        choices=("A", "B"),
+        metavar="STAGE",
+        help="refine every clip first (habitsim.refine): stage A (kinematic, the "
+        "default of --refine) or B (centroidal dynamics, --refine B)",
+    )
     p.add_argument("--json", action="store_true", help="one JSON object per run, then a summary")
-    add_check_option(p, help="exit with code 1 when a target is MISSED (stance QP and MPC solve "
-                     "times, real-time factor, mpc survival share and MPJPE; default: print "
-                     "the verdicts, exit 0)")
+    add_check_option(
+        p,
+        help="exit with code 1 when a target is MISSED (stance QP and MPC solve "
+        "times, real-time factor, mpc survival share and MPJPE; default: print "
+        "the verdicts, exit 0)",
+    )
     p.set_defaults(func=_bench_balance)
 
 
@@ -92,8 +123,14 @@ def _clean(v: Any) -> Any:
     return v
 
 
-def run_one(species: str, motion: Any, controller: str, *, mpc_hz: float = 30.0,
-            control_hz: float | None = None) -> dict[str, Any]:
+def run_one(
+    species: str,
+    motion: Any,
+    controller: str,
+    *,
+    mpc_hz: float = 30.0,
+    control_hz: float | None = None,
+) -> dict[str, Any]:
     """Track one clip with one controller; the figures of the run."""
     from ..controllers import make_controller
     from ..qpos import motion_to_qpos, species_model
@@ -109,10 +146,10 @@ def run_one(species: str, motion: Any, controller: str, *, mpc_hz: float = 30.0,
     if controller == "mpc":
         options["rate_hz"] = mpc_hz
     if controller != "pd":
-        options.update(qpos=motion_to_qpos(motion, model).qpos, fps=motion.fps,
-                       contacts=motion.contacts)
-    ctl = make_controller(controller, model, species if controller != "pd" else None,
-                          **options)
+        options.update(
+            qpos=motion_to_qpos(motion, model).qpos, fps=motion.fps, contacts=motion.contacts
+        )
+    ctl = make_controller(controller, model, species if controller != "pd" else None, **options)
     t0 = time.perf_counter()
     res = track(motion, controller=ctl, model=model, control_hz=control_hz)
     wall = time.perf_counter() - t0
@@ -146,8 +183,7 @@ def _clips(species: str, action: str, ns: argparse.Namespace) -> list[Any]:
         if ns.refine:
             from ..refine import RefineOptions, refine
 
-            r = refine(m, RefineOptions(dynamics=ns.refine == "B", metrics=False,
-                                        fallback=True))
+            r = refine(m, RefineOptions(dynamics=ns.refine == "B", metrics=False, fallback=True))
             m = r.motion
         out.append(m)
     return out
@@ -161,8 +197,9 @@ def _median(rows: list[dict[str, Any]], key: str) -> float:
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Timing medians, real-time factor and survival shares over the runs."""
     out: dict[str, Any] = {
-        "stance_qp_median_ms": _median([r for r in rows if r["controller"] != "pd"],
-                                       "stance_qp_median_ms"),
+        "stance_qp_median_ms": _median(
+            [r for r in rows if r["controller"] != "pd"], "stance_qp_median_ms"
+        ),
         "mpc_median_ms": _median([r for r in rows if r["controller"] == "mpc"], "mpc_median_ms"),
     }
     for c in CONTROLLERS:
@@ -183,16 +220,18 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def _fmt_row(species: str, action: str, by: dict[str, dict[str, Any]],
-             controllers: list[str]) -> str:
+def _fmt_row(
+    species: str, action: str, by: dict[str, dict[str, Any]], controllers: list[str]
+) -> str:
     cells = []
     for c in controllers:
         r = by.get(c)
         if r is None:
             cells.append(f"{'-':>19}")
         else:
-            cells.append(f"{r['survival']:5.2f} {r['sim_mpjpe_mm']:7.1f} "
-                         f"{r['sim_mpjpe_per_leg']:5.3f}")
+            cells.append(
+                f"{r['survival']:5.2f} {r['sim_mpjpe_mm']:7.1f} {r['sim_mpjpe_per_leg']:5.3f}"
+            )
     return f"{species:<9} {action:<10} " + "  ".join(cells)
 
 
@@ -210,17 +249,26 @@ def _bench_balance(ns: argparse.Namespace) -> int:
 
     if ns.clips < 1 or not ns.duration > 0 or not ns.mpc_hz > 0:
         raise HabitsimError("--clips, --duration and --mpc-hz must be positive")
-    species = ([load_species(s).name for s in ns.species] if ns.species
-               else [s.name for s in training_species()])
+    species = (
+        [load_species(s).name for s in ns.species]
+        if ns.species
+        else [s.name for s in training_species()]
+    )
     controllers = list(ns.controllers)
     if not ns.json:
-        print(f"bench balance: mujoco {mujoco.__version__}, {os.cpu_count()} CPU(s), "
-              f"{ns.clips} clip(s) × {ns.duration:g} s per species and action, "
-              f"MPC {ns.mpc_hz:g} Hz, control "
-              + (f"every step (mpc {MPC_CONTROL_HZ:g} Hz)" if ns.control_hz is None
-                 else f"{ns.control_hz:g} Hz") + ", "
-              + (f"stage-{ns.refine} refined" if ns.refine else "synthetic")
-              + " clips, no external force")
+        print(
+            f"bench balance: mujoco {mujoco.__version__}, {os.cpu_count()} CPU(s), "
+            f"{ns.clips} clip(s) × {ns.duration:g} s per species and action, "
+            f"MPC {ns.mpc_hz:g} Hz, control "
+            + (
+                f"every step (mpc {MPC_CONTROL_HZ:g} Hz)"
+                if ns.control_hz is None
+                else f"{ns.control_hz:g} Hz"
+            )
+            + ", "
+            + (f"stage-{ns.refine} refined" if ns.refine else "synthetic")
+            + " clips, no external force"
+        )
         head = "  ".join(f"{c + ' surv mpjpe /leg':>19}" for c in controllers)
         print(f"{'species':<9} {'action':<10} {head}")
     rows: list[dict[str, Any]] = []
@@ -245,30 +293,44 @@ def _bench_balance(ns: argparse.Namespace) -> int:
     if ns.json:
         print(json.dumps({"summary": {k: _clean(v) for k, v in summary.items()}}))
         return check_exit(missed, ns.check)
-    print(format_legend("(per controller: surv = share of the clip completed before a fall; "
-                        "mpjpe = sim MPJPE [mm] against the reference; /leg = the same per "
-                        "hind-leg length)"))
+    print(
+        format_legend(
+            "(per controller: surv = share of the clip completed before a fall; "
+            "mpjpe = sim MPJPE [mm] against the reference; /leg = the same per "
+            "hind-leg length)"
+        )
+    )
     qp, mpc = summary["stance_qp_median_ms"], summary["mpc_median_ms"]
     rt = summary.get("realtime_factor_mpc", float("nan"))
     print()
-    print(f"stance QP median solve      {qp:8.3f} ms   (target ≤ {TARGET_STANCE_QP_MS} ms: "
-          f"{_verdict(qp <= TARGET_STANCE_QP_MS)})")
+    print(
+        f"stance QP median solve      {qp:8.3f} ms   (target ≤ {TARGET_STANCE_QP_MS} ms: "
+        f"{_verdict(qp <= TARGET_STANCE_QP_MS)})"
+    )
     if "mpc" in controllers:
-        print(f"MPC median solve            {mpc:8.3f} ms   (target ≤ {TARGET_MPC_MS} ms: "
-              f"{_verdict(mpc <= TARGET_MPC_MS)})")
-        print(f"tracking speed with MPC     {rt:8.2f} × real time   (target ≥ {TARGET_REALTIME}: "
-              f"{_verdict(rt >= TARGET_REALTIME)})")
+        print(
+            f"MPC median solve            {mpc:8.3f} ms   (target ≤ {TARGET_MPC_MS} ms: "
+            f"{_verdict(mpc <= TARGET_MPC_MS)})"
+        )
+        print(
+            f"tracking speed with MPC     {rt:8.2f} × real time   (target ≥ {TARGET_REALTIME}: "
+            f"{_verdict(rt >= TARGET_REALTIME)})"
+        )
     for c in controllers:
         share = summary.get(f"survival_share_{c}", float("nan"))
-        line = (f"{c:<8} survival 1.0 in {share * 100:5.1f} % of {summary.get(f'cases_{c}', 0)} "
-                f"species × action; mean survival {summary.get(f'mean_survival_{c}', 0):.2f}; "
-                f"median sim MPJPE/leg (survived) "
-                f"{summary.get(f'mpjpe_per_leg_{c}', float('nan')):.3f}")
+        line = (
+            f"{c:<8} survival 1.0 in {share * 100:5.1f} % of {summary.get(f'cases_{c}', 0)} "
+            f"species × action; mean survival {summary.get(f'mean_survival_{c}', 0):.2f}; "
+            f"median sim MPJPE/leg (survived) "
+            f"{summary.get(f'mpjpe_per_leg_{c}', float('nan')):.3f}"
+        )
         if c == "mpc":
-            line += (f"   (targets ≥ {TARGET_SURVIVAL_SHARE * 100:.0f} %: "
-                     f"{_verdict(share >= TARGET_SURVIVAL_SHARE)}; "
-                     f"MPJPE ≤ {TARGET_MPJPE_PER_LEG}: "
-                     f"{_verdict(summary.get('mpjpe_per_leg_mpc', 1.0) <= TARGET_MPJPE_PER_LEG)})")
+            line += (
+                f"   (targets ≥ {TARGET_SURVIVAL_SHARE * 100:.0f} %: "
+                f"{_verdict(share >= TARGET_SURVIVAL_SHARE)}; "
+                f"MPJPE ≤ {TARGET_MPJPE_PER_LEG}: "
+                f"{_verdict(summary.get('mpjpe_per_leg_mpc', 1.0) <= TARGET_MPJPE_PER_LEG)})"
+            )
         print(line)
     for c in controllers:
         rtc = summary.get(f"realtime_factor_{c}", float("nan"))

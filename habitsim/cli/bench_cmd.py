@@ -44,18 +44,25 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument(
-        "--clips-per-species", type=int, default=_DEFAULT_CLIPS, metavar="N",
+        "--clips-per-species",
+        type=int,
+        default=_DEFAULT_CLIPS,
+        metavar="N",
         help=f"clips per species (default {_DEFAULT_CLIPS})",
     )
     p.add_argument("--workers", type=int, metavar="W", help="worker processes (default: CPU count)")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="build seed (default 0)")
     p.add_argument(
-        "--out", metavar="DIR",
+        "--out",
+        metavar="DIR",
         help="build here (an existing data set in DIR is replaced); default: a temporary folder",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_check_option(p, help="exit with code 1 when the default data set builds slower than "
-                     f"the target ({TARGET_BUILD_S:.0f} s; default: print the verdict, exit 0)")
+    add_check_option(
+        p,
+        help="exit with code 1 when the default data set builds slower than "
+        f"the target ({TARGET_BUILD_S:.0f} s; default: print the verdict, exit 0)",
+    )
     p.set_defaults(func=_bench_data)
 
     for mod in _EXTRA:

@@ -217,9 +217,16 @@ def run_window(task: WindowTask) -> list[dict[str, Any]]:
         row: dict[str, Any] = {**base, "method": method, "status": "ok", "note": ""}
         t0 = time.perf_counter()
         try:
-            run = run_clip(src, task.target, method=method, refine=task.refine,
-                           controller=task.controller, seed=task.seed, track=task.track,
-                           guard=task.guard)
+            run = run_clip(
+                src,
+                task.target,
+                method=method,
+                refine=task.refine,
+                controller=task.controller,
+                seed=task.seed,
+                track=task.track,
+                guard=task.guard,
+            )
         except MethodUnavailable as e:
             row.update(status="unavailable", note=str(e))
             rows.append(row)
@@ -231,28 +238,30 @@ def run_window(task: WindowTask) -> list[dict[str, Any]]:
             continue
         a, b = run.transferred.metrics, run.refined.metrics
         tm = run.tracked.metrics
-        row.update({
-            "contacts_method": run.transferred.contacts_method,
-            "stance_toe_height_transfer": _num(a.get("stance_toe_height_per_leg")),
-            "stance_toe_height_refined": _num(b.get("stance_toe_height_per_leg")),
-            "skate_mm_before": _num(a.get("skate_mm")),
-            "skate_mm_after": _num(b.get("skate_mm")),
-            "skate_labelled_mm_before": _num(a.get("skate_labelled_mm")),
-            "skate_labelled_mm_after": _num(b.get("skate_labelled_mm")),
-            "jerk_before": _num(a.get("jerk")),
-            "jerk_after": _num(b.get("jerk")),
-            "penetration_mm_before": _num(a.get("penetration_mm")),
-            "penetration_mm_after": _num(b.get("penetration_mm")),
-            "refine_status": run.refined.status,
-            "refine_check": run.refine_verdict,
-            "refine_note": run.refine_note,
-            "track_status": run.tracked.status,
-            "survival": _num(tm.get("survival")),
-            "sim_mpjpe_per_leg": _num(tm.get("sim_mpjpe_per_leg")),
-            "contact_f1_sim": _num(tm.get("contact_f1")),
-            **{f"time_{k}_s": v for k, v in run.times.items()},
-            "time_total_s": time.perf_counter() - t0,
-        })
+        row.update(
+            {
+                "contacts_method": run.transferred.contacts_method,
+                "stance_toe_height_transfer": _num(a.get("stance_toe_height_per_leg")),
+                "stance_toe_height_refined": _num(b.get("stance_toe_height_per_leg")),
+                "skate_mm_before": _num(a.get("skate_mm")),
+                "skate_mm_after": _num(b.get("skate_mm")),
+                "skate_labelled_mm_before": _num(a.get("skate_labelled_mm")),
+                "skate_labelled_mm_after": _num(b.get("skate_labelled_mm")),
+                "jerk_before": _num(a.get("jerk")),
+                "jerk_after": _num(b.get("jerk")),
+                "penetration_mm_before": _num(a.get("penetration_mm")),
+                "penetration_mm_after": _num(b.get("penetration_mm")),
+                "refine_status": run.refined.status,
+                "refine_check": run.refine_verdict,
+                "refine_note": run.refine_note,
+                "track_status": run.tracked.status,
+                "survival": _num(tm.get("survival")),
+                "sim_mpjpe_per_leg": _num(tm.get("sim_mpjpe_per_leg")),
+                "contact_f1_sim": _num(tm.get("contact_f1")),
+                **{f"time_{k}_s": v for k, v in run.times.items()},
+                "time_total_s": time.perf_counter() - t0,
+            }
+        )
         rows.append(row)
     return rows
 
@@ -283,43 +292,57 @@ def evaluate_targets(
     # refinement
     ref = [r for r in ok if refine != "none"]
     good = [
-        r for r in ref
+        r
+        for r in ref
         if (r.get("skate_mm_after") is not None and r["skate_mm_after"] <= REFINE_SKATE_MM)
-        and (r.get("penetration_mm_after") is not None
-             and r["penetration_mm_after"] <= REFINE_PENETRATION_MM)
-        and (r.get("jerk_after") is not None and r.get("jerk_before") is not None
-             and r["jerk_after"] <= r["jerk_before"] * (1 + 1e-9))
+        and (
+            r.get("penetration_mm_after") is not None
+            and r["penetration_mm_after"] <= REFINE_PENETRATION_MM
+        )
+        and (
+            r.get("jerk_after") is not None
+            and r.get("jerk_before") is not None
+            and r["jerk_after"] <= r["jerk_before"] * (1 + 1e-9)
+        )
     ]
     share = len(good) / len(ref) if ref else None
-    out.append({
-        "name": "refinement: skate ≤ 1 mm/frame, jerk ≤ input, penetration ≤ 1 mm",
-        "value": share, "shown": "-" if share is None else f"{100 * share:.0f} % of {len(ref)}",
-        "target": f"≥ {100 * REFINE_SHARE:.0f} % of transfers",
-        "verdict": _verdict(None if share is None else share >= REFINE_SHARE),
-    })
+    out.append(
+        {
+            "name": "refinement: skate ≤ 1 mm/frame, jerk ≤ input, penetration ≤ 1 mm",
+            "value": share,
+            "shown": "-" if share is None else f"{100 * share:.0f} % of {len(ref)}",
+            "target": f"≥ {100 * REFINE_SHARE:.0f} % of transfers",
+            "verdict": _verdict(None if share is None else share >= REFINE_SHARE),
+        }
+    )
 
     # survival of habit transfers under mpc, unassisted
     trk = [r for r in ok if tracked and r.get("survival") is not None]
     habit = [r for r in trk if r["method"] == "habit"]
     applies = tracked and controller == "mpc" and habit
     share = (sum(r["survival"] >= 1.0 for r in habit) / len(habit)) if applies else None
-    out.append({
-        "name": "habit transfers surviving unassisted (mpc)",
-        "value": share,
-        "shown": "-" if share is None else f"{100 * share:.0f} % of {len(habit)}",
-        "target": f"≥ {100 * SURVIVAL_SHARE:.0f} %",
-        "verdict": _verdict(None if share is None else share >= SURVIVAL_SHARE),
-    })
+    out.append(
+        {
+            "name": "habit transfers surviving unassisted (mpc)",
+            "value": share,
+            "shown": "-" if share is None else f"{100 * share:.0f} % of {len(habit)}",
+            "target": f"≥ {100 * SURVIVAL_SHARE:.0f} %",
+            "verdict": _verdict(None if share is None else share >= SURVIVAL_SHARE),
+        }
+    )
 
     # median sim MPJPE
     e = [r["sim_mpjpe_per_leg"] for r in trk if r.get("sim_mpjpe_per_leg") is not None]
     med = float(np.median(e)) if e else None
-    out.append({
-        "name": "median sim MPJPE / leg length",
-        "value": med, "shown": "-" if med is None else f"{med:.3f}",
-        "target": f"≤ {MPJPE_PER_LEG}",
-        "verdict": _verdict(None if med is None else med <= MPJPE_PER_LEG),
-    })
+    out.append(
+        {
+            "name": "median sim MPJPE / leg length",
+            "value": med,
+            "shown": "-" if med is None else f"{med:.3f}",
+            "target": f"≤ {MPJPE_PER_LEG}",
+            "verdict": _verdict(None if med is None else med <= MPJPE_PER_LEG),
+        }
+    )
 
     # habit ≥ direct on survival
     direct = [r for r in trk if r["method"] == "direct"]
@@ -329,24 +352,29 @@ def evaluate_targets(
         shown, verdict, value = f"{sh:.2f} vs {sd:.2f}", _verdict(sh >= sd - 1e-9), sh - sd
     else:
         shown, verdict, value = "-", "n/a", None
-    out.append({
-        "name": "habit ≥ direct on mean survival", "value": value, "shown": shown,
-        "target": "habit ≥ direct", "verdict": verdict,
-    })
+    out.append(
+        {
+            "name": "habit ≥ direct on mean survival",
+            "value": value,
+            "shown": shown,
+            "target": "habit ≥ direct",
+            "verdict": verdict,
+        }
+    )
 
     # time per clip
     limit = SECONDS_PER_4S_CLIP * seconds / 4.0
-    tt = [
-        sum(r.get(f"time_{k}_s") or 0.0 for k in ("transfer", "refine", "track"))
-        for r in ok
-    ]
+    tt = [sum(r.get(f"time_{k}_s") or 0.0 for k in ("transfer", "refine", "track")) for r in ok]
     med = float(np.median(tt)) if tt else None
-    out.append({
-        "name": f"transfer + refine + track of one {seconds:g} s window (median)",
-        "value": med, "shown": "-" if med is None else f"{med:.1f} s",
-        "target": f"≤ {limit:.1f} s" + ("" if seconds == 4 else " (10 s per 4 s)"),
-        "verdict": _verdict(None if med is None else med <= limit),
-    })
+    out.append(
+        {
+            "name": f"transfer + refine + track of one {seconds:g} s window (median)",
+            "value": med,
+            "shown": "-" if med is None else f"{med:.1f} s",
+            "target": f"≤ {limit:.1f} s" + ("" if seconds == 4 else " (10 s per 4 s)"),
+            "verdict": _verdict(None if med is None else med <= limit),
+        }
+    )
     return out
 
 
@@ -435,7 +463,8 @@ def format_summary(rows: Sequence[dict[str, Any]], targets: Sequence[dict[str, A
             f"(whole window {sum(s >= 1.0 for s in surv)}/{len(surv)}); sim MPJPE/L "
             f"{_f(_median(ok, 'sim_mpjpe_per_leg'), 3)}; contacts "
             + ", ".join(f"{k} {v}" for k, v in sorted(how.items()))
-            + "; refinement check " + ", ".join(f"{k} {v}" for k, v in sorted(checks.items()))
+            + "; refinement check "
+            + ", ".join(f"{k} {v}" for k, v in sorted(checks.items()))
         )
         lines.append(
             f"           wall time per stage [s]: transfer {_f(_median(ok, 'time_transfer_s'))},"
@@ -445,12 +474,15 @@ def format_summary(rows: Sequence[dict[str, Any]], targets: Sequence[dict[str, A
         )
     reverted = [r for r in rows if r.get("refine_check") == "reverted"]
     for r in reverted:
-        lines.append(f"  refinement reverted: {Path(r['clip']).stem}@{r['start_s']:g} → "
-                     f"{r['target']} ({r['method']}): {r['refine_note']}")
+        lines.append(
+            f"  refinement reverted: {Path(r['clip']).stem}@{r['start_s']:g} → "
+            f"{r['target']} ({r['method']}): {r['refine_note']}"
+        )
     lines += ["", "targets:"]
     for t in targets:
-        lines.append(f"  {t['name']:62s} {t['shown']:>14s}   (target {t['target']}: "
-                     f"{t['verdict']})")
+        lines.append(
+            f"  {t['name']:62s} {t['shown']:>14s}   (target {t['target']}: {t['verdict']})"
+        )
     return "\n".join(lines)
 
 
@@ -470,30 +502,69 @@ def register(sub: argparse._SubParsersAction) -> None:
             "a target is MISSED, 2 on bad input."
         ),
     )
-    p.add_argument("--data", required=True, metavar="DIR",
-                   help="folder of .bvh, .glb or .gltf clips")
-    add_list_option(p, "--targets", default=list(DEFAULT_TARGETS), metavar="SPECIES",
-                    help=f"target species (default {','.join(DEFAULT_TARGETS)})")
-    add_list_option(p, "--methods", default=list(DEFAULT_METHODS), metavar="METHOD",
-                    help=f"transfer methods (default {','.join(DEFAULT_METHODS)})")
-    p.add_argument("--species", default="dog", metavar="NAME",
-                   help="skeleton the clips are imported onto (default dog)")
-    p.add_argument("--seconds", type=float, default=4.0, metavar="S",
-                   help="window length [s] (default 4)")
-    p.add_argument("--windows-per-clip", type=int, default=1, metavar="N",
-                   help="consecutive windows per clip, from where the animal moves (default 1)")
-    p.add_argument("--fps", type=float, default=30.0, metavar="HZ",
-                   help="frame rate the clips are resampled to (default 30; 0 keeps theirs)")
-    p.add_argument("--refine", default="A", choices=("none", "A", "B"),
-                   help="refinement stage (default A)")
-    p.add_argument("--controller", default="mpc", metavar="NAME",
-                   help="unassisted tracking controller (default mpc)")
+    p.add_argument(
+        "--data", required=True, metavar="DIR", help="folder of .bvh, .glb or .gltf clips"
+    )
+    add_list_option(
+        p,
+        "--targets",
+        default=list(DEFAULT_TARGETS),
+        metavar="SPECIES",
+        help=f"target species (default {','.join(DEFAULT_TARGETS)})",
+    )
+    add_list_option(
+        p,
+        "--methods",
+        default=list(DEFAULT_METHODS),
+        metavar="METHOD",
+        help=f"transfer methods (default {','.join(DEFAULT_METHODS)})",
+    )
+    p.add_argument(
+        "--species",
+        default="dog",
+        metavar="NAME",
+        help="skeleton the clips are imported onto (default dog)",
+    )
+    p.add_argument(
+        "--seconds", type=float, default=4.0, metavar="S", help="window length [s] (default 4)"
+    )
+    p.add_argument(
+        "--windows-per-clip",
+        type=int,
+        default=1,
+        metavar="N",
+        help="consecutive windows per clip, from where the animal moves (default 1)",
+    )
+    p.add_argument(
+        "--fps",
+        type=float,
+        default=30.0,
+        metavar="HZ",
+        help="frame rate the clips are resampled to (default 30; 0 keeps theirs)",
+    )
+    p.add_argument(
+        "--refine", default="A", choices=("none", "A", "B"), help="refinement stage (default A)"
+    )
+    p.add_argument(
+        "--controller",
+        default="mpc",
+        metavar="NAME",
+        help="unassisted tracking controller (default mpc)",
+    )
     p.add_argument("--no-track", action="store_true", help="skip the MuJoCo tracking")
-    p.add_argument("--no-check", action="store_true",
-                   help="do not track the unrefined transfer to check the refinement")
+    p.add_argument(
+        "--no-check",
+        action="store_true",
+        help="do not track the unrefined transfer to check the refinement",
+    )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
-    p.add_argument("--workers", type=int, default=None, metavar="W",
-                   help="worker processes (default: CPU count; 1 = in this process)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="W",
+        help="worker processes (default: CPU count; 1 = in this process)",
+    )
     p.add_argument("--json", metavar="OUT", help="also write the rows and targets here")
     p.set_defaults(func=_bench_real)
 
@@ -549,8 +620,10 @@ def plan(ns: argparse.Namespace) -> tuple[list[WindowTask], list[str]]:
         frames = int(round(ns.seconds * m.fps))
         starts = window_starts(m, frames, ns.windows_per_clip)
         if not starts:
-            notes.append(f"{f.name}: skipped, {m.num_frames} frames ({m.duration:.2f} s) is "
-                         f"shorter than one {ns.seconds:g} s window ({frames} frames)")
+            notes.append(
+                f"{f.name}: skipped, {m.num_frames} frames ({m.duration:.2f} s) is "
+                f"shorter than one {ns.seconds:g} s window ({frames} frames)"
+            )
             continue
         for s in starts:
             windows.append((f.name, round(s / m.fps, 3), m.slice(s, s + frames)))
@@ -559,8 +632,18 @@ def plan(ns: argparse.Namespace) -> tuple[list[WindowTask], list[str]]:
             f"--data {ns.data}: no clip gives a {ns.seconds:g} s window; " + "; ".join(notes)
         )
     tasks = [
-        WindowTask(clip, start, w, t, tuple(methods), mode, ns.controller, not ns.no_track,
-                   not ns.no_check, ns.seed)
+        WindowTask(
+            clip,
+            start,
+            w,
+            t,
+            tuple(methods),
+            mode,
+            ns.controller,
+            not ns.no_track,
+            not ns.no_check,
+            ns.seed,
+        )
         for t in targets  # grouped by target: a process keeps few built refinement problems
         for clip, start, w in windows
     ]
@@ -596,10 +679,16 @@ def _bench_real(ns: argparse.Namespace) -> int:
     finally:
         ex.close()
     order = {(t.clip, t.start_s, t.target): i for i, t in enumerate(tasks)}
-    rows.sort(key=lambda r: (order[(r["clip"], r["start_s"], r["target"])],
-                             methods.index(r["method"])))
-    verdicts = evaluate_targets(rows, seconds=ns.seconds, refine=tasks[0].refine,
-                                controller=ns.controller, tracked=not ns.no_track)
+    rows.sort(
+        key=lambda r: (order[(r["clip"], r["start_s"], r["target"])], methods.index(r["method"]))
+    )
+    verdicts = evaluate_targets(
+        rows,
+        seconds=ns.seconds,
+        refine=tasks[0].refine,
+        controller=ns.controller,
+        tracked=not ns.no_track,
+    )
     print(format_legend(LEGEND))
     print(format_summary(rows, verdicts))
     wall = time.perf_counter() - t0
@@ -616,5 +705,3 @@ def _bench_real(ns: argparse.Namespace) -> int:
         atomic_write_text(ns.json, json.dumps(json_safe(doc), indent=2) + "\n")
         print(f"rows written to {ns.json}")
     return exit_code(verdicts)
-
-

@@ -62,8 +62,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     add_list_option(p, "--species", help="species (default: all)")
-    add_list_option(p, "--stages", choices=("A", "B"), default=["A", "B"], metavar="STAGE",
-                    help="stages to time (default A B)")
+    add_list_option(
+        p,
+        "--stages",
+        choices=("A", "B"),
+        default=["A", "B"],
+        metavar="STAGE",
+        help="stages to time (default A B)",
+    )
     p.add_argument(
         "--clips",
         type=int,
@@ -93,8 +99,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="NAME",
         help="species of the scaling run (default dog)",
     )
-    add_list_option(p, "--lengths", convert=int, default=[100, 300, 1000], metavar="T",
-                    help="clip lengths of the scaling run (default 100 300 1000)")
+    add_list_option(
+        p,
+        "--lengths",
+        convert=int,
+        default=[100, 300, 1000],
+        metavar="T",
+        help="clip lengths of the scaling run (default 100 300 1000)",
+    )
     p.add_argument(
         "--success-clips",
         type=int,
@@ -104,9 +116,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
     p.add_argument("--json", action="store_true", help="also print one JSON object at the end")
-    add_check_option(p, help="exit with code 1 when a target is MISSED: a stage's median solve "
-                     "time, the success rate, or survival after refinement below survival "
-                     "before (default: print the verdicts, exit 0)")
+    add_check_option(
+        p,
+        help="exit with code 1 when a target is MISSED: a stage's median solve "
+        "time, the success rate, or survival after refinement below survival "
+        "before (default: print the verdicts, exit 0)",
+    )
     p.set_defaults(func=_bench_refine)
 
 
@@ -136,8 +151,9 @@ def _test_split(data: str) -> list[tuple[str, str, Any]]:
     return [(e.species, e.action, m) for e, m in iter_clips(data, split="test")]
 
 
-def _test_window(clips: list[tuple[str, str, Any]], rng: np.random.Generator, frames: int,
-                 kinds: tuple[str, ...]) -> tuple[str, str, Any]:
+def _test_window(
+    clips: list[tuple[str, str, Any]], rng: np.random.Generator, frames: int, kinds: tuple[str, ...]
+) -> tuple[str, str, Any]:
     """A random ``frames``-long window of a random test clip with artefacts injected."""
     from ..refine import inject_artefacts
 
@@ -266,17 +282,22 @@ def _bench_refine(ns: argparse.Namespace) -> int:
         rec.pop("_results", None)
         out["species"][sp] = rec
         print(row, flush=True)
-    print(format_legend(
-        "(build: building the window problem once, wall [s]; solve: IPOPT time summed over "
-        "the windows; call: wall time of the refine() call, problems already built; cpu: "
-        "process CPU time over that call, all threads (up to the core count × call; this "
-        f"process runs {_os_threads() or '?'} threads, {os.cpu_count()} CPU(s)); iters: "
-        "IPOPT iterations; medians over the clips; ! = solve over the target"
-        + ("" if ns.no_survival else
-           f"; survival: unassisted {ns.survival_controller} tracking, share of the clip "
-           "completed, before → after stage-A refinement")
-        + ")"
-    ))
+    print(
+        format_legend(
+            "(build: building the window problem once, wall [s]; solve: IPOPT time summed over "
+            "the windows; call: wall time of the refine() call, problems already built; cpu: "
+            "process CPU time over that call, all threads (up to the core count × call; this "
+            f"process runs {_os_threads() or '?'} threads, {os.cpu_count()} CPU(s)); iters: "
+            "IPOPT iterations; medians over the clips; ! = solve over the target"
+            + (
+                ""
+                if ns.no_survival
+                else f"; survival: unassisted {ns.survival_controller} tracking, share of the clip "
+                "completed, before → after stage-A refinement"
+            )
+            + ")"
+        )
+    )
     for sp, rec in out["species"].items():
         for st in ns.stages:
             med = rec[st]["median_solve"]
@@ -293,22 +314,31 @@ def _bench_refine(ns: argparse.Namespace) -> int:
         for n in ns.lengths:
             r = _timed(_clip(ns.scaling_species, n, ns.seed + 100), st)
             out["scaling"].setdefault(st, {})[n] = {
-                k: r[k] for k in ("ok", "solve", "call", "cpu", "build")}
+                k: r[k] for k in ("ok", "solve", "call", "cpu", "build")
+            }
             parts.append(
                 f"{n} frames: solve {_fmt(r['solve'], 6)} s ({1000 * r['solve'] / n:5.2f} "
                 f"ms/frame), call {_fmt(r['call'], 6)} s wall, cpu {_fmt(r['cpu'], 6)} s"
                 + (" incl. a build" if r["cpu_includes_build"] else "")
             )
         print(f"  stage {st}: " + "; ".join(parts))
-    print(format_legend("(solve: IPOPT time summed over the windows; call and cpu: the whole "
-                        "refine() call, window problems built beforehand; cpu counts every "
-                        "thread of the process)", indent="  "))
+    print(
+        format_legend(
+            "(solve: IPOPT time summed over the windows; call and cpu: the whole "
+            "refine() call, window problems built beforehand; cpu counts every "
+            "thread of the process)",
+            indent="  ",
+        )
+    )
 
     # ---------------------------------------------------------------- success
     rng = np.random.default_rng(ns.seed + 7)
     test_clips = _test_split(ns.data) if ns.data else None
-    source = (f"windows of the {len(test_clips)} test-split clips of {ns.data}" if test_clips
-              else "random species and action")
+    source = (
+        f"windows of the {len(test_clips)} test-split clips of {ns.data}"
+        if test_clips
+        else "random species and action"
+    )
     print(
         f"\nIPOPT success on {ns.success_clips} random artefact clips per stage "
         f"(100 frames, {source}, random artefact mix):"
@@ -342,8 +372,9 @@ def _bench_refine(ns: argparse.Namespace) -> int:
         verdict = "met" if rate >= TARGET_SUCCESS else "MISSED"
         out["success"][st] = {"rate": rate, "failed": fails}
         if rate < TARGET_SUCCESS:
-            missed.append(f"stage {st} IPOPT success {100 * rate:.1f} % < "
-                          f"{100 * TARGET_SUCCESS:.0f} %")
+            missed.append(
+                f"stage {st} IPOPT success {100 * rate:.1f} % < {100 * TARGET_SUCCESS:.0f} %"
+            )
         print(
             f"  stage {st}: {ok}/{tried} = {100 * rate:.1f} % "
             f"(target ≥ {100 * TARGET_SUCCESS:.0f} %: {verdict})"

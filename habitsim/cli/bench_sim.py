@@ -55,25 +55,44 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     add_list_option(p, "--species", help="species (default: all)")
-    p.add_argument("--clips", type=int, default=2, metavar="N",
-                   help="walks per species for survival / assisted error (default 2)")
-    p.add_argument("--batch", type=int, default=8, metavar="N",
-                   help="clips in the batched-rate measurement (default 8)")
+    p.add_argument(
+        "--clips",
+        type=int,
+        default=2,
+        metavar="N",
+        help="walks per species for survival / assisted error (default 2)",
+    )
+    p.add_argument(
+        "--batch",
+        type=int,
+        default=8,
+        metavar="N",
+        help="clips in the batched-rate measurement (default 8)",
+    )
     p.add_argument("--threads", type=int, metavar="T", help="threads (default: CPU count)")
-    p.add_argument("--repeats", type=int, default=3, metavar="R",
-                   help="interleaved repetitions of the rate measurements, best kept "
-                        "(default 3)")
-    p.add_argument("--duration", type=float, default=5.0, metavar="S",
-                   help="walk length [s] (default 5)")
+    p.add_argument(
+        "--repeats",
+        type=int,
+        default=3,
+        metavar="R",
+        help="interleaved repetitions of the rate measurements, best kept (default 3)",
+    )
+    p.add_argument(
+        "--duration", type=float, default=5.0, metavar="S", help="walk length [s] (default 5)"
+    )
     p.add_argument("--action", default="walk", help="synthetic action (default walk)")
-    p.add_argument("--no-sway", action="store_true",
-                   help="generate the walks with trunk_sway=0")
+    p.add_argument("--no-sway", action="store_true", help="generate the walks with trunk_sway=0")
     from ..controllers import CONTROLLERS
 
-    p.add_argument("--assisted-controller", default="servo", choices=CONTROLLERS,
-                   help="controller of the assisted runs (default servo)")
-    p.add_argument("--skip-quality", action="store_true",
-                   help="rates only (no survival / assisted runs)")
+    p.add_argument(
+        "--assisted-controller",
+        default="servo",
+        choices=CONTROLLERS,
+        help="controller of the assisted runs (default servo)",
+    )
+    p.add_argument(
+        "--skip-quality", action="store_true", help="rates only (no survival / assisted runs)"
+    )
     p.add_argument("--json", action="store_true", help="one JSON object per species per line")
     add_check_option(p)
     p.set_defaults(func=_bench_sim)
@@ -102,8 +121,10 @@ def _clips(species: str, n: int, ns: argparse.Namespace, seed0: int = 0) -> list
     from ..gaits import generate
 
     extra = {"trunk_sway": 0.0} if ns.no_sway else {}
-    return [generate(species, ns.action, seed=seed0 + i, duration_s=ns.duration, **extra)
-            for i in range(n)]
+    return [
+        generate(species, ns.action, seed=seed0 + i, duration_s=ns.duration, **extra)
+        for i in range(n)
+    ]
 
 
 def _steps(result: Any) -> int:
@@ -132,10 +153,14 @@ def bench_species(species: str, ns: argparse.Namespace, threads: int) -> dict[st
         for key, fn in (
             ("raw_steps_per_s", lambda: raw_step_rate(model, 1.0)),
             ("single_steps_per_s", lambda: rate(lambda: track(clip, stop_on_fall=False))),
-            ("python_steps_per_s",
-             lambda: rate(lambda: track(clip, stop_on_fall=False, use_rollout=False))),
-            ("batched_steps_per_s",
-             lambda: rate(lambda: track_many(batch, stop_on_fall=False, threads=threads))),
+            (
+                "python_steps_per_s",
+                lambda: rate(lambda: track(clip, stop_on_fall=False, use_rollout=False)),
+            ),
+            (
+                "batched_steps_per_s",
+                lambda: rate(lambda: track_many(batch, stop_on_fall=False, threads=threads)),
+            ),
         ):
             best[key] = max(best.get(key, 0.0), fn())
     out.update(best)
@@ -151,7 +176,8 @@ def bench_species(species: str, ns: argparse.Namespace, threads: int) -> dict[st
     out["assisted_survival"] = float(np.mean([x.survival for x in res]))
     out["assisted_sim_mpjpe_mm"] = float(np.mean([x.metrics["sim_mpjpe_mm"] for x in res]))
     out["assisted_sim_mpjpe_per_leg"] = float(
-        np.mean([x.metrics["sim_mpjpe_per_leg"] for x in res]))
+        np.mean([x.metrics["sim_mpjpe_per_leg"] for x in res])
+    )
     out["assist_force_mg"] = float(np.mean([x.metrics["assist_force_mg"] for x in res]))
     return out
 
@@ -172,19 +198,26 @@ _LEGEND_QUALITY = _LEGEND + (
 def _fmt(row: dict[str, Any]) -> str:
     def g(key: str, spec: str) -> str:
         v = row.get(key)
-        return "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) \
+        return (
+            "n/a"
+            if v is None or (isinstance(v, float) and not math.isfinite(v))
             else format(v, spec)
+        )
 
     ok = "ok" if row["batched_vs_raw"] >= TARGET_BATCH_RATIO else "MISSED"
-    text = (f"{row['species']:<9} {g('raw_steps_per_s', '8.0f')} {g('single_steps_per_s', '8.0f')} "
-            f"{g('python_steps_per_s', '8.0f')} {g('batched_steps_per_s', '8.0f')} "
-            f"{g('batched_vs_raw', '6.2f')} {ok:<6}")
+    text = (
+        f"{row['species']:<9} {g('raw_steps_per_s', '8.0f')} {g('single_steps_per_s', '8.0f')} "
+        f"{g('python_steps_per_s', '8.0f')} {g('batched_steps_per_s', '8.0f')} "
+        f"{g('batched_vs_raw', '6.2f')} {ok:<6}"
+    )
     if "survival_servo" in row:
         mp = row["assisted_sim_mpjpe_per_leg"]
         ok2 = "ok" if mp <= TARGET_ASSISTED_MPJPE_PER_LEG else "MISSED"
-        text += (f" {g('survival_servo', '6.2f')} {g('survival_servo+stance', '6.2f')} "
-                 f"{g('assisted_sim_mpjpe_mm', '8.1f')} {g('assisted_sim_mpjpe_per_leg', '6.3f')} "
-                 f"{ok2:<6} {g('assist_force_mg', '6.2f')}")
+        text += (
+            f" {g('survival_servo', '6.2f')} {g('survival_servo+stance', '6.2f')} "
+            f"{g('assisted_sim_mpjpe_mm', '8.1f')} {g('assisted_sim_mpjpe_per_leg', '6.3f')} "
+            f"{ok2:<6} {g('assist_force_mg', '6.2f')}"
+        )
     return text
 
 
@@ -199,30 +232,44 @@ def _bench_sim(ns: argparse.Namespace) -> int:
     if threads < 1 or ns.batch < 1 or ns.clips < 1 or not ns.duration > 0:
         raise HabitsimError("--threads, --batch, --clips and --duration must be positive")
     if not ns.json:
-        print(f"bench sim: mujoco {mujoco.__version__}, {threads} thread(s), {os.cpu_count()} "
-              f"CPU(s), {ns.action} {ns.duration:g} s{' (no sway)' if ns.no_sway else ''}, "
-              f"batch {ns.batch}, {ns.clips} clip(s) per species for quality")
-        head = (f"{'species':<9} {'raw/s':>8} {'single/s':>8} {'python/s':>8} {'batch/s':>8} "
-                f"{'b/raw':>6} {'≥0.5':<6}")
+        print(
+            f"bench sim: mujoco {mujoco.__version__}, {threads} thread(s), {os.cpu_count()} "
+            f"CPU(s), {ns.action} {ns.duration:g} s{' (no sway)' if ns.no_sway else ''}, "
+            f"batch {ns.batch}, {ns.clips} clip(s) per species for quality"
+        )
+        head = (
+            f"{'species':<9} {'raw/s':>8} {'single/s':>8} {'python/s':>8} {'batch/s':>8} "
+            f"{'b/raw':>6} {'≥0.5':<6}"
+        )
         if not ns.skip_quality:
-            head += (f" {'surv':>6} {'s+stc':>6} {'as.mpjpe':>8} {'/leg':>6} {'≤0.05':<6} "
-                     f"{'as.mg':>6}")
+            head += (
+                f" {'surv':>6} {'s+stc':>6} {'as.mpjpe':>8} {'/leg':>6} {'≤0.05':<6} {'as.mg':>6}"
+            )
         print(head)
     rows = []
     for sp in species:
         row = bench_species(sp, ns, threads)
         rows.append(row)
         if ns.json:
-            print(json.dumps({k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-                              for k, v in row.items()}), flush=True)
+            print(
+                json.dumps(
+                    {
+                        k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                        for k, v in row.items()
+                    }
+                ),
+                flush=True,
+            )
         else:
             print(_fmt(row), flush=True)
     if not ns.json:
         print(format_legend(_LEGEND_QUALITY if not ns.skip_quality else _LEGEND))
     if not ns.json and len(rows) > 1:
         ratio = [r["batched_vs_raw"] for r in rows]
-        print(f"batched/raw: min {min(ratio):.2f}, median {float(np.median(ratio)):.2f} "
-              f"(target ≥ {TARGET_BATCH_RATIO})")
+        print(
+            f"batched/raw: min {min(ratio):.2f}, median {float(np.median(ratio)):.2f} "
+            f"(target ≥ {TARGET_BATCH_RATIO})"
+        )
     return check_exit(missed_targets(rows), ns.check)
 
 
@@ -231,10 +278,12 @@ def missed_targets(rows: list[dict[str, Any]]) -> list[str]:
     missed = []
     for r in rows:
         if not r["batched_vs_raw"] >= TARGET_BATCH_RATIO:
-            missed.append(f"{r['species']} batched/raw {r['batched_vs_raw']:.2f} "
-                          f"< {TARGET_BATCH_RATIO}")
+            missed.append(
+                f"{r['species']} batched/raw {r['batched_vs_raw']:.2f} < {TARGET_BATCH_RATIO}"
+            )
         mp = r.get("assisted_sim_mpjpe_per_leg")
         if mp is not None and not mp <= TARGET_ASSISTED_MPJPE_PER_LEG:
-            missed.append(f"{r['species']} assisted MPJPE/leg {mp:.3f} "
-                          f"> {TARGET_ASSISTED_MPJPE_PER_LEG}")
+            missed.append(
+                f"{r['species']} assisted MPJPE/leg {mp:.3f} > {TARGET_ASSISTED_MPJPE_PER_LEG}"
+            )
     return missed

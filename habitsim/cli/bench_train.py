@@ -172,7 +172,9 @@ def _bench_train(ns: argparse.Namespace) -> int:
         f"                      network    {lat['network_best_ms']:6.1f} ms best, "
         f"{lat['network_median_ms']:6.1f} ms median"
     )
-    missed = ([] if verdict == "met" else
-              [f"transfer latency {lat['end_to_end_median_ms']:.1f} ms"
-                 f" > {TARGET_LATENCY_MS:.0f} ms"])
+    missed = (
+        []
+        if verdict == "met"
+        else [f"transfer latency {lat['end_to_end_median_ms']:.1f} ms > {TARGET_LATENCY_MS:.0f} ms"]
+    )
     return check_exit(missed, ns.check)

@@ -77,10 +77,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     i.add_argument("file", type=Path, help="the .bvh, .glb or .gltf file")
-    i.add_argument("--species", default="dog",
-                   help="species to size the detection against (default dog)")
-    i.add_argument("--map", type=Path, default=None, dest="joint_map",
-                   help="a joint-map file to check instead of the automatic mapping")
+    i.add_argument(
+        "--species", default="dog", help="species to size the detection against (default dog)"
+    )
+    i.add_argument(
+        "--map",
+        type=Path,
+        default=None,
+        dest="joint_map",
+        help="a joint-map file to check instead of the automatic mapping",
+    )
     _gltf_options(i)
     i.set_defaults(func=_inspect)
 
@@ -99,10 +105,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _gltf_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--animation", default=None, metavar="NAME|INDEX",
-                   help="glTF/GLB: the animation to import (default: the first)")
-    p.add_argument("--fps", type=float, default=None,
-                   help="glTF/GLB: sampling rate in Hz (default 30)")
+    p.add_argument(
+        "--animation",
+        default=None,
+        metavar="NAME|INDEX",
+        help="glTF/GLB: the animation to import (default: the first)",
+    )
+    p.add_argument(
+        "--fps", type=float, default=None, help="glTF/GLB: sampling rate in Hz (default 30)"
+    )
 
 
 def _animation(value: str | None) -> str | int | None:
@@ -137,7 +148,8 @@ def _inspect(ns: argparse.Namespace) -> int:
         print(
             "stance on the source's own feet (LF RF LH RH): duty "
             + " ".join(f"{d:.2f}" for d in c["duty"])
-            + "; foot joints " + ", ".join(c["foot_joints"])
+            + "; foot joints "
+            + ", ".join(c["foot_joints"])
         )
     template = {"extends": "auto", "map": mapping.mapped()}
     print()
@@ -154,8 +166,15 @@ def _import(ns: argparse.Namespace) -> int:
     if ns.out.suffix != ".npz":
         raise MotionFileError(f"--out must end in .npz, got {ns.out.name!r}")
     motion, mapping = import_bvh(
-        ns.file, sp, joint_map=ns.joint_map, units=ns.units, up=ns.up, strict=not ns.lenient,
-        plant=not ns.no_plant, animation=_animation(ns.animation), fps=ns.fps,
+        ns.file,
+        sp,
+        joint_map=ns.joint_map,
+        units=ns.units,
+        up=ns.up,
+        strict=not ns.lenient,
+        plant=not ns.no_plant,
+        animation=_animation(ns.animation),
+        fps=ns.fps,
     )
     print(mapping)
     for w in mapping.warnings:

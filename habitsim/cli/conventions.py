@@ -58,23 +58,35 @@ class ListAction(argparse.Action):
     comma-separated names; stores the list of names (converted by ``convert`` and
     checked against ``names`` when given)."""
 
-    def __init__(self, option_strings: Sequence[str], dest: str,
-                 convert: Callable[[str], Any] | None = None,
-                 names: Sequence[str] | None = None, **kwargs: Any) -> None:
+    def __init__(
+        self,
+        option_strings: Sequence[str],
+        dest: str,
+        convert: Callable[[str], Any] | None = None,
+        names: Sequence[str] | None = None,
+        **kwargs: Any,
+    ) -> None:
         self.convert = convert
         self.names = tuple(names) if names is not None else None
         super().__init__(option_strings, dest, nargs="+", **kwargs)
 
-    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
-                 values: Any, option_string: str | None = None) -> None:
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
         names = split_names(values)
         if not names:
             parser.error(f"{option_string}: expected at least one name")
         if self.names is not None:
             bad = [n for n in names if n not in self.names]
             if bad:
-                parser.error(f"{option_string}: invalid choice {', '.join(map(repr, bad))} "
-                             f"(choose from {', '.join(self.names)})")
+                parser.error(
+                    f"{option_string}: invalid choice {', '.join(map(repr, bad))} "
+                    f"(choose from {', '.join(self.names)})"
+                )
         if self.convert is not None:
             try:
                 names = [self.convert(n) for n in names]
@@ -83,9 +95,15 @@ class ListAction(argparse.Action):
         setattr(namespace, self.dest, names)
 
 
-def add_list_option(parser: argparse.ArgumentParser, *flags: str, default: Any = None,
-                    help: str, metavar: str = "NAME", choices: Sequence[str] | None = None,
-                    convert: Callable[[str], Any] | None = None) -> argparse.Action:
+def add_list_option(
+    parser: argparse.ArgumentParser,
+    *flags: str,
+    default: Any = None,
+    help: str,
+    metavar: str = "NAME",
+    choices: Sequence[str] | None = None,
+    convert: Callable[[str], Any] | None = None,
+) -> argparse.Action:
     """Add an option taking several names as ``A,B``, ``A B`` or both.
 
     Args:
@@ -97,9 +115,15 @@ def add_list_option(parser: argparse.ArgumentParser, *flags: str, default: Any =
         choices: allowed names (checked after splitting); None allows any.
         convert: applied to each name after splitting (e.g. ``int``).
     """
-    return parser.add_argument(*flags, action=ListAction, default=default, metavar=metavar,
-                               names=choices, convert=convert,
-                               help=f"{help}; A,B or A B")
+    return parser.add_argument(
+        *flags,
+        action=ListAction,
+        default=default,
+        metavar=metavar,
+        names=choices,
+        convert=convert,
+        help=f"{help}; A,B or A B",
+    )
 
 
 def add_check_option(parser: argparse.ArgumentParser, help: str = CHECK_HELP) -> None:
@@ -124,5 +148,10 @@ LEGEND_WIDTH = 100
 
 def format_legend(text: str, indent: str = "") -> str:
     """A table's legend, wrapped to :data:`LEGEND_WIDTH` columns, every line indented."""
-    return textwrap.fill(text, width=LEGEND_WIDTH, initial_indent=indent,
-                         subsequent_indent=indent, break_on_hyphens=False)
+    return textwrap.fill(
+        text,
+        width=LEGEND_WIDTH,
+        initial_indent=indent,
+        subsequent_indent=indent,
+        break_on_hyphens=False,
+    )

@@ -59,18 +59,33 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--out", default="demo_out", metavar="DIR", help="output folder (default demo_out)"
     )
     p.add_argument(
-        "--clips-per-species", type=int, default=DEMO_CLIPS_PER_SPECIES, metavar="N",
+        "--clips-per-species",
+        type=int,
+        default=DEMO_CLIPS_PER_SPECIES,
+        metavar="N",
         help=f"clips per species (default {DEMO_CLIPS_PER_SPECIES})",
     )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
     p.add_argument("--workers", type=int, metavar="W", help="worker processes (default: CPU count)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    add_list_option(p, "--targets", default=["cat", "bear", "tiger"], metavar="SPECIES",
-                    help="target species of the transfer stage (default cat,bear,tiger)")
-    p.add_argument("--no-video", action="store_true",
-                   help="do not render the MP4 of each unassisted tracking run")
-    p.add_argument("--controller", default="mpc", choices=("balance", "mpc"),
-                   help="unassisted tracking controller (default mpc)")
+    add_list_option(
+        p,
+        "--targets",
+        default=["cat", "bear", "tiger"],
+        metavar="SPECIES",
+        help="target species of the transfer stage (default cat,bear,tiger)",
+    )
+    p.add_argument(
+        "--no-video",
+        action="store_true",
+        help="do not render the MP4 of each unassisted tracking run",
+    )
+    p.add_argument(
+        "--controller",
+        default="mpc",
+        choices=("balance", "mpc"),
+        help="unassisted tracking controller (default mpc)",
+    )
     p.add_argument("--data-only", action="store_true", help="stop after the data set stage")
     p.set_defaults(func=_demo)
 
@@ -148,8 +163,10 @@ def _pipeline(ns: argparse.Namespace) -> None:
         f"MuJoCo unassisted ({ns.controller}) and with measured root assistance"
     )
     if not ns.no_video and not videos:
-        print("  (no OpenGL backend for off-screen rendering here: videos are skipped; "
-              "install libegl1 and libgl1-mesa-dri, or libosmesa6)")
+        print(
+            "  (no OpenGL backend for off-screen rendering here: videos are skipped; "
+            "install libegl1 and libgl1-mesa-dri, or libosmesa6)"
+        )
     pairs = [(name, src, tgt) for name, src in sources for tgt in targets]
     rows: list[dict] = []
     figures: list[dict] = []
@@ -160,8 +177,7 @@ def _pipeline(ns: argparse.Namespace) -> None:
         _stage(bar, f"{name} → {tgt}", "transfer → refine → track")
         # transfer → refine (stage A) → track unassisted, labels passed along;
         # a refinement that makes the clip track worse is reported and not kept
-        run = run_clip(src, tgt, method="habit", refine="A", controller=ns.controller,
-                       seed=ns.seed)
+        run = run_clip(src, tgt, method="habit", refine="A", controller=ns.controller, seed=ns.seed)
         moved, ref = run.transferred.motion, run.refine_result
         info = moved.metadata.get("transfer", {})
         moved.save(out / f"{name}_to_{tgt}.npz")
@@ -181,27 +197,29 @@ def _pipeline(ns: argparse.Namespace) -> None:
         pm = {} if plain is None else plain.metrics
         hm = helped.metrics
         retrieval = info.get("retrieval") or {}
-        rows.append({
-            "source": name,
-            "target": tgt,
-            "habit_from": info.get("habit_species", tgt),
-            "retrieval": retrieval.get("explanation"),
-            "contacts": run.transferred.contacts_method,
-            "refine_status": run.refined.status,
-            "refine_check": run.refine_verdict,
-            "refine_note": run.refine_note,
-            "skate_mm_before": run.transferred.metrics.get("skate_mm"),
-            "skate_mm_after": run.refined.metrics.get("skate_mm"),
-            "controller": ns.controller,
-            "survival_unassisted": pm.get("survival"),
-            "sim_mpjpe_per_leg_unassisted": pm.get("sim_mpjpe_per_leg"),
-            "survival_assisted": hm.get("survival"),
-            "sim_mpjpe_per_leg_assisted": hm.get("sim_mpjpe_per_leg"),
-            "assist_force_mg": hm.get("assist_force_mg"),
-            "video": None if video is None else video.name,
-            "seconds_per_stage": {k: round(v, 2) for k, v in run.times.items()},
-            "seconds": round(time.perf_counter() - t1, 1),
-        })
+        rows.append(
+            {
+                "source": name,
+                "target": tgt,
+                "habit_from": info.get("habit_species", tgt),
+                "retrieval": retrieval.get("explanation"),
+                "contacts": run.transferred.contacts_method,
+                "refine_status": run.refined.status,
+                "refine_check": run.refine_verdict,
+                "refine_note": run.refine_note,
+                "skate_mm_before": run.transferred.metrics.get("skate_mm"),
+                "skate_mm_after": run.refined.metrics.get("skate_mm"),
+                "controller": ns.controller,
+                "survival_unassisted": pm.get("survival"),
+                "sim_mpjpe_per_leg_unassisted": pm.get("sim_mpjpe_per_leg"),
+                "survival_assisted": hm.get("survival"),
+                "sim_mpjpe_per_leg_assisted": hm.get("sim_mpjpe_per_leg"),
+                "assist_force_mg": hm.get("assist_force_mg"),
+                "video": None if video is None else video.name,
+                "seconds_per_stage": {k: round(v, 2) for k, v in run.times.items()},
+                "seconds": round(time.perf_counter() - t1, 1),
+            }
+        )
         figures.append(_traces(src, run, plain, helped))
         if bar is not None:
             bar.update(1)
@@ -213,8 +231,10 @@ def _pipeline(ns: argparse.Namespace) -> None:
     html = _html_report(Path(ns.out), rows, figures, table, ns)
     print(table)
     print(LEGEND)
-    print(f"motions and videos in {out}/; report in {ns.out}/report.md and {html}, "
-          f"table in {ns.out}/pipeline.json")
+    print(
+        f"motions and videos in {out}/; report in {ns.out}/report.md and {html}, "
+        f"table in {ns.out}/pipeline.json"
+    )
 
 
 def _bar(total: int, off: bool):
@@ -244,22 +264,27 @@ def _traces(src: Motion, run, plain, helped) -> dict:
     tracking error over time (unassisted and assisted)."""
     from ..evaluation.runner import _per_frame_error_mm
 
-    panels = [("source", src.contacts if src.contacts is not None else src.detect_contacts()),
-              ("transferred", run.transferred.contacts),
-              ("tracked ref.", run.reference_contacts)]  # refined, unless reverted
+    panels = [
+        ("source", src.contacts if src.contacts is not None else src.detect_contacts()),
+        ("transferred", run.transferred.contacts),
+        ("tracked ref.", run.reference_contacts),
+    ]  # refined, unless reverted
     curves = []
     if plain is not None:
         panels.append((f"sim {plain.controller}", plain.contacts))
-        curves.append((f"{plain.controller} (unassisted)", _per_frame_error_mm(plain),
-                       plain.fps))
+        curves.append((f"{plain.controller} (unassisted)", _per_frame_error_mm(plain), plain.fps))
     panels.append(("sim servo+assist", helped.contacts))
     curves.append(("servo + root assistance", _per_frame_error_mm(helped), helped.fps))
-    return {"panels": [(n, c) for n, c in panels if c is not None],
-            "curves": curves, "fps": float(run.transferred.motion.fps)}
+    return {
+        "panels": [(n, c) for n, c in panels if c is not None],
+        "curves": curves,
+        "fps": float(run.transferred.motion.fps),
+    }
 
 
-def _html_report(out: Path, rows: list[dict], figures: list[dict], table: str,
-                 ns: argparse.Namespace) -> Path:
+def _html_report(
+    out: Path, rows: list[dict], figures: list[dict], table: str, ns: argparse.Namespace
+) -> Path:
     """``report.html`` next to ``report.md``: the table, its legend, a bar chart of the
     tracking figures, per pair a gait diagram and the tracking error over time, and the
     videos (with the eval report's page writer, :mod:`habitsim.evaluation.report`)."""
@@ -276,28 +301,40 @@ def _html_report(out: Path, rows: list[dict], figures: list[dict], table: str,
     page.table(cells[0], cells[1:])
     page.para(LEGEND)
     page.heading("Tracking per pair")
-    page.image(_tracking_bars(rows, ns.controller), "tracking",
-               "survival and simulated joint error (MPJPE / leg length) per pair, "
-               f"unassisted ({ns.controller}) and with root assistance (servo)")
+    page.image(
+        _tracking_bars(rows, ns.controller),
+        "tracking",
+        "survival and simulated joint error (MPJPE / leg length) per pair, "
+        f"unassisted ({ns.controller}) and with root assistance (servo)",
+    )
     page.heading("Gait diagrams and tracking error")
     for r, fig in zip(rows, figures, strict=True):
         title = f"{r['source']} → {r['target']}"
         slug = f"{r['source']}_{r['target']}"
-        page.image(_gait_diagram(fig["panels"], fig["fps"], title), f"gait_{slug}",
-                   f"gait diagram (bars: foot in contact): {title}")
-        page.image(_error_curves(fig["curves"], title), f"err_{slug}",
-                   f"tracking error (simulated vs reference joints): {title}")
+        page.image(
+            _gait_diagram(fig["panels"], fig["fps"], title),
+            f"gait_{slug}",
+            f"gait diagram (bars: foot in contact): {title}",
+        )
+        page.image(
+            _error_curves(fig["curves"], title),
+            f"err_{slug}",
+            f"tracking error (simulated vs reference joints): {title}",
+        )
     vids = [r for r in rows if r["video"]]
     page.heading("Videos")
     if not vids:
         page.para("No videos (--no-video, or no OpenGL backend here).")
     else:
-        page.para("The simulated body in its species' colour; the reference it tracks as a "
-                  "translucent blue ghost beside it; red discs under the feet in stance "
-                  "(solid: the simulation's foot contacts, faint: the reference's labels).")
+        page.para(
+            "The simulated body in its species' colour; the reference it tracks as a "
+            "translucent blue ghost beside it; red discs under the feet in stance "
+            "(solid: the simulation's foot contacts, faint: the reference's labels)."
+        )
     for r in vids:
-        page.video(f"pipeline/{r['video']}",
-                   f"{r['source']} → {r['target']}, {r['controller']} unassisted")
+        page.video(
+            f"pipeline/{r['video']}", f"{r['source']} → {r['target']}, {r['controller']} unassisted"
+        )
     atomic_write_text(out / "report.html", page.document("habitsim demo report"))
     return out / "report.html"
 
@@ -309,15 +346,20 @@ def _tracking_bars(rows: list[dict], controller: str) -> bytes:
     labels = [f"{r['source']} → {r['target']}" for r in rows]
     x = range(len(rows))
     fig, axes = plt.subplots(1, 2, figsize=(2.0 + 1.3 * len(rows), 3.4), squeeze=False)
-    for ax, key, title in ((axes[0, 0], "survival", "survival ↑"),
-                           (axes[0, 1], "sim_mpjpe_per_leg", "sim MPJPE / leg ↓")):
-        for j, (tag, colour) in enumerate((("unassisted", "#4477aa"),
-                                           ("assisted", "#ee6677"))):
+    for ax, key, title in (
+        (axes[0, 0], "survival", "survival ↑"),
+        (axes[0, 1], "sim_mpjpe_per_leg", "sim MPJPE / leg ↓"),
+    ):
+        for j, (tag, colour) in enumerate((("unassisted", "#4477aa"), ("assisted", "#ee6677"))):
             vals = [r.get(f"{key}_{tag}") for r in rows]
             vals = [float("nan") if v is None else float(v) for v in vals]
-            ax.bar([i + (j - 0.5) * 0.38 for i in x], [0.0 if v != v else v for v in vals],
-                   width=0.38, color=colour,
-                   label=f"{controller} unassisted" if tag == "unassisted" else "servo + assist")
+            ax.bar(
+                [i + (j - 0.5) * 0.38 for i in x],
+                [0.0 if v != v else v for v in vals],
+                width=0.38,
+                color=colour,
+                label=f"{controller} unassisted" if tag == "unassisted" else "servo + assist",
+            )
         ax.set_xticks(list(x))
         ax.set_xticklabels(labels, fontsize=7, rotation=30, ha="right")
         ax.set_title(title, fontsize=9)
@@ -357,19 +399,37 @@ def _fmt(v: object, nd: int = 3) -> str:
 
 def _table(rows: list[dict]) -> str:
     """The summary table (Markdown pipe table, readable as plain text)."""
-    head = ("source", "target", "habit of", "contacts", "refine", "check",
-            "skate mm before→after",
-            "survival (unassisted)", "MPJPE/leg", "survival (assisted)", "MPJPE/leg",
-            "assist m·g", "s")
+    head = (
+        "source",
+        "target",
+        "habit of",
+        "contacts",
+        "refine",
+        "check",
+        "skate mm before→after",
+        "survival (unassisted)",
+        "MPJPE/leg",
+        "survival (assisted)",
+        "MPJPE/leg",
+        "assist m·g",
+        "s",
+    )
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         cells = [
-            r["source"], r["target"], str(r["habit_from"]), str(r["contacts"]),
-            str(r["refine_status"]), str(r["refine_check"]),
+            r["source"],
+            r["target"],
+            str(r["habit_from"]),
+            str(r["contacts"]),
+            str(r["refine_status"]),
+            str(r["refine_check"]),
             f"{_fmt(r['skate_mm_before'], 2)}→{_fmt(r['skate_mm_after'], 2)}",
-            _fmt(r["survival_unassisted"], 2), _fmt(r["sim_mpjpe_per_leg_unassisted"]),
-            _fmt(r["survival_assisted"], 2), _fmt(r["sim_mpjpe_per_leg_assisted"]),
-            _fmt(r["assist_force_mg"]), _fmt(r["seconds"], 1),
+            _fmt(r["survival_unassisted"], 2),
+            _fmt(r["sim_mpjpe_per_leg_unassisted"]),
+            _fmt(r["survival_assisted"], 2),
+            _fmt(r["sim_mpjpe_per_leg_assisted"]),
+            _fmt(r["assist_force_mg"]),
+            _fmt(r["seconds"], 1),
         ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -405,8 +465,9 @@ def _report(rows: list[dict], table: str, ns: argparse.Namespace) -> str:
         "sim MPJPE) is not kept, and said so here.",
         "",
     ]
-    out += [f"* {r['source']} → {r['target']}: {r['refine_check']}: {r['refine_note']}"
-            for r in rows]
+    out += [
+        f"* {r['source']} → {r['target']}: {r['refine_check']}: {r['refine_note']}" for r in rows
+    ]
     out.append("")
     held = [r for r in rows if r["retrieval"]]
     if held:

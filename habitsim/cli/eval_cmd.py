@@ -63,13 +63,22 @@ def register(sub: argparse._SubParsersAction) -> None:
             "camel (99 pairs)."
         ),
     )
-    p.add_argument("--data", metavar="DIR",
-                   help="synthetic data set folder (default: build OUT/data, "
-                        f"{DEFAULT_DATA_CLIPS_PER_SPECIES} clips per species, seed 0)")
-    p.add_argument("--out", default="eval_out", metavar="DIR",
-                   help="output folder (default eval_out)")
-    add_list_option(p, "--methods", default=list(DEFAULT_METHODS), metavar="METHOD",
-                    help=f"methods (default {','.join(DEFAULT_METHODS)})")
+    p.add_argument(
+        "--data",
+        metavar="DIR",
+        help="synthetic data set folder (default: build OUT/data, "
+        f"{DEFAULT_DATA_CLIPS_PER_SPECIES} clips per species, seed 0)",
+    )
+    p.add_argument(
+        "--out", default="eval_out", metavar="DIR", help="output folder (default eval_out)"
+    )
+    add_list_option(
+        p,
+        "--methods",
+        default=list(DEFAULT_METHODS),
+        metavar="METHOD",
+        help=f"methods (default {','.join(DEFAULT_METHODS)})",
+    )
     p.add_argument(
         "--refine",
         default="kinematic",
@@ -82,20 +91,27 @@ def register(sub: argparse._SubParsersAction) -> None:
         choices=CONTROLLERS,
         metavar="NAME",
         help=f"tracking controller: {', '.join(CONTROLLERS)} (default {DEFAULT_CONTROLLER}; "
-             "servo has no balance and falls within about a second)",
+        "servo has no balance and falls within about a second)",
     )
     p.add_argument("--assist", action="store_true", help="track with root assistance")
     p.add_argument("--no-track", action="store_true", help="skip the MuJoCo tracking")
     p.add_argument("--no-dynamic", action="store_true", help="skip the inverse-dynamics metrics")
     p.add_argument("--split", default="val", help="split of the source clips (default val)")
     add_list_option(p, "--sources", metavar="SPECIES", help="only these source species")
-    add_list_option(p, "--targets", default=list(DEFAULT_TARGETS), metavar="SPECIES",
-                    help=f"target species (default {','.join(DEFAULT_TARGETS)}; "
-                         "'all': the data set's training species)")
+    add_list_option(
+        p,
+        "--targets",
+        default=list(DEFAULT_TARGETS),
+        metavar="SPECIES",
+        help=f"target species (default {','.join(DEFAULT_TARGETS)}; "
+        "'all': the data set's training species)",
+    )
     p.add_argument(
-        "--clips-per-source", default=str(DEFAULT_CLIPS_PER_SOURCE), metavar="N",
+        "--clips-per-source",
+        default=str(DEFAULT_CLIPS_PER_SOURCE),
+        metavar="N",
         help=f"first N validation clips of each source species (default "
-             f"{DEFAULT_CLIPS_PER_SOURCE}; 'all': every clip)",
+        f"{DEFAULT_CLIPS_PER_SOURCE}; 'all': every clip)",
     )
     p.add_argument(
         "--reference-split",
@@ -169,8 +185,7 @@ def _eval(ns: argparse.Namespace) -> int:
     if not data:
         from ..evaluation.runner import default_data
 
-        data = str(default_data(ns.out, workers=ns.workers, progress=not ns.no_progress,
-                                log=print))
+        data = str(default_data(ns.out, workers=ns.workers, progress=not ns.no_progress, log=print))
     cfg = EvalConfig(
         data=data,
         out=ns.out,

@@ -44,16 +44,25 @@ def register(sub: argparse._SubParsersAction) -> None:
         "<species>_position.xml and scene_position.xml, README.md, preview.png",
     )
     add_list_option(p, "--species", help="species (default: all)")
-    p.add_argument("--out", type=Path, default=None,
-                   help="models folder (default: the installed habitsim.mjcf_models)")
-    p.add_argument("--no-preview", action="store_true",
-                   help="do not render preview.png (it needs an OpenGL context: EGL or OSMesa "
-                   "headless)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="models folder (default: the installed habitsim.mjcf_models)",
+    )
+    p.add_argument(
+        "--no-preview",
+        action="store_true",
+        help="do not render preview.png (it needs an OpenGL context: EGL or OSMesa headless)",
+    )
     p.set_defaults(func=_build)
     q = sub.add_parser("path", help="print the path of a species' model file")
     q.add_argument("species")
     q.add_argument("--scene", action="store_true", help="the scene.xml (floor + light)")
-    q.add_argument("--position", action="store_true",
-                   help="the standing model (position actuators holding 'home'; it stands "
-                   "in plain MuJoCo) instead of the torque model the controllers use")
+    q.add_argument(
+        "--position",
+        action="store_true",
+        help="the standing model (position actuators holding 'home'; it stands "
+        "in plain MuJoCo) instead of the torque model the controllers use",
+    )
     q.set_defaults(func=_path)

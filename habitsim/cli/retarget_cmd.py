@@ -28,17 +28,32 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("source", type=Path, metavar="SRC", help="habitsim motion (.npz)")
-    p.add_argument("--robot", type=Path, required=True, metavar="MJCF",
-                   help="robot model; its scene (with a floor) for --track")
-    add_list_option(p, "--feet", metavar="FOOT", help=(
-        "the robot's foot sites, geoms or bodies in the order LF, RF, LH, RH "
-        "(e.g. FL,FR,RL,RR)"))
+    p.add_argument(
+        "--robot",
+        type=Path,
+        required=True,
+        metavar="MJCF",
+        help="robot model; its scene (with a floor) for --track",
+    )
+    add_list_option(
+        p,
+        "--feet",
+        metavar="FOOT",
+        help=(
+            "the robot's foot sites, geoms or bodies in the order LF, RF, LH, RH (e.g. FL,FR,RL,RR)"
+        ),
+    )
     p.add_argument("--out", type=Path, required=True, metavar="Q.npz", help="robot clip to write")
     p.add_argument("--track", action="store_true", help="track the result in MuJoCo")
-    p.add_argument("--controller", default="mpc", choices=TRACK_CONTROLLERS,
-                   help="controller of --track (default mpc)")
-    p.add_argument("--report", type=Path, metavar="JSON",
-                   help="write the tracking report (--track)")
+    p.add_argument(
+        "--controller",
+        default="mpc",
+        choices=TRACK_CONTROLLERS,
+        help="controller of --track (default mpc)",
+    )
+    p.add_argument(
+        "--report", type=Path, metavar="JSON", help="write the tracking report (--track)"
+    )
     p.add_argument("--video", type=Path, metavar="MP4", help="render the tracked run (--track)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=_retarget)
@@ -52,54 +67,74 @@ def _retarget(ns: argparse.Namespace) -> int:
     from ..retarget import RetargetError, drawable, load_robot, retarget, track_clip
 
     if ns.source.suffix.lower() != ".npz":
-        raise RetargetError(f"SRC must be a habitsim motion (.npz), got {str(ns.source)!r} "
-                            "(import a .bvh with `habitsim data import-bvh` first)")
+        raise RetargetError(
+            f"SRC must be a habitsim motion (.npz), got {str(ns.source)!r} "
+            "(import a .bvh with `habitsim data import-bvh` first)"
+        )
     if not ns.feet:
-        raise RetargetError("--feet names the robot's feet in the order LF, RF, LH, RH, "
-                            "e.g. --feet FL,FR,RL,RR")
+        raise RetargetError(
+            "--feet names the robot's feet in the order LF, RF, LH, RH, e.g. --feet FL,FR,RL,RR"
+        )
     if (ns.report or ns.video) and not ns.track:
         raise RetargetError("--report and --video describe the tracked run: add --track")
     motion = load_motion(ns.source)
     robot = load_robot(ns.robot)
     if ns.track and not any(robot.geom_bodyid == 0):
-        raise RetargetError(f"{str(ns.robot)!r} has no floor (no geom on the world body): "
-                            "--track needs the robot's scene")
+        raise RetargetError(
+            f"{str(ns.robot)!r} has no floor (no geom on the world body): "
+            "--track needs the robot's scene"
+        )
     if ns.video:
         from ..render import check_video_writer
 
         check_video_writer(ns.video)  # fail before the work
     clip = retarget(motion, robot, ns.feet)
     clip.save(ns.out)
-    summary: dict = {"out": str(ns.out), "frames": len(clip.qpos), "fps": clip.fps,
-                     "duration_s": clip.duration, **clip.metadata}
+    summary: dict = {
+        "out": str(ns.out),
+        "frames": len(clip.qpos),
+        "fps": clip.fps,
+        "duration_s": clip.duration,
+        **clip.metadata,
+    }
     if ns.track:
         res = track_clip(clip, robot, controller=ns.controller)
         rep = res.report()
-        summary["track"] = {k: rep[k] for k in ("controller", "fell", "fall_time_s",
-                                                "fall_reason")}
-        summary["track"].update({k: rep["metrics"][k] for k in (
-            "survival", "sim_mpjpe_mm", "root_drift_mm", "contact_f1")})
+        summary["track"] = {k: rep[k] for k in ("controller", "fell", "fall_time_s", "fall_reason")}
+        summary["track"].update(
+            {
+                k: rep["metrics"][k]
+                for k in ("survival", "sim_mpjpe_mm", "root_drift_mm", "contact_f1")
+            }
+        )
         summary["track"]["mpc_median_ms"] = rep["controller_stats"].get("mpc_median_ms")
         if ns.report:
             atomic_write_text(ns.report, json.dumps(rep, indent=2, allow_nan=False) + "\n")
         if ns.video:
             from ..render import render_video
 
-            cam = "tracking" if mujoco.mj_name2id(
-                robot, mujoco.mjtObj.mjOBJ_CAMERA, "tracking") >= 0 else "track"
+            cam = (
+                "tracking"
+                if mujoco.mj_name2id(robot, mujoco.mjtObj.mjOBJ_CAMERA, "tracking") >= 0
+                else "track"
+            )
             render_video(drawable(res.model), res.qpos, res.fps, ns.video, camera=cam)
     if ns.json:
         print(json.dumps(json_safe(summary), allow_nan=False))
         return 0
-    print(f"{ns.source} -> {ns.out}: {summary['frames']} frames at {clip.fps:g} fps "
-          f"({summary['duration_s']:.2f} s); scale {summary['scale']:.3f}, IK residual max "
-          f"{1e3 * summary['ik_residual_max_m']:.2f} mm, joints at a range limit "
-          f"{100 * summary['joints_at_limit_share']:.1f} %")
+    print(
+        f"{ns.source} -> {ns.out}: {summary['frames']} frames at {clip.fps:g} fps "
+        f"({summary['duration_s']:.2f} s); scale {summary['scale']:.3f}, IK residual max "
+        f"{1e3 * summary['ik_residual_max_m']:.2f} mm, joints at a range limit "
+        f"{100 * summary['joints_at_limit_share']:.1f} %"
+    )
     if ns.track:
         t = summary["track"]
-        line = (f"tracked with {t['controller']}: survival {t['survival']:.2f}, sim MPJPE "
-                f"{t['sim_mpjpe_mm']:.1f} mm, root drift {t['root_drift_mm']:.1f} mm, contact F1 "
-                f"{t['contact_f1']:.2f}")
+        line = (
+            f"tracked with {t['controller']}: survival {t['survival']:.2f}, sim MPJPE "
+            f"{t['sim_mpjpe_mm']:.1f} mm, root drift {t['root_drift_mm']:.1f} mm, contact F1 "
+            f"{t['contact_f1']:.2f}"
+        )
         if t["mpc_median_ms"] is not None:
             line += f", MPC {t['mpc_median_ms']:.2f} ms"
         print(line)

@@ -28,21 +28,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", required=True, metavar="DIR", help="data set folder")
     p.add_argument(
-        "--clips-per-species", type=int, default=40, metavar="N",
+        "--clips-per-species",
+        type=int,
+        default=40,
+        metavar="N",
         help="clips per species (default 40)",
     )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="build seed (default 0)")
     add_list_option(p, "--species", help="species (default: the whole catalog)")
-    p.add_argument(
-        "--workers", type=int, metavar="W", help="worker processes (default: CPU count)"
-    )
+    p.add_argument("--workers", type=int, metavar="W", help="worker processes (default: CPU count)")
     p.add_argument(
         "--fps", type=float, default=30.0, metavar="F", help="frame rate [Hz] (default 30)"
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-resume", action="store_true", help="regenerate clips already on disk")
     p.add_argument(
-        "--overwrite", action="store_true",
+        "--overwrite",
+        action="store_true",
         help="replace a data set of another configuration in DIR",
     )
     p.set_defaults(func=_synth)

@@ -57,18 +57,38 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("input", metavar="IN.npz", help="motion file")
     p.add_argument("--out", metavar="SIM.npz", help="write the simulated motion here")
     p.add_argument("--report", metavar="R.json", help="write the JSON report here")
-    p.add_argument("--controller", default="mpc", choices=CONTROLLERS,
-                   help="controller (default mpc: convex MPC with balance; servo: in-engine "
-                        "position servos, no balance)")
-    p.add_argument("--assist", choices=("root",), default=None,
-                   help="external root assistance (a PD wrench on the trunk; reported)")
+    p.add_argument(
+        "--controller",
+        default="mpc",
+        choices=CONTROLLERS,
+        help="controller (default mpc: convex MPC with balance; servo: in-engine "
+        "position servos, no balance)",
+    )
+    p.add_argument(
+        "--assist",
+        choices=("root",),
+        default=None,
+        help="external root assistance (a PD wrench on the trunk; reported)",
+    )
     p.add_argument("--video", metavar="V.mp4", help="render a video (.mp4 or .gif)")
-    p.add_argument("--control-hz", type=float, metavar="HZ",
-                   help="control rate [Hz] (default: every simulation step; mpc: 250 Hz)")
-    p.add_argument("--settle", type=float, default=0.0, metavar="S",
-                   help="hold the first frame S seconds before the clip (default 0)")
-    p.add_argument("--no-stop", action="store_true",
-                   help="keep simulating after a fall (metrics still use the survived part)")
+    p.add_argument(
+        "--control-hz",
+        type=float,
+        metavar="HZ",
+        help="control rate [Hz] (default: every simulation step; mpc: 250 Hz)",
+    )
+    p.add_argument(
+        "--settle",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="hold the first frame S seconds before the clip (default 0)",
+    )
+    p.add_argument(
+        "--no-stop",
+        action="store_true",
+        help="keep simulating after a fall (metrics still use the survived part)",
+    )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=_track)
 

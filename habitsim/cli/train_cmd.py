@@ -41,8 +41,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace a checkpoint already in CKPT")
     p.add_argument("--steps", type=int, metavar="N", help="override the number of steps")
     p.add_argument("--seed", type=int, metavar="S", help="override the seed (default 0)")
-    p.add_argument("--threads", type=int, metavar="N",
-                   help="torch CPU threads (default: the preset's; default 2, small 1)")
+    p.add_argument(
+        "--threads",
+        type=int,
+        metavar="N",
+        help="torch CPU threads (default: the preset's; default 2, small 1)",
+    )
     p.add_argument(
         "--set",
         action="append",

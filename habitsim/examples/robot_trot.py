@@ -29,29 +29,42 @@ GO1_SCENE = Path(__file__).resolve().parents[2] / "tests" / "robots" / "unitree_
 GO1_FEET = ("FL", "FR", "RL", "RR")
 
 
-def run(robot: str | Path = GO1_SCENE, feet: tuple[str, ...] = GO1_FEET, *,
-        duration_s: float = 10.0, speed: float = 0.5,
-        video: str | Path | None = None) -> list[dict[str, Any]]:
+def run(
+    robot: str | Path = GO1_SCENE,
+    feet: tuple[str, ...] = GO1_FEET,
+    *,
+    duration_s: float = 10.0,
+    speed: float = 0.5,
+    video: str | Path | None = None,
+) -> list[dict[str, Any]]:
     """Stand, trot in place and trot forward at ``speed`` for ``duration_s`` each under
     ``mpc``; one row of figures per case (``video``: a folder for an MP4 per case)."""
     from habitsim.retarget import drawable, load_robot, stand, track_clip, trot
 
     model = load_robot(robot)
-    cases = (("stand", stand(model, feet, duration_s=duration_s)),
-             ("trot in place", trot(model, feet, speed=0.0, duration_s=duration_s)),
-             (f"trot {speed:g} m/s", trot(model, feet, speed=speed, duration_s=duration_s)))
+    cases = (
+        ("stand", stand(model, feet, duration_s=duration_s)),
+        ("trot in place", trot(model, feet, speed=0.0, duration_s=duration_s)),
+        (f"trot {speed:g} m/s", trot(model, feet, speed=speed, duration_s=duration_s)),
+    )
     rows = []
     for name, clip in cases:
         res = track_clip(clip, model, controller="mpc")
         m, st = res.metrics, res.controller_stats
-        rows.append({
-            "case": name, "duration_s": clip.duration, "survival": res.survival,
-            "fall_reason": res.fall_reason, "sim_mpjpe_mm": m["sim_mpjpe_mm"],
-            "root_drift_mm": m["root_drift_mm"], "contact_f1": m["contact_f1"],
-            "distance_m": float(res.qpos[-1, 0] - res.qpos[0, 0]),
-            "mpc_median_ms": st.get("mpc_median_ms", float("nan")),
-            "realtime_factor": m["realtime_factor"],
-        })
+        rows.append(
+            {
+                "case": name,
+                "duration_s": clip.duration,
+                "survival": res.survival,
+                "fall_reason": res.fall_reason,
+                "sim_mpjpe_mm": m["sim_mpjpe_mm"],
+                "root_drift_mm": m["root_drift_mm"],
+                "contact_f1": m["contact_f1"],
+                "distance_m": float(res.qpos[-1, 0] - res.qpos[0, 0]),
+                "mpc_median_ms": st.get("mpc_median_ms", float("nan")),
+                "realtime_factor": m["realtime_factor"],
+            }
+        )
         if video is not None:
             from habitsim.render import render_video
 
@@ -62,32 +75,47 @@ def run(robot: str | Path = GO1_SCENE, feet: tuple[str, ...] = GO1_FEET, *,
 
 def format_rows(rows: list[dict[str, Any]]) -> str:
     """The figures as a table with a legend."""
-    head = (f"{'case':<16}{'time s':>7}{'surv':>6}{'MPJPE mm':>10}{'drift mm':>10}"
-            f"{'F1':>6}{'dist m':>8}{'MPC ms':>8}{'RTF':>6}")
+    head = (
+        f"{'case':<16}{'time s':>7}{'surv':>6}{'MPJPE mm':>10}{'drift mm':>10}"
+        f"{'F1':>6}{'dist m':>8}{'MPC ms':>8}{'RTF':>6}"
+    )
     lines = [head]
     for r in rows:
-        lines.append(f"{r['case']:<16}{r['duration_s']:>7.1f}{r['survival']:>6.2f}"
-                     f"{r['sim_mpjpe_mm']:>10.1f}{r['root_drift_mm']:>10.1f}"
-                     f"{r['contact_f1']:>6.2f}{r['distance_m']:>8.2f}{r['mpc_median_ms']:>8.2f}"
-                     f"{r['realtime_factor']:>6.1f}")
+        lines.append(
+            f"{r['case']:<16}{r['duration_s']:>7.1f}{r['survival']:>6.2f}"
+            f"{r['sim_mpjpe_mm']:>10.1f}{r['root_drift_mm']:>10.1f}"
+            f"{r['contact_f1']:>6.2f}{r['distance_m']:>8.2f}{r['mpc_median_ms']:>8.2f}"
+            f"{r['realtime_factor']:>6.1f}"
+        )
         if r["fall_reason"]:
             lines.append(f"  fell: {r['fall_reason']}")
     from habitsim.cli.conventions import format_legend
 
-    lines.append(format_legend(
-        "surv: share of the clip before a fall; MPJPE: mean body-origin error to the "
-        "reference; drift: horizontal trunk error at the end; F1: foot contacts vs. the "
-        "reference's; dist: distance walked; MPC: median solve time; RTF: real-time factor"))
+    lines.append(
+        format_legend(
+            "surv: share of the clip before a fall; MPJPE: mean body-origin error to the "
+            "reference; drift: horizontal trunk error at the end; F1: foot contacts vs. the "
+            "reference's; dist: distance walked; MPC: median solve time; RTF: real-time factor"
+        )
+    )
     return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m habitsim.examples.robot_trot",
-                                description=__doc__.split("\n\n")[0])
-    p.add_argument("--robot", type=Path, default=GO1_SCENE, help="robot scene MJCF (default: "
-                   "the vendored Unitree Go1)")
-    p.add_argument("--feet", default=",".join(GO1_FEET),
-                   help="foot names in the order LF,RF,LH,RH (default FL,FR,RL,RR)")
+    p = argparse.ArgumentParser(
+        prog="python -m habitsim.examples.robot_trot", description=__doc__.split("\n\n")[0]
+    )
+    p.add_argument(
+        "--robot",
+        type=Path,
+        default=GO1_SCENE,
+        help="robot scene MJCF (default: the vendored Unitree Go1)",
+    )
+    p.add_argument(
+        "--feet",
+        default=",".join(GO1_FEET),
+        help="foot names in the order LF,RF,LH,RH (default FL,FR,RL,RR)",
+    )
     p.add_argument("--duration", type=float, default=10.0, help="seconds per case (default 10)")
     p.add_argument("--speed", type=float, default=0.5, help="forward trot speed [m/s] (0.5)")
     p.add_argument("--video", type=Path, help="write an MP4 per case into this folder")
@@ -95,8 +123,13 @@ def main(argv: list[str] | None = None) -> int:
     from habitsim.errors import HabitsimError
 
     try:
-        rows = run(ns.robot, tuple(f for f in ns.feet.split(",") if f),
-                   duration_s=ns.duration, speed=ns.speed, video=ns.video)
+        rows = run(
+            ns.robot,
+            tuple(f for f in ns.feet.split(",") if f),
+            duration_s=ns.duration,
+            speed=ns.speed,
+            video=ns.video,
+        )
     except HabitsimError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

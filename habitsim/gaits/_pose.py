@@ -178,8 +178,9 @@ class Solved:
     reach_error: np.ndarray  # (T, 4) [m]
 
 
-def _leg_shape(sp: Species, k: int, plan: LegPlan, frames: AxialFrames,
-               swing_fold: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _leg_shape(
+    sp: Species, k: int, plan: LegPlan, frames: AxialFrames, swing_fold: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Girdle flexion and foot inclination (before compliance) of leg ``k``, (T,) each."""
     geo = leg_geometry(sp, LEGS[k])
     groot = frames.girdle_root[:, k]
@@ -216,8 +217,17 @@ def solve(sp: Species, trunk: Trunk, plan: LegPlan) -> Solved:
         prot = frames.parent_rotation[:, k]
         tgt = plan.targets[:, k]
         gflex, finc = _leg_shape(sp, k, plan, frames, swing_fold)
-        res = leg_ik(sp, leg, groot, prot, tgt, gflex, finc,
-                     distal_band=reach_band(sp, k), max_inclination_change=FOOT_COMPLIANCE)
+        res = leg_ik(
+            sp,
+            leg,
+            groot,
+            prot,
+            tgt,
+            gflex,
+            finc,
+            distal_band=reach_band(sp, k),
+            max_inclination_change=FOOT_COMPLIANCE,
+        )
         q = res.quaternions()
         for n, joint in enumerate(leg_geometry(sp, leg).joints[:4]):
             rot[:, _J[joint]] = q[:, n]
@@ -290,7 +300,11 @@ def required_raising(sp: Species, legs: tuple[LegIKResult, ...]) -> np.ndarray:
 
 
 def fix_reach(
-    sp: Species, trunk: Trunk, plan: LegPlan, window: int, iterations: int = 30,
+    sp: Species,
+    trunk: Trunk,
+    plan: LegPlan,
+    window: int,
+    iterations: int = 30,
     mask: np.ndarray | None = None,
 ) -> tuple[Trunk, Solved]:
     """Lower the pelvis and withers (smoothly) until every leg keeps its reach reserve.
@@ -425,23 +439,38 @@ def respect_limits(sp: Species, trunk: Trunk, plan: LegPlan, base: Solved, windo
     frames = axial_frames(sp, trunk.root, rot)
     t = trunk.root.shape[0]
     k_n = LIMIT_OFFSETS.size
-    if all(float(_range_excess(sp, res_limb, res).max()) < 1e-12
-           for res_limb, res in zip(("fore", "fore", "hind", "hind"), base.legs, strict=True)):
+    if all(
+        float(_range_excess(sp, res_limb, res).max()) < 1e-12
+        for res_limb, res in zip(("fore", "fore", "hind", "hind"), base.legs, strict=True)
+    ):
         return base
     for k, leg in enumerate(LEGS):
         geo = leg_geometry(sp, leg)
         res0 = base.legs[k]
         finc0 = foot_inclination(
-            frames.parent_rotation[:, k], res0.abduction, res0.girdle_flex,
-            res0.upper_flex, res0.lower_flex, res0.foot_flex)
+            frames.parent_rotation[:, k],
+            res0.abduction,
+            res0.girdle_flex,
+            res0.upper_flex,
+            res0.lower_flex,
+            res0.foot_flex,
+        )
         rep = lambda a: np.repeat(a, k_n, axis=0)  # noqa: E731
         cand = rep(finc0) + np.tile(LIMIT_OFFSETS, t)
-        res = leg_ik(sp, leg, rep(frames.girdle_root[:, k]),
-                     rep(frames.parent_rotation[:, k]), rep(plan.targets[:, k]),
-                     rep(res0.girdle_flex), cand)
-        cost = (_range_excess(sp, geo.limb, res)
-                + 1e3 * (res.reach_error / sp.leg_length) ** 2
-                + 1e-4 * np.tile(LIMIT_OFFSETS, t) ** 2).reshape(t, k_n)
+        res = leg_ik(
+            sp,
+            leg,
+            rep(frames.girdle_root[:, k]),
+            rep(frames.parent_rotation[:, k]),
+            rep(plan.targets[:, k]),
+            rep(res0.girdle_flex),
+            cand,
+        )
+        cost = (
+            _range_excess(sp, geo.limb, res)
+            + 1e3 * (res.reach_error / sp.leg_length) ** 2
+            + 1e-4 * np.tile(LIMIT_OFFSETS, t) ** 2
+        ).reshape(t, k_n)
         best = LIMIT_OFFSETS[np.argmin(cost, axis=1)]
         # the offset demanded on top of what the compliance already turned
         turned = wrap_angle(finc0 - _nominal_inclination(sp, k, plan, frames))

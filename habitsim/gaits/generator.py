@@ -70,16 +70,18 @@ def draw_params(rng: np.random.Generator) -> dict[str, Any]:
     return p
 
 
-def _duty_from(gait_band: tuple[float, float], u_froude: float,
-               noise: float) -> tuple[float, float]:
+def _duty_from(
+    gait_band: tuple[float, float], u_froude: float, noise: float
+) -> tuple[float, float]:
     """Duty factor in its band, falling with speed (u_froude) plus noise; returns (β, u)."""
     u = float(np.clip(1.0 - u_froude + noise, 0.08, 0.92))
     lo, hi = gait_band
     return lo + u * (hi - lo), u
 
 
-def _metadata_base(sp: Species, action: str, gait: str, seed: int | None, fps: float,
-                   n: int) -> dict[str, Any]:
+def _metadata_base(
+    sp: Species, action: str, gait: str, seed: int | None, fps: float, n: int
+) -> dict[str, Any]:
     return {
         "generator": "habitsim.gaits",
         "generator_version": GENERATOR_VERSION,
@@ -99,8 +101,21 @@ _MAX_ATTEMPTS = 6
 _RETRY_SHRINK = 0.7
 
 
-def _build_cyclic(sp, action, gait, band, params, t, fps, froude, duty_factor, turn_rate, direction,
-                  trunk_sway, duty_shrink=1.0):
+def _build_cyclic(
+    sp,
+    action,
+    gait,
+    band,
+    params,
+    t,
+    fps,
+    froude,
+    duty_factor,
+    turn_rate,
+    direction,
+    trunk_sway,
+    duty_shrink=1.0,
+):
     """Build one cyclic clip for given speed and turn rate (validated here)."""
     if not (isinstance(froude, int | float) and math.isfinite(froude) and froude > 0):
         raise GaitError(f"froude must be a positive number for {action!r}, got {froude!r}")
@@ -122,8 +137,17 @@ def _build_cyclic(sp, action, gait, band, params, t, fps, froude, duty_factor, t
     phases = {f: (band.footfall[f] + params["phase_jitter"][f]) % 1.0 for f in FEET}
     if direction < 0:  # the walk run in reverse: the footfall sequence reverses
         phases = {f: (-v) % 1.0 for f, v in phases.items()}
-    g = gait_numbers(sp, gait, float(froude), duty, phases, float(turn_rate),
-                     params["start_phase"], params["heading"], direction)
+    g = gait_numbers(
+        sp,
+        gait,
+        float(froude),
+        duty,
+        phases,
+        float(turn_rate),
+        params["start_phase"],
+        params["heading"],
+        direction,
+    )
     gain = sp.habits.trunk_sway if trunk_sway is None else float(trunk_sway)
     style = {k: params[k] for k in ("neck_offset", "head_offset", "tail_offset", "swing_scale")}
     tr, sol, plan = build_locomotion(sp, gait, g, t, fps, style, gain)
@@ -245,12 +269,28 @@ def generate(
                 w_nd = lo_nd + (params["turn_rate_nd"] - lo_nd) * shrink
                 w_nd = w_nd if action == "turn_left" else (-w_nd if action == "turn_right" else 0.0)
                 turn_rate = w_nd * math.sqrt(GRAVITY / sp.hip_height)
-            built = _build_cyclic(sp, action, gait, band, params, t, fps, froude, duty_factor,
-                                  turn_rate, direction, trunk_sway, shrink)
+            built = _build_cyclic(
+                sp,
+                action,
+                gait,
+                band,
+                params,
+                t,
+                fps,
+                froude,
+                duty_factor,
+                turn_rate,
+                direction,
+                trunk_sway,
+                shrink,
+            )
             g, tr, sol, plan = built
             err = sol.reach_error[plan.contacts]
-            if (not (froude_drawn or turn_drawn) or err.size == 0
-                    or err.max() <= FEASIBLE_STANCE_ERROR_M):
+            if (
+                not (froude_drawn or turn_drawn)
+                or err.size == 0
+                or err.max() <= FEASIBLE_STANCE_ERROR_M
+            ):
                 break
         meta_out["attempts"] = attempt + 1
         meta_out.update(
@@ -269,10 +309,18 @@ def generate(
         )
     else:
         heading = params["heading"]
-        meta_out.update(speed_mps=0.0, velocity_mps=0.0, froude=0.0, duty_factor=1.0,
-                        stride_frequency_hz=0.0, stride_length_m=0.0, turn_rate=0.0,
-                        turn_rate_nd=0.0,
-                        start_phase=params["start_phase"], heading=heading)
+        meta_out.update(
+            speed_mps=0.0,
+            velocity_mps=0.0,
+            froude=0.0,
+            duty_factor=1.0,
+            stride_frequency_hz=0.0,
+            stride_length_m=0.0,
+            turn_rate=0.0,
+            turn_rate_nd=0.0,
+            start_phase=params["start_phase"],
+            heading=heading,
+        )
         if action == "idle":
             tr, sol, plan = build_idle(sp, t, fps, params, detail_rng)
         elif action == "sit":
@@ -281,9 +329,13 @@ def generate(
         else:
             tr, sol, plan, extra = build_jump(sp, t, fps, params)
             vx = extra["takeoff_speed_mps"][0]
-            meta_out.update(extra, speed_mps=vx, velocity_mps=vx,
-                            froude=vx * vx / (GRAVITY * sp.hip_height),
-                            duty_factor=float(plan.contacts.mean()))
+            meta_out.update(
+                extra,
+                speed_mps=vx,
+                velocity_mps=vx,
+                froude=vx * vx / (GRAVITY * sp.hip_height),
+                duty_factor=float(plan.contacts.mean()),
+            )
     stance_err = sol.reach_error[plan.contacts]
     meta_out["max_reach_error_mm"] = float(sol.reach_error.max() * 1000.0)
     meta_out["max_stance_reach_error_mm"] = (

@@ -47,8 +47,15 @@ def jump_timing(sp: Species, p: dict) -> dict[str, float]:
     t_stand = p["jump_stand_nd"] * tau
     t_crouch = p["jump_crouch_nd"] * tau
     t_rec = p["jump_recover_nd"] * tau
-    out = {"jump_height_m": height, "jump_distance_m": dist, "crouch_m": crouch, "vz": vz, "vx": vx,
-           "t_flight": t_flight, "t_push": t_push}
+    out = {
+        "jump_height_m": height,
+        "jump_distance_m": dist,
+        "crouch_m": crouch,
+        "vz": vz,
+        "vx": vx,
+        "t_flight": t_flight,
+        "t_push": t_push,
+    }
     out["t0"] = t_stand
     out["t1"] = out["t0"] + t_crouch
     out["t_takeoff"] = out["t1"] + t_push
@@ -99,9 +106,8 @@ def _trajectory(tm: dict, t: np.ndarray, z_s: float) -> tuple[np.ndarray, np.nda
     z[m] = z_c + c * min_jerk((t[m] - t3) / (te - t3))
     x[m] = x_end
     # pitch: nose up through push-off, level in flight, nose down on landing
-    pitch = (
-        0.08 * (min_jerk((t - t1) / (tto - t1)) - min_jerk((t - tto) / (tl - tto)))
-        - 0.05 * (min_jerk((t - tl) / max(t3 - tl, 1e-6)) - min_jerk((t - t3) / (te - t3)))
+    pitch = 0.08 * (min_jerk((t - t1) / (tto - t1)) - min_jerk((t - tto) / (tl - tto))) - 0.05 * (
+        min_jerk((t - tl) / max(t3 - tl, 1e-6)) - min_jerk((t - t3) / (te - t3))
     )
     return x, z, pitch
 

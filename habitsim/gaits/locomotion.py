@@ -210,8 +210,9 @@ def build_locomotion(
     phi = g.start_phase + f * t  # gait phase [cycles]
     two_pi = 2.0 * math.pi
 
-    swing_h = (hab.swing_height * sp.leg_length * style.get("swing_scale", 1.0)
-               * (0.8 + 0.4 * u_speed))
+    swing_h = (
+        hab.swing_height * sp.leg_length * style.get("swing_scale", 1.0) * (0.8 + 0.4 * u_speed)
+    )
     plan = plan_feet(sp, g, t, swing_h)
 
     tr = Trunk.standing(sp, t.shape[0])
@@ -245,8 +246,11 @@ def build_locomotion(
     tr.tail_yaw[:, 1] = 0.7 * sway * np.sin(two_pi * (phi - 0.15))
     if abs(g.turn_rate) > 0:
         lim = max(abs(v) for v in sp.joint_limits["spine_yaw"])
-        bend = float(np.clip(g.turn_rate * info["trunk_span"] / max(abs(g.speed_mps), 1e-6),
-                            -2 * lim, 2 * lim))
+        bend = float(
+            np.clip(
+                g.turn_rate * info["trunk_span"] / max(abs(g.speed_mps), 1e-6), -2 * lim, 2 * lim
+            )
+        )
         tr.spine_yaw += bend / 3.0
         tr.neck_yaw += 0.5 * bend
         tr.head_yaw += 0.25 * bend

@@ -35,8 +35,9 @@ def breathing_rate_hz(sp: Species) -> float:
     return 53.5 * sp.mass_kg**-0.26 / 60.0
 
 
-def _idle_motion(sp: Species, tr: Trunk, t: np.ndarray, rng: np.random.Generator,
-                 amount: float) -> None:
+def _idle_motion(
+    sp: Species, tr: Trunk, t: np.ndarray, rng: np.random.Generator, amount: float
+) -> None:
     """Breathing, head and tail motion in place (modifies ``tr``)."""
     h = sp.hip_height
     fb = breathing_rate_hz(sp)
@@ -82,8 +83,9 @@ def build_idle(
     return tr2, sol, plan
 
 
-def _sit_pose(sp: Species, heading: float, hip_frac: float,
-              hind_foot_incl: float) -> dict[str, float]:
+def _sit_pose(
+    sp: Species, heading: float, hip_frac: float, hind_foot_incl: float
+) -> dict[str, float]:
     """Final sitting trunk (in the heading frame, root xy relative to standing).
 
     The fore legs straighten (shoulder 96 % of the fore reach above the planted fore
@@ -106,14 +108,24 @@ def _sit_pose(sp: Species, heading: float, hip_frac: float,
     tr.root[:] = 0.0
     tr.pitch += d_th
     fr = axial_frames(sp, tr.root, tr.rotations())
-    rg = np.array([[math.cos(gf.girdle_flex0), 0, math.sin(gf.girdle_flex0)], [0, 1, 0],
-                   [-math.sin(gf.girdle_flex0), 0, math.cos(gf.girdle_flex0)]])
+    rg = np.array(
+        [
+            [math.cos(gf.girdle_flex0), 0, math.sin(gf.girdle_flex0)],
+            [0, 1, 0],
+            [-math.sin(gf.girdle_flex0), 0, math.cos(gf.girdle_flex0)],
+        ]
+    )
     shoulder = fr.girdle_root[:, 0] + np.einsum(
         "tij,j->ti", fr.parent_rotation[:, 0] @ rg, [0, 0, -gf.girdle]
     )
     gh = leg_geometry(sp, "LH")
-    rh = np.array([[math.cos(gh.girdle_flex0), 0, math.sin(gh.girdle_flex0)], [0, 1, 0],
-                   [-math.sin(gh.girdle_flex0), 0, math.cos(gh.girdle_flex0)]])
+    rh = np.array(
+        [
+            [math.cos(gh.girdle_flex0), 0, math.sin(gh.girdle_flex0)],
+            [0, 1, 0],
+            [-math.sin(gh.girdle_flex0), 0, math.cos(gh.girdle_flex0)],
+        ]
+    )
     hip = fr.girdle_root[:, 2] + np.einsum(
         "tij,j->ti", fr.parent_rotation[:, 2] @ rh, [0, 0, -gh.girdle]
     )
@@ -137,8 +149,12 @@ def _sit_pose(sp: Species, heading: float, hip_frac: float,
             i = int(np.flatnonzero(ok)[np.argmin(hip_z[ok])])
         else:
             continue
-        return {"d_pitch": float(d_th[i]), "root_x": float(root_x[i]), "root_z": float(root_z[i]),
-                "foot_incl": float(incl)}
+        return {
+            "d_pitch": float(d_th[i]),
+            "root_x": float(root_x[i]),
+            "root_z": float(root_z[i]),
+            "foot_incl": float(incl),
+        }
     raise GaitError(f"species {sp.name!r}: no reachable sitting posture")
 
 

@@ -70,8 +70,9 @@ def torch_matrix_to_6d(m: torch.Tensor) -> torch.Tensor:
     return torch.cat([m[..., :, 0], m[..., :, 1]], dim=-1)
 
 
-def _chain(parents: tuple[int, ...], root: torch.Tensor, quats: torch.Tensor,
-           off: tuple[torch.Tensor, ...]) -> torch.Tensor:
+def _chain(
+    parents: tuple[int, ...], root: torch.Tensor, quats: torch.Tensor, off: tuple[torch.Tensor, ...]
+) -> torch.Tensor:
     """Joint positions (…, J, 3) of the topology ``parents`` (parent index per joint).
 
     ``off[j]`` is joint j's offset from its parent as a column (…, 3, 1) that broadcasts

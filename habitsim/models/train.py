@@ -159,7 +159,9 @@ def _position_loss(
     ]
     pp, pt = pp / h, pt / h
     pose = F.smooth_l1_loss(
-        pp[..., 1:, :] - pp[..., :1, :], pt[..., 1:, :] - pt[..., :1, :], reduction="none",
+        pp[..., 1:, :] - pp[..., :1, :],
+        pt[..., 1:, :] - pt[..., :1, :],
+        reduction="none",
         beta=beta,
     ).mean((-1, -2))
     path = F.smooth_l1_loss(pp[..., 0, :], pt[..., 0, :], reduction="none", beta=beta).mean(-1)

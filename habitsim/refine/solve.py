@@ -728,8 +728,9 @@ def _prepare(
     sp = motion.species_info
     cleaning = None
     if opts.clean_contacts:
-        c, cleaning = clean_contact_labels(c_in, targets[:, toe_idx], motion.fps, sp.leg_length,
-                                           trim=opts.trim_contacts)
+        c, cleaning = clean_contact_labels(
+            c_in, targets[:, toe_idx], motion.fps, sp.leg_length, trim=opts.trim_contacts
+        )
         if cleaning["frames_changed"] and f_c is not None:  # corners moved: filter again
             q = _lowpass_qpos(q_raw, info, motion.fps, f_c, c)
             targets = qpos_joint_positions(model, q)
@@ -831,8 +832,9 @@ def _preplant(
     sp = motion.species_info
     c, cleaning = c_in, None
     if opts.clean_contacts:
-        c, cleaning = clean_contact_labels(c_in, motion.foot_positions(), motion.fps,
-                                           sp.leg_length, trim=opts.trim_contacts)
+        c, cleaning = clean_contact_labels(
+            c_in, motion.foot_positions(), motion.fps, sp.leg_length, trim=opts.trim_contacts
+        )
     floor = None
     if opts.swing_clearance is not None:
         floor = swing_clearance(c, motion.fps, sp.leg_length, opts.swing_clearance)[0]
