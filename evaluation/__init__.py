@@ -1,20 +1,12 @@
-"""Evaluation of habitsim motions (installed as ``habitsim.evaluation``).
+"""Evaluation of habitsim motions: the benchmark (installed as ``habitsim.evaluation``).
 
-Modules:
+The per-clip metrics it reports (kinematic, dynamic, simulated, biomechanical) live one
+layer down, in :mod:`habitsim.metrics`. Modules:
 
-* :mod:`habitsim.evaluation.kinematic` — kinematic physical-plausibility metrics of
-  docs/metrics.md (``penetration_mm``, ``float_mm``, ``skate_mm``, ``skate_ratio``, ``jerk``,
-  ``bone_length_error_mm``, ``joint_limit_violation_rad`` and the ``*_per_leg`` variants);
-  entry point :func:`habitsim.evaluation.kinematic.kinematic_metrics`.
-* :mod:`habitsim.evaluation.dynamic` — dynamic plausibility (inverse dynamics):
-  :func:`~habitsim.evaluation.dynamic.dynamic_metrics`.
-* :mod:`habitsim.evaluation.simulated` — simulated-tracking metrics.
 * :mod:`habitsim.evaluation.distribution` — the paper's distribution metrics (``fid``,
   ``intra_fid``, ``downstream_fid``, ``diversity``, ``one_nna``) and ``mpjpe_mm``.
 * :mod:`habitsim.evaluation.evaluator` — the frozen evaluator network (features and
   species / action heads): :func:`load_evaluator`, :func:`train_evaluator`.
-* :mod:`habitsim.evaluation.biomech` — biomechanical consistency with a species' gait
-  table: :func:`biomech_metrics`.
 * :mod:`habitsim.evaluation.methods` — the transfer-method registry (``direct``,
   ``ground_truth``, the learned methods of :mod:`habitsim.models`).
 * :mod:`habitsim.evaluation.runner` — the benchmark runner (``habitsim eval``):
@@ -23,7 +15,7 @@ Modules:
 * :mod:`habitsim.evaluation.report` — HTML / Markdown report: :func:`write_report`.
 
 The names below are imported lazily (the evaluator pulls in torch, the report
-matplotlib), so ``import habitsim.evaluation.kinematic`` stays light.
+matplotlib), so ``import habitsim.evaluation.distribution`` stays light.
 """
 
 from __future__ import annotations
@@ -33,8 +25,6 @@ from typing import Any
 
 #: public name → defining submodule
 _EXPORTS = {
-    "kinematic_metrics": "kinematic",
-    "KINEMATIC_KEYS": "kinematic",
     "fid": "distribution",
     "intra_fid": "distribution",
     "downstream_fid": "distribution",
@@ -44,9 +34,6 @@ _EXPORTS = {
     "mpjpe_mm": "distribution",
     "transfer_mpjpe_mm": "distribution",
     "FIDError": "distribution",
-    "biomech_metrics": "biomech",
-    "BiomechResult": "biomech",
-    "BIOMECH_KEYS": "biomech",
     "Evaluator": "evaluator",
     "EvaluatorConfig": "evaluator",
     "EvaluatorError": "evaluator",

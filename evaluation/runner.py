@@ -22,7 +22,7 @@ the refinement as it is) and measures:
    target the evaluator has no class for; ``action_correct``: predicted action = the
    source's action), ``mpjpe_mm`` against the source scaled to the target's size and
    ``paired_mpjpe_mm`` against ``generate(target, like=source)``, and the
-   biomechanical consistency (:mod:`habitsim.evaluation.biomech`) against the target's
+   biomechanical consistency (:mod:`habitsim.metrics.biomech`) against the target's
    gait table, from foot contacts detected on the geometry (every method alike);
 3. **refine** with :func:`habitsim.refine.refine` (``--refine kinematic|dynamics``,
    with ``fallback``: a failed solve keeps the input and says so in ``refine_status``).
@@ -30,8 +30,8 @@ the refinement as it is) and measures:
    the planned stance; the learned methods:
    :func:`habitsim.models.transfer.transfer_contacts`), found by the transfer stage
    when a method sets none;
-4. kinematic (:mod:`~habitsim.evaluation.kinematic`) and dynamic
-   (:mod:`~habitsim.evaluation.dynamic`) plausibility of the reference that is tracked
+4. kinematic (:mod:`~habitsim.metrics.kinematic`) and dynamic
+   (:mod:`~habitsim.metrics.dynamic`) plausibility of the reference that is tracked
    (the refined motion, or the transferred one);
 5. **track** it with :func:`habitsim.sim.track` (unassisted by default; the reference
    contact labels are the refined ones): the simulated
@@ -555,17 +555,17 @@ def evaluate_pair(task: PairTask) -> dict[str, Any]:
             )
         except MethodUnavailable:
             row["paired_mpjpe_mm"] = row["paired_mpjpe_per_leg"] = math.nan
-        from .biomech import biomech_metrics
+        from habitsim.metrics.biomech import biomech_metrics
 
         row.update(biomech_metrics(out, use_labels=False).to_dict())
 
         row["refine_status"] = run.refined.status
         row["time_refine_s"] = run.times["refine"]
-        from .kinematic import KINEMATIC_KEYS
+        from habitsim.metrics.kinematic import KINEMATIC_KEYS
 
         row.update({k: run.refined.metrics[k] for k in KINEMATIC_KEYS})
         if task.dynamic:
-            from .dynamic import dynamic_metrics
+            from habitsim.metrics.dynamic import dynamic_metrics
 
             row.update(dynamic_metrics(ref, run.model, run.refined.contacts))
         sim_res = run.track_result

@@ -3,7 +3,7 @@
 :func:`build_dataset` generates ``clips_per_species`` clips of every requested species
 with :func:`habitsim.gaits.generate`, writes them as motion files, measures them
 (:func:`habitsim.gait_stats.gait_statistics`,
-:func:`habitsim.evaluation.kinematic.kinematic_metrics`) and writes a manifest;
+:func:`habitsim.metrics.kinematic.kinematic_metrics`) and writes a manifest;
 :func:`load_manifest` reads and validates a built data set and :func:`iter_clips` walks
 its clips.
 
@@ -167,7 +167,7 @@ class ClipEntry:
 
     The generator fields (``gait`` … ``frames``) are the clip's planned values from its
     metadata; ``measured`` holds what :func:`~habitsim.gait_stats.gait_statistics` and
-    :func:`~habitsim.evaluation.kinematic.kinematic_metrics` measure on the written file
+    :func:`~habitsim.metrics.kinematic.kinematic_metrics` measure on the written file
     (keys :data:`MEASURED_KEYS`; ``None`` where undefined, e.g. the phase error of a
     clip without steps). ``phase_error`` is the mean circular distance [stride] between
     measured and planned footfall phases of LF, RF and RH.
@@ -472,8 +472,8 @@ def _phase_error(measured: dict[str, Any], planned: dict[str, Any] | None) -> fl
 
 
 def _measure(m: Motion) -> dict[str, float | None]:
-    from .evaluation.kinematic import kinematic_metrics
     from .gait_stats import gait_statistics
+    from .metrics.kinematic import kinematic_metrics
 
     gs = gait_statistics(m).to_dict()
     km = kinematic_metrics(m)
@@ -1038,7 +1038,7 @@ def _stats_markdown(rows: list[StatsRow], man: DatasetManifest) -> str:
         f"generator version {man.generator_version}.\n\n"
         "Means per species × action of the measured statistics of the written clips "
         "(`habitsim.gait_stats.gait_statistics`, "
-        "`habitsim.evaluation.kinematic.kinematic_metrics`); "
+        "`habitsim.metrics.kinematic.kinematic_metrics`); "
         "'plan' columns are the generator's targets, phase err is the mean circular distance "
         "between measured and planned footfall phases [stride], '-' = undefined "
         "(e.g. no steps). For `jump`, 'Fr plan' is the take-off Froude number while 'Fr' "

@@ -218,7 +218,7 @@ def stance_toe_height(motion: Motion, contacts: np.ndarray | None) -> float:
 def _motion_metrics(motion: Motion, contacts: np.ndarray | None) -> dict[str, Any]:
     """docs/metrics.md kinematic metrics (literal contact definition), the skating under the
     stage's own labels, and the stance toe height."""
-    from .evaluation.kinematic import kinematic_metrics, skate_mm
+    from .metrics.kinematic import kinematic_metrics, skate_mm
 
     out: dict[str, Any] = dict(kinematic_metrics(motion))
     out["stance_toe_height_per_leg"] = stance_toe_height(motion, contacts)

@@ -602,7 +602,7 @@ class TrackResult:
         assist: the assistance report (``{"assist_force_mg": 0.0}`` when off).
         work_j: Σ|τ·q̇|·dt over the survived part [J].
         wall_time_s: wall-clock time of the simulation loop [s].
-        metrics: :data:`habitsim.evaluation.simulated.SIMULATED_KEYS` → value.
+        metrics: :data:`habitsim.metrics.simulated.SIMULATED_KEYS` → value.
     """
 
     species: str
@@ -1126,7 +1126,7 @@ def _finish(
     controller: str,
     stats: dict[str, Any],
 ) -> TrackResult:
-    from .evaluation.simulated import simulated_metrics
+    from .metrics.simulated import simulated_metrics
 
     mg = _total_mass(model) * float(np.linalg.norm(model.opt.gravity))
     n_ref = len(clip.qpos)

@@ -94,7 +94,7 @@ def plausibility_violations(
     Raises:
         HabitsimError: an override names no bound (the message lists the valid ones).
     """
-    from .evaluation.kinematic import kinematic_metrics
+    from .metrics.kinematic import kinematic_metrics
 
     b = asdict(bounds or PlausibilityBounds())
     unknown = set(overrides) - set(b)

@@ -20,17 +20,17 @@ from habitsim.contacts import (
     touchdown_frames,
 )
 from habitsim.errors import InvalidMotionError
-from habitsim.evaluation.kinematic import (
-    KINEMATIC_KEYS,
-    bone_length_error_mm,
-    kinematic_metrics,
-)
 from habitsim.hinges import (
     HINGE_NAMES,
     compose_hinges,
     hinge_angles,
     hinge_limits,
     hinge_residual_rad,
+)
+from habitsim.metrics.kinematic import (
+    KINEMATIC_KEYS,
+    bone_length_error_mm,
+    kinematic_metrics,
 )
 from habitsim.motion import Motion
 from habitsim.rotations import quat_mul, rot_x, rot_y

@@ -8,8 +8,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from habitsim.evaluation.dynamic import DYNAMIC_KEYS, dynamic_metrics, inverse_dynamics
-from habitsim.evaluation.simulated import (
+from habitsim.metrics.dynamic import DYNAMIC_KEYS, dynamic_metrics, inverse_dynamics
+from habitsim.metrics.simulated import (
     SIMULATED_KEYS,
     contact_f1,
     cost_of_transport,

@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from habitsim.evaluation.biomech import BIOMECH_KEYS, biomech_metrics
 from habitsim.evaluation.distribution import (
     FIDError,
     diversity,
@@ -20,6 +19,7 @@ from habitsim.evaluation.distribution import (
     transfer_mpjpe_mm,
 )
 from habitsim.evaluation.methods import direct_transfer
+from habitsim.metrics.biomech import BIOMECH_KEYS, biomech_metrics
 
 # ---------------------------------------------------------------------------- FID
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from habitsim.errors import GaitError, UnknownSpeciesError
-from habitsim.evaluation.kinematic import skate_mm
 from habitsim.gait_stats import gait_statistics
 from habitsim.gaits import ACTIONS, LOCOMOTION_ACTIONS, action_gait, available_actions, generate
+from habitsim.metrics.kinematic import skate_mm
 from habitsim.qpos import load_species_model, motion_to_qpos
 from habitsim.rotations import quat_to_matrix
 from habitsim.species import load_species, species_names

@@ -17,7 +17,7 @@ import pytest
 
 import habitsim
 from habitsim.cli import main
-from habitsim.evaluation.kinematic import jerk, kinematic_metrics, penetration_mm, skate_mm
+from habitsim.metrics.kinematic import jerk, kinematic_metrics, penetration_mm, skate_mm
 from habitsim.qpos import load_species_model, motion_to_qpos, qpos_joint_positions
 from habitsim.refine import (
     ARTEFACTS,

@@ -10,9 +10,9 @@ import pytest
 
 from habitsim import UnknownSpeciesError
 from habitsim.controllers import PDController
-from habitsim.evaluation.dynamic import DYNAMIC_KEYS
-from habitsim.evaluation.kinematic import KINEMATIC_KEYS, kinematic_metrics
-from habitsim.evaluation.simulated import SIMULATED_KEYS
+from habitsim.metrics.dynamic import DYNAMIC_KEYS
+from habitsim.metrics.kinematic import KINEMATIC_KEYS, kinematic_metrics
+from habitsim.metrics.simulated import SIMULATED_KEYS
 from habitsim.motion import Motion, load_motion
 from habitsim.qpos import QposTrajectory, load_species_model, qpos_to_motion
 from habitsim.sim import (

@@ -7,7 +7,7 @@ Plain output is an aligned two-column table (per-foot values in LF, RF, LH, RH o
   the file carries contact labels, else ``detected``);
 * every key of :meth:`habitsim.gait_stats.GaitStats.to_dict` (per-foot values are
   objects keyed ``LF, RF, LH, RH``);
-* every key of :data:`habitsim.evaluation.kinematic.KINEMATIC_KEYS`.
+* every key of :data:`habitsim.metrics.kinematic.KINEMATIC_KEYS`.
 
 A missing or unreadable file raises :class:`~habitsim.errors.MotionFileError`, which the
 CLI turns into ``error: ...`` and exit code 2.
@@ -56,9 +56,9 @@ def motion_stats(path: str) -> dict[str, Any]:
     Raises:
         MotionFileError, InvalidMotionError, UnknownSpeciesError: a bad file.
     """
-    from ..evaluation.dynamic import dynamic_metrics
-    from ..evaluation.kinematic import kinematic_metrics
     from ..gait_stats import gait_statistics
+    from ..metrics.dynamic import dynamic_metrics
+    from ..metrics.kinematic import kinematic_metrics
     from ..motion import load_motion
 
     m = load_motion(path)

@@ -10,10 +10,10 @@
   contacts; shorter than the input when the run fell or went unstable).
 * ``--report``: one JSON object (written atomically): ``input``, the tracking report of
   :meth:`habitsim.sim.TrackResult.report` (``metrics`` with every key of
-  :data:`habitsim.evaluation.simulated.SIMULATED_KEYS`, ``fell``/``fall_time_s``/
+  :data:`habitsim.metrics.simulated.SIMULATED_KEYS`, ``fell``/``fall_time_s``/
   ``fall_reason``, ``unstable``/``unstable_reason``, ``controller_stats``, ``assist``),
-  ``reference_dynamic`` (:data:`habitsim.evaluation.dynamic.DYNAMIC_KEYS` of the input)
-  and ``simulated_kinematic`` (:data:`habitsim.evaluation.kinematic.KINEMATIC_KEYS` of the
+  ``reference_dynamic`` (:data:`habitsim.metrics.dynamic.DYNAMIC_KEYS` of the input)
+  and ``simulated_kinematic`` (:data:`habitsim.metrics.kinematic.KINEMATIC_KEYS` of the
   simulated frames, skating judged on the simulated contacts). Non-finite numbers are
   ``null``.
 
@@ -105,8 +105,8 @@ def _finite(v: Any) -> Any:
 
 def track_report(ns: argparse.Namespace) -> tuple[dict[str, Any], Any]:
     """Run the tracking of ``ns.input`` and build the JSON report (and the result)."""
-    from ..evaluation.dynamic import dynamic_metrics
-    from ..evaluation.kinematic import kinematic_metrics
+    from ..metrics.dynamic import dynamic_metrics
+    from ..metrics.kinematic import kinematic_metrics
     from ..motion import load_motion
     from ..sim import track
 

@@ -36,7 +36,7 @@ Keys (all values JSON types; lengths in mm where the key says so):
                                 ``cleaning`` (what :func:`~.solve.clean_contact_labels`
                                 changed, None when off), ``swing_clearance_mm``
 ``metrics_before/after``        docs/metrics.md kinematic metrics (and dynamic ones when
-                                :mod:`habitsim.evaluation.dynamic` is available) of the
+                                :mod:`habitsim.metrics.dynamic` is available) of the
                                 input and of the result (when ``options.metrics``), by
                                 the metrics' literal definitions (contact = toe height
                                 < 2 % L), not by the refinement's labels
@@ -105,11 +105,11 @@ def _evaluator(model: mujoco.MjModel, n_frames: int, dynamics: bool) -> Refineme
 
 
 def _metrics(motion: Any, contacts: np.ndarray, model: mujoco.MjModel) -> dict[str, float]:
-    from ..evaluation.kinematic import kinematic_metrics
+    from ..metrics.kinematic import kinematic_metrics
 
     out = dict(kinematic_metrics(motion))
     try:
-        from ..evaluation.dynamic import dynamic_metrics
+        from ..metrics.dynamic import dynamic_metrics
     except ImportError:  # pragma: no cover - the dynamic metrics are optional
         return out
     out.update(dynamic_metrics(motion, model, contacts))

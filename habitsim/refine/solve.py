@@ -977,14 +977,14 @@ def _solve_checked(
 
 def compare_metrics(motion_in: Motion, motion_out: Motion) -> dict[str, Any]:
     """docs/metrics.md's ``skate_mm``, ``jerk`` and ``penetration_mm`` (the functions of
-    :mod:`habitsim.evaluation.kinematic`, literal definitions) of the input and of the
+    :mod:`habitsim.metrics.kinematic`, literal definitions) of the input and of the
     result, and which of them the result makes worse (beyond :data:`WORSE_TOLERANCE`).
 
     Returns:
         ``before`` / ``after`` (key → value), ``worse`` (keys, in
         :data:`VERDICT_METRICS` order) and ``ok`` (nothing worse).
     """
-    from ..evaluation.kinematic import jerk, penetration_mm, skate_mm
+    from ..metrics.kinematic import jerk, penetration_mm, skate_mm
 
     out: dict[str, Any] = {"before": {}, "after": {}}
     for tag, mo in (("before", motion_in), ("after", motion_out)):
