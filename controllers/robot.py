@@ -182,9 +182,9 @@ def foot_geoms(model: mujoco.MjModel, feet: Sequence[str]) -> np.ndarray:
                 "colliding geom to touch the ground with"
             )
         if kind == "body":  # the body's lowest colliding geom at home touches down
-            from habitsim.sim import _lowest_z
+            from habitsim.mjutils import lowest_z
 
-            low = _lowest_z(model, cand, d.geom_xpos[cand], d.geom_xmat[cand])
+            low = lowest_z(model, cand, d.geom_xpos[cand], d.geom_xmat[cand])
             out.append(int(cand[int(np.argmin(low))]))
             continue
         point = d.site_xpos[i] if kind == "site" else d.geom_xpos[i]

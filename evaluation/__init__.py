@@ -10,7 +10,8 @@ layer down, in :mod:`habitsim.metrics`. Modules:
 * :mod:`habitsim.evaluation.methods` — the transfer-method registry (``direct``,
   ``ground_truth``, the learned methods of :mod:`habitsim.models`).
 * :mod:`habitsim.evaluation.runner` — the benchmark runner (``habitsim eval``):
-  :class:`EvalConfig`, :func:`run_benchmark`.
+  :class:`EvalConfig`, :func:`run_benchmark`; its pieces :mod:`~.config`,
+  :mod:`~.planning`, :mod:`~.pairs`, :mod:`~.tables`, :mod:`~.summary`.
 * :mod:`habitsim.evaluation.executors` — local process pool and Dask executors.
 * :mod:`habitsim.evaluation.report` — HTML / Markdown report: :func:`write_report`.
 

@@ -308,7 +308,7 @@ figcaption{font-size:12px;color:#555}
 
 
 def _load_run(out: Path) -> tuple[dict[str, Any], dict[str, Any], list[dict[str, Any]]]:
-    from .runner import load_rows
+    from .tables import load_rows
 
     try:
         run = json.loads((out / "run.json").read_text(encoding="utf-8"))
@@ -331,7 +331,7 @@ def write_report(out: str | Path) -> list[Path]:
     Raises:
         ReportError: the folder holds no finished run.
     """
-    from .runner import PHYSICAL_COLUMNS, TABLE1_COLUMNS, _fmt, tracking_label
+    from .tables import PHYSICAL_COLUMNS, TABLE1_COLUMNS, _fmt, tracking_label
 
     out = Path(out)
     cfg, summary_doc, rows = _load_run(out)

@@ -29,19 +29,20 @@ beyond the forward kinematics.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from .errors import InvalidMotionError
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .motion import Motion
+    from .species import Species
 
 __all__ = [
     "CONTACT_HEIGHT_PER_LEG",
     "CONTACT_SPEED_PER_LEG",
     "HYSTERESIS",
+    "FootTrack",
     "detect_contacts",
     "contacts_from_feet",
     "contacts_by_duty",
@@ -50,6 +51,19 @@ __all__ = [
     "drop_short_runs",
     "warp_contacts",
 ]
+
+
+class FootTrack(Protocol):
+    """What :func:`detect_contacts` reads of a motion (:class:`habitsim.motion.Motion`,
+    which imports this module: contacts sit below motions)."""
+
+    fps: float
+
+    @property
+    def species_info(self) -> Species: ...
+
+    def foot_positions(self) -> np.ndarray: ...
+
 
 #: Toe height threshold as a fraction of the hind-leg length (docs/metrics.md: 2 %).
 CONTACT_HEIGHT_PER_LEG = 0.02
@@ -130,7 +144,7 @@ def contacts_from_feet(feet: np.ndarray, fps: float, leg_length: float) -> np.nd
     return _fill_and_open(_runs_with_seed(loose, strict))
 
 
-def detect_contacts(motion: Motion) -> np.ndarray:
+def detect_contacts(motion: FootTrack) -> np.ndarray:
     """Foot contacts of a motion from toe height and horizontal speed.
 
     Thresholds are size-normalised (see the module docstring): height < 2 % and

@@ -62,6 +62,11 @@ class DatasetError(HabitsimError, ValueError):
     """A data set folder that is missing files or has an inconsistent manifest."""
 
 
+class SimulationError(HabitsimError, ValueError):
+    """Bad input to the tracking runner: unknown controller, a model that does not fit
+    the reference (missing joints, wrong nq), NaN in a reference, bad rates."""
+
+
 class UnknownMethodError(HabitsimError, KeyError, ValueError):
     """A transfer method name that is not registered (the message lists the valid ones);
     raised by :func:`habitsim.models.transfer` and the benchmark's method registry."""

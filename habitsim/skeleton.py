@@ -39,7 +39,7 @@ import numpy as np
 
 from .errors import InvalidMotionError
 from .rotations import quat_to_matrix, rot_y
-from .species import Species, load_species
+from .species import Species, load_species, standing_global_pitch, standing_leg_angles
 
 __all__ = [
     "JOINT_NAMES",
@@ -134,32 +134,6 @@ def _offsets(sp: Species) -> np.ndarray:
     return off
 
 
-def _standing_global_pitch(sp: Species) -> dict[str, float]:
-    """Global rotation angle about +y [rad] of every posed bone in the standing pose."""
-    g = {"trunk": -sp.trunk_pitch}
-    for k, inc in sp.inclinations.items():
-        g[k] = -inc  # +y rotation swings a downward bone backward, inclination is forward
-    g["neck"] = -sp.neck_elevation
-    g["head"] = -sp.head_pitch
-    g["tail"] = sp.tail_carriage  # +y rotation lifts a backward-pointing bone
-    return g
-
-
-def standing_leg_angles(sp: Species) -> dict[str, float]:
-    """Local flexion angles [rad] of the standing pose, keyed by joint-limit role."""
-    g = _standing_global_pitch(sp)
-    out: dict[str, float] = {}
-    for limb in ("fore", "hind"):
-        prev = g["trunk"]
-        for seg in ("girdle", "upper", "lower", "foot"):
-            out[f"{limb}_{seg}_flex"] = g[f"{limb}_{seg}"] - prev
-            prev = g[f"{limb}_{seg}"]
-    out["neck_pitch"] = g["neck"] - g["trunk"]
-    out["head_pitch"] = g["head"] - g["neck"]
-    out["tail_pitch"] = g["tail"] - g["trunk"]
-    return out
-
-
 @dataclass(frozen=True, eq=False)
 class Skeleton:
     """The habitsim topology with one species' bone offsets.
@@ -206,7 +180,7 @@ class Skeleton:
     @functools.cached_property
     def _standing(self) -> tuple[np.ndarray, np.ndarray]:
         sp = load_species(self.species)
-        g = _standing_global_pitch(sp)
+        g = standing_global_pitch(sp)
         ang = np.zeros(self.num_joints)
         ang[_INDEX["pelvis"]] = g["trunk"]
         loc = standing_leg_angles(sp)

@@ -50,6 +50,8 @@ __all__ = [
     "all_species",
     "training_species",
     "held_out_species",
+    "standing_global_pitch",
+    "standing_leg_angles",
 ]
 
 POSTURES = ("crouched_digitigrade", "digitigrade", "unguligrade", "plantigrade", "columnar")
@@ -418,10 +420,35 @@ def _parse(data: dict[str, Any], path: Path | None) -> Species:
     return sp
 
 
+# ---------------------------------------------------------------- standing posture
+def standing_global_pitch(sp: Species) -> dict[str, float]:
+    """Global rotation angle about +y [rad] of every posed bone in the standing pose."""
+    g = {"trunk": -sp.trunk_pitch}
+    for k, inc in sp.inclinations.items():
+        g[k] = -inc  # +y rotation swings a downward bone backward, inclination is forward
+    g["neck"] = -sp.neck_elevation
+    g["head"] = -sp.head_pitch
+    g["tail"] = sp.tail_carriage  # +y rotation lifts a backward-pointing bone
+    return g
+
+
+def standing_leg_angles(sp: Species) -> dict[str, float]:
+    """Local flexion angles [rad] of the standing pose, keyed by joint-limit role."""
+    g = standing_global_pitch(sp)
+    out: dict[str, float] = {}
+    for limb in ("fore", "hind"):
+        prev = g["trunk"]
+        for seg in ("girdle", "upper", "lower", "foot"):
+            out[f"{limb}_{seg}_flex"] = g[f"{limb}_{seg}"] - prev
+            prev = g[f"{limb}_{seg}"]
+    out["neck_pitch"] = g["neck"] - g["trunk"]
+    out["head_pitch"] = g["head"] - g["neck"]
+    out["tail_pitch"] = g["tail"] - g["trunk"]
+    return out
+
+
 def _check_limits_hold_posture(sp: Species, where: str) -> None:
     """The standing posture's local joint angles must lie inside the joint limits."""
-    from .skeleton import standing_leg_angles  # local import: skeleton imports species
-
     standing = standing_leg_angles(sp)
     # Joints resting at 0 in the standing pose: tail2 (tail_pitch), spine, yaws, abductions.
     rest_zero = {

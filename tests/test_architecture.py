@@ -101,3 +101,215 @@ def test_registry_builds_every_kind(name: str) -> None:
     model = servo_model(base) if name.startswith("servo") else base
     ctl = make_controller(name, model)
     assert isinstance(ctl, Controller)
+
+
+# ------------------------------------------------------------------------- import graph
+#: Source folder -> installed package (setup.py's ROOTS).
+SOURCES = {
+    "habitsim": "habitsim",
+    "controllers": "habitsim.controllers",
+    "evaluation": "habitsim.evaluation",
+    "mjcf_models": "habitsim.mjcf_models",
+}
+
+#: The layers, bottom to top (docs/architecture.md): a module may import its own layer and
+#: the layers below, never one above. Looked up by the longest matching module prefix.
+LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    (
+        "core",
+        (
+            "habitsim.errors",
+            "habitsim.fileio",
+            "habitsim.rotations",
+            "habitsim.skeleton",
+            "habitsim.species",
+            "habitsim.catalog",
+            "habitsim.motion",
+            "habitsim.contacts",
+            "habitsim.hinges",
+            "habitsim.body",
+            "habitsim.ik",
+            "habitsim.planting",
+            "habitsim.gait_stats",
+            "habitsim.gaits",
+            "habitsim.bvh",
+            "habitsim.gltf",
+            "habitsim.bvh_mapping",
+            "habitsim.render",
+            "habitsim.workers",
+        ),
+    ),
+    (
+        "physics",
+        ("habitsim.mjcf_models", "habitsim.qpos", "habitsim.mjutils", "habitsim.controllers"),
+    ),
+    ("metrics", ("habitsim.metrics",)),
+    (
+        "stages",
+        (
+            "habitsim.refine",
+            "habitsim.sim",
+            "habitsim.retarget",
+            "habitsim.dataset",
+            "habitsim.testing",
+            "habitsim.pytest_plugin",
+        ),
+    ),
+    ("learning", ("habitsim.models",)),
+    ("benchmark", ("habitsim.pipeline", "habitsim.evaluation")),
+    ("apps", ("habitsim.cli", "habitsim.__main__", "habitsim.fuzz", "habitsim.examples")),
+)
+#: The package itself (``habitsim/__init__.py``): the facade above every layer, which any
+#: submodule's import runs first anyway; importing it is not an upward import.
+FACADE = "habitsim"
+
+
+def _project_modules() -> dict[str, tuple[Path, bool]]:
+    """Installed module name -> (source file, is a package)."""
+    out: dict[str, tuple[Path, bool]] = {}
+    for folder, name in SOURCES.items():
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            if "__pycache__" in path.parts:
+                continue
+            parts = list(path.relative_to(ROOT / folder).with_suffix("").parts)
+            package = parts[-1] == "__init__"
+            if package:
+                parts = parts[:-1]
+            out[".".join([name, *parts])] = (path, package)
+    return out
+
+
+def import_graph() -> dict[str, dict[str, int]]:
+    """module -> {imported project module: line}, every import of the module's AST
+    (module level, function level, ``TYPE_CHECKING`` blocks, ``import_module("...")``)."""
+    modules = _project_modules()
+
+    def known(name: str) -> str | None:
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    graph: dict[str, dict[str, int]] = {}
+    for mod, (path, package) in modules.items():
+        pkg = mod if package else mod.rpartition(".")[0]
+
+        def absolute(name: str, level: int, pkg: str = pkg) -> str:
+            if not level:
+                return name
+            base = pkg.split(".")[: len(pkg.split(".")) - (level - 1)]
+            return ".".join([*base, name] if name else base)
+
+        edges: dict[str, int] = {}
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            names: list[str] = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = absolute(node.module or "", node.level)
+                names = [
+                    f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base
+                    for a in node.names
+                ]
+            elif (
+                isinstance(node, ast.Call)
+                and getattr(node.func, "attr", getattr(node.func, "id", "")) == "import_module"
+                and node.args
+                and isinstance(node.args[0], ast.Constant)
+                and isinstance(node.args[0].value, str)
+            ):
+                name = node.args[0].value
+                level = len(name) - len(name.lstrip("."))
+                names = [absolute(name.lstrip("."), level)]
+            for name in names:
+                target = known(name)
+                if target is not None and target != mod:
+                    edges.setdefault(target, node.lineno)
+        graph[mod] = edges
+    return graph
+
+
+def _cycles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[list[str]] = []
+    for start in graph:
+        if start in index:
+            continue
+        work = [(start, iter(graph[start]))]
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        on_stack.add(start)
+        while work:
+            v, children = work[-1]
+            for w in children:
+                if w not in index:
+                    index[w] = low[w] = len(index)
+                    stack.append(w)
+                    on_stack.add(w)
+                    work.append((w, iter(graph[w])))
+                    break
+                if w in on_stack:
+                    low[v] = min(low[v], index[w])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
+                if low[v] == index[v]:
+                    comp = []
+                    while True:
+                        w = stack.pop()
+                        on_stack.discard(w)
+                        comp.append(w)
+                        if w == v:
+                            break
+                    if len(comp) > 1:
+                        out.append(sorted(comp))
+    return out
+
+
+def layer_of(module: str) -> int | None:
+    """Index of the module's layer in :data:`LAYERS` (longest prefix), None if unlisted."""
+    best, found = -1, None
+    for i, (_, prefixes) in enumerate(LAYERS):
+        for p in prefixes:
+            if (module == p or module.startswith(p + ".")) and len(p) > best:
+                best, found = len(p), i
+    return found
+
+
+def test_import_graph_sees_every_kind_of_import() -> None:
+    graph = import_graph()
+    assert "habitsim.controllers.base" in graph["habitsim.controllers"]  # relative, package
+    assert "habitsim.metrics.simulated" in graph["habitsim.sim"]  # function level
+    assert "habitsim.refine" in graph["habitsim"]  # import_module(".refine", __name__)
+    assert _cycles({"a": {"b": 1}, "b": {"c": 1}, "c": {"a": 1}, "d": {"a": 1}}) == [
+        ["a", "b", "c"]
+    ]
+
+
+def test_no_import_cycles() -> None:
+    cycles = _cycles(import_graph())
+    assert not cycles, "import cycles:\n" + "\n".join(" <-> ".join(c) for c in cycles)
+
+
+def test_every_module_has_a_layer() -> None:
+    missing = [m for m in import_graph() if m != FACADE and layer_of(m) is None]
+    assert not missing, "add to LAYERS (and docs/architecture.md): " + ", ".join(missing)
+
+
+def test_layers_run_one_way() -> None:
+    bad = []
+    for mod, edges in import_graph().items():
+        here = layer_of(mod)
+        if mod == FACADE or here is None:
+            continue
+        for target, line in edges.items():
+            there = layer_of(target)
+            if target != FACADE and there is not None and there > here:
+                bad.append(
+                    f"{mod}:{line} ({LAYERS[here][0]}) imports {target} ({LAYERS[there][0]})"
+                )
+    assert not bad, "imports of a higher layer:\n" + "\n".join(sorted(bad))

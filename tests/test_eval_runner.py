@@ -265,7 +265,7 @@ def test_refine_stage_runs(data: Path, tmp_path: Path) -> None:
 def test_defaults_measure_the_product(data: Path, tmp_path: Path, monkeypatch) -> None:
     """With no options: habit beside the baselines, stage A, mpc; one clip per source."""
     from habitsim.cli import build_parser
-    from habitsim.evaluation import runner
+    from habitsim.evaluation import planning, runner
 
     ns = build_parser().parse_args(["eval"])
     assert ns.methods == ["habit", "direct", "ground_truth"] and ns.controller == "mpc"
@@ -288,7 +288,7 @@ def test_defaults_measure_the_product(data: Path, tmp_path: Path, monkeypatch) -
     with pytest.raises(EvalError, match="clips_per_source"):
         _cfg(data, tmp_path / "o", clips_per_source=0)
     # the default data set: built on the first run, reused after
-    monkeypatch.setattr(runner, "DEFAULT_DATA_CLIPS_PER_SPECIES", 1)
+    monkeypatch.setattr(planning, "DEFAULT_DATA_CLIPS_PER_SPECIES", 1)  # default_data's
     folder = runner.default_data(tmp_path / "run", workers=1, progress=False)
     from habitsim.dataset import load_manifest
     from habitsim.species import species_names

@@ -262,7 +262,7 @@ def _note(bar, text: str) -> None:
 def _traces(src: Motion, run, plain, helped) -> dict:
     """What the HTML report plots of one pair: stance timelines of every stage and the
     tracking error over time (unassisted and assisted)."""
-    from ..evaluation.runner import _per_frame_error_mm
+    from ..evaluation.pairs import _per_frame_error_mm
 
     panels = [
         ("source", src.contacts if src.contacts is not None else src.detect_contacts()),

@@ -4,7 +4,7 @@ The question: which external "hand of god" wrench on the trunk does a motion nee
 the ground has pushed as much as it physically can? For every reference frame:
 
 1. ``qvel`` and ``qacc`` by finite differences of the qpos trajectory
-   (:func:`habitsim.sim.finite_differences`).
+   (:func:`habitsim.mjutils.finite_differences`).
 2. ``mj_inverse`` with every constraint disabled gives the generalised force the motion
    needs without any ground, ``τ = M(q)·q̈ + c(q, q̇) − passive``. For a body in the air
    its free-joint force part is exactly ``m·g`` upward.
@@ -117,7 +117,9 @@ def inverse_dynamics(
         InvalidMotionError: shapes or model do not fit.
     """
     from habitsim.controllers import actuated_joints
-    from habitsim.sim import SimulationError, finite_differences, foot_geoms
+    from habitsim.errors import SimulationError
+    from habitsim.mjutils import finite_differences
+    from habitsim.mjutils import species_foot_geoms as foot_geoms
 
     try:
         qvel, qacc = finite_differences(model, qpos, fps)

@@ -9,6 +9,7 @@ centroidal dynamics. See :func:`refine` and, for the pieces:
 * :mod:`~habitsim.refine.problem` — the NLP of one window, built apart from solving it;
 * :mod:`~habitsim.refine.windows` — overlapping windows for long clips;
 * :mod:`~habitsim.refine.solve` — :func:`refine` itself;
+* :mod:`~habitsim.refine.verdict` — is the result worse than the input (solver guard, report);
 * :mod:`~habitsim.refine.report` — the JSON report;
 * :mod:`~habitsim.refine.artefacts` — artefact injection for tests and benchmarks.
 """

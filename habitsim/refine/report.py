@@ -65,7 +65,7 @@ import mujoco
 import numpy as np
 
 from .problem import COST_TERMS, STAGE_A_TERMS, RefinementProblem, clip_evaluator
-from .solve import WORSE_TOLERANCE
+from .verdict import WORSE_TOLERANCE
 
 __all__ = ["build_report", "clean_json"]
 

@@ -86,6 +86,7 @@ from .problem import (
     SolverSettings,
     build_refinement_problem,
 )
+from .verdict import VERDICT_METRICS, WORSE_TOLERANCE, compare_metrics
 from .windows import Window, plan_windows
 
 __all__ = [
@@ -128,11 +129,6 @@ STANCE_SLIP_PER_LEG = 0.15
 MAX_TRIM_SHARE = 1.0
 #: Shortest stance run kept and longest swing gap filled [s] (at least 2 resp. 1 frames).
 MIN_RUN_S = 0.04
-#: How much worse than the input a metric of the result may be before the report's
-#: verdict calls it worse: absolute [mm] for the lengths, relative for the jerk.
-WORSE_TOLERANCE = {"skate_mm": 0.05, "penetration_mm": 0.05, "jerk": 1e-3}
-#: The metrics of the verdict (:func:`compare_metrics`).
-VERDICT_METRICS = ("skate_mm", "jerk", "penetration_mm")
 #: The weights a guard retry multiplies by :data:`GUARD_FACTOR`; one that is 0 (the jerk
 #: terms by default) is switched on at its :data:`GUARD_START` value instead. The jerk
 #: terms are off in the first solve: they cost 3–5× its time (the Gauss-Newton attempt
@@ -973,38 +969,6 @@ def _solve_checked(
         out.contacts = prep.contacts.copy()
         qpos = prep.qpos_in.copy()
     return x, log, status, failure, checks, qpos, out, build_s
-
-
-def compare_metrics(motion_in: Motion, motion_out: Motion) -> dict[str, Any]:
-    """docs/metrics.md's ``skate_mm``, ``jerk`` and ``penetration_mm`` (the functions of
-    :mod:`habitsim.metrics.kinematic`, literal definitions) of the input and of the
-    result, and which of them the result makes worse (beyond :data:`WORSE_TOLERANCE`).
-
-    Returns:
-        ``before`` / ``after`` (key → value), ``worse`` (keys, in
-        :data:`VERDICT_METRICS` order) and ``ok`` (nothing worse).
-    """
-    from ..metrics.kinematic import jerk, penetration_mm, skate_mm
-
-    out: dict[str, Any] = {"before": {}, "after": {}}
-    for tag, mo in (("before", motion_in), ("after", motion_out)):
-        pos = mo.global_positions()
-        out[tag] = {
-            "skate_mm": skate_mm(mo, positions=pos),
-            "jerk": jerk(mo, positions=pos),
-            "penetration_mm": penetration_mm(mo, positions=pos),
-        }
-    worse = []
-    for k in VERDICT_METRICS:
-        b, a = out["before"][k], out["after"][k]
-        if not (np.isfinite(a) and np.isfinite(b)):
-            continue
-        tol = WORSE_TOLERANCE[k] * (abs(b) if k == "jerk" else 1.0)
-        if a > b + tol:
-            worse.append(k)
-    out["worse"] = worse
-    out["ok"] = not worse
-    return out
 
 
 class _WindowFailed(Exception):
