@@ -27,6 +27,41 @@ def test_core_imports_without_torch() -> None:
     assert out.stdout.strip() == "[]"
 
 
+def test_cli_parser_without_torch() -> None:
+    """``habitsim --help`` builds every command's parser without the learning core."""
+    code = (
+        "import sys, contextlib, io\n"
+        "import habitsim.cli\n"
+        "habitsim.cli.build_parser()\n"
+        "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+        "    habitsim.cli.main(['--help'])\n"
+        "print(sorted(m for m in ('torch', 'roma') if m in sys.modules))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT / "tests"
+    )
+    assert out.stdout.strip() == "[]"
+
+
+def test_models_names_stay_the_functions() -> None:
+    """The learning core loads on first use; ``habitsim.models.transfer`` / ``.train`` stay
+    the functions even when their submodules are imported first."""
+    code = (
+        "import sys, types\n"
+        "import habitsim.models.config\n"
+        "assert 'torch' not in sys.modules\n"
+        "import habitsim.models.transfer, habitsim.models.train\n"
+        "import habitsim.models as M\n"
+        "from habitsim.models import transfer, train, METHODS\n"
+        "assert isinstance(transfer, types.FunctionType) and M.transfer is transfer\n"
+        "assert isinstance(train, types.FunctionType) and M.train is train\n"
+        "assert sys.modules['habitsim.models.transfer'].transfer is transfer and METHODS\n"
+        "import habitsim\n"
+        "assert habitsim.transfer is transfer\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT / "tests")
+
+
 def test_refine_attribute_is_the_module() -> None:
     code = (
         "import types, habitsim\n"

@@ -6,20 +6,45 @@ import argparse
 from pathlib import Path
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    """Add the top-level ``transfer`` command."""
+def _description() -> str:
+    """The command's description, with every registered method (imports the learning
+    core, so it is built when the help is shown, not with the parser)."""
     from ..models.transfer import METHODS
 
+    return (
+        "Re-express a motion (.npz, or .bvh with --from) on another species' skeleton. "
+        "Held-out target species borrow the habit latent of the nearest training species "
+        "in text-embedding space; the choice is printed. Methods: "
+        + "; ".join(f"{m.name}: {m.description}" for m in METHODS.values())
+    )
+
+
+class _Help(argparse.Action):
+    """``-h/--help`` that fills in the description first (see :func:`_description`)."""
+
+    def __init__(self, option_strings: list[str], dest: str, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: object,
+        option_string: str | None = None,
+    ) -> None:
+        parser.description = _description()
+        parser.print_help()
+        parser.exit()
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the top-level ``transfer`` command."""
     p = sub.add_parser(
         "transfer",
         help="transfer a motion to another species, keeping the target's habits",
-        description=(
-            "Re-express a motion (.npz, or .bvh with --from) on another species' skeleton. "
-            "Held-out target species borrow the habit latent of the nearest training species "
-            "in text-embedding space; the choice is printed. Methods: "
-            + "; ".join(f"{m.name}: {m.description}" for m in METHODS.values())
-        ),
+        add_help=False,
     )
+    p.add_argument("-h", "--help", action=_Help, help="show this help message and exit")
     p.add_argument(
         "source", type=Path, nargs="?", metavar="SRC", help="source motion (.npz or .bvh)"
     )

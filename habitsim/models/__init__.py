@@ -22,43 +22,52 @@ Modules: :mod:`~habitsim.models.config` (typed configs and presets),
 
 from __future__ import annotations
 
-from .checkpoint import LoadedCheckpoint, load_checkpoint, save_checkpoint
-from .config import (
-    PRESETS,
-    VARIANTS,
-    Config,
-    HabitConfig,
-    ModelConfig,
-    NetConfig,
-    QuantizerConfig,
-    TextConfig,
-    TrainConfig,
-    preset,
-)
-from .errors import (
-    CheckpointError,
-    ConfigError,
-    MethodNotAvailableError,
-    ModelError,
-    TextEncoderError,
-    TrainingDataError,
-    UnknownMethodError,
-)
-from .evaluate import REFERENCE_CLIPS, reconstruction_error
-from .model import HabitVQVAE
-from .text import Retrieval, retrieve_neighbour, species_embeddings
-from .train import TrainResult, train
-from .transfer import (
-    METHODS,
-    TransferMethod,
-    available_methods,
-    direct_transfer,
-    load_model,
-    reconstruct,
-    register_method,
-    shipped_checkpoint,
-    transfer,
-)
+import importlib
+import sys
+import types
+from typing import Any
+
+#: public name → defining submodule (imported on first use: the network modules pull in
+#: torch, and ``habitsim.models.config`` must stay importable without it)
+_EXPORTS = {
+    "LoadedCheckpoint": "checkpoint",
+    "load_checkpoint": "checkpoint",
+    "save_checkpoint": "checkpoint",
+    "PRESETS": "config",
+    "VARIANTS": "config",
+    "Config": "config",
+    "HabitConfig": "config",
+    "ModelConfig": "config",
+    "NetConfig": "config",
+    "QuantizerConfig": "config",
+    "TextConfig": "config",
+    "TrainConfig": "config",
+    "preset": "config",
+    "CheckpointError": "errors",
+    "ConfigError": "errors",
+    "MethodNotAvailableError": "errors",
+    "ModelError": "errors",
+    "TextEncoderError": "errors",
+    "TrainingDataError": "errors",
+    "UnknownMethodError": "errors",
+    "REFERENCE_CLIPS": "evaluate",
+    "reconstruction_error": "evaluate",
+    "HabitVQVAE": "model",
+    "Retrieval": "text",
+    "retrieve_neighbour": "text",
+    "species_embeddings": "text",
+    "TrainResult": "train",
+    "train": "train",
+    "METHODS": "transfer",
+    "TransferMethod": "transfer",
+    "available_methods": "transfer",
+    "direct_transfer": "transfer",
+    "load_model": "transfer",
+    "reconstruct": "transfer",
+    "register_method": "transfer",
+    "shipped_checkpoint": "transfer",
+    "transfer": "transfer",
+}
 
 __all__ = [
     "transfer",
@@ -99,3 +108,33 @@ __all__ = [
     "TextEncoderError",
     "TrainingDataError",
 ]
+
+
+#: Functions named like the submodule defining them (``habitsim.models.transfer`` is the
+#: function, ``habitsim.models.transfer.transfer`` too).
+_SHADOWED = ("transfer", "train")
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+class _Package(types.ModuleType):
+    """The import system sets a loaded submodule as an attribute of its package; keep
+    ``transfer`` and ``train`` the functions whenever their submodules load."""
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name in _SHADOWED and isinstance(value, types.ModuleType):
+            value = getattr(value, name)
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package
