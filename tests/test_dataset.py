@@ -281,7 +281,7 @@ def test_resume_replaces_corrupt_clip_and_removes_stale(tmp_path: Path) -> None:
 def test_clip_failure_names_the_clip_and_writes_no_manifest(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import habitsim.dataset as ds
+    import habitsim.dataset.clips as ds  # where a clip is generated
 
     def boom(*a, **k):
         raise RuntimeError("generator exploded")
