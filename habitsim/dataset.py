@@ -102,6 +102,8 @@ MAX_CLIPS_PER_SPECIES = 10_000
 MAX_SEED = 2**32 - 1
 #: Value of the manifest's ``kind`` key.
 DATASET_KIND = "habitsim.synthetic_gaits"
+#: ``kind`` of a data set imported from motion-capture files (:mod:`habitsim.dataset_import`).
+IMPORTED_KIND = "habitsim.imported_clips"
 SPLITS: tuple[str, ...] = ("train", "val", "test")
 #: Split rule position (k·len(ACTIONS) + action number) mod 10 → split (others: train).
 _SPLIT_PERIOD = 10
@@ -556,15 +558,15 @@ def _make_clip(root: str, job: ClipJob, resume: bool) -> tuple[dict[str, Any], b
 # ---------------------------------------------------------------------------- build
 
 
-def _read_manifest_json(path: Path) -> dict[str, Any]:
+def _read_manifest_json(path: Path, kinds: tuple[str, ...] = (DATASET_KIND,)) -> dict[str, Any]:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
         reason = "nested too deep" if isinstance(e, RecursionError) else brief(str(e), 200)
         raise DatasetError(f"{path}: not a readable manifest ({reason})") from None
-    if not isinstance(data, dict) or data.get("kind") != DATASET_KIND:
+    if not isinstance(data, dict) or data.get("kind") not in kinds:
         raise DatasetError(
-            f"{path}: not a habitsim synthetic data set manifest (kind != {DATASET_KIND!r})"
+            f"{path}: not a habitsim data set manifest of kind {' or '.join(map(repr, kinds))}"
         )
     version = data.get("format_version")
     if version != MANIFEST_FORMAT_VERSION:
@@ -828,7 +830,7 @@ def load_manifest(dataset_dir: str | Path, *, check_files: bool = True) -> Datas
             f"{root}: no {MANIFEST_NAME} (not a data set, or an interrupted build; "
             "run the build again to finish it)"
         )
-    data = _read_manifest_json(mpath)
+    data = _read_manifest_json(mpath, (DATASET_KIND, IMPORTED_KIND))
     for key, types in (
         ("seed", (int,)),
         ("fps", (int, float)),
