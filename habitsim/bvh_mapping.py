@@ -1106,14 +1106,13 @@ def _identity_import(bvh: BVHData, species: Species) -> tuple[Motion, JointMappi
             f"by the hind-leg length ratio {scale:.4g}"
         )
     joints: dict[str, str | None] = {n: n for n in JOINT_NAMES}
+    notes.append("stance labels detected on the file's own toes (habitsim contact rule)")
     mapping = JointMapping(joints, "identity", None, scale, notes)
-    m = Motion(
-        species.name,
-        bvh.fps,
-        root * scale,
-        q,
-        metadata={"source": "bvh", "bvh_file": Path(bvh.source).name, "mapping": mapping.to_dict()},
-    )
+    meta = {"source": "bvh", "bvh_file": Path(bvh.source).name, "mapping": mapping.to_dict()}
+    m = Motion(species.name, bvh.fps, root * scale, q, metadata=meta)
+    from .contacts import detect_contacts
+
+    m = Motion(m.species, m.fps, m.root_positions, m.rotations, detect_contacts(m), meta)
     return m, mapping
 
 

@@ -186,6 +186,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.sim",
             "habitsim.retarget",
             "habitsim.dataset",
+            "habitsim.dataset_import",
             "habitsim.testing",
             "habitsim.pytest_plugin",
         ),

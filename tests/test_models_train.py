@@ -106,9 +106,12 @@ def test_total_loss_is_the_sum_of_its_parts():
         + t.beta * logs["commit"]
         + t.kl_weight * logs["kl"]
         + t.position_weight * logs["pos"]
+        + t.contact_weight * logs["contact"]
+        + t.stance_weight * logs["stance"]
         + t.paired_weight * logs["paired"]
     )
     assert logs["loss"] == pytest.approx(total, rel=1e-5)
+    assert logs["contact"] > 0 and logs["stance"] > 0  # an untrained decoder: both terms live
 
 
 def test_position_loss_separates_root_path_from_pose():
@@ -118,7 +121,7 @@ def test_position_loss_separates_root_path_from_pose():
     m = generate("dog", "trot", seed=2, duration_s=1.5)
     x = torch.from_numpy(canonical_window(clip_arrays(m), 0, 32)[0]).double()[None]
     valid = torch.ones(1, 32, dtype=torch.bool)
-    assert float(_position_loss(x, x, valid, ["dog"], 30.0, 0.05)) == 0.0
+    assert float(_position_loss(x, x, valid, ["dog"], 30.0, 0.05)[0]) == 0.0
     # a root-velocity bias moves the path only: the loss is the pelvis path's error alone
     drift = x.clone()
     drift[..., Q_DIM] += 0.1  # Froude units, forward
@@ -126,7 +129,7 @@ def test_position_loss_separates_root_path_from_pose():
     err = 0.1 * math.sqrt(9.81 * h) / 30.0 * torch.arange(32.0).double() / h  # [hip heights]
     sl1 = torch.where(err < 0.05, 0.5 * err**2 / 0.05, err - 0.025)
     expect = float((sl1 / 3.0).mean())  # mean over x, y, z of the pelvis; y, z exact
-    got = float(_position_loss(drift, x, valid, ["dog"], 30.0, 0.05))
+    got = float(_position_loss(drift, x, valid, ["dog"], 30.0, 0.05)[0])
     assert got == pytest.approx(expect, rel=1e-6)
 
 
@@ -368,4 +371,35 @@ def test_export_drops_training_state(tiny_data, tmp_path):
             progress=False,
             log=lambda s: None,
             text_embeddings=_fake_text(),
+        )
+
+
+def test_fine_tune_starts_from_the_checkpoint(tiny_data, tmp_path):
+    text = _fake_text()
+    cfg = _tiny_config(steps=3)
+    base = train(
+        tiny_data, tmp_path / "base", cfg, progress=False, log=lambda s: None, text_embeddings=text
+    )
+    w0 = load_checkpoint(base.out_dir).model.state_dict()
+    ft_cfg = cfg.replace(**{"train.steps": 1, "train.lr": 1e-9, "train.lr_final": 1e-9})
+    ft = train(
+        tiny_data, tmp_path / "ft", ft_cfg, progress=False, log=lambda s: None, init=base.out_dir
+    )
+    ck = load_checkpoint(ft.out_dir)
+    w1 = ck.model.state_dict()
+    enc = [k for k in w0 if k.startswith("encoder.")]
+    # one step at a negligible rate: the weights are the base's, not a fresh draw
+    assert max(float((w1[k] - w0[k]).abs().max()) for k in enc) < 1e-6
+    torch.testing.assert_close(w1["feat_std"], w0["feat_std"])
+    torch.testing.assert_close(w1["text_table"], w0["text_table"])
+    doc = json.loads((ft.out_dir / "config.json").read_text())
+    assert doc["init"]["checkpoint"] == str(base.out_dir)
+    with pytest.raises(CheckpointError, match="model configuration differs"):
+        train(
+            tiny_data,
+            tmp_path / "bad",
+            ft_cfg.replace(**{"model.net.width": 8}),
+            progress=False,
+            log=lambda s: None,
+            init=base.out_dir,
         )

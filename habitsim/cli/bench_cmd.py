@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 
 from ..dataset import DatasetBuild, build_dataset, iter_clips
-from . import bench_balance, bench_real, bench_refine, bench_sim, bench_train
+from . import bench_balance, bench_model, bench_real, bench_refine, bench_sim, bench_train
 from .conventions import add_check_option, check_exit
 
 #: Modules of ``habitsim.cli`` that add more ``bench`` sub-commands, in help order.
-_EXTRA = (bench_sim, bench_refine, bench_balance, bench_train, bench_real)
+_EXTRA = (bench_sim, bench_refine, bench_balance, bench_train, bench_model, bench_real)
 #: Build-time target of the default data set [s] (on 2 cores).
 TARGET_BUILD_S = 120.0
 _DEFAULT_CLIPS = 40

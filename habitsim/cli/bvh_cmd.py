@@ -22,14 +22,52 @@ def register(sub: argparse._SubParsersAction) -> None:
             "Read a BVH file (any hierarchy and channel order, cm or m, y-up or z-up), map its "
             "joints onto the species' habitsim skeleton (automatically from names and "
             "hierarchy, or with --map), retarget and write a motion .npz. The mapping used is "
-            "printed as 'habitsim joint <- source joint' lines."
+            "printed as 'habitsim joint <- source joint' lines. With --dir, every .bvh/.glb/.gltf "
+            "file under a folder becomes one clip of a data set folder (--out) that "
+            "'habitsim train --data' reads; --labels names each file's action and split."
         ),
     )
-    p.add_argument("file", type=Path, help="the .bvh, .glb or .gltf file")
+    p.add_argument("file", type=Path, nargs="?", help="the .bvh, .glb or .gltf file")
+    p.add_argument(
+        "--dir",
+        type=Path,
+        default=None,
+        dest="src_dir",
+        metavar="DIR",
+        help="import every motion file under DIR as a data set (instead of one file)",
+    )
     p.add_argument(
         "--species", required=True, help="target catalog species (see 'habitsim species list')"
     )
-    p.add_argument("--out", required=True, type=Path, help="output motion file (.npz)")
+    p.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        help="output motion file (.npz), or with --dir the data set folder",
+    )
+    p.add_argument(
+        "--labels",
+        type=Path,
+        default=None,
+        metavar="CSV",
+        help="with --dir: CSV with columns file,action[,split] (default: action 'unlabelled', "
+        "splits 8/1/1 by file order)",
+    )
+    p.add_argument(
+        "--resample",
+        type=float,
+        default=30.0,
+        metavar="HZ",
+        help="with --dir: frame rate every clip is resampled to (default 30, the models')",
+    )
+    p.add_argument(
+        "--skip-bad",
+        action="store_true",
+        help="with --dir: skip files that cannot be imported instead of stopping",
+    )
+    p.add_argument(
+        "--overwrite", action="store_true", help="with --dir: replace a data set already in --out"
+    )
     p.add_argument(
         "--map",
         type=Path,
@@ -163,6 +201,13 @@ def _import(ns: argparse.Namespace) -> int:
     from ..species import load_species
 
     sp = load_species(ns.species)  # fail fast with the list of known species
+    if (ns.file is None) == (ns.src_dir is None):
+        raise MotionFileError("give one motion FILE or --dir DIR (not both, not neither)")
+    if ns.src_dir is not None:
+        return _import_dir(ns)
+    for flag, value in (("--labels", ns.labels), ("--skip-bad", ns.skip_bad)):
+        if value:
+            raise MotionFileError(f"{flag} only applies with --dir")
     if ns.out.suffix != ".npz":
         raise MotionFileError(f"--out must end in .npz, got {ns.out.name!r}")
     motion, mapping = import_bvh(
@@ -183,6 +228,40 @@ def _import(ns: argparse.Namespace) -> int:
     print(
         f"imported {ns.file.name}: {motion.num_frames} frames at {motion.fps:g} fps "
         f"({motion.duration:.2f} s) onto {motion.species} -> {ns.out}"
+    )
+    return 0
+
+
+def _import_dir(ns: argparse.Namespace) -> int:
+    from ..dataset_import import import_folder
+
+    if ns.animation is not None or ns.fps is not None or ns.lenient:
+        raise MotionFileError("--animation, --fps and --lenient apply to one file, not --dir")
+    build = import_folder(
+        ns.src_dir,
+        ns.out,
+        ns.species,
+        labels=ns.labels,
+        fps=ns.resample,
+        overwrite=ns.overwrite,
+        skip_bad=ns.skip_bad,
+        joint_map=ns.joint_map,
+        units=ns.units,
+        up=ns.up,
+        plant=not ns.no_plant,
+        log=print,
+    )
+    for f, w in build.warnings:
+        print(f"warning: {f}: {w}", file=sys.stderr)
+    for f, why in build.skipped:
+        print(f"skipped: {f}: {why}", file=sys.stderr)
+    man = build.manifest
+    counts = ", ".join(f"{k} {v}" for k, v in man.split_counts().items())
+    frames = sum(c.frames for c in man.clips)
+    print(
+        f"data set {ns.out}: {len(man.clips)} clips of {man.species_names[0]} "
+        f"({frames} frames at {man.fps:g} fps; {counts})"
+        + (f"; {len(build.skipped)} file(s) skipped" if build.skipped else "")
     )
     return 0
 

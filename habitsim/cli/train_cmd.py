@@ -12,6 +12,10 @@ import json
 import time
 from pathlib import Path
 
+#: Default schedule of a fine-tune (``--init``): short, at a fifth of the training rate.
+FINETUNE_STEPS = 1000
+FINETUNE_LR = 2e-4
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the top-level ``train`` command."""
@@ -22,8 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="train the habit-preserving motion VQ-VAE (writes a checkpoint folder)",
         description=(
             "Train the motion VQ-VAE with per-species habit flows and text embeddings on a "
-            "synthetic data set (habitsim data synth). Default config: ≤ 20 min on 2 CPU "
-            "cores; small: ≤ 2 min."
+            "data set (habitsim data synth, or data import-bvh --dir). Configs: default "
+            "≤ 20 min on 2 CPU cores, small ≤ 2 min, large ≤ 2.5 h (resume with --resume); "
+            "--init fine-tunes a trained model."
         ),
     )
     p.add_argument("--data", required=True, type=Path, metavar="DIR", help="data set folder")
@@ -37,6 +42,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         choices=list(VARIANTS),
         help="model variant / ablation (default: habit)",
     )
+    p.add_argument(
+        "--init",
+        default=None,
+        metavar="CKPT|VARIANT",
+        help="fine-tune: start from this checkpoint (a folder, or 'habit' for the shipped "
+        "model) with its model configuration; --config then only sets the schedule, "
+        f"by default {FINETUNE_STEPS} steps at lr {FINETUNE_LR:g}",
+    )
     p.add_argument("--resume", action="store_true", help="continue the training state in CKPT")
     p.add_argument("--overwrite", action="store_true", help="replace a checkpoint already in CKPT")
     p.add_argument("--steps", type=int, metavar="N", help="override the number of steps")
@@ -45,7 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--threads",
         type=int,
         metavar="N",
-        help="torch CPU threads (default: the preset's; default 2, small 1)",
+        help="torch CPU threads (default: the preset's; default and large 2, small 1)",
     )
     p.add_argument(
         "--set",
@@ -73,6 +86,34 @@ def _parse_set(items: list[str]) -> dict[str, object]:
     return out
 
 
+def _finetune_config(init: str, cfg):
+    """The fine-tune's configuration: the checkpoint's model, ``cfg``'s schedule with
+    :data:`FINETUNE_STEPS` steps at :data:`FINETUNE_LR` (``--steps`` / ``--set`` apply on
+    top)."""
+    from ..models.checkpoint import read_checkpoint_config
+    from ..models.config import VARIANTS, Config
+    from ..models.transfer import resolve_checkpoint
+
+    named = init in VARIANTS and not Path(init).is_dir()
+    base, _ = read_checkpoint_config(resolve_checkpoint(init) if named else Path(init))
+    steps = FINETUNE_STEPS
+    train = cfg.train
+    return Config(
+        name=f"finetune:{base.name}",
+        model=base.model,
+        train=type(train)(
+            **{
+                **train.__dict__,
+                "steps": steps,
+                "lr": FINETUNE_LR,
+                "lr_final": min(train.lr_final, FINETUNE_LR / 4),
+                "warmup_steps": min(train.warmup_steps, steps // 10),
+                "val_every": min(train.val_every, 250),
+            }
+        ),
+    ).validate()
+
+
 def _train(ns: argparse.Namespace) -> int:
     from ..models.checkpoint import MODEL_FILE
     from ..models.config import preset
@@ -81,6 +122,8 @@ def _train(ns: argparse.Namespace) -> int:
 
     cfg = preset(ns.config, ns.variant)
     changes = _parse_set(ns.set)
+    if ns.init is not None:
+        cfg = _finetune_config(ns.init, cfg)
     if ns.steps is not None:
         changes["train.steps"] = ns.steps
     if ns.seed is not None:
@@ -91,7 +134,13 @@ def _train(ns: argparse.Namespace) -> int:
         cfg = cfg.replace(**changes)
     t0 = time.perf_counter()
     res = train(
-        ns.data, ns.out, cfg, resume=ns.resume, overwrite=ns.overwrite, progress=not ns.no_progress
+        ns.data,
+        ns.out,
+        cfg,
+        resume=ns.resume,
+        overwrite=ns.overwrite,
+        progress=not ns.no_progress,
+        init=ns.init,
     )
     ref = record_reference_error(ns.out)
     wall = time.perf_counter() - t0

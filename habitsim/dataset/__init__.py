@@ -58,6 +58,7 @@ from .manifest import iter_clips, load_manifest
 from .planning import clip_seed, clip_split, plan_clips
 from .records import (
     DATASET_KIND,
+    IMPORTED_KIND,
     MANIFEST_FORMAT_VERSION,
     MANIFEST_NAME,
     MAX_CLIPS_PER_SPECIES,
@@ -81,6 +82,7 @@ __all__ = [
     "MANIFEST_FORMAT_VERSION",
     "SPLITS",
     "DATASET_KIND",
+    "IMPORTED_KIND",
     "MAX_CLIPS_PER_SPECIES",
     "MAX_SEED",
     "MEASURED_KEYS",

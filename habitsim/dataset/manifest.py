@@ -11,6 +11,7 @@ from ..errors import DatasetError, brief
 from ..motion import Motion, load_motion
 from .records import (
     DATASET_KIND,
+    IMPORTED_KIND,
     MANIFEST_FORMAT_VERSION,
     MANIFEST_NAME,
     SPLITS,
@@ -19,15 +20,15 @@ from .records import (
 )
 
 
-def _read_manifest_json(path: Path) -> dict[str, Any]:
+def _read_manifest_json(path: Path, kinds: tuple[str, ...] = (DATASET_KIND,)) -> dict[str, Any]:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
         reason = "nested too deep" if isinstance(e, RecursionError) else brief(str(e), 200)
         raise DatasetError(f"{path}: not a readable manifest ({reason})") from None
-    if not isinstance(data, dict) or data.get("kind") != DATASET_KIND:
+    if not isinstance(data, dict) or data.get("kind") not in kinds:
         raise DatasetError(
-            f"{path}: not a habitsim synthetic data set manifest (kind != {DATASET_KIND!r})"
+            f"{path}: not a habitsim data set manifest of kind {' or '.join(map(repr, kinds))}"
         )
     version = data.get("format_version")
     if version != MANIFEST_FORMAT_VERSION:
@@ -77,7 +78,7 @@ def load_manifest(dataset_dir: str | Path, *, check_files: bool = True) -> Datas
             f"{root}: no {MANIFEST_NAME} (not a data set, or an interrupted build; "
             "run the build again to finish it)"
         )
-    data = _read_manifest_json(mpath)
+    data = _read_manifest_json(mpath, (DATASET_KIND, IMPORTED_KIND))
     for key, types in (
         ("seed", (int,)),
         ("fps", (int, float)),

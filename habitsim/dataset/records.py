@@ -26,6 +26,8 @@ MAX_CLIPS_PER_SPECIES = 10_000
 MAX_SEED = 2**32 - 1
 #: Value of the manifest's ``kind`` key.
 DATASET_KIND = "habitsim.synthetic_gaits"
+#: ``kind`` of a data set imported from motion-capture files (:mod:`habitsim.dataset_import`).
+IMPORTED_KIND = "habitsim.imported_clips"
 SPLITS: tuple[str, ...] = ("train", "val", "test")
 #: Split rule position (k·len(ACTIONS) + action number) mod 10 → split (others: train).
 _SPLIT_PERIOD = 10

@@ -246,6 +246,22 @@ class TrainConfig:
         position_weight: weight of a smooth-L1 loss on forward-kinematics joint positions
             [hip heights]: the pelvis' path integrated from the decoded velocities, every
             other joint relative to the pelvis (a habitsim addition; 0 = the paper).
+        contact_weight: weight of the binary cross-entropy of the decoder's four contact
+            logits against the windows' stance labels (feature version 3).
+        stance_weight: weight of the stance term: smooth-L1 of the decoded toe velocity
+            [leg lengths / s] (forward kinematics of the decoded window, root path
+            included) towards zero on the frames the labels hold in stance, so decoded
+            feet rest where the source's did.
+        input_noise: standard deviation of Gaussian noise added to the encoder's
+            normalised input (targets stay clean), so imported real clips, whose joints
+            jitter, land near the training windows.
+        speed_jitter: s > 0 adds every clip played (1 − s) and (1 + s) times faster
+            (cadence and speed scale together, :func:`habitsim.models.data.speed_variant`);
+            0 = no speed augmentation.
+        quantizer_dropout: with residual levels, the probability that a training window
+            is decoded from only its first n levels, n uniform in 1…L−1 (quantizer
+            dropout, SoundStream / MoMask): the first level alone must carry the action,
+            the others refine it.
         mirror: also train on every clip reflected in the sagittal plane
             (:meth:`habitsim.motion.Motion.mirrored`: left and right limbs swap, a left turn
             becomes a right one), paired with its partners' reflections; it doubles the
@@ -275,6 +291,11 @@ class TrainConfig:
     paired_weight: float = 0.3
     root_velocity_weight: float = 0.0
     position_weight: float = 1.0
+    contact_weight: float = 0.05
+    stance_weight: float = 0.05
+    input_noise: float = 0.0
+    speed_jitter: float = 0.0
+    quantizer_dropout: float = 0.0
     mirror: bool = True
     val_every: int = 500
     checkpoint_every: int = 250
@@ -299,8 +320,13 @@ class TrainConfig:
             "paired_weight",
             "root_velocity_weight",
             "position_weight",
+            "contact_weight",
+            "stance_weight",
+            "input_noise",
         ):
             _check(getattr(self, k) >= 0, f"train.{k} must be ≥ 0")
+        _check(0.0 <= self.speed_jitter < 0.5, "train.speed_jitter must be in [0, 0.5)")
+        _check(0.0 <= self.quantizer_dropout <= 1.0, "train.quantizer_dropout must be in [0, 1]")
         _check(self.smooth_l1_beta > 0, "train.smooth_l1_beta must be > 0")
         _check(self.val_every >= 1 and self.checkpoint_every >= 1, "train.*_every must be ≥ 1")
         _check(self.threads is None or self.threads >= 1, "train.threads must be ≥ 1")
@@ -416,12 +442,34 @@ def _small() -> Config:
     )
 
 
+def _large() -> Config:
+    """The long budget: ≤ 2.5 h on an idle 2-core CPU (2 threads), resumable.
+
+    Wider convolutions, four residual codebooks trained with quantizer dropout (the first
+    level alone must still decode the action), three times the steps on a cosine schedule,
+    and the real-input augmentations (input noise, speed variants)."""
+    return Config(
+        name="large",
+        model=ModelConfig(net=NetConfig(width=192), quantizer=QuantizerConfig(levels=4)),
+        train=TrainConfig(
+            steps=12000,
+            lr_schedule="cosine",
+            warmup_steps=300,
+            quantizer_dropout=0.5,
+            input_noise=0.02,
+            speed_jitter=0.15,
+            val_every=1000,
+            threads=2,
+        ),
+    )
+
+
 #: Named presets of ``habitsim train --config``.
-PRESETS = {"default": _default, "small": _small}
+PRESETS = {"default": _default, "small": _small, "large": _large}
 
 
 def preset(name: str, variant: str | None = None) -> Config:
-    """The named preset (``default`` or ``small``), optionally for another variant.
+    """The named preset (``default``, ``small`` or ``large``), optionally for another variant.
 
     Raises:
         ConfigError: unknown preset or variant (lists the valid names).

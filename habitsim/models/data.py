@@ -20,7 +20,7 @@ import torch
 from ..dataset import iter_clips, load_manifest
 from ..motion import MIRROR_ACTIONS
 from .errors import TrainingDataError
-from .features import FEAT_DIM, ClipArrays, canonical_window, clip_arrays
+from .features import C_DIM, C_INDEX, FEAT_DIM, ClipArrays, canonical_window, clip_arrays
 
 __all__ = ["ClipSet", "Batch", "WindowSampler", "load_clip_set", "feature_stats", "fixed_windows"]
 
@@ -74,12 +74,17 @@ def load_clip_set(
     species: Iterable[str] | None = None,
     progress: bool = False,
     mirror: bool = False,
+    speeds: Sequence[float] = (),
 ) -> ClipSet:
     """Read and pre-process every clip of ``split`` (optionally only some species).
 
     With ``mirror``, each clip's sagittal reflection (:meth:`~habitsim.motion.Motion.mirrored`)
     follows it, with the pair key ``KEY~mirror`` (so it pairs with its partners'
     reflections) and the reflected action.
+
+    ``speeds`` adds, for each factor s ≠ 1, the clip (and its reflection) played s times
+    faster (:func:`speed_variant`; cadence and speed both scale by s, stance labels
+    follow), paired with its partners' variants of the same factor (``KEY~xS``).
 
     Raises:
         TrainingDataError: no clips, or clips of different frame rates.
@@ -96,21 +101,48 @@ def load_clip_set(
     clips: list[ClipArrays] = []
     keys: list[str | None] = []
     actions: list[str] = []
+    factors = [float(f) for f in speeds if abs(float(f) - 1.0) > 1e-9]
     for entry, m in it:
-        clips.append(clip_arrays(m))
-        keys.append(entry.pair_key)
-        actions.append(entry.action)
+        versions = [(m, entry.pair_key, entry.action)]
         if mirror:
-            r = m.mirrored()
-            clips.append(clip_arrays(r))
-            keys.append(None if entry.pair_key is None else f"{entry.pair_key}~mirror")
-            actions.append(MIRROR_ACTIONS.get(entry.action, entry.action))
+            versions.append(
+                (
+                    m.mirrored(),
+                    None if entry.pair_key is None else f"{entry.pair_key}~mirror",
+                    MIRROR_ACTIONS.get(entry.action, entry.action),
+                )
+            )
+        for f in factors:
+            versions += [
+                (speed_variant(v, f), None if k is None else f"{k}~x{f:g}", a)
+                for v, k, a in versions[: 1 + int(mirror)]
+            ]
+        for v, k, a in versions:
+            clips.append(clip_arrays(v))
+            keys.append(k)
+            actions.append(a)
     if not clips:
         raise TrainingDataError(f"{data_dir}: no {split} clips" + (f" of {sel}" if sel else ""))
     fps = {c.fps for c in clips}
     if len(fps) != 1:
         raise TrainingDataError(f"{data_dir}: {split} clips have several frame rates {sorted(fps)}")
     return ClipSet(clips, keys, actions, fps.pop())
+
+
+def speed_variant(motion, factor: float):
+    """The motion played ``factor`` times faster, at its own frame rate (a training
+    augmentation: real clips come at cadences and speeds the generator does not draw)."""
+    from ..motion import Motion, resample_motion
+
+    fast = Motion(
+        motion.species,
+        motion.fps * factor,
+        motion.root_positions,
+        motion.rotations,
+        motion.contacts,
+        dict(motion.metadata),
+    )
+    return resample_motion(fast, motion.fps)
 
 
 @dataclass
@@ -185,7 +217,8 @@ def fixed_windows(data: ClipSet, window: int, per_clip: int = 1) -> list[tuple[i
 
 
 def feature_stats(data: ClipSet, window: int, floor: float = 1e-2) -> tuple[np.ndarray, np.ndarray]:
-    """Per-dimension mean and std (floored) of canonical windows over the whole set.
+    """Per-dimension mean and std (floored) of canonical windows over the whole set
+    (0 and 1 on the contact channels, whose decoded values are logits).
 
     Every clip contributes windows starting every ``window // 2`` frames.
     """
@@ -195,7 +228,10 @@ def feature_stats(data: ClipSet, window: int, floor: float = 1e-2) -> tuple[np.n
             f, v, _ = canonical_window(c, s, window)
             acc.append(f[v])
     allf = np.concatenate(acc).astype(np.float64)
-    return allf.mean(0).astype(np.float32), np.maximum(allf.std(0), floor).astype(np.float32)
+    mean, std = allf.mean(0), np.maximum(allf.std(0), floor)
+    mean[C_INDEX : C_INDEX + C_DIM] = 0.0  # the decoder's contact outputs are logits
+    std[C_INDEX : C_INDEX + C_DIM] = 1.0
+    return mean.astype(np.float32), std.astype(np.float32)
 
 
 def stack_windows(

@@ -1,6 +1,6 @@
 """The network's per-frame representation of a motion and its inverse.
 
-Per frame t (``FEAT_DIM`` = J·4 + J·3 + 1 = 211 numbers):
+Per frame t (``FEAT_DIM`` = J·4 + J·3 + 1 + 4 = 215 numbers):
 
 * ``q_t`` (J·4): local joint quaternions wxyz, hemisphere-continuous in time (the first
   frame of a clip has w ≥ 0) — the paper's q (Sec. 3.1);
@@ -9,7 +9,12 @@ Per frame t (``FEAT_DIM`` = J·4 + J·3 + 1 = 211 numbers):
   the Froude velocity — the paper's v, made size-free so that one network serves a cat
   and an elephant (transferred speeds follow the Froude scaling of gaits);
 * ``h_t`` (1): pelvis height / h. The paper recovers the root from velocities only; a
-  height channel keeps long clips from drifting vertically (a habitsim addition).
+  height channel keeps long clips from drifting vertically (a habitsim addition);
+* ``c_t`` (4): foot contacts LF, RF, LH, RH (1 = stance) — the clip's stance labels
+  (a synthetic clip's planned stance, an import's labels found on the source skeleton),
+  detected on its toes when it has none. The decoder outputs *logits* on these channels
+  (their normalisation is the identity), trained against the labels; a decoded frame is
+  in stance where the logit is > 0 (:func:`decoded_contacts`). Feature version 3.
 
 Windows are *heading-canonical*: positions, velocities and the pelvis quaternion are
 turned about z by −ψ₀, ψ₀ = the pelvis heading at the window's first frame, so every
@@ -44,6 +49,8 @@ __all__ = [
     "V_DIM",
     "FEAT_DIM",
     "H_INDEX",
+    "C_INDEX",
+    "C_DIM",
     "ClipArrays",
     "clip_arrays",
     "velocity_scale",
@@ -51,19 +58,22 @@ __all__ = [
     "canonical_window",
     "uncanonicalize",
     "features_to_motion",
+    "decoded_contacts",
     "window_positions",
     "batched_fk",
     "species_offsets",
 ]
 
 #: Version of this representation; a checkpoint records the one it was trained on.
-FEATURE_VERSION = 2
+FEATURE_VERSION = 3
 GRAVITY = 9.81  # [m/s²]
 NUM_JOINTS = len(JOINT_NAMES)
 Q_DIM = NUM_JOINTS * 4
 V_DIM = NUM_JOINTS * 3
 H_INDEX = Q_DIM + V_DIM
-FEAT_DIM = Q_DIM + V_DIM + 1
+C_INDEX = H_INDEX + 1
+C_DIM = 4
+FEAT_DIM = C_INDEX + C_DIM
 
 
 def velocity_scale(species: str) -> float:
@@ -108,6 +118,7 @@ class ClipArrays:
         height: (T,) pelvis height / h.
         yaw: (T,) pelvis heading [rad].
         root: (T, 3) pelvis positions [m].
+        contacts: (T, 4) stance labels as 0.0 / 1.0, feet LF, RF, LH, RH.
         meta: the motion's metadata (action, pair key, …).
     """
 
@@ -118,6 +129,7 @@ class ClipArrays:
     height: np.ndarray
     yaw: np.ndarray
     root: np.ndarray
+    contacts: np.ndarray
     meta: dict[str, Any]
 
     @property
@@ -137,6 +149,12 @@ def clip_arrays(motion: Motion) -> ClipArrays:
         v[0] = v[1]
     sp = load_species(motion.species)
     yaw = heading_yaw(q[:, 0])
+    if motion.contacts is not None:
+        labels = np.asarray(motion.contacts, dtype=bool)
+    else:
+        from ..contacts import contacts_from_feet
+
+        labels = contacts_from_feet(x[:, motion.skeleton.foot_indices], motion.fps, sp.leg_length)
     return ClipArrays(
         species=motion.species,
         fps=float(motion.fps),
@@ -145,6 +163,7 @@ def clip_arrays(motion: Motion) -> ClipArrays:
         height=motion.root_positions[:, 2] / sp.hip_height,
         yaw=yaw,
         root=np.array(motion.root_positions, dtype=np.float64),
+        contacts=labels.astype(np.float64),
         meta=dict(motion.metadata),
     )
 
@@ -169,7 +188,13 @@ def canonical_window(
     q[:, 0] = quat_mul(_yaw_quat(-yaw0), q[:, 0])
     v = _rotate_z(clip.velocities[idx], -yaw0)
     feats = np.concatenate(
-        [q.reshape(length, -1), v.reshape(length, -1), clip.height[idx, None]], axis=1
+        [
+            q.reshape(length, -1),
+            v.reshape(length, -1),
+            clip.height[idx, None],
+            clip.contacts[idx],
+        ],
+        axis=1,
     )
     return feats.astype(np.float32), valid, yaw0
 
@@ -177,8 +202,8 @@ def canonical_window(
 def uncanonicalize(feats: np.ndarray, yaw0: float) -> np.ndarray:
     """Turn canonical window features (T, FEAT_DIM) back to heading ``yaw0`` (float64).
 
-    The pelvis quaternion and every joint velocity turn; local rotations and the height
-    do not.
+    The pelvis quaternion and every joint velocity turn; local rotations, the height and
+    the contacts do not.
     """
     f = np.array(feats, dtype=np.float64, copy=True)
     t = f.shape[0]
@@ -218,6 +243,14 @@ def features_to_motion(
     root[:, :2] = start[None] + np.cumsum(steps, axis=0)
     root[:, 2] = f[:, H_INDEX] * sp.hip_height
     return Motion(species, fps, root, q, None, dict(metadata or {}))
+
+
+def decoded_contacts(feats: np.ndarray) -> np.ndarray:
+    """Stance labels (T, 4) bool of decoded features (T, FEAT_DIM): contact logit > 0.
+
+    (A clip's own features hold 0 / 1 there, which read back as its labels.)
+    """
+    return np.asarray(feats)[:, C_INDEX : C_INDEX + C_DIM] > 0.0
 
 
 def species_offsets(species: list[str], dtype: torch.dtype = torch.float32) -> torch.Tensor:

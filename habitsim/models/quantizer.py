@@ -196,10 +196,17 @@ class EMAQuantizer(nn.Module):
         )
 
 
-def residual_quantize(levels: list[EMAQuantizer], f: torch.Tensor, **kw) -> QuantizerOutput:
+def residual_quantize(
+    levels: list[EMAQuantizer],
+    f: torch.Tensor,
+    n_levels: torch.Tensor | None = None,
+    **kw,
+) -> QuantizerOutput:
     """Quantize latents ``f`` (B, D, T') by the codebooks ``levels`` in turn, each on the
     residual the previous ones left (keyword arguments go to every level's forward).
 
+    ``n_levels`` (B,) keeps only the first n codebooks' codes of each item (quantizer
+    dropout while training; every level still sees, and learns from, its residual).
     With one level this is that level's own output.
     """
     if len(levels) == 1:
@@ -208,11 +215,13 @@ def residual_quantize(levels: list[EMAQuantizer], f: torch.Tensor, **kw) -> Quan
     total = torch.zeros_like(f)
     commit = f.new_zeros(())
     outs = []
-    for q in levels:
+    for k, q in enumerate(levels):
         o = q(r, **kw)
         e = o.quantized.detach()  # the codes' values (the straight-through part is f's)
-        total = total + e
         r = r - e
+        if n_levels is not None:
+            e = e * (n_levels > k).to(e.dtype)[:, None, None]
+        total = total + e
         commit = commit + o.commit_loss
         outs.append(o)
     return QuantizerOutput(

@@ -9,6 +9,13 @@ One optimiser (AdamW) trains everything jointly on random heading-canonical wind
                                                   z_B ~ p_B drawn from B's prior as at transfer
       + w_pos·[smooth-L1 of FK pose rel. pelvis      joint-position term (pose and root path
                + smooth-L1 of the pelvis path] / h   as separate terms)
+      + w_c·BCE(contact logits, stance labels)      decoded foot contacts (4 channels)
+      + w_st·smooth-L1(toe velocity / leg, 0)        feet rest on the labels' stance frames
+                                                  (toe velocity by FK of the decoded window)
+
+The paired term carries the contact and stance terms of B's clip too. Augmentations
+(``TrainConfig``): Gaussian noise on the encoder's input, speed variants of every clip,
+and, with residual codebooks, quantizer dropout.
 
 The −log p_c(z) part of the KL term is the prior's NLL of paper eq. 10; the log q part
 keeps the Gaussian posterior from collapsing onto a point. The learning rate warms up
@@ -57,7 +64,7 @@ from .data import (
     stack_windows,
 )
 from .errors import CheckpointError, TrainingDataError
-from .features import H_INDEX, Q_DIM, window_positions
+from .features import C_DIM, C_INDEX, H_INDEX, Q_DIM, window_positions
 from .model import HabitVQVAE
 from .text import species_embeddings
 
@@ -129,7 +136,7 @@ def _recon_terms(
     """(rotation + height term, velocity term) of L_re."""
     b = cfg.train.smooth_l1_beta
     lq = _masked_smooth_l1(pred[..., :Q_DIM], target[..., :Q_DIM], valid, b)
-    lh = _masked_smooth_l1(pred[..., H_INDEX:], target[..., H_INDEX:], valid, b)
+    lh = _masked_smooth_l1(pred[..., H_INDEX:C_INDEX], target[..., H_INDEX:C_INDEX], valid, b)
     lv = _masked_smooth_l1(pred[..., Q_DIM:H_INDEX], target[..., Q_DIM:H_INDEX], valid, b)
     if cfg.train.root_velocity_weight > 0:  # the pelvis' channels, whose error the path integrates
         lv = lv + cfg.train.root_velocity_weight * _masked_smooth_l1(
@@ -145,19 +152,23 @@ def _position_loss(
     species: list[str],
     fps: float,
     beta: float,
-) -> torch.Tensor:
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Smooth-L1 on forward-kinematics positions [hip heights], as two terms: the pose
     (every joint relative to the pelvis) plus the pelvis' path (integrated from the
     decoded velocities). In one term on global positions the integrated drift of the
     root enters every joint's error, drowns the limbs' gradient, and the limbs were learnt
-    several times slower."""
-    pp = window_positions(pred, species, fps)
+    several times slower.
+
+    Returns:
+        (the loss, the decoded joint positions (B, T, J, 3) [m]).
+    """
+    pos = window_positions(pred, species, fps)
     with torch.no_grad():
         pt = window_positions(target, species, fps)
     h = torch.tensor([load_species(s).hip_height for s in species], dtype=pred.dtype)[
         :, None, None, None
     ]
-    pp, pt = pp / h, pt / h
+    pp, pt = pos / h, pt / h
     pose = F.smooth_l1_loss(
         pp[..., 1:, :] - pp[..., :1, :],
         pt[..., 1:, :] - pt[..., :1, :],
@@ -166,7 +177,69 @@ def _position_loss(
     ).mean((-1, -2))
     path = F.smooth_l1_loss(pp[..., 0, :], pt[..., 0, :], reduction="none", beta=beta).mean(-1)
     w = valid.to(pose.dtype)
-    return ((pose + path) * w).sum() / w.sum().clamp_min(1.0)
+    return ((pose + path) * w).sum() / w.sum().clamp_min(1.0), pos
+
+
+def _contact_loss(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """Binary cross-entropy of the decoded contact logits against the stance labels."""
+    e = F.binary_cross_entropy_with_logits(
+        pred[..., C_INDEX : C_INDEX + C_DIM],
+        target[..., C_INDEX : C_INDEX + C_DIM],
+        reduction="none",
+    ).mean(-1)
+    w = valid.to(e.dtype)
+    return (e * w).sum() / w.sum().clamp_min(1.0)
+
+
+def _stance_loss(
+    pos: torch.Tensor,
+    target: torch.Tensor,
+    valid: torch.Tensor,
+    species: list[str],
+    fps: float,
+    beta: float,
+) -> torch.Tensor:
+    """Smooth-L1 of the decoded toe velocity [leg lengths / s] towards zero on frames
+    whose label and the previous frame's are both stance (mean over those frames)."""
+    from ..skeleton import FOOT_JOINTS, JOINT_NAMES
+
+    toes = [JOINT_NAMES.index(n) for n in FOOT_JOINTS]
+    leg = torch.tensor([load_species(s).leg_length for s in species], dtype=pos.dtype)
+    v = (pos[:, 1:, toes] - pos[:, :-1, toes]) * (fps / leg[:, None, None, None])
+    c = target[..., C_INDEX : C_INDEX + C_DIM] > 0.5
+    on = c[:, 1:] & c[:, :-1] & (valid[:, 1:] & valid[:, :-1])[..., None]
+    e = F.smooth_l1_loss(v, torch.zeros_like(v), reduction="none", beta=beta).sum(-1)
+    w = on.to(e.dtype)
+    return (e * w).sum() / w.sum().clamp_min(1.0)
+
+
+def _kinematic_terms(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    valid: torch.Tensor,
+    species: list[str],
+    fps: float,
+    cfg: Config,
+    logs: dict[str, float],
+    tag: str = "",
+) -> torch.Tensor:
+    """Position, contact and stance terms of one set of decoded windows (weighted)."""
+    t = cfg.train
+    total = pred.new_zeros(())
+    if t.position_weight > 0 or t.stance_weight > 0:
+        lp, pos = _position_loss(pred, target, valid, species, fps, t.smooth_l1_beta)
+        if t.position_weight > 0:
+            total = total + t.position_weight * lp
+            logs[f"{tag}pos"] = float(lp.detach())
+        if t.stance_weight > 0:
+            ls = _stance_loss(pos, target, valid, species, fps, t.smooth_l1_beta)
+            total = total + t.stance_weight * ls
+            logs[f"{tag}stance"] = float(ls.detach())
+    if t.contact_weight > 0:
+        lc = _contact_loss(pred, target, valid)
+        total = total + t.contact_weight * lc
+        logs[f"{tag}contact"] = float(lc.detach())
+    return total
 
 
 def _prior_draws(
@@ -188,8 +261,20 @@ def compute_losses(
     """Total training loss of one batch and its logged parts (training mode: sampled
     codes, EMA update, reparameterised z)."""
     t = cfg.train
-    f = model.encode(batch.x)
-    qo = model.quantize(f, generator=generator)
+    x_in = batch.x
+    if t.input_noise > 0:  # noise in normalised units, on every channel but the contacts
+        noise = torch.randn(batch.x.shape, generator=generator, dtype=batch.x.dtype)
+        noise[..., C_INDEX:] = 0.0
+        x_in = batch.x + t.input_noise * noise * model.feat_std
+    f = model.encode(x_in)
+    n_levels = None
+    levels = model.cfg.quantizer.levels
+    if levels > 1 and t.quantizer_dropout > 0:
+        b0 = batch.x.shape[0]
+        drop = torch.rand(b0, generator=generator) < t.quantizer_dropout
+        fewer = torch.randint(1, levels, (b0,), generator=generator)
+        n_levels = torch.where(drop, fewer, torch.full_like(fewer, levels))
+    qo = model.quantize(f, generator=generator, n_levels=n_levels)
     logs: dict[str, float] = {}
     codes = [qo.quantized]
     species = list(batch.species)
@@ -215,17 +300,24 @@ def compute_losses(
     lq, lv = _recon_terms(y[:b], batch.x, batch.valid, cfg)
     recon = lq + t.alpha * lv
     total = recon + t.beta * qo.commit_loss + t.kl_weight * kl
-    if t.position_weight > 0:
-        lp = _position_loss(y[:b], batch.x, batch.valid, species, fps, t.smooth_l1_beta)
-        total = total + t.position_weight * lp
-        logs["pos"] = float(lp.detach())
+    total = total + _kinematic_terms(y[:b], batch.x, batch.valid, species, fps, cfg, logs)
     if n_pair:
         pq, pv = _recon_terms(y[b:], batch.pair_x, batch.pair_valid, cfg)
-        paired = pq + t.alpha * pv
-        if t.position_weight > 0:
-            paired = paired + t.position_weight * _position_loss(
-                y[b:], batch.pair_x, batch.pair_valid, batch.pair_species, fps, t.smooth_l1_beta
+        pair_logs: dict[str, float] = {}
+        paired = (
+            pq
+            + t.alpha * pv
+            + _kinematic_terms(
+                y[b:],
+                batch.pair_x,
+                batch.pair_valid,
+                batch.pair_species,
+                fps,
+                cfg,
+                pair_logs,
+                "paired_",
             )
+        )
         total = total + t.paired_weight * paired
         logs["paired"] = float(paired.detach())
     logs.update(
@@ -427,6 +519,7 @@ def train(
     progress: bool = True,
     log: Callable[[str], None] = print,
     text_embeddings: dict[str, np.ndarray] | None = None,
+    init: str | Path | None = None,
 ) -> TrainResult:
     """Train a model on a synthetic data set and write a checkpoint folder.
 
@@ -442,6 +535,10 @@ def train(
         log: where one-line messages go.
         text_embeddings: ``{species: g}`` to use instead of embedding the catalog's
             descriptions with ``config.model.text.model`` (tests, custom texts).
+        init: fine-tune: start from this checkpoint's weights (a folder, or a shipped
+            variant name such as ``habit``) instead of a fresh model. ``config.model``
+            must equal the checkpoint's; its species, text embeddings and feature
+            normalisation are kept, and the data's clips of its species are trained on.
 
     Raises:
         TrainingDataError: no training clips.
@@ -461,11 +558,22 @@ def train(
         torch.set_num_threads(t.threads)
     t0 = time.perf_counter()
     try:
-        known = {s.name for s in training_species()}
-        tr = load_clip_set(data_dir, "train", progress=progress, mirror=t.mirror)
+        base: LoadedCheckpoint | None = None
+        if init is not None:
+            base = _load_init(init, cfg)
+        known = set(base.model.species) if base else {s.name for s in training_species()}
+        speeds = (1.0 - t.speed_jitter, 1.0 + t.speed_jitter) if t.speed_jitter > 0 else ()
+        tr = load_clip_set(data_dir, "train", progress=progress, mirror=t.mirror, speeds=speeds)
         species = sorted(s for s in tr.species if s in known)
         if not species:
-            raise TrainingDataError(f"{data_dir}: the train split has no training species")
+            raise TrainingDataError(
+                f"{data_dir}: the train split has no clip of "
+                + (
+                    f"the species of {init} ({', '.join(sorted(known))})"
+                    if base
+                    else "a training species"
+                )
+            )
         if len(species) != len(tr.species):
             keep = [i for i, c in enumerate(tr.clips) if c.species in known]
             tr = ClipSet(
@@ -481,21 +589,29 @@ def train(
         fps = tr.fps
         from ..species import species_names
 
-        text = (
-            dict(text_embeddings)
-            if text_embeddings is not None
-            else species_embeddings(species_names(), cfg.model.text.model)
-        )
+        if base is not None:
+            species = list(base.model.species)  # every habit encoder stays; the data's train
+            table = base.model.text_table.detach().numpy()
+            text = {n: table[i] for i, n in enumerate(base.model.text_names)}
+        elif text_embeddings is not None:
+            text = dict(text_embeddings)
+        else:
+            text = species_embeddings(species_names(), cfg.model.text.model)
         from .text import description_sha256
 
         text_meta = {
-            "model": cfg.model.text.model if text_embeddings is None else "custom",
+            "model": cfg.model.text.model if text_embeddings is None or base else "custom",
             "description_sha256": {n: description_sha256(n) for n in sorted(text)}
             if text_embeddings is None
             else {},
         }
-        stats = feature_stats(tr, cfg.model.window)
+        if base is not None:
+            stats = (base.model.feat_mean.numpy(), base.model.feat_std.numpy())
+        else:
+            stats = feature_stats(tr, cfg.model.window)
         model = build_untrained(cfg, species, text, stats)
+        if base is not None:
+            model.load_state_dict(base.model.state_dict())
         opt = torch.optim.AdamW(
             model.parameters(),
             lr=t.lr,
@@ -560,6 +676,7 @@ def train(
                     "history": history,
                 },
                 "versions": {"torch": torch.__version__},
+                **({"init": {"checkpoint": str(base.path)}} if base else {}),
             }
 
         def checkpoint(step: int, metrics: dict[str, float]) -> None:
@@ -638,6 +755,22 @@ def train(
         return TrainResult(out, max(start, t.steps), time.perf_counter() - t0, metrics, history)
     finally:
         torch.set_num_threads(old_threads)
+
+
+def _load_init(init: str | Path, cfg: Config) -> LoadedCheckpoint:
+    """The checkpoint a fine-tune starts from (folder or shipped variant name)."""
+    from .config import VARIANTS
+    from .transfer import resolve_checkpoint
+
+    named = str(init) in VARIANTS and not Path(init).is_dir()
+    path = resolve_checkpoint(str(init)) if named else Path(init)
+    base = load_checkpoint(path)
+    if base.config.model != cfg.model:
+        raise CheckpointError(
+            f"--init {init}: its model configuration differs from this run's; fine-tuning "
+            "keeps the checkpoint's model (only training settings may change)"
+        )
+    return base
 
 
 def record_metrics(out_dir: str | Path, metrics: dict[str, Any]) -> None:

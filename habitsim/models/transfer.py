@@ -55,6 +55,7 @@ from .features import (
     Q_DIM,
     canonical_window,
     clip_arrays,
+    decoded_contacts,
     features_to_motion,
     uncanonicalize,
 )
@@ -292,6 +293,7 @@ def _run_network(
     feats = _blend(world, starts, n, window)
     ratio = load_species(to).hip_height / load_species(src.species).hip_height
     out = features_to_motion(feats, to, ck.fps, src.root_positions[0, :2] * ratio)
+    out = Motion(out.species, out.fps, out.root_positions, out.rotations, decoded_contacts(feats))
     info = {
         "habit_species": habit_sp,
         "retrieval": None
@@ -330,46 +332,71 @@ def _gait_duty(target: str, source: Motion) -> tuple[str, float] | None:
     return None
 
 
-def transfer_contacts(out: Motion, source: Motion) -> tuple[np.ndarray, dict[str, Any]]:
+#: A decoded foot whose stance labels match the source's footfall schedule with an F1
+#: below this takes the source's schedule instead (the action's footfalls survive).
+MIN_SOURCE_AGREEMENT = 0.6
+
+
+def transfer_contacts(
+    out: Motion, source: Motion, decoded: np.ndarray | None = None
+) -> tuple[np.ndarray, dict[str, Any]]:
     """Foot-contact labels of a transferred motion, and how they were found.
 
     In this order:
 
-    1. ``source``: the source carries stance labels (``source.contacts``; a synthetic
-       clip's planned stance, an import's labels found on the source skeleton): the
-       transferred motion keeps the source's footfall schedule, carried over in
-       normalised time when the transfer changed the clip's length
-       (:func:`habitsim.contacts.warp_contacts`; a frame-rate round trip through the
-       model can add or drop a frame), then cleaned of runs shorter than 2 frames
-       (:func:`habitsim.contacts.drop_short_runs`).
-    2. ``detected``: no source labels: contacts detected on the output's resting feet
+    1. ``decoded``: the network's own contact outputs (feature version 3), cleaned of
+       runs shorter than 2 frames (:func:`habitsim.contacts.drop_short_runs`). When the
+       source carries stance labels they are checked against its footfall schedule
+       (carried over in normalised time, :func:`habitsim.contacts.warp_contacts`): the
+       per-foot F1 goes into the report and a foot that agrees less than
+       :data:`MIN_SOURCE_AGREEMENT` takes the source's schedule.
+    2. ``source``: no decoded contacts (``direct``), and the source carries stance labels
+       (a synthetic clip's planned stance, an import's labels found on the source
+       skeleton): the transferred motion keeps the source's footfall schedule.
+    3. ``detected``: neither: contacts detected on the output's resting feet
        (:func:`habitsim.contacts.detect_contacts`).
-    3. ``duty``: a decoded gait whose stance feet still slide may hold no resting frame
-       at all, and a refinement given no stance plants no foot; so a foot whose detected
-       stance share is under half its gait's duty factor is labelled by
+    4. ``duty``: a gait whose stance feet still slide may hold no resting frame at all,
+       and a refinement given no stance plants no foot; so a foot whose detected stance
+       share is under half its gait's duty factor is labelled by
        :func:`habitsim.contacts.contacts_by_duty` instead (the target's duty factor for
-       the source's gait).
+       the source's gait) — the last resort, reported.
 
     Returns:
         ``(labels, info)``: (T, 4) bool labels of ``out`` and ``info["method"]`` (one of
-        ``source``, ``detected``, ``duty``) with the details of that method.
+        ``decoded``, ``source``, ``detected``, ``duty``) with the details of that method.
     """
     from ..contacts import contacts_by_duty, contacts_from_feet, drop_short_runs, warp_contacts
+    from ..planting import contact_f1
 
+    src = None
     if source.contacts is not None:
-        src = np.asarray(source.contacts, dtype=bool)
-        labels = drop_short_runs(warp_contacts(src, out.num_frames), 2)
-        info: dict[str, Any] = {
+        src = drop_short_runs(warp_contacts(np.asarray(source.contacts, bool), out.num_frames), 2)
+    if decoded is not None:
+        labels = drop_short_runs(np.asarray(decoded, dtype=bool), 2)
+        info: dict[str, Any] = {"method": "decoded"}
+        if src is not None:
+            f1 = contact_f1(labels, src)
+            info["source_f1"] = [round(float(v), 3) for v in f1]
+            low = f1 < MIN_SOURCE_AGREEMENT
+            if low.any():
+                labels[:, low] = src[:, low]
+                info["feet_from_source"] = [n for n, lo in zip(FEET, low, strict=True) if lo]
+            return labels, info
+        gd = _gait_duty(out.species, source)
+        if gd is None or out.num_frames < 5 or not (labels.mean(axis=0) < 0.5 * gd[1]).any():
+            return labels, info
+    elif src is not None:
+        info = {
             "method": "source",
-            "source_frames": int(src.shape[0]),
-            "time_warped": bool(src.shape[0] != out.num_frames),
+            "source_frames": int(np.asarray(source.contacts).shape[0]),
+            "time_warped": bool(np.asarray(source.contacts).shape[0] != out.num_frames),
         }
-        return labels, info
+        return src, info
     feet = out.foot_positions()  # one forward-kinematics pass for both labellings
     leg = out.species_info.leg_length
-    detected = contacts_from_feet(feet, out.fps, leg)
+    detected = labels if decoded is not None else contacts_from_feet(feet, out.fps, leg)
     why = "the source has no stance labels"
-    info = {"method": "detected", "reason": why}
+    info = {"method": "decoded" if decoded is not None else "detected", "reason": why}
     gd = _gait_duty(out.species, source)
     if gd is None or out.num_frames < 5:
         return detected, info
@@ -392,7 +419,7 @@ def transfer_contacts(out: Motion, source: Motion) -> tuple[np.ndarray, dict[str
 def _finish(out: Motion, source: Motion, info: dict[str, Any]) -> Motion:
     out = _resample(out, source.fps)
     meta = {k: v for k, v in source.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
-    contacts, how = transfer_contacts(out, source)
+    contacts, how = transfer_contacts(out, source, out.contacts)
     meta["transfer"] = {**info, "contacts": how}
     return Motion(out.species, out.fps, out.root_positions, out.rotations, contacts, meta)
 
@@ -533,4 +560,6 @@ def reconstruct(
         **info,
     }
     out = _resample(out, motion.fps)
-    return Motion(out.species, out.fps, out.root_positions, out.rotations, None, {"transfer": info})
+    return Motion(
+        out.species, out.fps, out.root_positions, out.rotations, out.contacts, {"transfer": info}
+    )
