@@ -12,9 +12,10 @@ import pytest
 from habitsim.contacts import drop_short_runs, warp_contacts
 from habitsim.gaits import generate
 from habitsim.models import transfer
-from habitsim.models.transfer import transfer_contacts
+from habitsim.models.transfer import MIN_SOURCE_AGREEMENT, transfer_contacts
 from habitsim.motion import resample_motion
 from habitsim.pipeline import PipelineError, refine_mode, run_clip, stance_toe_height
+from habitsim.planting import contact_f1
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -46,12 +47,21 @@ def test_drop_short_runs_and_warp() -> None:
 
 def test_transfer_keeps_the_source_footfalls(trot) -> None:
     assert trot.contacts is not None
-    for method in ("habit", "direct"):
-        out = transfer(trot, to="cat", method=method, seed=0)
-        assert out.metadata["transfer"]["contacts"]["method"] == "source"
-        np.testing.assert_array_equal(
-            out.contacts, drop_short_runs(warp_contacts(trot.contacts, out.num_frames))
-        )
+    src = drop_short_runs(warp_contacts(trot.contacts, trot.num_frames))
+    # direct copies the source's schedule
+    out = transfer(trot, to="cat", method="direct", seed=0)
+    assert out.metadata["transfer"]["contacts"]["method"] == "source"
+    np.testing.assert_array_equal(out.contacts, src)
+    # the network's decoded contacts, checked foot by foot against the source's schedule
+    out = transfer(trot, to="cat", method="habit", seed=0)
+    how = out.metadata["transfer"]["contacts"]
+    assert how["method"] == "decoded" and len(how["source_f1"]) == 4
+    for k, foot in enumerate(("LF", "RF", "LH", "RH")):
+        f1 = contact_f1(out.contacts[:, k : k + 1], src[:, k : k + 1])[0]
+        if foot in how.get("feet_from_source", []):
+            np.testing.assert_array_equal(out.contacts[:, k], src[:, k])
+        else:  # kept: it agreed with the source's footfalls
+            assert f1 >= MIN_SOURCE_AGREEMENT and how["source_f1"][k] == pytest.approx(f1, abs=1e-3)
 
 
 def test_transfer_contacts_time_warped_when_the_length_changes(trot) -> None:
