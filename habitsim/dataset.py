@@ -63,7 +63,7 @@ from typing import Any
 import numpy as np
 
 from .errors import DatasetError, HabitsimError, brief
-from .fileio import atomic_write_text, make_dirs
+from .fileio import atomic_write_text, check_writable, make_dirs
 from .gaits import ACTIONS, GENERATOR_VERSION, available_actions, generate
 from .motion import Motion, load_motion
 from .species import FEET, all_species, load_species
@@ -711,6 +711,7 @@ def build_dataset(
 
     jobs = plan_clips(names, clips_per_species, seed, fps)
     make_dirs(out, "data set folder")
+    check_writable(out / MANIFEST_NAME, "data set folder")  # an existing read-only folder
     # From here on the folder is "being built": no manifest until the end.
     for name in (MANIFEST_NAME, STATS_CSV_NAME, STATS_MD_NAME):
         (out / name).unlink(missing_ok=True)

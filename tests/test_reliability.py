@@ -853,3 +853,244 @@ def test_same_seed_eval_tables_are_identical(
     assert rows(eval_run / "rows.csv") == rows(again / "rows.csv")
     for f in ["summary.json", *(f for f in files_under(again) if f.startswith("rows/"))]:
         _same_report(eval_run / f, again / f, drop=("out",))
+
+
+# ------------------------------------------------------------------ every writer: typed errors
+
+#: The two unwritable destinations of each writer's regression test: a file where a folder
+#: should be, and a read-only folder (skipped for the super-user, who writes there anyway).
+UNWRITABLE = [
+    "file",
+    pytest.param(
+        "read_only",
+        marks=pytest.mark.skipif(os.geteuid() == 0, reason="the super-user writes anywhere"),
+    ),
+]
+
+
+@pytest.fixture
+def unwritable(tmp_path: Path, request):
+    """A folder path nothing can be written under (``request.param``: "file" or
+    "read_only"); the read-only folder is made writable again at the end."""
+    kind = request.param
+    if kind == "file":
+        blocker = tmp_path / "blocker"
+        blocker.write_text("a file where a folder should be")
+        yield blocker / "sub"
+        return
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    try:
+        yield ro / "sub"
+    finally:
+        ro.chmod(0o755)
+
+
+def _typed_output_error(exc: BaseException) -> None:
+    assert isinstance(exc, OutputPathError), repr(exc)
+    assert len(str(exc)) < 600
+
+
+@pytest.mark.parametrize("unwritable", UNWRITABLE, indirect=True)
+def test_save_checkpoint_unwritable(unwritable: Path) -> None:
+    from habitsim.models import shipped_checkpoint
+    from habitsim.models.checkpoint import export_checkpoint, load_checkpoint, save_checkpoint
+
+    src = shipped_checkpoint()
+    ck = load_checkpoint(src)
+    with pytest.raises(OutputPathError) as ei:
+        save_checkpoint(unwritable / "ck", ck.model, ck.config, {"fps": 30.0})
+    _typed_output_error(ei.value)
+    with pytest.raises(OutputPathError) as ei:
+        export_checkpoint(src, unwritable / "shipped")
+    _typed_output_error(ei.value)
+    assert not unwritable.exists()
+
+
+@pytest.mark.parametrize("unwritable", UNWRITABLE, indirect=True)
+def test_train_checked_before_training(unwritable: Path, small_dataset: Path, capsys) -> None:
+    code, err = run_cli(
+        ["train", "--data", small_dataset, "--out", unwritable / "ck", "--config", "small"],
+        capsys,
+    )
+    assert code == 2 and err.startswith("error: ") and "--out" in err, err
+    assert not unwritable.exists()
+
+
+@pytest.mark.parametrize("unwritable", UNWRITABLE, indirect=True)
+def test_evaluator_unwritable(unwritable: Path, small_dataset: Path) -> None:
+    from habitsim.evaluation.evaluator import load_evaluator, save_evaluator, train_evaluator
+
+    calls = []
+    with pytest.raises(OutputPathError) as ei:  # refused before training
+        train_evaluator(small_dataset, unwritable / "e", progress=False, log=calls.append)
+    _typed_output_error(ei.value)
+    assert calls == []
+    ev = load_evaluator()
+    with pytest.raises(OutputPathError) as ei:
+        save_evaluator(
+            ev.model,
+            unwritable / "e",
+            accuracy={},
+            data_dir=small_dataset,
+            seed=0,
+            clips_per_species=1,
+            wall_time_s=0.0,
+            final_loss=0.0,
+        )
+    _typed_output_error(ei.value)
+    assert not unwritable.exists()
+
+
+@pytest.mark.parametrize("where", ["report_files", "report.html", "summary.csv"])
+def test_eval_outputs_checked_before_the_run(
+    tmp_path: Path, small_dataset: Path, capsys, where: str
+) -> None:
+    """A folder where a table should be, or a file where report_files/ should be."""
+    out = tmp_path / "run"
+    out.mkdir()
+    if where == "report_files":
+        (out / where).write_text("x")
+    else:
+        (out / where).mkdir()
+    args = [a for a in EVAL_ARGS if a != "--no-report"]
+    code, err = run_cli(["eval", "--data", small_dataset, "--out", out, *args], capsys)
+    assert code == 2 and err.startswith("error: ") and where in err, err
+    assert not list((out / "rows").glob("*.json"))  # no pair ran
+
+
+def test_write_report_unwritable(tmp_path: Path, eval_run: Path) -> None:
+    import shutil
+
+    from habitsim.evaluation.report import write_report
+
+    for case in ("file", "folder_inside"):
+        out = tmp_path / case
+        shutil.copytree(eval_run, out)
+        shutil.rmtree(out / "report_files", ignore_errors=True)
+        if case == "file":
+            (out / "report_files").write_text("x")
+        else:  # an old figure that is a folder cannot be cleared
+            (out / "report_files" / "01_old.png").mkdir(parents=True)
+        with pytest.raises(OutputPathError) as ei:
+            write_report(out)
+        _typed_output_error(ei.value)
+        assert not (out / "report.html").exists()
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="the super-user writes into read-only folders")
+def test_write_report_read_only(tmp_path: Path, eval_run: Path) -> None:
+    import shutil
+
+    from habitsim.evaluation.report import write_report
+
+    out = tmp_path / "run"
+    shutil.copytree(eval_run, out)
+    (out / "report_files").chmod(0o555)
+    try:
+        with pytest.raises(OutputPathError):
+            write_report(out)
+    finally:
+        (out / "report_files").chmod(0o755)
+
+
+@pytest.mark.parametrize("unwritable", UNWRITABLE, indirect=True)
+def test_demo_checked_before_work(unwritable: Path, tmp_path: Path, capsys) -> None:
+    code, err = run_cli(["demo", "--out", unwritable / "demo", "--no-progress"], capsys)
+    assert code == 2 and err.startswith("error: "), err
+    assert not unwritable.exists()
+
+
+@pytest.mark.parametrize("blocked", ["pipeline", "report_files", "report.md"])
+def test_demo_pipeline_outputs_checked_before_the_data_set(
+    tmp_path: Path, capsys, blocked: str
+) -> None:
+    out = tmp_path / "demo"
+    out.mkdir()
+    if blocked == "report.md":
+        (out / blocked).mkdir()
+    else:
+        (out / blocked).write_text("x")
+    code, err = run_cli(["demo", "--out", out, "--no-progress"], capsys)
+    assert code == 2 and err.startswith("error: ") and blocked in err, err
+    assert files_under(out) == [blocked]  # the data set was not built
+
+
+@pytest.mark.parametrize("unwritable", UNWRITABLE, indirect=True)
+def test_synth_into_unwritable_folder(unwritable: Path, capsys) -> None:
+    argv = ["data", "synth", "--species", "cat", "--clips-per-species", "1", "--workers", "1"]
+    code, err = run_cli([*argv, "--no-progress", "--out", unwritable / "d"], capsys)
+    assert code == 2 and err.startswith("error: "), err
+    assert not unwritable.exists()
+
+
+def test_synth_into_existing_read_only_folder_even_for_root(tmp_path: Path, monkeypatch) -> None:
+    """An existing data set folder that refuses new files (EACCES on create, as a
+    read-only folder or file system answers) is refused before any clip is made."""
+    import tempfile
+
+    from habitsim.dataset import build_dataset
+
+    def denied(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    (tmp_path / "d").mkdir()
+    monkeypatch.setattr(tempfile, "mkstemp", denied)
+    with pytest.raises(OutputPathError, match="Permission denied"):
+        build_dataset(tmp_path / "d", clips_per_species=1, species=["cat"], workers=1)
+    assert files_under(tmp_path) == ["d"]
+
+
+def test_make_dirs_read_only_even_for_root(tmp_path: Path, monkeypatch) -> None:
+    from habitsim.fileio import make_dirs
+
+    def denied(self, *args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(Path, "mkdir", denied)
+    with pytest.raises(OutputPathError, match="Permission denied"):
+        make_dirs(tmp_path / "x" / "y", "checkpoint folder")
+
+
+@pytest.mark.parametrize("unwritable", UNWRITABLE, indirect=True)
+@pytest.mark.parametrize("command", ["import-bvh", "export-bvh"])
+def test_bvh_commands_checked_before_work(
+    unwritable: Path, motion_file: Path, capsys, command: str
+) -> None:
+    if command == "import-bvh":
+        argv = ["data", "import-bvh", EXAMPLE_BVH, "--species", "dog"]
+        argv += ["--out", unwritable / "m.npz"]
+    else:
+        argv = ["data", "export-bvh", motion_file, "--out", unwritable / "m.bvh"]
+    code, err = run_cli(argv, capsys)
+    assert code == 2 and err.startswith("error: ") and "--out" in err, err
+    assert not unwritable.exists()
+
+
+@pytest.mark.parametrize("flag", ["--out", "--report", "--video"])
+def test_retarget_outputs_checked_together(
+    tmp_path: Path, motion_file: Path, capsys, flag: str
+) -> None:
+    blocker = tmp_path / "blocker"
+    blocker.write_text("x")
+    paths = {
+        "--out": tmp_path / "q.npz",
+        "--report": tmp_path / "r.json",
+        "--video": tmp_path / "v.gif",
+    }
+    paths[flag] = blocker / paths[flag].name
+    argv = ["retarget", motion_file, "--robot", tmp_path / "missing.xml", "--feet", "a,b,c,d"]
+    argv += ["--track", *(x for k, p in paths.items() for x in (k, p))]
+    code, err = run_cli(argv, capsys)
+    assert code == 2 and "file where a folder" in err and flag in err, err
+    assert files_under(tmp_path) == ["blocker"]
+
+
+@pytest.mark.parametrize("unwritable", UNWRITABLE, indirect=True)
+def test_write_golden_unwritable(unwritable: Path) -> None:
+    from habitsim.testing import write_golden
+
+    with pytest.raises(OutputPathError) as ei:
+        write_golden(unwritable / "g.json", {"x": 1.0})
+    _typed_output_error(ei.value)

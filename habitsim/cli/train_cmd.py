@@ -74,6 +74,7 @@ def _parse_set(items: list[str]) -> dict[str, object]:
 
 
 def _train(ns: argparse.Namespace) -> int:
+    from ..fileio import check_writable
     from ..models.checkpoint import MODEL_FILE
     from ..models.config import preset
     from ..models.evaluate import record_reference_error
@@ -89,6 +90,7 @@ def _train(ns: argparse.Namespace) -> int:
         changes["train.threads"] = ns.threads
     if changes:
         cfg = cfg.replace(**changes)
+    check_writable(Path(ns.out) / MODEL_FILE, "--out")  # before training, not after it
     t0 = time.perf_counter()
     res = train(
         ns.data, ns.out, cfg, resume=ns.resume, overwrite=ns.overwrite, progress=not ns.no_progress
