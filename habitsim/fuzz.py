@@ -2,6 +2,7 @@
 
 ::
 
+    habitsim fuzz [--n 10000] [--seed 0] [--show 5] [--targets bvh,npz,...] [--check]
     python -m habitsim.fuzz [--n 10000] [--seed 0] [--show 5] [--targets bvh,npz,...]
 
 Each input is made by mutating a valid one (the shipped example BVH, a generated motion
@@ -816,8 +817,29 @@ def _describe(case: Case) -> str:
     return text if len(text) <= 300 else text[:300] + f"… ({len(text)} characters)"
 
 
+#: Legend of :meth:`CampaignResult.table`.
+LEGEND = (
+    "inputs: fuzzed inputs of that target; ok: read (or the command ran) without an error; "
+    "typed: refused with a HabitsimError (error: ..., exit code 2, or a usage error); "
+    "raw: any other exception, a bug (shown below the table with its input)."
+)
+
+
+def print_campaign(res: CampaignResult, n: int, seed: int) -> None:
+    """Print a campaign's counts by outcome and their legend, then its first raw
+    exceptions."""
+    from .cli.conventions import format_legend
+
+    print(f"fuzz: {n} inputs, seed {seed}, {res.seconds:.0f} s")
+    print(res.table())
+    print(format_legend(LEGEND))
+    for case, exc, tb in res.raw:
+        print(f"\nraw {type(exc).__name__} on a {case.target} input: {_describe(case)}\n{tb}")
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m habitsim.fuzz``: run a campaign and print counts by outcome."""
+    """``python -m habitsim.fuzz``: run a campaign and print counts by outcome (the same
+    campaign as ``habitsim fuzz``)."""
     p = argparse.ArgumentParser(
         prog="python -m habitsim.fuzz", description="Fuzz habitsim's readers and command line."
     )
@@ -832,10 +854,7 @@ def main(argv: list[str] | None = None) -> int:
     ns = p.parse_args(argv)
     targets = [t.strip() for t in ns.targets.split(",")] if ns.targets else None
     res = campaign(ns.n, ns.seed, targets, keep=ns.show, progress=True)
-    print(f"fuzz: {ns.n} inputs, seed {ns.seed}, {res.seconds:.0f} s")
-    print(res.table())
-    for case, exc, tb in res.raw:
-        print(f"\nraw {type(exc).__name__} on a {case.target} input: {_describe(case)}\n{tb}")
+    print_campaign(res, ns.n, ns.seed)
     return 1 if res.total["raw"] else 0
 
 
