@@ -192,3 +192,23 @@ def test_fuzz_command_bounds(capsys, argv: list[str]) -> None:
 def test_fuzz_module_entry_point_still_works(capsys) -> None:
     assert fuzz.main(["--n", "4", "--targets", "species"]) == 0
     assert "total" in capsys.readouterr().out
+
+
+def test_heavy_commands_on_absurd_motions(ws) -> None:
+    """transfer / refine / track / eval on valid-shaped but absurd motions (fps at the
+    ends of its range, one frame, roots far away or under the floor, random rotations)."""
+
+    @settings(FAST, max_examples=8)
+    @given(rnd=st.randoms(use_true_random=False))
+    def check(rnd) -> None:
+        _check(ws, fuzz.make_case("heavy", ws, rnd))
+
+    check()
+
+
+def test_absurd_motions_are_valid_motions() -> None:
+    import random
+
+    for seed in range(40):
+        m, note = fuzz._absurd_motion(random.Random(seed))
+        assert 1 <= m.num_frames and m.duration <= fuzz.HEAVY_MAX_SECONDS + 1.0 / m.fps, note
