@@ -39,7 +39,8 @@ lint: $(BIN)/ruff
 	$(BIN)/ruff check $(LINTED)
 	$(BIN)/ruff format --check $(LINTED)
 
-# A long fuzzing campaign over the readers and the command line (counts by outcome).
+# A long fuzzing campaign over the readers and the command line (counts by outcome; the
+# same campaign as `habitsim fuzz --n N`).
 fuzz: $(STAMP)
 	$(BIN)/python -m habitsim.fuzz --n $(or $(FUZZ_N),10000)
 

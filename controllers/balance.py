@@ -444,7 +444,18 @@ class StanceQP:
         """Regularised least squares on the stance feet, clipped into the pyramid."""
         idx = np.flatnonzero(stance)
         a = wrench_matrix(np.asarray(r).reshape(-1, 3)[idx]) * row_scale[:, None]
-        f = np.linalg.solve(a.T @ a + 1e-6 * np.eye(a.shape[1]), a.T @ (wrench * row_scale))
+        lhs, rhs = a.T @ a + 1e-6 * np.eye(a.shape[1]), a.T @ (wrench * row_scale)
+        try:
+            f = np.linalg.solve(lhs, rhs)
+        except np.linalg.LinAlgError:
+            # singular in floating point: feet kilometres from the CoM (an absurd reference)
+            # drown the regularisation; least squares instead, no force if even that fails
+            try:
+                f = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+            except np.linalg.LinAlgError:
+                f = np.zeros(a.shape[1])
+            if not np.all(np.isfinite(f)):
+                f = np.zeros(a.shape[1])
         out = np.zeros((self.n, 3))
         for k, i in enumerate(idx):
             fi = f[3 * k : 3 * k + 3]

@@ -44,7 +44,7 @@ import torch
 from torch import nn
 
 from habitsim.errors import HabitsimError
-from habitsim.fileio import atomic_write, atomic_write_text
+from habitsim.fileio import atomic_write, atomic_write_text, make_dirs
 from habitsim.motion import FEATURE_DIM, Motion
 from habitsim.rotations import quat_fix_continuity, quat_mul, quat_slerp
 
@@ -529,12 +529,16 @@ def train_evaluator(
 
     Raises:
         DatasetError: a folder without a manifest. EvaluatorError: no training clips.
+        OutputPathError: ``out_dir`` cannot be written (checked before training).
     """
     from habitsim.dataset import load_manifest
+    from habitsim.fileio import check_writable
     from habitsim.gaits import ACTIONS
     from habitsim.species import load_species
 
     t0 = time.perf_counter()
+    for name in (_WEIGHTS, _CONFIG, _README):
+        check_writable(Path(out_dir) / name, "evaluator folder")
     data = Path(data_dir)
     man = load_manifest(data, check_files=False)
     train_species = sorted({c.species for c in man.clips if c.split == "train"})
@@ -669,8 +673,7 @@ def save_evaluator(
     """Write weights (safetensors), ``config.json`` and ``README.md`` atomically."""
     from safetensors.torch import save
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_dirs(out_dir, "evaluator folder")
     state = {k: v.detach().contiguous() for k, v in model.state_dict().items()}
     blob = save(state, metadata={"format": "pt", "kind": "habitsim.evaluator"})
     with atomic_write(out / _WEIGHTS) as fh:

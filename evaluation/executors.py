@@ -12,6 +12,13 @@ home-made:
   the same habitsim installation and access to the data set and output folders (a
   shared file system), because tasks carry file paths, not arrays.
 
+Workers die with the run either way: the local pool through
+:func:`habitsim.workers.init_worker`; the worker processes of a local Dask cluster
+(``--executor dask`` without ``--scheduler``) exit when their parent's pipe closes, so a
+SIGKILL'd run leaves none behind, and an interrupted one (Ctrl-C, SIGTERM) kills them at
+once instead of waiting for the tasks in flight. Workers of a remote scheduler are not
+the run's to stop.
+
 Starting a Dask cluster by hand (one scheduler, any number of workers, any machines)::
 
     dask scheduler --host 0.0.0.0 --port 8786              # on the head node
@@ -28,7 +35,9 @@ deterministic and independent of where and in which order it runs.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import os
+import signal
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
 
@@ -157,6 +166,7 @@ class DaskExecutor:
                 "the dask executor needs dask[distributed]: pip install 'habitsim[cluster]'"
             ) from e
         self._cluster = None
+        self._killed = False
         try:
             if scheduler is None:
                 self._cluster = LocalCluster(
@@ -184,14 +194,35 @@ class DaskExecutor:
         try:
             for f in as_completed(futs):
                 yield tasks[index[f.key]], f.result()
+        except BaseException:
+            # interrupted (Ctrl-C / SIGTERM) or a task failed: the worker processes of our
+            # own cluster stop now, not after the nanny's grace period with a task still
+            # writing its traces
+            self._kill_local_workers()
+            self._killed = True
+            raise
         finally:
             for f in futs:
                 f.cancel()
 
+    def _kill_local_workers(self) -> None:
+        """SIGKILL the worker processes of the local cluster (none with a scheduler: the
+        workers of a remote cluster are not ours to stop)."""
+        if self._cluster is None:
+            return
+        for nanny in list(getattr(self._cluster, "workers", {}).values()):
+            pid = getattr(nanny, "pid", None)
+            if isinstance(pid, int) and pid > 0 and pid != os.getpid():
+                with contextlib.suppress(OSError):
+                    os.kill(pid, signal.SIGKILL)
+
     def close(self) -> None:
-        self.client.close()
-        if self._cluster is not None:
-            self._cluster.close()
+        # after an interruption the workers are already gone: closing must not fail on it
+        quiet = contextlib.suppress(Exception) if self._killed else contextlib.nullcontext()
+        with quiet:
+            self.client.close()
+            if self._cluster is not None:
+                self._cluster.close(timeout=10)
 
 
 def make_executor(

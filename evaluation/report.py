@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from habitsim.errors import HabitsimError
-from habitsim.fileio import atomic_write, atomic_write_text
+from habitsim.errors import HabitsimError, OutputPathError, brief_path
+from habitsim.fileio import atomic_write, atomic_write_text, check_writable, make_dirs
 from habitsim.species import FEET
 
 __all__ = ["ReportError", "write_report", "SUMMARY_PLOT_METRICS"]
@@ -252,7 +252,7 @@ class _Page:
         self.n += 1
         ext = "gif" if mime == "image/gif" else "png"
         fname = f"{self.n:02d}_{name}.{ext}"
-        self.files.mkdir(parents=True, exist_ok=True)
+        make_dirs(self.files, "report folder")
         with atomic_write(self.files / fname) as fh:
             fh.write(data)
         b64 = base64.b64encode(data).decode("ascii")
@@ -322,6 +322,38 @@ def _load_run(out: Path) -> tuple[dict[str, Any], dict[str, Any], list[dict[str,
     return run["config"], summary, load_rows(out)
 
 
+def check_report_outputs(out: str | Path) -> None:
+    """Check that ``report.html``, ``report.md`` and ``report_files/`` of a run folder can
+    be written, without writing anything.
+
+    Raises:
+        OutputPathError: naming the path and the reason.
+    """
+    out = Path(out)
+    for name in ("report.html", "report.md"):
+        check_writable(out / name, "report")
+    check_writable(out / "report_files" / "01_figure.png", "report folder")
+
+
+def clear_figures(files: Path) -> None:
+    """Remove the figures of an earlier report from ``files`` (a typed error when one
+    cannot be removed).
+
+    Raises:
+        OutputPathError: a figure that cannot be removed (a folder, a read-only folder).
+    """
+    if not files.is_dir():
+        return
+    for old in files.glob("*"):
+        try:
+            old.unlink()
+        except OSError as e:
+            raise OutputPathError(
+                f"report folder {brief_path(files)}: cannot remove the old figure "
+                f"{brief_path(old.name)} ({e.strerror or type(e).__name__})"
+            ) from None
+
+
 def write_report(out: str | Path) -> list[Path]:
     """Write ``report.html`` and ``report.md`` (+ ``report_files/``) for a run folder.
 
@@ -336,9 +368,9 @@ def write_report(out: str | Path) -> list[Path]:
     out = Path(out)
     cfg, summary_doc, rows = _load_run(out)
     summary: dict[str, dict[str, Any]] = summary_doc["methods"]
+    check_report_outputs(out)
     page = _Page(out / "report_files")
-    for old in (out / "report_files").glob("*") if (out / "report_files").is_dir() else []:
-        old.unlink()
+    clear_figures(out / "report_files")
 
     page.heading("habitsim benchmark", 1)
     n_ok = sum(r["status"] == "ok" for r in rows)

@@ -84,7 +84,6 @@ defaults), :mod:`~habitsim.evaluation.planning` (:func:`default_data`,
 
 from __future__ import annotations
 
-import contextlib
 import json
 import shutil
 import time
@@ -93,8 +92,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from habitsim.errors import brief
-from habitsim.fileio import atomic_write, atomic_write_text, json_safe, make_dirs
+from habitsim.errors import OutputPathError, brief, brief_path
+from habitsim.fileio import atomic_write, atomic_write_text, check_writable, json_safe, make_dirs
 
 from .config import (
     DEFAULT_CLIPS_PER_SOURCE,
@@ -180,6 +179,32 @@ class BenchmarkResult:
         return format_table(self.summary, markdown=False, controller=_controller_label(self.config))
 
 
+#: Files of a run folder written at the end of a run (checked before it starts).
+_TABLE_FILES = (
+    "run.json",
+    "rows.csv",
+    "rows.parquet",
+    "features.npz",
+    "reference_features.npz",
+    "summary.json",
+    "summary.csv",
+    "summary.md",
+)
+
+
+def _check_outputs(out: Path, report: bool) -> None:
+    """Check, before any pair runs, that the tables (and the report) of a run can be
+    written: a folder named ``summary.csv`` or a read-only ``report_files/`` is an
+    :class:`~habitsim.errors.OutputPathError` now, not after hours of work."""
+    for name in _TABLE_FILES:
+        check_writable(out / name, "--out")
+    check_writable(out / "traces" / "pair" / "transferred.npz", "--out")
+    if report:
+        from .report import check_report_outputs
+
+        check_report_outputs(out)
+
+
 def _check_out(cfg: EvalConfig, resume: bool, overwrite: bool) -> None:
     out = Path(cfg.out)
     if out.exists() and not out.is_dir():
@@ -204,8 +229,15 @@ def _check_out(cfg: EvalConfig, resume: bool, overwrite: bool) -> None:
             "report.md",
             "reference_features.npz",
         ):
-            with contextlib.suppress(FileNotFoundError):
+            try:
                 (out / f).unlink()
+            except FileNotFoundError:
+                pass
+            except OSError as e:  # a folder of that name, a read-only folder
+                raise OutputPathError(
+                    f"--out {brief_path(out / f)}: cannot be replaced "
+                    f"({e.strerror or type(e).__name__})"
+                ) from None
         return
     if not resume:
         raise EvalError(
@@ -265,6 +297,7 @@ def run_benchmark(
     tasks = plan_tasks(cfg)
     out = Path(cfg.out)
     make_dirs(out / "rows", "--out")
+    _check_outputs(out, report)
     atomic_write_text(
         out / "run.json",
         json.dumps(

@@ -170,12 +170,14 @@ def write_tables(out: str | Path, rows: Sequence[dict[str, Any]]) -> list[Path]:
             pq.write_table(pa.table(data), fh)
         written.append(out / "rows.parquet")
     feats = [(r["key"], r["features"]) for r in rows if r.get("features")]
+    # (0, 0) when no pair has features (every pair failed): a table of no rows
+    features = (
+        np.array([f for _, f in feats], dtype=np.float64).reshape(len(feats), -1)
+        if feats
+        else np.zeros((0, 0))
+    )
     with atomic_write(out / "features.npz") as fh:
-        np.savez_compressed(
-            fh,
-            keys=np.array([k for k, _ in feats], dtype=str),
-            features=np.array([f for _, f in feats], dtype=np.float64).reshape(len(feats), -1),
-        )
+        np.savez_compressed(fh, keys=np.array([k for k, _ in feats], dtype=str), features=features)
     written.append(out / "features.npz")
     return written
 

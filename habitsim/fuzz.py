@@ -2,6 +2,7 @@
 
 ::
 
+    habitsim fuzz [--n 10000] [--seed 0] [--show 5] [--targets bvh,npz,...] [--check]
     python -m habitsim.fuzz [--n 10000] [--seed 0] [--show 5] [--targets bvh,npz,...]
 
 Each input is made by mutating a valid one (the shipped example BVH, a generated motion
@@ -29,6 +30,7 @@ import contextlib
 import io
 import json
 import random
+import re
 import shutil
 import sys
 import tempfile
@@ -64,6 +66,7 @@ TARGETS: dict[str, float] = {
     "species": 0.17,
     "manifest": 0.10,
     "cli": 0.08,
+    "heavy": 0.03,
 }
 
 #: Hostile number-like tokens.
@@ -632,6 +635,147 @@ def _cli_argv(ws: Workspace, rnd: random.Random) -> list[str]:
     return argv
 
 
+# ---------------------------------------------------------------------- heavy commands
+
+#: Longest clip of the heavy commands' inputs [s] (so a campaign stays fast).
+HEAVY_MAX_SECONDS = 1.0
+
+
+def _absurd_motion(rnd: random.Random, species: str | None = None, min_frames: int = 1):
+    """A valid-shaped motion with absurd but accepted values: fps at the ends of its
+    range, one to a few dozen frames, roots far away, under the floor, in the sky or
+    teleporting, random or flipped joint rotations, odd contact labels and actions."""
+    from .motion import FPS_RANGE, MAX_ABS_POSITION_M, Motion
+    from .skeleton import get_skeleton
+    from .species import species_names
+
+    sp = species or rnd.choice(species_names())
+    root0, rot0 = get_skeleton(sp).standing_pose()
+    fps = rnd.choice([FPS_RANGE[0], 1.5, 7.3, 30.0, 30.0, 240.0, 999.9, FPS_RANGE[1]])
+    frames = rnd.choice([1, 1, 2, 3, 4, 7, 15, 30])
+    frames = max(min_frames, min(frames, int(HEAVY_MAX_SECONDS * fps)))
+    root = np.repeat(root0[None], frames, axis=0).astype(float)
+    big = MAX_ABS_POSITION_M
+    kind = rnd.choice(["stand", "far", "under", "sky", "teleport", "ramp", "tiny"])
+    if kind == "far":
+        root[:, rnd.randrange(2)] += rnd.choice([-1, 1]) * rnd.uniform(0.5, 1.0) * big
+    elif kind == "under":
+        root[:, 2] = -rnd.choice([0.01, 1.0, 100.0, big])
+    elif kind == "sky":
+        root[:, 2] = rnd.choice([10.0, 1e3, big])
+    elif kind == "teleport":
+        root[1::2, rnd.randrange(3)] += rnd.choice([1.0, 1e3, 0.9 * big])
+    elif kind == "ramp":
+        root[:, 0] += np.linspace(0.0, rnd.choice([1.0, 100.0, 0.9 * big]), frames)
+    elif kind == "tiny":
+        root *= 1e-9
+    nprng = np.random.default_rng(rnd.getrandbits(32))
+    rot = np.repeat(rot0[None], frames, axis=0).astype(float)
+    rkind = rnd.choice(["pose", "noise", "random", "flip", "identity", "frozen_random"])
+    if rkind == "noise":
+        rot = rot + nprng.normal(0.0, 0.2, rot.shape)
+    elif rkind == "random":
+        rot = nprng.normal(size=rot.shape)
+    elif rkind == "flip":
+        rot[::2] *= -1.0
+    elif rkind == "identity":
+        rot[:] = (1.0, 0.0, 0.0, 0.0)
+    elif rkind == "frozen_random":
+        rot[:] = nprng.normal(size=rot.shape[1:])
+    rot /= np.linalg.norm(rot, axis=-1, keepdims=True)
+    contacts = rnd.choice([None, np.ones((frames, 4), bool), np.zeros((frames, 4), bool), "random"])
+    if isinstance(contacts, str):
+        contacts = nprng.random((frames, 4)) < 0.5
+    meta: dict[str, Any] = {}
+    if rnd.random() < 0.6:
+        meta["action"] = rnd.choice(["walk", "trot", "jump", "sit", "rotary_gallop", "nope", ""])
+    note = f"{sp} {frames} frames at {fps:g} fps, root {kind}, rotations {rkind}"
+    return Motion(sp, fps, root, rot, contacts, meta), note
+
+
+def _heavy_argv(ws: Workspace, rnd: random.Random) -> tuple[list[str], str]:
+    """A heavy command (transfer, refine, track, eval) on an absurd motion, with small
+    budgets: short clips, a few IPOPT iterations, one pair."""
+    from .species import species_names
+
+    command = rnd.choices(["transfer", "refine", "track", "eval", "light"], [4, 3, 3, 1, 1])[0]
+    if command == "eval":
+        return _heavy_eval(ws, rnd)
+    # refinement needs 3 frames: mostly give it those, sometimes fewer
+    motion, note = _absurd_motion(
+        rnd, min_frames=3 if command == "refine" and rnd.random() < 0.8 else 1
+    )
+    src = ws.path(".npz")
+    src.parent.mkdir(parents=True, exist_ok=True)
+    motion.save(src)
+    out = ws.path(".npz")
+    if command == "transfer":
+        argv = ["transfer", str(src), "--to", rnd.choice(species_names()), "--out", str(out)]
+        argv += ["--method", rnd.choice(["direct", "direct", "habit"])]
+        argv += ["--seed", str(rnd.choice([0, 1, 2**32 - 1]))]
+        if rnd.random() < 0.3:
+            argv += ["--temperature", rnd.choice(["0.001", "1", "10"])]
+        if rnd.random() < 0.3:
+            argv += ["--bvh", str(ws.path(".bvh"))]
+    elif command == "refine":
+        argv = ["refine", str(src), "--out", str(out), "--max-iter", rnd.choice(["1", "3", "5"])]
+        if rnd.random() < 0.6:  # the shortest windows and overlaps, sometimes too short
+            window = rnd.choice(["8", "8", "9", "10", "16", "100000", "5"])
+            argv += ["--window", window, "--overlap", rnd.choice(["4", "4", "5", "3"])]
+        for flag, p in (("--detect-contacts", 0.3), ("--fallback", 0.6), ("--no-metrics", 0.5)):
+            if rnd.random() < p:
+                argv.append(flag)
+        if rnd.random() < 0.1 and motion.num_frames <= 8:
+            argv.append("--dynamics")
+        if rnd.random() < 0.3:
+            argv += ["--report", str(ws.path(".json")), "--qpos", str(ws.path(".npz"))]
+    elif command == "track":
+        controller = rnd.choice(["servo", "pd", "servo+stance", "balance", "mpc"])
+        argv = ["track", str(src), "--controller", controller, "--out", str(out)]
+        if rnd.random() < 0.5:
+            argv += ["--settle", rnd.choice(["0", "0.002", "0.3"])]
+        if rnd.random() < 0.4:
+            hz = ["1", "7.5", "50", "10000"] if controller != "mpc" else ["1", "50", "250"]
+            argv += ["--control-hz", rnd.choice(hz)]
+        if rnd.random() < 0.3:
+            argv.append("--assist")
+            argv.append("root")
+        if rnd.random() < 0.2:
+            argv.append("--no-stop")
+        if rnd.random() < 0.3:
+            argv += ["--report", str(ws.path(".json"))]
+    else:  # the light readers of the same files
+        argv = rnd.choice(
+            [
+                ["motion", "stats", str(src)],
+                ["data", "export-bvh", str(src), "--out", str(ws.path(".bvh"))],
+            ]
+        )
+    return argv, note
+
+
+def _heavy_eval(ws: Workspace, rnd: random.Random) -> tuple[list[str], str]:
+    """``habitsim eval`` of one pair on a copy of the small data set whose training clip
+    is replaced by an absurd motion of the same species."""
+    data = ws.path("")
+    shutil.copytree(ws.dataset, data)
+    clip = rnd.choice([c for c in ws.manifest_seed["clips"] if c["split"] == "train"])
+    motion, note = _absurd_motion(rnd, clip["species"])
+    motion.metadata["action"] = clip["action"]
+    (data / clip["path"]).unlink()
+    motion.save(data / clip["path"])
+    argv = ["eval", "--data", str(data), "--out", str(ws.path("")), "--workers", "1"]
+    argv += ["--methods", rnd.choice(["direct", "habit"]), "--max-clips", "1"]
+    argv += ["--split", "train", "--sources", clip["species"], "--report-pairs"]
+    argv += [rnd.choice(["0", "1"]), "--no-videos", "--no-progress", "--no-dynamic"]
+    argv += ["--refine", rnd.choice(["none", "none", "kinematic"])]
+    argv += rnd.choice([["--no-track"], ["--no-track"], ["--controller", "servo"]])
+    argv += ["--targets", rnd.choice(["all", clip["species"], "cat,dog"])]
+    if rnd.random() < 0.5:
+        argv.append("--no-report")
+    return argv, f"eval of {note}"
+
+
 # ---------------------------------------------------------------------- running
 
 
@@ -647,6 +791,9 @@ def make_case(target: str, ws: Workspace, rnd: random.Random) -> Case:
         return Case(target, (_manifest(ws, rnd), rnd.random() < 0.5))
     if target == "cli":
         return Case(target, _cli_argv(ws, rnd))
+    if target == "heavy":
+        argv, note = _heavy_argv(ws, rnd)
+        return Case(target, argv, note)
     raise HabitsimError(f"unknown fuzz target {target!r}; valid: {', '.join(TARGETS)}")
 
 
@@ -713,6 +860,16 @@ def _run_cli(ws: Workspace, case: Case) -> None:
         raise _Typed(err.getvalue())
     if code not in (0, 1):
         raise RuntimeError(f"exit code {code}")
+    if case.data[0] == "eval":  # a pair's raw exception is kept in its row, not raised
+        out = Path(case.data[case.data.index("--out") + 1])
+        for row in sorted((out / "rows").glob("*.json")):
+            note = str(json.loads(row.read_text(encoding="utf-8")).get("note", ""))
+            if _RAW_NOTE.search(note):
+                raise RuntimeError(f"raw exception in the pair {row.stem}: {note[:300]}")
+
+
+#: The note of an eval row whose pair ended in a raw exception ("… (file.py:123)").
+_RAW_NOTE = re.compile(r"\(\w+\.py:\d+\)$")
 
 
 class _Typed(HabitsimError):
@@ -726,6 +883,7 @@ _RUNNERS: dict[str, Callable[[Workspace, Case], None]] = {
     "species": _run_species,
     "manifest": _run_manifest,
     "cli": _run_cli,
+    "heavy": _run_cli,
 }
 
 
@@ -813,11 +971,33 @@ def _describe(case: Case) -> str:
         text = str(d)
     else:
         text = json.dumps(d, default=str)
-    return text if len(text) <= 300 else text[:300] + f"… ({len(text)} characters)"
+    text = text if len(text) <= 300 else text[:300] + f"… ({len(text)} characters)"
+    return f"{text} ({case.note})" if case.note else text
+
+
+#: Legend of :meth:`CampaignResult.table`.
+LEGEND = (
+    "inputs: fuzzed inputs of that target; ok: read (or the command ran) without an error; "
+    "typed: refused with a HabitsimError (error: ..., exit code 2, or a usage error); "
+    "raw: any other exception, a bug (shown below the table with its input)."
+)
+
+
+def print_campaign(res: CampaignResult, n: int, seed: int) -> None:
+    """Print a campaign's counts by outcome and their legend, then its first raw
+    exceptions."""
+    from .cli.conventions import format_legend
+
+    print(f"fuzz: {n} inputs, seed {seed}, {res.seconds:.0f} s")
+    print(res.table())
+    print(format_legend(LEGEND))
+    for case, exc, tb in res.raw:
+        print(f"\nraw {type(exc).__name__} on a {case.target} input: {_describe(case)}\n{tb}")
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m habitsim.fuzz``: run a campaign and print counts by outcome."""
+    """``python -m habitsim.fuzz``: run a campaign and print counts by outcome (the same
+    campaign as ``habitsim fuzz``)."""
     p = argparse.ArgumentParser(
         prog="python -m habitsim.fuzz", description="Fuzz habitsim's readers and command line."
     )
@@ -832,10 +1012,7 @@ def main(argv: list[str] | None = None) -> int:
     ns = p.parse_args(argv)
     targets = [t.strip() for t in ns.targets.split(",")] if ns.targets else None
     res = campaign(ns.n, ns.seed, targets, keep=ns.show, progress=True)
-    print(f"fuzz: {ns.n} inputs, seed {ns.seed}, {res.seconds:.0f} s")
-    print(res.table())
-    for case, exc, tb in res.raw:
-        print(f"\nraw {type(exc).__name__} on a {case.target} input: {_describe(case)}\n{tb}")
+    print_campaign(res, ns.n, ns.seed)
     return 1 if res.total["raw"] else 0
 
 

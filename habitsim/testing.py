@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import HabitsimError
-from .fileio import atomic_write_text
+from .fileio import atomic_write_text, make_dirs
 from .motion import Motion
 
 __all__ = [
@@ -284,7 +284,7 @@ def write_golden(
     tol = {k: asdict(_tolerance(t)) for k, t in (tolerances or {}).items()}
     doc = {"format": GOLDEN_FORMAT, "versions": _versions(), "tolerances": tol, "figures": clean}
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
+    make_dirs(p.parent, "golden folder")
     atomic_write_text(p, json.dumps(doc, indent=2, sort_keys=True) + "\n")
 
 

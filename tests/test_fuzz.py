@@ -145,3 +145,70 @@ def test_campaign_counts() -> None:
     res = fuzz.campaign(30, seed=3, targets=["bvh", "species"])
     assert sum(res.total.values()) == 30 and res.total["raw"] == 0
     assert "total" in res.table()
+
+
+# ---------------------------------------------------------------------- habitsim fuzz
+
+
+def test_fuzz_command_prints_counts_by_outcome(capsys) -> None:
+    from habitsim.cli import main
+
+    code = main(["fuzz", "--n", "12", "--targets", "bvh,species", "--no-progress", "--check"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "fuzz: 12 inputs, seed 0" in out and "target: 0 raw tracebacks" in out
+    header = next(ln for ln in out.splitlines() if ln.startswith("target "))
+    assert header.split() == ["target", "inputs", "ok", "typed", "raw"]
+    total = next(ln for ln in out.splitlines() if ln.startswith("total"))
+    assert total.split()[1] == "12" and total.split()[4] == "0"
+
+
+def test_fuzz_command_check_exit_code(monkeypatch, capsys) -> None:
+    """A raw exception is shown with its input; only --check turns it into exit code 1."""
+    from habitsim.cli import main
+
+    def broken(ws, case):
+        raise RuntimeError("a raw bug")
+
+    monkeypatch.setitem(fuzz._RUNNERS, "species", broken)
+    argv = ["fuzz", "--n", "3", "--targets", "species", "--no-progress"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "raw RuntimeError on a species input" in out and "MISSED" in out
+    assert main([*argv, "--check"]) == 1
+
+
+@pytest.mark.parametrize(
+    "argv", [["--n", "0"], ["--n", "10000000"], ["--show", "-1"], ["--seed", "-1"]]
+)
+def test_fuzz_command_bounds(capsys, argv: list[str]) -> None:
+    from habitsim.cli import main
+
+    assert main(["fuzz", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "valid" in err
+
+
+def test_fuzz_module_entry_point_still_works(capsys) -> None:
+    assert fuzz.main(["--n", "4", "--targets", "species"]) == 0
+    assert "total" in capsys.readouterr().out
+
+
+def test_heavy_commands_on_absurd_motions(ws) -> None:
+    """transfer / refine / track / eval on valid-shaped but absurd motions (fps at the
+    ends of its range, one frame, roots far away or under the floor, random rotations)."""
+
+    @settings(FAST, max_examples=8)
+    @given(rnd=st.randoms(use_true_random=False))
+    def check(rnd) -> None:
+        _check(ws, fuzz.make_case("heavy", ws, rnd))
+
+    check()
+
+
+def test_absurd_motions_are_valid_motions() -> None:
+    import random
+
+    for seed in range(40):
+        m, note = fuzz._absurd_motion(random.Random(seed))
+        assert 1 <= m.num_frames and m.duration <= fuzz.HEAVY_MAX_SECONDS + 1.0 / m.fps, note

@@ -107,3 +107,39 @@ def test_eval_executor_workers_die_with_the_parent(tmp_path: Path, sig: int) -> 
         proc.wait(timeout=10)
     _assert_all_gone(workers)
     proc.wait(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def eval_data(tmp_path_factory) -> Path:
+    from habitsim.dataset import build_dataset
+
+    out = tmp_path_factory.mktemp("data")
+    build_dataset(
+        out, clips_per_species=1, seed=0, species=["cat", "dog"], workers=1, progress=False
+    )
+    return out
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
+def test_dask_eval_workers_die_with_the_parent(tmp_path: Path, eval_data: Path, sig: int) -> None:
+    """``habitsim eval --executor dask`` (a local cluster of 2 worker processes) killed
+    while its workers refine: no worker process is left, nothing is written after."""
+    pytest.importorskip("distributed")
+    out = tmp_path / "run"
+    args = ["eval", "--data", str(eval_data), "--out", str(out), "--executor", "dask"]
+    args += ["--workers", "2", "--methods", "direct", "--refine", "kinematic"]
+    args += ["--split", "train", "--targets", "all", "--report-pairs", "1", "--no-videos"]
+    args += ["--no-report", "--no-progress"]
+    proc, _ = _start(args, tmp_path)
+    parent = psutil.Process(proc.pid)
+    time.sleep(3.0)  # the cluster's workers up and on their first pairs
+    workers = parent.children(recursive=True)
+    assert proc.poll() is None, "the run ended before it could be killed"
+    proc.send_signal(sig)
+    proc.wait(timeout=60)
+    if sig == signal.SIGTERM:
+        assert proc.returncode == 130  # stopped like Ctrl-C
+    _assert_all_gone(workers, within_s=10.0)
+    files = sorted(out.rglob("*"))
+    time.sleep(1.0)
+    assert sorted(out.rglob("*")) == files

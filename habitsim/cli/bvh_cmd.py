@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from ..errors import MotionFileError
+from ..fileio import check_writable
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -210,6 +211,7 @@ def _import(ns: argparse.Namespace) -> int:
             raise MotionFileError(f"{flag} only applies with --dir")
     if ns.out.suffix != ".npz":
         raise MotionFileError(f"--out must end in .npz, got {ns.out.name!r}")
+    check_writable(ns.out, "--out")  # before the import, not after it
     motion, mapping = import_bvh(
         ns.file,
         sp,
@@ -272,6 +274,7 @@ def _export(ns: argparse.Namespace) -> int:
 
     if ns.out.suffix.lower() != ".bvh":
         raise MotionFileError(f"--out must end in .bvh, got {ns.out.name!r}")
+    check_writable(ns.out, "--out")
     motion = load_motion(ns.motion)
     write_bvh(motion, ns.out, order=ns.order)
     print(f"exported {motion.num_frames} frames of {motion.species} to {ns.out} (z up, metres)")

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 
 from ..dataset import build_dataset, check_resumable, format_stats_table
 from ..errors import DatasetError
+from ..fileio import check_writable, make_dirs
 from .conventions import add_list_option, split_names
 from .synth_cmd import format_summary
 
@@ -90,8 +91,28 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_demo)
 
 
+def _check_outputs(ns: argparse.Namespace) -> None:
+    """Every destination of the demo checked before its first minute of work (the data
+    set folder itself is checked by :func:`~habitsim.dataset.build_dataset`).
+
+    Raises:
+        OutputPathError: a file where a folder should be, a read-only folder, …
+    """
+    from ..evaluation.report import check_report_outputs
+
+    out = Path(ns.out)
+    check_writable(out / "manifest.json", "--out")
+    if ns.data_only:
+        return
+    for name in ("pipeline.json", "report.md"):
+        check_writable(out / name, "--out")
+    check_writable(out / "pipeline" / "motion.npz", "--out")
+    check_report_outputs(out)
+
+
 def _demo(ns: argparse.Namespace) -> int:
     t0 = time.perf_counter()
+    _check_outputs(ns)
     try:
         check_resumable(ns.out, seed=ns.seed)
         overwrite = False
@@ -150,8 +171,7 @@ def _pipeline(ns: argparse.Namespace) -> None:
     from ..render import RenderError, render_available, render_tracking
     from ..species import load_species
 
-    out = Path(ns.out) / "pipeline"
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_dirs(Path(ns.out) / "pipeline", "--out")
     targets = [load_species(t).name for t in split_names(ns.targets)]
     videos = not ns.no_video and render_available()
     sources = _sources(ns.seed)
@@ -288,12 +308,11 @@ def _html_report(
     """``report.html`` next to ``report.md``: the table, its legend, a bar chart of the
     tracking figures, per pair a gait diagram and the tracking error over time, and the
     videos (with the eval report's page writer, :mod:`habitsim.evaluation.report`)."""
-    from ..evaluation.report import _error_curves, _gait_diagram, _Page
+    from ..evaluation.report import _error_curves, _gait_diagram, _Page, clear_figures
     from ..fileio import atomic_write_text
 
     page = _Page(out / "report_files")
-    for old in (out / "report_files").glob("*") if (out / "report_files").is_dir() else []:
-        old.unlink()
+    clear_figures(out / "report_files")
     page.heading("habitsim demo report", 1)
     page.para(_INTRO.format(bvh=BVH_EXAMPLE, controller=ns.controller))
     lines = [ln for ln in table.splitlines() if not ln.startswith("|---")]

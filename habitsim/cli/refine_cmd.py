@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -127,15 +128,23 @@ def _qpos_names(model) -> list[str]:
     return names
 
 
+def _g(x: object, spec: str = ".4g") -> str:
+    """A report figure for the summary: ``n/a`` for a missing (None / NaN) one (a report
+    of an absurd input can hold those)."""
+    if isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x):
+        return format(x, spec)
+    return "n/a"
+
+
 def _summary(rep: dict) -> str:
     lines = [
         f"refine: {rep['species']}, {rep['frames']} frames, stage {rep['stage']}: "
-        f"{rep['status']} in {rep['iterations']} iterations, {rep['solve_time_s']:.2f} s solve "
-        f"({len(rep['windows'])} window(s))",
-        f"  max constraint violation {rep['max_constraint_violation']:.2e}; stance drift "
-        f"{rep['checks']['stance_drift_max_mm']:.3f} mm, penetration "
-        f"{rep['checks']['penetration_max_mm']:.3f} mm",
-        "  cost: " + ", ".join(f"{k} {v:.3g}" for k, v in rep["cost"].items()),
+        f"{rep['status']} in {rep['iterations']} iterations, "
+        f"{_g(rep['solve_time_s'], '.2f')} s solve ({len(rep['windows'])} window(s))",
+        f"  max constraint violation {_g(rep['max_constraint_violation'], '.2e')}; stance drift "
+        f"{_g(rep['checks']['stance_drift_max_mm'], '.3f')} mm, penetration "
+        f"{_g(rep['checks']['penetration_max_mm'], '.3f')} mm",
+        "  cost: " + ", ".join(f"{k} {_g(v, '.3g')}" for k, v in rep["cost"].items()),
     ]
     before, after = rep.get("metrics_before"), rep.get("metrics_after")
     if before and after:
@@ -150,7 +159,7 @@ def _summary(rep: dict) -> str:
         lines.append("  metric                       before      after")
         for k in keys:
             if k in before and k in after and before[k] is not None and after[k] is not None:
-                lines.append(f"  {k:26s} {before[k]:9.4g}  {after[k]:9.4g}")
+                lines.append(f"  {k:26s} {_g(before[k], '9.4g'):>9s}  {_g(after[k], '9.4g'):>9s}")
     cl = (rep.get("contacts") or {}).get("cleaning")
     if cl and cl.get("frames_changed"):
         parts = [
@@ -173,13 +182,13 @@ def _summary(rep: dict) -> str:
         keys = ("skate_mm", "jerk", "penetration_mm")
         lines.append(
             "  verdict: "
-            + ", ".join(f"{k} {v['before'][k]:.4g} → {v['after'][k]:.4g}" for k in keys)
+            + ", ".join(f"{k} {_g(v['before'][k])} → {_g(v['after'][k])}" for k in keys)
             + (" — not worse than the input" if v["ok"] else f" — WORSE on {', '.join(v['worse'])}")
         )
     if "residual_mg" in rep:
         lines.append(
-            f"  model root residual / m·g: mean {rep['residual_mg']['mean']:.3f}, "
-            f"max {rep['residual_mg']['max']:.3f}"
+            f"  model root residual / m·g: mean {_g(rep['residual_mg']['mean'], '.3f')}, "
+            f"max {_g(rep['residual_mg']['max'], '.3f')}"
         )
     return "\n".join(lines)
 

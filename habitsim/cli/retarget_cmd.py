@@ -60,6 +60,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _retarget(ns: argparse.Namespace) -> int:
+    from ..fileio import output_transaction
+
+    # every destination checked before the work; written together or not at all
+    with output_transaction({"--out": ns.out, "--report": ns.report, "--video": ns.video}):
+        return _retarget_outputs(ns)
+
+
+def _retarget_outputs(ns: argparse.Namespace) -> int:
     import mujoco
 
     from ..fileio import atomic_write_text, json_safe

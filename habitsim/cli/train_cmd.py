@@ -115,6 +115,7 @@ def _finetune_config(init: str, cfg):
 
 
 def _train(ns: argparse.Namespace) -> int:
+    from ..fileio import check_writable
     from ..models.checkpoint import MODEL_FILE
     from ..models.config import preset
     from ..models.evaluate import record_reference_error
@@ -132,6 +133,7 @@ def _train(ns: argparse.Namespace) -> int:
         changes["train.threads"] = ns.threads
     if changes:
         cfg = cfg.replace(**changes)
+    check_writable(Path(ns.out) / MODEL_FILE, "--out")  # before training, not after it
     t0 = time.perf_counter()
     res = train(
         ns.data,

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import DatasetError, brief
-from ..fileio import atomic_write_text, make_dirs
+from ..fileio import atomic_write_text, check_writable, make_dirs
 from ..gaits import GENERATOR_VERSION, available_actions
 from ..species import load_species
 from .clips import _make_clip
@@ -173,6 +173,7 @@ def build_dataset(
 
     jobs = plan_clips(names, clips_per_species, seed, fps)
     make_dirs(out, "data set folder")
+    check_writable(out / MANIFEST_NAME, "data set folder")  # an existing read-only folder
     # From here on the folder is "being built": no manifest until the end.
     for name in (MANIFEST_NAME, STATS_CSV_NAME, STATS_MD_NAME):
         (out / name).unlink(missing_ok=True)

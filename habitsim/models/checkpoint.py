@@ -23,7 +23,7 @@ from typing import Any
 
 import torch
 
-from ..fileio import atomic_write, atomic_write_text
+from ..fileio import atomic_write, atomic_write_text, make_dirs
 from .config import Config
 from .errors import CheckpointError, ConfigError
 from .features import FEATURE_VERSION
@@ -104,8 +104,7 @@ def save_checkpoint(
         meta: JSON-ready extra fields; must hold ``fps``; ``metrics`` / ``training`` optional.
         train_state: (tensors, json) of the optimiser / RNG state, to resume training.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_dirs(out_dir, "checkpoint folder")  # OutputPathError, not a raw OSError
     files: dict[str, str] = {}
     with atomic_write(out / MODEL_FILE) as fh:
         fh.write(_state_bytes(model.state_dict()))
@@ -315,7 +314,7 @@ def export_checkpoint(src: str | Path, dst: str | Path, note: dict[str, Any] | N
     doc = json.loads((src / CONFIG_FILE).read_text(encoding="utf-8"))
     doc["files"] = {MODEL_FILE: doc["files"][MODEL_FILE]}
     doc.update(note or {})
-    dst.mkdir(parents=True, exist_ok=True)
+    make_dirs(dst, "checkpoint folder")
     with atomic_write(dst / MODEL_FILE) as fh, open(src / MODEL_FILE, "rb") as fin:
         shutil.copyfileobj(fin, fh)
     for stale in (STATE_FILE, STATE_JSON):
