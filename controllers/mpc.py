@@ -52,8 +52,9 @@ import casadi
 import mujoco
 import numpy as np
 
-from .balance import BalanceController, _moment
+from .balance import BalanceController
 from .base import ControllerError, Reference
+from .stance_qp import _moment
 from .swing import STANCE, PlanSample, matrix_from_rpy, rpy_from_matrix
 
 __all__ = [
