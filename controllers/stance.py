@@ -39,6 +39,8 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
+from habitsim.mjutils import body_free_joint, free_body, home_qpos
+
 from .base import (
     BaseController,
     ControllerError,
@@ -47,7 +49,7 @@ from .base import (
     actuated_joints,
     joint_torques,
 )
-from .gains import _point_body, _point_pos, _resolve_points, free_body, home_qpos
+from .gains import _point_body, _point_pos, _resolve_points
 from .stance_qp import StanceQP, distribute_wrench
 
 __all__ = ["TrunkStabilizer", "StabilizedController", "distribute_wrench", "StanceQP"]
@@ -119,8 +121,8 @@ class TrunkStabilizer:
             if self.trunk < 0:
                 names = [model.body(i).name for i in range(1, model.nbody)]
                 raise ControllerError(f"unknown trunk body {trunk!r}; bodies: {', '.join(names)}")
-        jnt = int(model.body_jntadr[self.trunk])
-        if jnt < 0 or int(model.jnt_type[jnt]) != int(mujoco.mjtJoint.mjJNT_FREE):
+        jnt = body_free_joint(model, self.trunk)
+        if jnt < 0:
             raise ControllerError(f"trunk body {model.body(self.trunk).name!r} has no free joint")
         self._qa, self._da = int(model.jnt_qposadr[jnt]), int(model.jnt_dofadr[jnt])
         if joints is None:

@@ -37,8 +37,18 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from habitsim.mjutils import (
+    HABITSIM_FEET,
+    ROBOT_FEET,
+    ModelLookupError,
+    free_body,
+    known_feet,
+    leg_length,
+    point_pos,
+)
+
 from .base import ControllerError, JointActuatorMap, actuated_joints
-from .gains import _point_body, _resolve_points, free_body, home_qpos
+from .gains import _point_body, _resolve_points
 
 __all__ = [
     "STANCE",
@@ -64,59 +74,33 @@ SWING = 1
 #: … scheduled on the ground but not touching it: no force, reaching down.
 SEEK = 2
 
-#: Foot names of the habitsim species models (order LF, RF, LH, RH).
-HABITSIM_FEET = ("lf_foot", "rf_foot", "lh_foot", "rh_foot")
-_ROBOT_FEET = (
-    ("FL_foot", "FR_foot", "RL_foot", "RR_foot"),
-    ("LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"),
-    ("fl_foot", "fr_foot", "rl_foot", "rr_foot"),
-    ("FL", "FR", "RL", "RR"),
-)  # MuJoCo Menagerie's Unitree robots
-
 
 def default_feet(model: mujoco.MjModel) -> tuple[str, ...]:
-    """The model's feet in the order LF, RF, LH, RH, found by the usual names.
+    """The model's feet in the order LF, RF, LH, RH, found by the usual names
+    (:func:`habitsim.mjutils.known_feet`).
 
     Raises:
         ControllerError: no known naming matches (pass ``feet=`` explicitly).
     """
-    for names in (HABITSIM_FEET, *_ROBOT_FEET):
-        if all(_has_point(model, n) for n in names):
-            return names
-    raise ControllerError(
-        "cannot find the feet of the model by name (tried "
-        + "; ".join(", ".join(n) for n in (HABITSIM_FEET, *_ROBOT_FEET))
-        + "); pass feet=[...] (site, geom or body names in the order LF, RF, LH, RH)"
-    )
-
-
-def _has_point(model: mujoco.MjModel, name: str) -> bool:
-    return any(
-        mujoco.mj_name2id(model, o, name) >= 0
-        for o in (mujoco.mjtObj.mjOBJ_SITE, mujoco.mjtObj.mjOBJ_GEOM, mujoco.mjtObj.mjOBJ_BODY)
-    )
+    names = known_feet(model)
+    if names is None:
+        raise ControllerError(
+            "cannot find the feet of the model by name (tried "
+            + "; ".join(", ".join(n) for n in (HABITSIM_FEET, *ROBOT_FEET))
+            + "); pass feet=[...] (site, geom or body names in the order LF, RF, LH, RH)"
+        )
+    return names
 
 
 def model_leg_length(model: mujoco.MjModel, feet: Sequence[str] | None = None) -> float:
-    """A model's leg length [m] when no species says it: the mean vertical distance
-    between the trunk (free-joint body origin) and the feet at the home pose."""
-    trunk = free_body(model)
-    if trunk < 0:
+    """A model's leg length [m] when no species says it (:func:`habitsim.mjutils.leg_length`:
+    the height of the trunk above the mean of the feet at the home pose)."""
+    if free_body(model) < 0:
         raise ControllerError("the model has no free joint")
-    pts = _resolve_points(model, list(feet or default_feet(model)))
-    d = mujoco.MjData(model)
-    d.qpos[:] = home_qpos(model)
-    mujoco.mj_kinematics(model, d)
-    z = [_point_pos_now(d, k, i)[2] for k, i in pts]
-    return float(max(d.xpos[trunk, 2] - np.mean(z), 1e-3))
-
-
-def _point_pos_now(data: mujoco.MjData, kind: str, i: int) -> np.ndarray:
-    if kind == "site":
-        return data.site_xpos[i]
-    if kind == "geom":
-        return data.geom_xpos[i]
-    return data.xpos[i]
+    try:
+        return leg_length(model, feet or default_feet(model))
+    except ModelLookupError as e:
+        raise ControllerError(str(e)) from e
 
 
 def rpy_from_matrix(rot: np.ndarray) -> np.ndarray:
@@ -246,7 +230,7 @@ class LegSet:
             return data.geom_xpos[self._ids]
         if self._kind == "site":
             return data.site_xpos[self._ids]
-        return np.array([_point_pos_now(data, k, i) for k, i in self.points])
+        return np.array([point_pos(data, k, i) for k, i in self.points])
 
     def jacobians(
         self,

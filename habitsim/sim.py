@@ -36,12 +36,22 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from . import mjutils
 from .contacts import contacts_from_feet
 from .controllers import CONTROLLERS, REGISTRY, ControllerError, make_controller
 from .errors import InvalidMotionError, SimulationError, unknown_choice
+from .mjutils import (
+    HABITSIM_FEET,
+    ModelLookupError,
+    finite_differences,
+    foot_soles,
+    free_dofs,
+    free_joints,
+    home_qpos,
+    leg_length,
+    lowest_z,
+)
 from .mjutils import check_qpos as _check_qpos
-from .mjutils import finite_differences, species_foot_geoms
-from .mjutils import lowest_z as _lowest_z
 from .motion import Motion
 from .qpos import QposTrajectory, motion_to_qpos, qpos_to_motion, species_model
 from .species import load_species
@@ -176,7 +186,7 @@ def build_reference(
 
 # --------------------------------------------------------------------------- model helpers
 def _free_body(model: mujoco.MjModel) -> int:
-    free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    free = free_joints(model)
     if len(free) != 1:
         raise SimulationError(
             f"the model needs exactly one free joint (the trunk), found {len(free)}"
@@ -187,21 +197,16 @@ def _free_body(model: mujoco.MjModel) -> int:
 def foot_geoms(model: mujoco.MjModel, feet: Sequence[str] | None = None) -> np.ndarray:
     """(nf,) geom ids of the feet: ``lf_foot, rf_foot, lh_foot, rh_foot`` (habitsim's
     models), or the colliding geom of each of ``feet``, named as the robot names them
-    (site, geom or body; :func:`habitsim.controllers.robot.foot_geoms`).
+    (site, geom or body; :func:`habitsim.mjutils.foot_geoms`).
 
     Raises:
         SimulationError: a foot geom is missing (the message lists the model's geoms), an
             unknown foot name.
     """
-    if feet is not None:
-        from .controllers import ControllerError
-        from .controllers.robot import foot_geoms as robot_feet
-
-        try:
-            return robot_feet(model, feet)
-        except ControllerError as e:
-            raise SimulationError(str(e)) from e
-    return species_foot_geoms(model)
+    try:
+        return mjutils.foot_geoms(model, feet)
+    except ModelLookupError as e:
+        raise SimulationError(str(e)) from e
 
 
 def _touch_adr(model: mujoco.MjModel, feet: Sequence[str] | None = None) -> np.ndarray | None:
@@ -246,7 +251,7 @@ def _state_offsets(model: mujoco.MjModel) -> dict[str, int]:
 
 # --------------------------------------------------------------------------- servos
 #: Foot geoms in the order of contact labels (LF, RF, LH, RH).
-FOOT_GEOMS = ("lf_foot", "rf_foot", "lh_foot", "rh_foot")
+FOOT_GEOMS = HABITSIM_FEET
 
 
 def servo_model(model: mujoco.MjModel) -> mujoco.MjModel:
@@ -370,8 +375,7 @@ def root_assist(model: mujoco.MjModel, frequency_hz: float = ASSIST_FREQUENCY_HZ
     trunk = _free_body(model)
     dof = int(model.jnt_dofadr[model.body_jntadr[trunk]])
     d = mujoco.MjData(model)
-    if model.nkey:
-        mujoco.mj_resetDataKeyframe(model, d, 0)
+    d.qpos[:] = home_qpos(model)
     mujoco.mj_forward(model, d)
     full = np.zeros((model.nv, model.nv))
     mujoco.mj_fullM(model, d, full)
@@ -447,7 +451,7 @@ class FallDetector:
             self.ref_height[k] = d.xpos[self.trunk, 2]
             self.ref_up[k] = d.xmat[self.trunk, [2, 5, 8]]
             pos[k], mat[k] = d.geom_xpos[colliding], d.geom_xmat[colliding]
-        near = _lowest_z(model, colliding, pos, mat) < tol  # (T, n)
+        near = lowest_z(model, colliding, pos, mat) < tol  # (T, n)
         bodies = model.geom_bodyid[colliding]
         self.ref_ground = [set(int(b) for b in bodies[row]) for row in near]
         self.contact_frames = 0
@@ -677,7 +681,7 @@ def _resolve(
                 raise SimulationError("a bare qpos array needs fps=")
             q, f = motion_or_qpos, fps
         q = _check_qpos(base, q)
-        leg = sp.leg_length if sp is not None else _model_leg_length(base)
+        leg = sp.leg_length if sp is not None else _model_leg_length(base, feet)
         nf = 4 if feet is None else len(feet)
         if contacts is not None:
             contacts = _check_contacts(contacts, len(q), nf)
@@ -692,28 +696,22 @@ def _resolve(
     )
 
 
-def _model_leg_length(model: mujoco.MjModel) -> float:
-    """Normalising length of a user model without a species: home trunk height [m]."""
-    d = mujoco.MjData(model)
-    if model.nkey:
-        mujoco.mj_resetDataKeyframe(model, d, 0)
-    mujoco.mj_kinematics(model, d)
-    return float(max(d.xpos[_free_body(model), 2], 1e-3))
+def _model_leg_length(model: mujoco.MjModel, feet: Sequence[str] | None = None) -> float:
+    """Normalising length of a user model without a species: the trunk's height above
+    its feet at home (:func:`habitsim.mjutils.leg_length`)."""
+    _free_body(model)
+    foot_geoms(model, feet)  # a model without the feet fails here, naming its geoms
+    try:
+        return leg_length(model, feet)
+    except ModelLookupError as e:
+        raise SimulationError(str(e)) from e
 
 
 def _foot_points(
     model: mujoco.MjModel, qpos: np.ndarray, names: Sequence[str] | None = None
 ) -> np.ndarray:
     """(T, nf, 3) lowest points of the foot spheres."""
-    feet = foot_geoms(model, names)
-    d = mujoco.MjData(model)
-    out = np.empty((len(qpos), len(feet), 3))
-    for k, q in enumerate(qpos):
-        d.qpos[:] = q
-        mujoco.mj_kinematics(model, d)
-        out[k] = d.geom_xpos[feet]
-        out[k, :, 2] -= model.geom_size[feet, 0]
-    return out
+    return foot_soles(model, qpos, foot_geoms(model, names))
 
 
 def _species_model(species: str, servos: bool) -> mujoco.MjModel:
@@ -798,10 +796,7 @@ def _touch(
 def _joint_dofs(model: mujoco.MjModel) -> np.ndarray:
     """Every dof except the free joint's."""
     keep = np.ones(model.nv, bool)
-    for j in range(model.njnt):
-        if int(model.jnt_type[j]) == mujoco.mjtJoint.mjJNT_FREE:
-            a = model.jnt_dofadr[j]
-            keep[a : a + 6] = False
+    keep[free_dofs(model)] = False
     return np.flatnonzero(keep)
 
 

@@ -260,7 +260,7 @@ def test_render_frames(dog) -> None:
 
 def test_lowest_point_matches_mujoco_distance(dog) -> None:
     """The geometric ground clearance used for the reference equals mj_geomDistance."""
-    from habitsim.sim import _lowest_z
+    from habitsim.mjutils import lowest_z as _lowest_z
 
     d = mujoco.MjData(dog)
     floor = dog.geom("floor").id

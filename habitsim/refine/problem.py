@@ -101,6 +101,7 @@ import mujoco
 import numpy as np
 
 from ..errors import unknown_choice
+from ..mjutils import free_joints, home_qpos
 from ..skeleton import JOINT_NAMES
 from .errors import RefineError, RefineInputError
 from .kinematics import SymbolicKinematics, _matmul, gibbs_to_matrix, quat_to_matrix_sx
@@ -255,9 +256,7 @@ def model_info(model: mujoco.MjModel) -> ModelInfo:
     Raises:
         RefineError: no single free joint, a non-hinge joint, or a missing foot sphere.
     """
-    free = [
-        j for j in range(model.njnt) if int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_FREE)
-    ]
+    free = free_joints(model)
     if len(free) != 1:
         raise RefineError(f"the model needs exactly one free joint (the pelvis), found {len(free)}")
     hinges = [j for j in range(model.njnt) if j != free[0]]
@@ -285,8 +284,7 @@ def model_info(model: mujoco.MjModel) -> ModelInfo:
     mu = max(float(model.geom_friction[feet_a, 0].max()), floor_mu)
     # composite inertia about the CoM, pelvis frame, at the home keyframe (or qpos0)
     d = mujoco.MjData(model)
-    if model.nkey:
-        mujoco.mj_resetDataKeyframe(model, d, 0)
+    d.qpos[:] = home_qpos(model)
     mujoco.mj_kinematics(model, d)
     mujoco.mj_comPos(model, d)
     root = int(model.jnt_bodyid[free[0]])
