@@ -13,7 +13,7 @@ Cheetah 3's balance controller, in its whole-body form):
    with ``e_R`` the trunk body's orientation error and ``ω`` its angular velocity (the
    MPC uses the whole body's centroidal one instead, see
    :attr:`BalanceController.centroidal_rate`), the reference from the motion
-   (:class:`~habitsim.controllers.swing.MotionPlan`, or the current
+   (:class:`~habitsim.controllers.plan.MotionPlan`, or the current
    :class:`~habitsim.controllers.base.Reference` alone), ``I_c`` the
    centroidal inertia of the model at its current pose, gains scaled with the body
    (:class:`BalanceConfig`).
@@ -54,7 +54,7 @@ Cheetah 3's balance controller, in its whole-body form):
    limits. ``f_i`` is the force the ground exerts on foot i; the leg pushes the ground
    with ``−f_i``, hence ``−J_iᵀ f_i``: a stance leg asked for an upward force extends and
    lifts the trunk (tested).
-4. **Contacts** (:class:`~habitsim.controllers.swing.ContactTracker`): schedule from the
+4. **Contacts** (:class:`~habitsim.controllers.contact_state.ContactTracker`): schedule from the
    motion, early touch-down switches a leg to stance, a lost contact zeroes its force.
 
 Kinematic quantities are read from ``data`` as left by ``mj_step`` (the state at the
@@ -70,21 +70,12 @@ import mujoco
 import numpy as np
 
 from .base import BaseController, ControllerError, ControllerStats, Reference
+from .contact_state import STANCE, SWING, ContactTracker
 from .gains import critical_damping, max_stable_gains, stiffness_rule
+from .legs import LegSet, model_leg_length
+from .plan import MotionPlan, PlanSample, matrix_from_rpy, plan_from_qpos, rpy_from_matrix
 from .stance_qp import STANCE_SOLVERS, StanceQP, _moment, wrench_matrix
-from .swing import (
-    STANCE,
-    SWING,
-    ContactTracker,
-    LegSet,
-    MotionPlan,
-    PlanSample,
-    SwingLegs,
-    matrix_from_rpy,
-    model_leg_length,
-    plan_from_qpos,
-    rpy_from_matrix,
-)
+from .swing import SwingLegs
 
 __all__ = [
     "BalanceConfig",
@@ -155,7 +146,7 @@ class BalanceConfig:
             front feet half a step short and pitched over).
         early_reach: ... only when the foot is within this horizontal distance of its
             swing target [m] (default 0.1·L); farther behind, the foot is scuffing, not
-            landing (:class:`~habitsim.controllers.swing.ContactTracker`).
+            landing (:class:`~habitsim.controllers.contact_state.ContactTracker`).
         lost_s: grace time before a stance foot without contact loses its force [s].
     """
 
@@ -289,8 +280,8 @@ class BalanceController(BaseController):
             see :class:`~habitsim.controllers.robot.ServoTorque`).
         feet: foot names in contact-label order (default: ``lf_foot, rf_foot, lh_foot,
             rh_foot`` or the usual robot names, see
-            :func:`~habitsim.controllers.swing.default_feet`).
-        plan: a :class:`~habitsim.controllers.swing.MotionPlan` of the clip to track
+            :func:`~habitsim.controllers.legs.default_feet`).
+        plan: a :class:`~habitsim.controllers.plan.MotionPlan` of the clip to track
             (or set it later with :meth:`set_plan`). Without a plan the controller still
             works from each tick's :class:`Reference` (current CoM and feet by forward
             kinematics, contacts from ``ref.contacts``), but swing feet then follow their

@@ -88,7 +88,7 @@ class RobotLegs:
         model: the robot (with a floor or without).
         feet: foot names in the order of the contact labels (LF, RF, LH, RH for a
             habitsim motion).
-        legs: the controllers' :class:`~habitsim.controllers.swing.LegSet` (foot points,
+        legs: the controllers' :class:`~habitsim.controllers.legs.LegSet` (foot points,
             the joints each leg owns).
         home: (nq,) the standing pose (keyframe ``home``, else ``qpos0``).
         height: trunk height over the ground when standing [m].
@@ -140,7 +140,7 @@ def robot_legs(model: mujoco.MjModel, feet: Sequence[str]) -> RobotLegs:
             sites, geoms and bodies), a foot without joints of its own.
     """
     from .controllers import ControllerError
-    from .controllers.swing import LegSet
+    from .controllers.legs import LegSet
 
     feet = tuple(str(f) for f in feet)
     if not feet:
@@ -410,7 +410,7 @@ def retarget(
     Raises:
         RetargetError: see :func:`robot_legs`; not four feet.
     """
-    from .controllers.swing import matrix_from_rpy, rpy_from_matrix
+    from .controllers.plan import matrix_from_rpy, rpy_from_matrix
 
     rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet))
     if len(rl.feet) != 4:

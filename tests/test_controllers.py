@@ -582,3 +582,15 @@ def test_nan_or_misshaped_reference_rejected(robot) -> None:
         ServoController(servo).control(
             servo, home_data(servo), Reference(0.0, ref.qpos, ref.qvel * np.nan, ref.qacc)
         )
+
+
+def test_swing_reexports_the_legs_plan_and_contact_state_modules() -> None:
+    from habitsim.controllers import contact_state, legs, plan, swing
+
+    assert swing.LegSet is legs.LegSet and swing.default_feet is legs.default_feet
+    assert swing.model_leg_length is legs.model_leg_length
+    assert swing.MotionPlan is plan.MotionPlan and swing.plan_from_qpos is plan.plan_from_qpos
+    assert swing.rpy_from_matrix is plan.rpy_from_matrix
+    assert swing.ContactTracker is contact_state.ContactTracker
+    assert (swing.STANCE, swing.SWING, swing.SEEK) == (0, 1, 2)
+    assert set(swing.__all__) <= set(dir(swing))
