@@ -73,8 +73,9 @@ from .factory import (  # noqa: E402
     controller_spec,
     make_controller,
 )
+from .legs import LegSet  # noqa: E402
 from .mpc import ConvexMPC, MPCController, MPCWeights  # noqa: E402
-from .swing import LegSet, MotionPlan, plan_from_qpos  # noqa: E402
+from .plan import MotionPlan, plan_from_qpos  # noqa: E402
 
 __all__ += [
     "BalanceConfig",

@@ -18,8 +18,9 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from habitsim.mjutils import body_free_joint, free_body
+
 from .base import ControllerError, Reference
-from .gains import free_body
 
 __all__ = ["RootAssist"]
 
@@ -53,8 +54,8 @@ class RootAssist:
             self.body = free_body(model)
         else:
             self.body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body)
-        jnt = int(model.body_jntadr[self.body]) if self.body >= 0 else -1
-        if jnt < 0 or int(model.jnt_type[jnt]) != int(mujoco.mjtJoint.mjJNT_FREE):
+        jnt = body_free_joint(model, self.body)
+        if jnt < 0:
             raise ControllerError("RootAssist needs a body with a free joint")
         self._qa, self._da = int(model.jnt_qposadr[jnt]), int(model.jnt_dofadr[jnt])
         self.mass = float(model.body_subtreemass[self.body])

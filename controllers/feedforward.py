@@ -40,6 +40,8 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
+from habitsim.mjutils import free_dofs
+
 from .base import ControllerError, Reference, actuated_joints
 
 __all__ = ["InverseDynamicsFeedforward"]
@@ -113,12 +115,7 @@ class InverseDynamicsFeedforward:
             self._model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
         self._data = mujoco.MjData(self._model)
         self._sdata = mujoco.MjData(self._model)
-        self._free_dofs = np.array([], dtype=int)
-        for j in range(model.njnt):
-            if int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_FREE):
-                a = int(model.jnt_dofadr[j])
-                self._free_dofs = np.arange(a, a + 6)
-                break
+        self._free_dofs = free_dofs(model)[:6]  # the (first) free joint's
         self.residual_root_wrench = np.zeros(6)
         self.unsupported_root_wrench = np.zeros(6)
         self.last_qfrc_inverse = np.zeros(model.nv)

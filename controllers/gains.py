@@ -34,11 +34,24 @@ Where ``M_ii`` comes from (``method``):
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Sequence
 
 import mujoco
 import numpy as np
+
+from habitsim.mjutils import (
+    ModelLookupError,
+    find_feet,
+    free_body,
+    home_qpos,
+    resolve_points,
+)
+from habitsim.mjutils import (
+    point_body as _point_body,
+)
+from habitsim.mjutils import (
+    point_pos as _point_pos,
+)
 
 from .base import ControllerError, actuated_joints
 
@@ -56,14 +69,6 @@ __all__ = [
 
 _METHODS = ("fullM", "invweight0")
 _MODES = ("gravity", "inertia", "torque")
-
-
-def home_qpos(model: mujoco.MjModel, key: str = "home") -> np.ndarray:
-    """(nq,) the keyframe named ``key`` if the model has one, else ``qpos0``."""
-    kid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, key)
-    if kid >= 0:
-        return model.key_qpos[kid].copy()
-    return model.qpos0.copy()
 
 
 def joint_space_inertia(model: mujoco.MjModel, qpos: np.ndarray | None = None) -> np.ndarray:
@@ -106,83 +111,12 @@ def effective_inertia(
     raise ControllerError(f"unknown inertia method {method!r}; valid: {', '.join(_METHODS)}")
 
 
-def free_body(model: mujoco.MjModel) -> int:
-    """Id of the body carrying the model's (first) free joint; ``-1`` if there is none."""
-    for j in range(model.njnt):
-        if int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_FREE):
-            return int(model.jnt_bodyid[j])
-    return -1
-
-
-def find_feet(
-    model: mujoco.MjModel, qpos: np.ndarray | None = None, *, tolerance: float | None = None
-) -> list[str]:
-    """Names of the geoms touching the world's geoms (the ground) at ``qpos``
-    (default: home), as ``"#<id>"`` for unnamed geoms.
-
-    Geoms within ``tolerance`` [m] of the ground count (default 1 % of the model's
-    extent), since a home keyframe usually places the feet exactly at the surface. Used
-    when a gain rule needs the support feet and the caller named none.
-    """
-    tol = 0.01 * float(model.stat.extent) if tolerance is None else float(tolerance)
-    model = copy.copy(model)
-    model.geom_margin[:] = np.maximum(model.geom_margin, tol)
-    data = mujoco.MjData(model)
-    data.qpos[:] = home_qpos(model) if qpos is None else qpos
-    mujoco.mj_forward(model, data)
-    feet: list[str] = []
-    for c in data.contact[: data.ncon]:
-        if c.dist > tol:
-            continue
-        g1, g2 = int(c.geom[0]), int(c.geom[1])
-        for mine, other in ((g1, g2), (g2, g1)):
-            if model.geom_bodyid[other] == 0 and model.geom_bodyid[mine] != 0:
-                name = model.geom(mine).name or f"#{mine}"
-                if name not in feet:
-                    feet.append(name)
-    return feet
-
-
 def _resolve_points(model: mujoco.MjModel, names: Sequence[str]) -> list[tuple[str, int]]:
-    """Each name as ('site'|'geom'|'body', id), tried in that order."""
-    out = []
-    for n in names:
-        if n.startswith("#") and n[1:].isdigit() and int(n[1:]) < model.ngeom:
-            out.append(("geom", int(n[1:])))
-            continue
-        for kind, obj in (
-            ("site", mujoco.mjtObj.mjOBJ_SITE),
-            ("geom", mujoco.mjtObj.mjOBJ_GEOM),
-            ("body", mujoco.mjtObj.mjOBJ_BODY),
-        ):
-            i = mujoco.mj_name2id(model, obj, n)
-            if i >= 0:
-                out.append((kind, i))
-                break
-        else:
-            sites = [model.site(i).name for i in range(model.nsite) if model.site(i).name]
-            geoms = [model.geom(i).name for i in range(model.ngeom) if model.geom(i).name]
-            raise ControllerError(
-                f"foot {n!r} is not a site, geom or body of the model; named sites: "
-                f"{', '.join(sites) or '(none)'}; named geoms: {', '.join(geoms) or '(none)'}"
-            )
-    return out
-
-
-def _point_body(model: mujoco.MjModel, kind: str, i: int) -> int:
-    if kind == "site":
-        return int(model.site_bodyid[i])
-    if kind == "geom":
-        return int(model.geom_bodyid[i])
-    return i
-
-
-def _point_pos(data: mujoco.MjData, kind: str, i: int) -> np.ndarray:
-    if kind == "site":
-        return data.site_xpos[i]
-    if kind == "geom":
-        return data.geom_xpos[i]
-    return data.xpos[i]
+    """:func:`habitsim.mjutils.resolve_points`, an unknown name as a ControllerError."""
+    try:
+        return resolve_points(model, names)
+    except ModelLookupError as e:
+        raise ControllerError(str(e)) from e
 
 
 def _is_ancestor(model: mujoco.MjModel, anc: int, body: int) -> bool:

@@ -37,7 +37,7 @@ and evaluated through CasADi's zero-copy function buffer. Weights are dimensionl
 scaled by mass, leg length and gravity (:class:`MPCWeights`).
 
 The reference trunk states and the contact table come from the motion's
-:class:`~habitsim.controllers.swing.MotionPlan`; without a plan the current reference is
+:class:`~habitsim.controllers.plan.MotionPlan`; without a plan the current reference is
 extrapolated at constant velocity and the current contacts are held.
 """
 
@@ -52,9 +52,11 @@ import casadi
 import mujoco
 import numpy as np
 
-from .balance import BalanceController, _moment
+from .balance import BalanceController
 from .base import ControllerError, Reference
-from .swing import STANCE, PlanSample, matrix_from_rpy, rpy_from_matrix
+from .contact_state import STANCE
+from .plan import PlanSample, matrix_from_rpy, rpy_from_matrix
+from .stance_qp import _moment
 
 __all__ = [
     "MPCWeights",

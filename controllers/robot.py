@@ -30,8 +30,9 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
+from habitsim import mjutils
+
 from .base import ControllerError, JointActuatorMap
-from .gains import _point_body, _resolve_points, home_qpos
 
 __all__ = ["ServoTorque", "torque_model", "foot_geoms", "is_position_servo"]
 
@@ -151,43 +152,16 @@ def torque_model(model: mujoco.MjModel) -> mujoco.MjModel:
 
 
 def foot_geoms(model: mujoco.MjModel, feet: Sequence[str]) -> np.ndarray:
-    """(nf,) the colliding geom of each foot, named as the robot names it.
-
-    A name is a site, geom or body (tried in that order, as the controllers do); a
-    colliding geom of that name is taken as it is; for a site (or a non-colliding geom),
-    the colliding geom of its body whose centre is nearest the named point at the home
-    pose (the foot sphere, not the shank capsule); for a body, its lowest colliding geom
-    at the home pose.
+    """(nf,) the colliding geom of each foot, named as the robot names it
+    (:func:`habitsim.mjutils.foot_geoms`: a colliding geom of that name as it is; for a
+    site or a non-colliding geom, the colliding geom of its body nearest the named point
+    at the home pose; for a body, its lowest colliding geom at the home pose).
 
     Raises:
         ControllerError: an unknown name (the message lists the model's named sites and
             geoms), or a foot body without a colliding geom.
     """
-    pts = _resolve_points(model, list(feet))
-    d = mujoco.MjData(model)
-    d.qpos[:] = home_qpos(model)
-    mujoco.mj_kinematics(model, d)
-    colliding = (model.geom_contype != 0) | (model.geom_conaffinity != 0)
-    out = []
-    for name, (kind, i) in zip(feet, pts, strict=True):
-        geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
-        if geom >= 0 and colliding[geom]:
-            out.append(geom)
-            continue
-        body = _point_body(model, kind, i)
-        cand = np.flatnonzero((model.geom_bodyid == body) & colliding)
-        if cand.size == 0:
-            raise ControllerError(
-                f"foot {name!r} (body {model.body(body).name!r}) has no "
-                "colliding geom to touch the ground with"
-            )
-        if kind == "body":  # the body's lowest colliding geom at home touches down
-            from habitsim.mjutils import lowest_z
-
-            low = lowest_z(model, cand, d.geom_xpos[cand], d.geom_xmat[cand])
-            out.append(int(cand[int(np.argmin(low))]))
-            continue
-        point = d.site_xpos[i] if kind == "site" else d.geom_xpos[i]
-        dist = np.linalg.norm(d.geom_xpos[cand] - point, axis=1)
-        out.append(int(cand[int(np.argmin(dist))]))
-    return np.array(out, dtype=int)
+    try:
+        return mjutils.foot_geoms(model, list(feet))
+    except mjutils.ModelLookupError as e:
+        raise ControllerError(str(e)) from e

@@ -6,17 +6,18 @@ Every tick, :class:`TrunkStabilizer`
    reference free-joint pose and velocity (plus the reference acceleration),
    ``W = [m·(a_des − g); I_c·α_des]``,
 2. distributes ``W`` over the stance feet (``ref.contacts``, or all feet) as ground
-   reaction forces ``f_i`` by a small QP::
+   reaction forces ``f_i`` with the shared stance-force QP
+   (:func:`~habitsim.controllers.stance_qp.distribute_wrench`)::
 
        min_f  ‖S (A f − W)‖² + ε‖f‖²
        s.t.   |f·t1|, |f·t2| ≤ μ f·n   (4-sided friction pyramid per foot)
               0 ≤ f·n ≤ fz_max
 
    with ``A = [I … I; [p_i − c]× …]``, ``n`` the up direction (against gravity), ``S``
-   scaling the torque rows by one over a body length so both halves are in newtons. The
-   QP is solved with CasADi's ``conic`` interface (plugin ``daqp`` by default, built once
-   per number of stance feet and reused); if the solver fails, a clipped regularised least
-   squares solution is used and the failure counted in :attr:`TrunkStabilizer.stats`,
+   scaling the torque rows by one over a body length so both halves are in newtons (one
+   :class:`~habitsim.controllers.stance_qp.StanceQP` built per number of stance feet and
+   reused); if the solver fails, a clipped regularised least squares solution is used and
+   the failure counted in :attr:`TrunkStabilizer.stats`,
 3. turns the forces into joint torques ``τ = −Σ_i J_iᵀ f_i`` (``J_i`` the foot point's
    translational Jacobian restricted to the leg joints). ``f_i`` is the force the ground
    must exert on foot ``i``; by reaction the foot must push the ground with ``−f_i``,
@@ -35,9 +36,10 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
-import casadi
 import mujoco
 import numpy as np
+
+from habitsim.mjutils import body_free_joint, free_body, home_qpos
 
 from .base import (
     BaseController,
@@ -47,160 +49,10 @@ from .base import (
     actuated_joints,
     joint_torques,
 )
-from .gains import _point_body, _point_pos, _resolve_points, free_body, home_qpos
+from .gains import _point_body, _point_pos, _resolve_points
+from .stance_qp import StanceQP, distribute_wrench
 
-__all__ = ["TrunkStabilizer", "StabilizedController", "distribute_wrench", "WrenchQP"]
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def _frame(up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit tangents orthogonal to ``up``."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    t1 = helper - up * (helper @ up)
-    t1 /= np.linalg.norm(t1)
-    return t1, np.cross(up, t1)
-
-
-class WrenchQP:
-    """The force-distribution QP for a fixed number of stance feet (built once, reused).
-
-    Args:
-        n_feet: number of stance feet k (decision variables: 3k forces, world frame).
-        solver: a CasADi conic plugin ("daqp", "qpoases", "osqp", "proxqp").
-    """
-
-    def __init__(self, n_feet: int, solver: str = "daqp") -> None:
-        if not casadi.has_conic(solver):
-            raise ControllerError(
-                f"CasADi conic plugin {solver!r} is not available; available: "
-                + ", ".join(p for p in ("daqp", "qpoases", "osqp", "proxqp") if casadi.has_conic(p))
-            )
-        self.n = n_feet
-        nx, nc = 3 * n_feet, 5 * n_feet
-        opts: dict = {"error_on_fail": False}
-        if solver == "qpoases":
-            opts["printLevel"] = "none"
-        elif solver in ("osqp",):
-            opts["osqp"] = {"verbose": False}
-        self._solver = casadi.conic(
-            f"stance_qp_{n_feet}",
-            solver,
-            {"h": casadi.Sparsity.dense(nx, nx), "a": casadi.Sparsity.dense(nc, nx)},
-            opts,
-        )
-
-    def solve(
-        self, h: np.ndarray, g: np.ndarray, a: np.ndarray, lba: np.ndarray, uba: np.ndarray
-    ) -> tuple[np.ndarray | None, bool]:
-        """(x, success) of ``min ½xᵀhx + gᵀx s.t. lba ≤ a x ≤ uba``."""
-        try:
-            sol = self._solver(h=h, g=g, a=a, lba=lba, uba=uba)
-        except RuntimeError:
-            return None, False
-        ok = bool(self._solver.stats().get("success", False))
-        x = np.asarray(sol["x"], dtype=float).ravel()
-        return (x if ok and np.all(np.isfinite(x)) else None), ok and bool(np.all(np.isfinite(x)))
-
-
-def _problem(
-    points: np.ndarray,
-    com: np.ndarray,
-    wrench: np.ndarray,
-    up: np.ndarray,
-    mu: float,
-    fz_max: float,
-    length: float,
-    eps: float,
-):
-    """Matrices of the distribution QP (see module docstring)."""
-    k = len(points)
-    amat = np.zeros((6, 3 * k))
-    for i, p in enumerate(points):
-        amat[:3, 3 * i : 3 * i + 3] = np.eye(3)
-        amat[3:, 3 * i : 3 * i + 3] = _skew(p - com)
-    s = np.array([1.0, 1.0, 1.0, 1 / length, 1 / length, 1 / length])
-    a_s, w_s = amat * s[:, None], wrench * s
-    h = 2.0 * (a_s.T @ a_s + eps * np.eye(3 * k))
-    g = -2.0 * a_s.T @ w_s
-    t1, t2 = _frame(up)
-    cons = np.zeros((5 * k, 3 * k))
-    lba = np.tile([-np.inf, -np.inf, -np.inf, -np.inf, 0.0], k)
-    uba = np.tile([0.0, 0.0, 0.0, 0.0, fz_max], k)
-    for i in range(k):
-        c = slice(3 * i, 3 * i + 3)
-        cons[5 * i + 0, c] = t1 - mu * up
-        cons[5 * i + 1, c] = -t1 - mu * up
-        cons[5 * i + 2, c] = t2 - mu * up
-        cons[5 * i + 3, c] = -t2 - mu * up
-        cons[5 * i + 4, c] = up
-    return amat, h, g, cons, lba, uba
-
-
-def _fallback(
-    amat: np.ndarray, wrench: np.ndarray, up: np.ndarray, mu: float, fz_max: float, eps: float
-) -> np.ndarray:
-    """Regularised least squares, then each force clipped into its friction pyramid."""
-    k = amat.shape[1] // 3
-    f = np.linalg.solve(amat.T @ amat + max(eps, 1e-9) * np.eye(3 * k), amat.T @ wrench)
-    t1, t2 = _frame(up)
-    out = np.zeros_like(f)
-    for i in range(k):
-        fi = f[3 * i : 3 * i + 3]
-        fn = float(np.clip(fi @ up, 0.0, fz_max))
-        ft1 = float(np.clip(fi @ t1, -mu * fn, mu * fn))
-        ft2 = float(np.clip(fi @ t2, -mu * fn, mu * fn))
-        out[3 * i : 3 * i + 3] = fn * up + ft1 * t1 + ft2 * t2
-    return out
-
-
-def distribute_wrench(
-    points: np.ndarray,
-    com: np.ndarray,
-    wrench: np.ndarray,
-    *,
-    mu: float = 0.8,
-    fz_max: float = np.inf,
-    up: np.ndarray | None = None,
-    length: float = 0.3,
-    regularization: float = 1e-4,
-    qp: WrenchQP | None = None,
-    solver: str = "daqp",
-) -> tuple[np.ndarray, bool]:
-    """Ground forces ``(k, 3)`` on ``k`` stance points giving ``wrench`` about ``com``.
-
-    Args:
-        points: (k, 3) stance foot positions [m], world frame.
-        com: (3,) point the wrench's torque is taken about [m].
-        wrench: (6,) wanted [force N, torque N·m], world frame.
-        mu: friction coefficient of the 4-sided pyramid.
-        fz_max: largest normal force per foot [N].
-        up: (3,) ground normal (default +z).
-        length: body length [m] scaling torque rows against force rows.
-        regularization: ε on ‖f‖² (in units of the scaled residual).
-        qp: a prebuilt :class:`WrenchQP` for k feet (else one is built).
-
-    Returns:
-        (forces (k, 3), solved): ``solved`` is False when the QP failed and the clipped
-        least-squares fallback was used.
-    """
-    pts = np.asarray(points, dtype=float).reshape(-1, 3)
-    k = len(pts)
-    if k == 0:
-        return np.zeros((0, 3)), True
-    n = np.array([0.0, 0.0, 1.0]) if up is None else np.asarray(up, dtype=float)
-    n = n / np.linalg.norm(n)
-    fmax = float(fz_max) if np.isfinite(fz_max) else 1e9
-    amat, h, g, cons, lba, uba = _problem(
-        pts, np.asarray(com, float), np.asarray(wrench, float), n, mu, fmax, length, regularization
-    )
-    solver_qp = qp if qp is not None else WrenchQP(k, solver)
-    x, ok = solver_qp.solve(h, g, cons, lba, uba)
-    if x is None:
-        x = _fallback(amat, np.asarray(wrench, float), n, mu, fmax, regularization)
-    return x.reshape(k, 3), ok
+__all__ = ["TrunkStabilizer", "StabilizedController", "distribute_wrench", "StanceQP"]
 
 
 class TrunkStabilizer:
@@ -269,8 +121,8 @@ class TrunkStabilizer:
             if self.trunk < 0:
                 names = [model.body(i).name for i in range(1, model.nbody)]
                 raise ControllerError(f"unknown trunk body {trunk!r}; bodies: {', '.join(names)}")
-        jnt = int(model.body_jntadr[self.trunk])
-        if jnt < 0 or int(model.jnt_type[jnt]) != int(mujoco.mjtJoint.mjJNT_FREE):
+        jnt = body_free_joint(model, self.trunk)
+        if jnt < 0:
             raise ControllerError(f"trunk body {model.body(self.trunk).name!r} has no free joint")
         self._qa, self._da = int(model.jnt_qposadr[jnt]), int(model.jnt_dofadr[jnt])
         if joints is None:
@@ -315,8 +167,8 @@ class TrunkStabilizer:
             raise ControllerError(f"fz_max must be > 0, got {fz_max}")
         self.regularization = float(regularization)
         self.solver = solver
-        self._qps: dict[int, WrenchQP] = {}
-        WrenchQP(1, solver)  # fail early if the plugin is missing
+        self._qps: dict[int, StanceQP] = {}
+        StanceQP(1, solver)  # fail early if the plugin is missing
         self._inertia_body, self.length = self._centroidal(model)
         self._jacp = np.zeros((3, model.nv))
         self.stats = ControllerStats()
@@ -423,7 +275,7 @@ class TrunkStabilizer:
             com = data.subtree_com[self.trunk]
             k = idx.size
             if k not in self._qps:
-                self._qps[k] = WrenchQP(k, self.solver)
+                self._qps[k] = StanceQP(k, self.solver)
             forces, ok = distribute_wrench(
                 pts,
                 com,

@@ -21,6 +21,7 @@ import numpy as np
 
 from .errors import InvalidMotionError
 from .hinges import HINGE_JOINTS, HINGE_NAMES, compose_hinges, hinge_angles
+from .mjutils import free_joints
 from .motion import Motion
 from .rotations import quat_angle, quat_fix_continuity, quat_normalize
 from .skeleton import ABDUCTION_SIGN, JOINT_NAMES
@@ -98,7 +99,7 @@ def _compiled(species: str, servos: bool) -> mujoco.MjModel:
 
 
 def _free_joint(model: mujoco.MjModel) -> int:
-    free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    free = free_joints(model)
     if len(free) != 1:
         raise InvalidMotionError(f"the model needs exactly one free joint, found {len(free)}")
     return free[0]

@@ -51,6 +51,7 @@ import mujoco
 import numpy as np
 
 from .errors import HabitsimError
+from .mjutils import foot_soles, free_body, home_qpos
 from .motion import Motion
 
 __all__ = [
@@ -87,7 +88,7 @@ class RobotLegs:
         model: the robot (with a floor or without).
         feet: foot names in the order of the contact labels (LF, RF, LH, RH for a
             habitsim motion).
-        legs: the controllers' :class:`~habitsim.controllers.swing.LegSet` (foot points,
+        legs: the controllers' :class:`~habitsim.controllers.legs.LegSet` (foot points,
             the joints each leg owns).
         home: (nq,) the standing pose (keyframe ``home``, else ``qpos0``).
         height: trunk height over the ground when standing [m].
@@ -139,8 +140,7 @@ def robot_legs(model: mujoco.MjModel, feet: Sequence[str]) -> RobotLegs:
             sites, geoms and bodies), a foot without joints of its own.
     """
     from .controllers import ControllerError
-    from .controllers.gains import free_body, home_qpos
-    from .controllers.swing import LegSet
+    from .controllers.legs import LegSet
 
     feet = tuple(str(f) for f in feet)
     if not feet:
@@ -373,22 +373,16 @@ def _source_paths(motion: Motion) -> dict[str, np.ndarray]:
     model = species_model(motion.species)
     q = motion_to_qpos(motion, model).qpos
     feet = foot_geoms(model)
-    trunk = int(
-        model.jnt_bodyid[
-            [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE][0]
-        ]
-    )
+    trunk = free_body(model)
     d = mujoco.MjData(model)
     t = len(q)
-    pos, rot, sole = np.empty((t, 3)), np.empty((t, 3, 3)), np.empty((t, 4, 3))
+    pos, rot = np.empty((t, 3)), np.empty((t, 3, 3))
     for k in range(t):
         d.qpos[:] = q[k]
         mujoco.mj_kinematics(model, d)
         pos[k] = d.xpos[trunk]
         rot[k] = d.xmat[trunk].reshape(3, 3)
-        sole[k] = d.geom_xpos[feet]
-        sole[k, :, 2] -= model.geom_size[feet, 0]
-    return {"pos": pos, "rot": rot, "sole": sole}
+    return {"pos": pos, "rot": rot, "sole": foot_soles(model, q, feet)}
 
 
 def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
@@ -416,7 +410,7 @@ def retarget(
     Raises:
         RetargetError: see :func:`robot_legs`; not four feet.
     """
-    from .controllers.swing import matrix_from_rpy, rpy_from_matrix
+    from .controllers.plan import matrix_from_rpy, rpy_from_matrix
 
     rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet))
     if len(rl.feet) != 4:

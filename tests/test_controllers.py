@@ -321,8 +321,42 @@ def test_qp_respects_friction_pyramid() -> None:
     assert f[:, 0].sum() == pytest.approx(mu * f[:, 2].sum(), rel=1e-3)  # pushed to the edge
 
 
+def test_qp_with_a_tilted_normal_is_the_rotated_flat_problem() -> None:
+    from habitsim.controllers.stance_qp import ground_frame
+
+    com = np.array([0.01, 0.0, 0.3])
+    wanted = np.array([60.0, -3.0, 190.0, 2.0, -4.0, 1.0])
+    flat, ok_flat = distribute_wrench(square_feet(), com, wanted, mu=0.5, fz_max=80.0)
+    up = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+    rot = ground_frame(up)
+    np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(rot) == pytest.approx(1.0) and np.allclose(rot[2], up)
+    tilted, ok = distribute_wrench(
+        (square_feet() - com) @ rot + com,
+        com,
+        np.concatenate([wanted[:3] @ rot, wanted[3:] @ rot]),
+        mu=0.5,
+        fz_max=80.0,
+        up=up,
+    )
+    assert ok and ok_flat
+    np.testing.assert_allclose(tilted, flat @ rot, atol=1e-6)
+
+
+def test_one_stance_qp_for_stabiliser_balance_and_mpc() -> None:
+    from habitsim.controllers import balance, mpc, stance_qp
+
+    assert stance_mod.StanceQP is balance.StanceQP is stance_qp.StanceQP
+    assert stance_mod.distribute_wrench is stance_qp.distribute_wrench
+    assert issubclass(mpc.MPCController, balance.BalanceController)
+
+
 def test_qp_failure_falls_back_and_is_counted(robot, monkeypatch) -> None:
-    monkeypatch.setattr(stance_mod.WrenchQP, "solve", lambda self, *a, **k: (None, False))
+    monkeypatch.setattr(
+        stance_mod.StanceQP,
+        "_evaluate",
+        lambda self: (np.full(3 * self.n, np.nan), np.zeros_like(self._out[2])),
+    )
     stab = TrunkStabilizer(robot, FEET, mu=0.5)
     data = home_data(robot)
     ref = standing_ref(robot)
@@ -548,3 +582,15 @@ def test_nan_or_misshaped_reference_rejected(robot) -> None:
         ServoController(servo).control(
             servo, home_data(servo), Reference(0.0, ref.qpos, ref.qvel * np.nan, ref.qacc)
         )
+
+
+def test_swing_reexports_the_legs_plan_and_contact_state_modules() -> None:
+    from habitsim.controllers import contact_state, legs, plan, swing
+
+    assert swing.LegSet is legs.LegSet and swing.default_feet is legs.default_feet
+    assert swing.model_leg_length is legs.model_leg_length
+    assert swing.MotionPlan is plan.MotionPlan and swing.plan_from_qpos is plan.plan_from_qpos
+    assert swing.rpy_from_matrix is plan.rpy_from_matrix
+    assert swing.ContactTracker is contact_state.ContactTracker
+    assert (swing.STANCE, swing.SWING, swing.SEEK) == (0, 1, 2)
+    assert set(swing.__all__) <= set(dir(swing))

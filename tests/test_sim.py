@@ -260,7 +260,7 @@ def test_render_frames(dog) -> None:
 
 def test_lowest_point_matches_mujoco_distance(dog) -> None:
     """The geometric ground clearance used for the reference equals mj_geomDistance."""
-    from habitsim.sim import _lowest_z
+    from habitsim.mjutils import lowest_z as _lowest_z
 
     d = mujoco.MjData(dog)
     floor = dog.geom("floor").id
@@ -275,3 +275,14 @@ def test_lowest_point_matches_mujoco_distance(dog) -> None:
         want = [mujoco.mj_geomDistance(dog, d, int(g), floor, 10.0, None) for g in geoms]
         got = _lowest_z(dog, geoms, d.geom_xpos[geoms], d.geom_xmat[geoms])
         np.testing.assert_allclose(got, want, atol=1e-9)
+
+
+def test_sim_package_keeps_every_public_name() -> None:
+    import habitsim.sim as S
+
+    for name in S.__all__:
+        assert getattr(S, name) is not None, name
+    from habitsim.sim.tracking import track as track_fn
+
+    assert S.track is track_fn and callable(S.track)
+    assert S._species_model("dog", False) is S.species_model("dog")

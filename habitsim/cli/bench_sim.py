@@ -102,11 +102,11 @@ def raw_step_rate(model: Any, seconds: float = 2.0) -> float:
     """mj_step calls per second on ``model`` holding its home pose (Python loop)."""
     import mujoco
 
+    from ..mjutils import home_qpos
     from ..sim import servo_targets
 
     d = mujoco.MjData(model)
-    if model.nkey:
-        mujoco.mj_resetDataKeyframe(model, d, 0)
+    d.qpos[:] = home_qpos(model)
     d.ctrl[:] = servo_targets(model, d.qpos)[0]
     n = int(round(seconds / model.opt.timestep))
     for _ in range(200):  # warm-up (contacts settle, caches)

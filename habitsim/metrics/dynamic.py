@@ -41,6 +41,7 @@ import numpy as np
 from scipy.optimize import nnls
 
 from habitsim.errors import InvalidMotionError
+from habitsim.mjutils import free_joints
 from habitsim.motion import Motion
 from habitsim.qpos import motion_to_qpos, species_model
 
@@ -131,7 +132,7 @@ def inverse_dynamics(
     c = np.zeros((t, 4), bool) if contacts is None else np.asarray(contacts, bool)
     if c.shape != (t, 4):
         raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
-    free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    free = free_joints(model)
     if len(free) != 1:
         raise InvalidMotionError(f"the model needs exactly one free joint, found {len(free)}")
     r0 = int(model.jnt_dofadr[free[0]])

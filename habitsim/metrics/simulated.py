@@ -40,6 +40,7 @@ import mujoco
 import numpy as np
 
 from habitsim.errors import InvalidMotionError
+from habitsim.mjutils import free_joints
 from habitsim.qpos import qpos_joint_positions
 
 __all__ = [
@@ -69,7 +70,7 @@ MIN_DISTANCE_PER_LEG = 0.01
 
 
 def _root_adr(model: mujoco.MjModel) -> int:
-    free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    free = free_joints(model)
     if len(free) != 1:
         raise InvalidMotionError(f"the model needs exactly one free joint, found {len(free)}")
     return int(model.jnt_qposadr[free[0]])

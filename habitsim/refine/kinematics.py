@@ -31,6 +31,7 @@ import casadi as ca
 import mujoco
 import numpy as np
 
+from ..mjutils import free_joints
 from .errors import RefineError
 
 __all__ = ["SymbolicKinematics", "FKResult", "quat_to_matrix_sx", "gibbs_to_matrix"]
@@ -204,7 +205,7 @@ class SymbolicKinematics:
         self.model = model
         self.nq = int(model.nq)
         self.nbody = int(model.nbody)
-        free = [j for j in range(model.njnt) if int(model.jnt_type[j]) == _FREE]
+        free = free_joints(model)
         #: qpos address of the single free joint (None without one).
         self.free_qposadr: int | None = int(model.jnt_qposadr[free[0]]) if len(free) == 1 else None
         self.free_body: int | None = int(model.jnt_bodyid[free[0]]) if len(free) == 1 else None

@@ -23,8 +23,7 @@ block      size  meaning
 ``com``    3     stage B only: the centre of mass c [m], tied to the FK's CoM by the
                  ``com`` rows (an auxiliary variable: it keeps c̈ a linear function of
                  3 variables per frame instead of a nonlinear one of 3 × 40, which
-                 cut stage B's Hessian and factorisation time by ~3× and its build
-                 time from 45 s to 13 s)
+                 makes stage B's Hessian, factorisation and build cheaper; README)
 =========  ====  ===============================================================
 
 Why a Gibbs-vector correction of the input orientation rather than a quaternion with a
@@ -46,10 +45,9 @@ window length and species):
   differences of the hinge angles × L/2 (a displacement at half a leg length), same unit.
   Planting feet the input lets slide and lifting swing feet over the contact height bend
   the input's paths, and inputs far outside the joint ranges are clipped; without these
-  two terms the bends came out as kinks (a transferred trot went from docs/metrics.md's jerk
-  of 143 to 1193 m/s³). Both are linear or nearly so; a jerk of the 30 joint positions
-  themselves made every KKT factorisation about 5× slower and IPOPT's Gauss-Newton
-  iterations stall. The hinge term couples 4 frames and costs about 1.5× per iteration;
+  two terms the bends came out as kinks (README). Both are linear or nearly so; a jerk of
+  the 30 joint positions themselves made every KKT factorisation slower and IPOPT's
+  Gauss-Newton iterations stall. The hinge term couples 4 frames;
 * ``regularisation`` = w_reg · mean of (θ − θ̂)² over frames and hinges
   + w_root · mean ‖g‖² (stay near the input angles and root orientation);
 * stage B ``residual`` = w_residual · mean over interior frames of
@@ -65,7 +63,7 @@ The residual wrench is the slack of the centroidal equations, eliminated (the op
 with c̈ and dL/dt by central differences, ω from R_tᵀR_{t+1}, I_c the model's composite
 inertia about the CoM in the pelvis frame at the home keyframe, p_f the lowest point of
 the foot sphere, F_f = m·g · Σ_e β_e (μ·d_e + ẑ) with d_e = ±x̂, ±ŷ (a linear friction
-pyramid: quadratic cones are ~100× slower in IPOPT).
+pyramid: quadratic cones are much slower in IPOPT, see the README).
 
 Constraints (rows of g, in this order):
 
@@ -101,6 +99,7 @@ import mujoco
 import numpy as np
 
 from ..errors import unknown_choice
+from ..mjutils import free_joints, home_qpos
 from ..skeleton import JOINT_NAMES
 from .errors import RefineError, RefineInputError
 from .kinematics import SymbolicKinematics, _matmul, gibbs_to_matrix, quat_to_matrix_sx
@@ -255,9 +254,7 @@ def model_info(model: mujoco.MjModel) -> ModelInfo:
     Raises:
         RefineError: no single free joint, a non-hinge joint, or a missing foot sphere.
     """
-    free = [
-        j for j in range(model.njnt) if int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_FREE)
-    ]
+    free = free_joints(model)
     if len(free) != 1:
         raise RefineError(f"the model needs exactly one free joint (the pelvis), found {len(free)}")
     hinges = [j for j in range(model.njnt) if j != free[0]]
@@ -285,8 +282,7 @@ def model_info(model: mujoco.MjModel) -> ModelInfo:
     mu = max(float(model.geom_friction[feet_a, 0].max()), floor_mu)
     # composite inertia about the CoM, pelvis frame, at the home keyframe (or qpos0)
     d = mujoco.MjData(model)
-    if model.nkey:
-        mujoco.mj_resetDataKeyframe(model, d, 0)
+    d.qpos[:] = home_qpos(model)
     mujoco.mj_kinematics(model, d)
     mujoco.mj_comPos(model, d)
     root = int(model.jnt_bodyid[free[0]])

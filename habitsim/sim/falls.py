@@ -1,0 +1,119 @@
+"""docs/metrics.md's fall rule (:class:`FallDetector`), checked at every reference frame."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import mujoco
+import numpy as np
+
+from ..mjutils import lowest_z
+from .model import _free_body, foot_geoms
+from .reference import _check_qpos
+
+#: docs/metrics.md fall rule: trunk height below this share of its reference height …
+FALL_HEIGHT_RATIO = 0.5
+
+
+#: … or trunk tilt (from the reference's trunk orientation) above this [deg] …
+FALL_TILT_DEG = 60.0
+
+
+#: … or a non-foot body touching the ground for longer than this [s].
+FALL_GROUND_CONTACT_S = 0.2
+
+
+#: A reference body counts as resting on the ground within this share of leg length.
+GROUND_TOLERANCE_PER_LEG = 0.01
+
+
+class FallDetector:
+    """docs/metrics.md's fall rule, evaluated at the reference frames.
+
+    A run has fallen at frame k when (a) the trunk (free-joint body) is lower than
+    :data:`FALL_HEIGHT_RATIO` × the reference trunk height at k, (b) the angle between
+    the simulated and the reference trunk "up" axes exceeds :data:`FALL_TILT_DEG` (tilt is
+    measured from the reference orientation, so a giraffe's sloping back or a sit does not
+    count), or (c) a non-foot body has touched the ground for more than
+    :data:`FALL_GROUND_CONTACT_S` (bodies that the reference itself rests on the ground at
+    that frame, within 1 % of leg length, are allowed: e.g. the haunches of a sit).
+
+    Args:
+        model: the simulated model (with a floor: geoms of the world body).
+        ref_qpos: (T, nq) reference frames.
+        fps: frame rate [Hz].
+        leg_length: normalising length [m].
+        feet: foot names of a robot (default habitsim's foot geoms, see :func:`foot_geoms`).
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        ref_qpos: np.ndarray,
+        fps: float,
+        leg_length: float,
+        feet: Sequence[str] | None = None,
+    ) -> None:
+        self.model = model
+        self.fps = float(fps)
+        self.trunk = _free_body(model)
+        feet = foot_geoms(model, feet)
+        self.foot_bodies = set(int(model.geom_bodyid[g]) for g in feet)
+        self.ground = set(int(g) for g in np.flatnonzero(model.geom_bodyid == 0))
+        q = _check_qpos(model, ref_qpos)
+        # reference trunk height, up axis and bodies resting on the ground per frame
+        colliding = np.flatnonzero(
+            ((model.geom_contype != 0) | (model.geom_conaffinity != 0)) & (model.geom_bodyid != 0)
+        )
+        tol = GROUND_TOLERANCE_PER_LEG * leg_length
+        d = mujoco.MjData(model)
+        self.ref_height = np.empty(len(q))
+        self.ref_up = np.empty((len(q), 3))
+        pos = np.empty((len(q), len(colliding), 3))
+        mat = np.empty((len(q), len(colliding), 9))
+        for k in range(len(q)):
+            d.qpos[:] = q[k]
+            mujoco.mj_kinematics(model, d)
+            self.ref_height[k] = d.xpos[self.trunk, 2]
+            self.ref_up[k] = d.xmat[self.trunk, [2, 5, 8]]
+            pos[k], mat[k] = d.geom_xpos[colliding], d.geom_xmat[colliding]
+        near = lowest_z(model, colliding, pos, mat) < tol  # (T, n)
+        bodies = model.geom_bodyid[colliding]
+        self.ref_ground = [set(int(b) for b in bodies[row]) for row in near]
+        self.contact_frames = 0
+
+    def _ground_bodies(self, data: mujoco.MjData) -> set[int]:
+        out = set()
+        for c in range(data.ncon):
+            con = data.contact[c]
+            g1, g2 = int(con.geom1), int(con.geom2)
+            if g1 in self.ground and g2 not in self.ground:
+                out.add(int(self.model.geom_bodyid[g2]))
+            elif g2 in self.ground and g1 not in self.ground:
+                out.add(int(self.model.geom_bodyid[g1]))
+        return out
+
+    def reset(self) -> None:
+        self.contact_frames = 0
+
+    def check(self, k: int, data: mujoco.MjData) -> str | None:
+        """The fall reason at frame k (``data`` after mj_step/mj_forward), or None."""
+        k = min(k, len(self.ref_height) - 1)
+        h = data.xpos[self.trunk, 2]
+        if h < FALL_HEIGHT_RATIO * self.ref_height[k]:
+            ref = self.ref_height[k]
+            return f"trunk height {h:.3f} m < {FALL_HEIGHT_RATIO:.0%} of reference {ref:.3f} m"
+        up = data.xmat[self.trunk, [2, 5, 8]]
+        tilt = math.degrees(math.acos(float(np.clip(up @ self.ref_up[k], -1.0, 1.0))))
+        if tilt > FALL_TILT_DEG:
+            return f"trunk tilt {tilt:.0f} deg > {FALL_TILT_DEG:.0f} deg"
+        touching = self._ground_bodies(data) - self.foot_bodies - self.ref_ground[k]
+        if touching:
+            self.contact_frames += 1
+            if self.contact_frames / self.fps > FALL_GROUND_CONTACT_S:
+                names = ", ".join(sorted(self.model.body(b).name for b in touching))
+                return f"non-foot body on the ground > {FALL_GROUND_CONTACT_S} s ({names})"
+        else:
+            self.contact_frames = 0
+        return None
