@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from .conventions import add_check_option, check_exit
+from .conventions import add_check_option, add_list_option, check_exit
 
 #: Targets of the learning core (issue "[2/5] Learning core v2").
 TARGET_WHOLE_PCT = 5.0
@@ -82,12 +82,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--real-species", default="dog", help="species of the --real files (default dog)"
     )
-    p.add_argument(
+    add_list_option(
+        p,
         "--targets",
-        nargs="+",
         default=list(DEFAULT_TARGETS),
         metavar="SPECIES",
-        help=f"target species (default {' '.join(DEFAULT_TARGETS)}; a source's own is skipped)",
+        help=f"target species (default {','.join(DEFAULT_TARGETS)}; a source's own is skipped)",
     )
     add_check_option(p)
     p.set_defaults(func=_bench_model)
