@@ -155,7 +155,8 @@ def _entry(m: Motion, rel: str, split: str, held_out: bool, action: str, i: int)
     dur = max((m.num_frames - 1) / m.fps, 1e-9)
     path_len = float(np.linalg.norm(np.diff(m.root_positions[:, :2], axis=0), axis=1).sum())
     speed = path_len / dur
-    turn = float((_yaw(m)[-1] - _yaw(m)[0]) / dur)
+    yaw = _yaw(m)
+    turn = float((yaw[-1] - yaw[0]) / dur)
     try:
         measured = _measure(m)
     except HabitsimError:
@@ -254,7 +255,8 @@ def import_folder(
     held = bool(sp.held_out)
     entries: list[ClipEntry] = []
     motions: list[tuple[str, Motion]] = []
-    build = ImportBuild(manifest=None)  # type: ignore[arg-type]
+    warnings: list[tuple[str, str]] = []
+    skipped: list[tuple[str, str]] = []
     taken: set[str] = set()
     for f in files:
         rel_src = f.relative_to(src).as_posix()
@@ -264,11 +266,11 @@ def import_folder(
         except HabitsimError as e:
             if not skip_bad:
                 raise type(e)(f"{rel_src}: {e}") from None
-            build.skipped.append((rel_src, str(e)))
+            skipped.append((rel_src, str(e)))
             if log:
                 log(f"skipped {rel_src}: {e}")
             continue
-        build.warnings += [(rel_src, w) for w in mapping.warnings]
+        warnings += [(rel_src, w) for w in mapping.warnings]
         m = resample_motion(m, float(fps))
         action = lab.get("action") or "unlabelled"
         split = lab.get("split") or _default_split(len(entries), held)
@@ -315,5 +317,4 @@ def import_folder(
         for old in sorted((out / split).rglob("*.npz")) if (out / split).is_dir() else []:
             if old not in keep:
                 old.unlink()
-    build.manifest = manifest
-    return build
+    return ImportBuild(manifest, warnings, skipped)

@@ -172,9 +172,7 @@ def transfer_quality(
     }
 
 
-def synthetic_sources(
-    data: Path | None, split: str, limit: int, targets: list[str] | None = None
-) -> list[Any]:
+def synthetic_sources(data: Path | None, split: str, limit: int) -> list[Any]:
     """Synthetic source clips of training species (cyclic actions first)."""
     from ..gaits import available_actions, generate
     from ..species import training_species

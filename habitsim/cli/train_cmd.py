@@ -90,28 +90,22 @@ def _finetune_config(init: str, cfg):
     """The fine-tune's configuration: the checkpoint's model, ``cfg``'s schedule with
     :data:`FINETUNE_STEPS` steps at :data:`FINETUNE_LR` (``--steps`` / ``--set`` apply on
     top)."""
-    from ..models.checkpoint import read_checkpoint_config
-    from ..models.config import VARIANTS, Config
-    from ..models.transfer import resolve_checkpoint
+    import dataclasses
 
-    named = init in VARIANTS and not Path(init).is_dir()
-    base, _ = read_checkpoint_config(resolve_checkpoint(init) if named else Path(init))
-    steps = FINETUNE_STEPS
-    train = cfg.train
-    return Config(
-        name=f"finetune:{base.name}",
-        model=base.model,
-        train=type(train)(
-            **{
-                **train.__dict__,
-                "steps": steps,
-                "lr": FINETUNE_LR,
-                "lr_final": min(train.lr_final, FINETUNE_LR / 4),
-                "warmup_steps": min(train.warmup_steps, steps // 10),
-                "val_every": min(train.val_every, 250),
-            }
-        ),
-    ).validate()
+    from ..models.checkpoint import read_checkpoint_config
+    from ..models.config import Config
+    from ..models.train import resolve_init
+
+    base, _ = read_checkpoint_config(resolve_init(init))
+    train = dataclasses.replace(
+        cfg.train,
+        steps=FINETUNE_STEPS,
+        lr=FINETUNE_LR,
+        lr_final=min(cfg.train.lr_final, FINETUNE_LR / 4),
+        warmup_steps=min(cfg.train.warmup_steps, FINETUNE_STEPS // 10),
+        val_every=min(cfg.train.val_every, 250),
+    )
+    return Config(name=f"finetune:{base.name}", model=base.model, train=train).validate()
 
 
 def _train(ns: argparse.Namespace) -> int:

@@ -44,6 +44,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from ..skeleton import FOOT_JOINTS, JOINT_NAMES
 from ..species import load_species, training_species
 from .checkpoint import (
     CONFIG_FILE,
@@ -67,6 +68,9 @@ from .errors import CheckpointError, TrainingDataError
 from .features import C_DIM, C_INDEX, H_INDEX, Q_DIM, window_positions
 from .model import HabitVQVAE
 from .text import species_embeddings
+
+#: Joint indices of the four toes (LF, RF, LH, RH), for the stance term.
+_TOES = [JOINT_NAMES.index(n) for n in FOOT_JOINTS]
 
 __all__ = ["TrainResult", "build_untrained", "compute_losses", "evaluate_windows", "train", "lr_at"]
 
@@ -201,9 +205,7 @@ def _stance_loss(
 ) -> torch.Tensor:
     """Smooth-L1 of the decoded toe velocity [leg lengths / s] towards zero on frames
     whose label and the previous frame's are both stance (mean over those frames)."""
-    from ..skeleton import FOOT_JOINTS, JOINT_NAMES
-
-    toes = [JOINT_NAMES.index(n) for n in FOOT_JOINTS]
+    toes = _TOES
     leg = torch.tensor([load_species(s).leg_length for s in species], dtype=pos.dtype)
     v = (pos[:, 1:, toes] - pos[:, :-1, toes]) * (fps / leg[:, None, None, None])
     c = target[..., C_INDEX : C_INDEX + C_DIM] > 0.5
@@ -757,14 +759,19 @@ def train(
         torch.set_num_threads(old_threads)
 
 
-def _load_init(init: str | Path, cfg: Config) -> LoadedCheckpoint:
-    """The checkpoint a fine-tune starts from (folder or shipped variant name)."""
+def resolve_init(init: str | Path) -> Path:
+    """The folder of the checkpoint a fine-tune starts from: ``init`` itself, or the
+    shipped checkpoint of a variant name (``habit``) unless a folder of that name exists."""
     from .config import VARIANTS
     from .transfer import resolve_checkpoint
 
     named = str(init) in VARIANTS and not Path(init).is_dir()
-    path = resolve_checkpoint(str(init)) if named else Path(init)
-    base = load_checkpoint(path)
+    return resolve_checkpoint(str(init)) if named else Path(init)
+
+
+def _load_init(init: str | Path, cfg: Config) -> LoadedCheckpoint:
+    """The checkpoint a fine-tune starts from (folder or shipped variant name)."""
+    base = load_checkpoint(resolve_init(init))
     if base.config.model != cfg.model:
         raise CheckpointError(
             f"--init {init}: its model configuration differs from this run's; fine-tuning "

@@ -382,9 +382,6 @@ def transfer_contacts(
                 labels[:, low] = src[:, low]
                 info["feet_from_source"] = [n for n, lo in zip(FEET, low, strict=True) if lo]
             return labels, info
-        gd = _gait_duty(out.species, source)
-        if gd is None or out.num_frames < 5 or not (labels.mean(axis=0) < 0.5 * gd[1]).any():
-            return labels, info
     elif src is not None:
         info = {
             "method": "source",
