@@ -56,6 +56,7 @@ __all__ = [
     "PlantReport",
     "plant_legs",
     "plant_motion",
+    "stance_driven_root",
     "leg_pose_angles",
     "contact_f1",
 ]
@@ -413,6 +414,45 @@ def leg_pose_angles(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
             h[f"{ft}_flex"],
         )
     return girdle, incl
+
+
+def stance_driven_root(motion: Motion, contacts: np.ndarray) -> tuple[Motion, float]:
+    """The motion with its pelvis' horizontal path moved by what its stance feet slide.
+
+    On every frame step where at least one foot is in stance on both frames, the pelvis'
+    horizontal step loses the mean horizontal step of those toes, so the body travels as
+    far as its stance legs carry it and the stance toes (on average) stay put; flight
+    steps keep the pelvis' own step. The legs, the trunk's rotation and the pelvis
+    height are kept. The speed ratio it returns measures how far a motion's legs carry
+    its body: 1 for feet that rest in stance, near 0 for legs that slide along with the
+    body (``habitsim bench model`` reports it for the decoder's transfers).
+
+    Args:
+        motion: the motion.
+        contacts: (T, 4) bool stance labels.
+
+    Returns:
+        ``(motion with the new root path, mean horizontal speed new / old)`` (1 for a
+        motion that does not move).
+    """
+    t = motion.num_frames
+    c = np.asarray(contacts, dtype=bool)
+    if c.shape != (t, 4):
+        raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
+    if t < 2:
+        return motion, 1.0
+    toes = motion.foot_positions()[..., :2]
+    on = (c[1:] & c[:-1]).astype(np.float64)  # (T-1, 4)
+    n = on.sum(axis=1, keepdims=True)
+    slip = (np.diff(toes, axis=0) * on[..., None]).sum(axis=1) / np.maximum(n, 1.0)
+    root = np.array(motion.root_positions, dtype=np.float64)
+    root[1:, :2] -= np.cumsum(slip, axis=0)
+    old = np.linalg.norm(np.diff(motion.root_positions[:, :2], axis=0), axis=1).sum()
+    new = np.linalg.norm(np.diff(root[:, :2], axis=0), axis=1).sum()
+    out = Motion(
+        motion.species, motion.fps, root, motion.rotations, motion.contacts, dict(motion.metadata)
+    )
+    return out, float(new / old) if old > 1e-12 else 1.0
 
 
 def plant_motion(

@@ -354,3 +354,25 @@ def test_plant_motion_plants_own_feet_and_lifts_swing():
     feet = out.foot_positions()[..., :2]
     both = m.contacts[1:] & m.contacts[:-1]
     assert np.linalg.norm(np.diff(feet, axis=0), axis=-1)[both].max() <= 0.002 * leg
+
+
+def test_stance_driven_root_measures_how_far_the_legs_carry_the_body():
+    from habitsim.motion import Motion
+    from habitsim.planting import stance_driven_root
+
+    m = habitsim.generate("dog", "walk", seed=2, duration_s=2.0)  # no flight phase
+    assert m.contacts.any(axis=1).all()
+    # feet that rest: the legs carry the whole travel, the path is unchanged
+    same, ratio = stance_driven_root(m, m.contacts)
+    assert ratio == pytest.approx(1.0, abs=0.03)
+    np.testing.assert_allclose(same.root_positions, m.root_positions, atol=0.03 * 0.5)
+    # the same legs with the body sliding twice as far: the stance legs carry half of it,
+    # and held still they put the body back on the legs' own path
+    fast = m.root_positions.copy()
+    fast[:, :2] = fast[0, :2] + 2.0 * (fast[:, :2] - fast[0, :2])
+    slide = Motion("dog", m.fps, fast, m.rotations, m.contacts)
+    back, ratio = stance_driven_root(slide, m.contacts)
+    assert ratio == pytest.approx(0.5, abs=0.03)
+    np.testing.assert_array_equal(back.root_positions[:, 2], fast[:, 2])
+    with pytest.raises(habitsim.errors.InvalidMotionError, match="contacts must have shape"):
+        stance_driven_root(m, m.contacts[:-1])

@@ -26,7 +26,7 @@ from habitsim.models.features import (
 )
 from habitsim.models.quantizer import EMAQuantizer, residual_quantize
 from habitsim.models.train import _contact_loss, _stance_loss
-from habitsim.models.transfer import MIN_SOURCE_AGREEMENT, transfer_contacts
+from habitsim.models.transfer import MAX_DUTY_GAP, MIN_SOURCE_AGREEMENT, transfer_contacts
 from habitsim.motion import Motion
 from habitsim.species import load_species
 
@@ -135,6 +135,14 @@ def test_transfer_labels_come_from_the_decoded_contacts_checked_against_the_sour
     labels, info = transfer_contacts(out, src, bad)
     assert info["source_f1"][2] < MIN_SOURCE_AGREEMENT <= min(info["source_f1"][:2])
     assert info["feet_from_source"] == ["LH"]
+    np.testing.assert_array_equal(labels, src.contacts)
+    # a decoded foot that stands far longer than the source's (a high F1 all the same)
+    # takes the source's schedule too
+    long = src.contacts.copy()
+    long[:, 0] |= np.roll(long[:, 0], 4) | np.roll(long[:, 0], 8)
+    labels, info = transfer_contacts(out, src, long)
+    assert info["duty"][0] - info["source_duty"][0] > MAX_DUTY_GAP
+    assert info["feet_from_source"] == ["LF"]
     np.testing.assert_array_equal(labels, src.contacts)
     # without decoded contacts (direct) the source's schedule is used as such
     labels, info = transfer_contacts(out, src)

@@ -12,7 +12,12 @@ import pytest
 from habitsim.contacts import drop_short_runs, warp_contacts
 from habitsim.gaits import generate
 from habitsim.models import transfer
-from habitsim.models.transfer import MIN_SOURCE_AGREEMENT, transfer_contacts
+from habitsim.models.transfer import (
+    MAX_DUTY_GAP,
+    MIN_SOURCE_AGREEMENT,
+    PLANT_MAX_REACH_PER_LEG,
+    transfer_contacts,
+)
 from habitsim.motion import resample_motion
 from habitsim.pipeline import PipelineError, refine_mode, run_clip, stance_toe_height
 from habitsim.planting import contact_f1
@@ -60,8 +65,42 @@ def test_transfer_keeps_the_source_footfalls(trot) -> None:
         f1 = contact_f1(out.contacts[:, k : k + 1], src[:, k : k + 1])[0]
         if foot in how.get("feet_from_source", []):
             np.testing.assert_array_equal(out.contacts[:, k], src[:, k])
-        else:  # kept: it agreed with the source's footfalls
+        else:  # kept: it agreed with the source's footfalls and stands as long
             assert f1 >= MIN_SOURCE_AGREEMENT and how["source_f1"][k] == pytest.approx(f1, abs=1e-3)
+            assert abs(out.contacts[:, k].mean() - src[:, k].mean()) <= MAX_DUTY_GAP
+
+
+def _resting(m, labels) -> float:
+    v = np.linalg.norm(np.diff(m.foot_positions(), axis=0), axis=-1) * m.fps
+    on = labels[1:] & labels[:-1]
+    return float((v[on] <= 0.1 * m.species_info.leg_length).mean())
+
+
+def test_habit_transfer_plants_its_feet_on_its_labels(trot) -> None:
+    planted = transfer(trot, to="elephant", method="habit", seed=0)
+    raw = transfer(trot, to="elephant", method="habit", seed=0, plant=False)
+    np.testing.assert_array_equal(planted.contacts, raw.contacts)  # same labels
+    assert raw.metadata["transfer"]["planted"] is False
+    report = planted.metadata["transfer"]["planted"]
+    assert report["kept"] and len(report["stance_toe_height_per_leg"]) == 4
+    assert report["max_reach_error_per_leg"] <= PLANT_MAX_REACH_PER_LEG
+    c = planted.contacts
+    assert _resting(planted, c) >= 0.95 > _resting(raw, c)
+    z = planted.foot_positions()[..., 2][c] / planted.species_info.leg_length
+    assert np.median(np.abs(z)) <= 0.01  # stance toes on the ground
+    # the trunk is the decoder's: planting re-solves the legs only
+    np.testing.assert_allclose(planted.root_positions[:, :2], raw.root_positions[:, :2], atol=1e-9)
+
+
+def test_planting_out_of_reach_keeps_the_decoded_feet_and_says_why(trot) -> None:
+    # the horse's trot at the cat's Froude speed and the horse's cadence: strides of
+    # more leg lengths than the cat's legs sweep
+    out = transfer(trot, to="cat", method="habit", seed=0)
+    raw = transfer(trot, to="cat", method="habit", seed=0, plant=False)
+    report = out.metadata["transfer"]["planted"]
+    assert not report["kept"] and "do not reach" in report["reason"]
+    assert report["max_reach_error_per_leg"] > PLANT_MAX_REACH_PER_LEG
+    np.testing.assert_array_equal(out.rotations, raw.rotations)
 
 
 def test_transfer_contacts_time_warped_when_the_length_changes(trot) -> None:

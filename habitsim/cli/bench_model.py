@@ -13,9 +13,16 @@ the learning core:
   phases relative to LH and the source's, mean over LF, RF, RH,
   :func:`habitsim.gait_stats.gait_statistics`; target ≤ 0.1 cycle, median), the share of
   transfers whose duty factor lies in the target's band for the gait, and how the
-  transfer found its stance labels.
+  transfer found its stance labels. The phases are those of the transfer's labels; the
+  same error on the contacts detected on the output's own toes
+  (:meth:`habitsim.motion.Motion.detect_contacts`) says whether the feet follow them.
 * **Feet that rest**: on the frames a transfer labels in stance (this frame and the one
-  before), the share where the toe moves at ≤ 0.1 leg lengths per second (target ≥ 90 %).
+  before), the share where the toe moves at ≤ 0.1 leg lengths per second (target ≥ 90 %),
+  for the transfer as :func:`habitsim.models.transfer.transfer` returns it (feet planted
+  on its labels by leg IK) and for the decoder's own kinematics (``plant=False``), with
+  how far the decoder's stance legs carry its body (the travel left when the stance toes
+  are held still, :func:`habitsim.planting.stance_driven_root`, over the decoded travel:
+  1 for legs that push the body, near 0 for feet that slide along with it).
 * **Size and latency**: ``model.safetensors`` (target ≤ 30 MB) and one 64-frame transfer
   (:func:`habitsim.cli.bench_train.transfer_latency`, target ≤ 20 ms).
 """
@@ -128,10 +135,13 @@ def transfer_quality(
     from ..gait_stats import gait_statistics
     from ..gaits import action_gait
     from ..models.transfer import transfer
+    from ..planting import stance_driven_root
     from ..species import load_species
 
     phase, in_band, rest, stance, methods = [], [], 0, 0, {}
-    n = 0
+    rest_raw = stance_raw = n = 0
+    carried: list[float] = []
+    phase_feet: list[float] = []
     for src in sources:
         src_phases = gait_statistics(src).phase_offsets if src.contacts is not None else {}
         action = src.metadata.get("action")
@@ -145,11 +155,18 @@ def transfer_quality(
             methods[key] = methods.get(key, 0) + 1
             r, s = _resting_share(out)
             rest, stance = rest + r, stance + s
+            raw = transfer(src, to=t, method="habit", checkpoint=checkpoint, seed=0, plant=False)
+            r, s = _resting_share(raw.with_contacts(out.contacts))
+            rest_raw, stance_raw = rest_raw + r, stance_raw + s
+            carried.append(stance_driven_root(raw, out.contacts)[1])
             gs = gait_statistics(out)
             if src_phases:  # sources that step (a real clip has no action label)
                 e = _phase_error(gs.phase_offsets, src_phases)
                 if math.isfinite(e):
                     phase.append(e)
+                    # the same on the contacts the output's own toes show
+                    seen = gait_statistics(out.with_contacts(out.detect_contacts()))
+                    phase_feet.append(_phase_error(seen.phase_offsets, src_phases))
             if action in CYCLIC_ACTIONS:
                 try:
                     habit = load_species(t).gaits.get(action_gait(t, str(action)))
@@ -165,8 +182,11 @@ def transfer_quality(
         if phase
         else math.nan,
         "phase_measured": len(phase),
+        "phase_error_feet_median": statistics.median(phase_feet) if phase_feet else math.nan,
         "duty_in_band": float(np.mean(in_band)) if in_band else math.nan,
         "resting_share": rest / stance if stance else math.nan,
+        "resting_share_decoder": rest_raw / stance_raw if stance_raw else math.nan,
+        "carried_travel_median": statistics.median(carried) if carried else math.nan,
         "stance_frames": stance,
         "contact_methods": methods,
     }
@@ -218,10 +238,15 @@ def _row(name: str, q: dict[str, Any]) -> list[str]:
         f"{q['phase_measured']} stepping transfers, {100 * q['phase_error_share_ok']:.0f} % ≤ "
         f"{TARGET_PHASE_ERROR} (target median ≤ {TARGET_PHASE_ERROR}: "
         f"{'met' if ok_p else 'MISSED'})",
+        f"    (on the contacts detected on the output's toes: median "
+        f"{q['phase_error_feet_median']:.3f} cycle)",
         f"    duty factor in the target's band  {100 * q['duty_in_band']:.0f} %",
         f"    stance toes at rest    {100 * q['resting_share']:.1f} % of {q['stance_frames']} "
         f"stance frames ≤ {TARGET_TOE_SPEED} leg/s (target ≥ {100 * TARGET_RESTING_SHARE:.0f} %: "
         f"{'met' if ok_r else 'MISSED'})",
+        f"    (decoder alone, feet not planted: {100 * q['resting_share_decoder']:.1f} %; its "
+        f"stance legs carry the body {100 * q['carried_travel_median']:.0f} % of its decoded "
+        "travel, median)",
         "    stance labels          "
         + ", ".join(f"{k} {v}" for k, v in sorted(q["contact_methods"].items())),
     ]

@@ -112,6 +112,9 @@ def register_method(
 ) -> TransferMethod:
     """Add a transfer method to :data:`METHODS` (plug-in point for evaluation).
 
+    :func:`transfer` calls ``fn(motion, to, seed=…, checkpoint=…, temperature=…,
+    plant=…)``; a method takes ``**kwargs`` for the options it has no use for.
+
     Raises:
         ValueError: the name is taken (unless ``overwrite``).
     """
@@ -334,7 +337,17 @@ def _gait_duty(target: str, source: Motion) -> tuple[str, float] | None:
 
 #: A decoded foot whose stance labels match the source's footfall schedule with an F1
 #: below this takes the source's schedule instead (the action's footfalls survive).
-MIN_SOURCE_AGREEMENT = 0.6
+#: The F1 alone lets a foot that is labelled in stance almost all the time through
+#: (stance share 0.9 against the source's 0.4 still scores 0.6), hence also
+#: :data:`MAX_DUTY_GAP`. Measured with the feature version 3 model: median decoded F1
+#: 0.83 on synthetic test transfers, 0.70 on transfers of real dog clips.
+MIN_SOURCE_AGREEMENT = 0.8
+
+#: ... and a decoded foot whose stance share differs from the source's by more than this
+#: takes the source's schedule too. On a real trot sent to the tiger the decoded feet
+#: stood 82–91 % of the time against the source's 38–42 %; planted, that clip fell after
+#: 0.3 s, with the source's schedule it was tracked to the end.
+MAX_DUTY_GAP = 0.1
 
 
 def transfer_contacts(
@@ -348,8 +361,9 @@ def transfer_contacts(
        runs shorter than 2 frames (:func:`habitsim.contacts.drop_short_runs`). When the
        source carries stance labels they are checked against its footfall schedule
        (carried over in normalised time, :func:`habitsim.contacts.warp_contacts`): the
-       per-foot F1 goes into the report and a foot that agrees less than
-       :data:`MIN_SOURCE_AGREEMENT` takes the source's schedule.
+       per-foot F1 and stance shares go into the report, and a foot that agrees less
+       than :data:`MIN_SOURCE_AGREEMENT` or whose stance share is more than
+       :data:`MAX_DUTY_GAP` from the source's takes the source's schedule.
     2. ``source``: no decoded contacts (``direct``), and the source carries stance labels
        (a synthetic clip's planned stance, an import's labels found on the source
        skeleton): the transferred motion keeps the source's footfall schedule.
@@ -376,8 +390,11 @@ def transfer_contacts(
         info: dict[str, Any] = {"method": "decoded"}
         if src is not None:
             f1 = contact_f1(labels, src)
+            duty, duty_src = labels.mean(axis=0), src.mean(axis=0)
             info["source_f1"] = [round(float(v), 3) for v in f1]
-            low = f1 < MIN_SOURCE_AGREEMENT
+            info["duty"] = [round(float(v), 3) for v in duty]
+            info["source_duty"] = [round(float(v), 3) for v in duty_src]
+            low = (f1 < MIN_SOURCE_AGREEMENT) | (np.abs(duty - duty_src) > MAX_DUTY_GAP)
             if low.any():
                 labels[:, low] = src[:, low]
                 info["feet_from_source"] = [n for n, lo in zip(FEET, low, strict=True) if lo]
@@ -413,11 +430,47 @@ def transfer_contacts(
     return labels, info
 
 
-def _finish(out: Motion, source: Motion, info: dict[str, Any]) -> Motion:
+#: Planting is kept only when every planted toe reaches its target within this share of
+#: leg length ...
+PLANT_MAX_REACH_PER_LEG = 0.05
+#: ... and the pelvis is lowered by at most this share of leg length to reach them.
+#: Beyond, a stance run sweeps further than the leg reaches (a large source's stride
+#: sent to a small target keeps its cadence at the target's Froude speed, so the small
+#: animal's strides are longer in leg lengths): planting would crouch the animal and
+#: still leave toes off their footholds, so the decoded feet are kept and the report
+#: says why.
+PLANT_MAX_DROP_PER_LEG = 0.1
+
+
+def _finish(out: Motion, source: Motion, info: dict[str, Any], plant: bool = False) -> Motion:
+    """The decoded motion at the source's frame rate with its stance labels
+    (:func:`transfer_contacts`) and, with ``plant``, its feet planted on them by leg IK
+    (:func:`habitsim.planting.plant_motion`: each stance run held at one foothold on the
+    ground, swing blended in between), kept when the legs reach
+    (:data:`PLANT_MAX_REACH_PER_LEG`, :data:`PLANT_MAX_DROP_PER_LEG`).
+    ``metadata["transfer"]["planted"]`` says what the planting did: ``False`` when it
+    was off or no foot is in stance, else its report with ``kept`` (and ``reason`` when
+    not)."""
+    from ..planting import plant_motion
+
     out = _resample(out, source.fps)
     meta = {k: v for k, v in source.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
     contacts, how = transfer_contacts(out, source, out.contacts)
-    meta["transfer"] = {**info, "contacts": how}
+    planted: Any = False
+    if plant and contacts.any():
+        moved, report = plant_motion(out, contacts)
+        planted = report.to_dict(out.species_info.leg_length)
+        reach, drop = planted["max_reach_error_per_leg"], planted["max_pelvis_drop_per_leg"]
+        if reach <= PLANT_MAX_REACH_PER_LEG and drop <= PLANT_MAX_DROP_PER_LEG:
+            out, planted["kept"] = moved, True
+        else:
+            planted["kept"] = False
+            planted["reason"] = (
+                f"the legs do not reach the footholds (toe {reach:.2f} leg lengths off, "
+                f"pelvis lowered {drop:.2f}; limits {PLANT_MAX_REACH_PER_LEG}, "
+                f"{PLANT_MAX_DROP_PER_LEG}): the decoded feet are kept"
+            )
+    meta["transfer"] = {**info, "contacts": how, "planted": planted}
     return Motion(out.species, out.fps, out.root_positions, out.rotations, contacts, meta)
 
 
@@ -451,6 +504,7 @@ def _network_method(variant: str) -> Callable[..., Motion]:
         seed: int | None = 0,
         checkpoint: str | Path | None = None,
         temperature: float = 1.0,
+        plant: bool = True,
         **_: Any,
     ) -> Motion:
         ck = load_model(checkpoint, variant)
@@ -463,7 +517,7 @@ def _network_method(variant: str) -> Callable[..., Motion]:
             ck, motion, load_species(to).name, seed=seed, temperature=temperature
         )
         info = {"method": variant, "from": motion.species, "to": out.species, "seed": seed, **info}
-        return _finish(out, motion, info)
+        return _finish(out, motion, info, plant=plant)
 
     run.__name__ = f"transfer_{variant}"
     return run
@@ -492,6 +546,7 @@ def transfer(
     seed: int | None = 0,
     checkpoint: str | Path | None = None,
     temperature: float = 1.0,
+    plant: bool = True,
 ) -> Motion:
     """Transfer a motion onto another species, keeping the target's habits.
 
@@ -504,12 +559,15 @@ def transfer(
             same output).
         checkpoint: checkpoint folder to use instead of the default of the method.
         temperature: scale of the flow's base Gaussian when drawing z_c (1 = the prior).
+        plant: the network methods plant the decoded feet on the output's stance labels
+            by leg IK (``False``: the decoder's raw kinematics; ``direct`` keeps the
+            source's planted feet either way).
 
     Returns:
         A :class:`~habitsim.motion.Motion` on ``to``'s skeleton at the source's frame
         rate, with foot contacts (:func:`transfer_contacts`) and ``metadata["transfer"]``
         (method, habit species, retrieval explanation for held-out targets, how the
-        contacts were found).
+        contacts were found, what the planting did).
 
     Raises:
         UnknownMethodError: the method is not registered (lists the valid ones).
@@ -534,7 +592,7 @@ def transfer(
                 dict(motion.metadata),
             )
     return METHODS[method].fn(
-        motion, tgt, seed=seed, checkpoint=checkpoint, temperature=temperature
+        motion, tgt, seed=seed, checkpoint=checkpoint, temperature=temperature, plant=plant
     )
 
 
