@@ -119,8 +119,11 @@ class LocalExecutor:
             self._pool = cf.ProcessPoolExecutor(
                 self.workers, initializer=_init_worker, initargs=(os.getpid(),)
             )
-        futs = {self._pool.submit(fn, t): t for t in tasks}
+        futs: dict[cf.Future, Any] = {}
         try:
+            # an interrupt while the tasks are submitted stops the pool as well
+            for t in tasks:
+                futs[self._pool.submit(fn, t)] = t
             for f in cf.as_completed(futs):
                 yield futs[f], f.result()
         except BaseException:

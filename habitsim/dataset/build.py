@@ -202,10 +202,12 @@ def build_dataset(
             with cf.ProcessPoolExecutor(
                 max_workers=n_workers, initializer=init_worker, initargs=(os.getpid(),)
             ) as pool:
-                futures = {
-                    pool.submit(_make_clip, str(out), job, resume): i for i, job in enumerate(jobs)
-                }
+                futures: dict[cf.Future, int] = {}
                 try:
+                    # submitting hundreds of clips takes a while: an interrupt that lands
+                    # here must stop the pool too, not leave `with` waiting for the queue
+                    for i, job in enumerate(jobs):
+                        futures[pool.submit(_make_clip, str(out), job, resume)] = i
                     for fut in cf.as_completed(futures):
                         entries[futures[fut]], made = fut.result()
                         generated += made
