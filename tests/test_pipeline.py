@@ -4,6 +4,7 @@ cache."""
 
 from __future__ import annotations
 
+import importlib
 from types import SimpleNamespace
 
 import numpy as np
@@ -16,6 +17,7 @@ from habitsim.models.transfer import (
     MAX_DUTY_GAP,
     MIN_SOURCE_AGREEMENT,
     PLANT_MAX_REACH_PER_LEG,
+    _reaches,
     transfer_contacts,
 )
 from habitsim.motion import resample_motion
@@ -101,6 +103,36 @@ def test_planting_out_of_reach_keeps_the_decoded_feet_and_says_why(trot) -> None
     assert not report["kept"] and "do not reach" in report["reason"]
     assert report["max_reach_error_per_leg"] > PLANT_MAX_REACH_PER_LEG
     np.testing.assert_array_equal(out.rotations, raw.rotations)
+
+
+def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot, monkeypatch):
+    # the horse's trot sent to the tiger: the decoded stance feet slide, so a foothold
+    # held for a whole stance run is out of reach with the decoded root path
+    # the module (habitsim.models.transfer is also the name of its function)
+    transfer_module = importlib.import_module("habitsim.models.transfer")
+
+    monkeypatch.setattr(transfer_module, "PLANT_MIN_SPEED_RATIO", 0.2)
+    out = transfer(trot, to="tiger", method="habit", seed=0)
+    raw = transfer(trot, to="tiger", method="habit", seed=0, plant=False)
+    report = out.metadata["transfer"]["planted"]
+    assert report["kept"] and report["root"] == "carried", report
+    assert "do not reach" in report["reason"] and "carry" in report["reason"]
+    assert _reaches(report)
+    c = out.contacts
+    assert _resting(out, c) >= 0.95 > _resting(raw, c)
+
+    # the body travels less than the decoder's, by the ratio the report gives
+    def travel(m):
+        return np.linalg.norm(np.diff(m.root_positions[:, :2], axis=0), axis=1).sum()
+
+    assert travel(out) / travel(raw) == pytest.approx(report["speed_ratio"], abs=2e-3)
+    assert 0.2 <= report["speed_ratio"] < 0.99
+    # a body its legs carry too little is not moved: the decoded feet are kept
+    monkeypatch.setattr(transfer_module, "PLANT_MIN_SPEED_RATIO", 0.99)
+    slow = transfer(trot, to="tiger", method="habit", seed=0)
+    report = slow.metadata["transfer"]["planted"]
+    assert not report["kept"] and "carry the body only" in report["reason"]
+    np.testing.assert_array_equal(slow.root_positions, raw.root_positions)
 
 
 def test_transfer_contacts_time_warped_when_the_length_changes(trot) -> None:

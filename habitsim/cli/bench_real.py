@@ -79,6 +79,16 @@ class BenchRealError(HabitsimError, ValueError):
     a window, bad window settings."""
 
 
+def _planted(motion: Any) -> str:
+    """How the transfer planted its feet (``metadata["transfer"]["planted"]``):
+    ``decoded`` / ``carried`` (the root path the feet were planted under), ``no`` (out of
+    reach, decoded feet kept) or ``-`` (the method does not plant)."""
+    p = (getattr(motion, "metadata", None) or {}).get("transfer", {}).get("planted")
+    if not isinstance(p, dict):
+        return "-"
+    return str(p.get("root", "decoded")) if p.get("kept") else "no"
+
+
 # ---------------------------------------------------------------------------- sources
 
 
@@ -241,6 +251,7 @@ def run_window(task: WindowTask) -> list[dict[str, Any]]:
         row.update(
             {
                 "contacts_method": run.transferred.contacts_method,
+                "planted": _planted(run.transferred.motion),
                 "stance_toe_height_transfer": _num(a.get("stance_toe_height_per_leg")),
                 "stance_toe_height_refined": _num(b.get("stance_toe_height_per_leg")),
                 "skate_mm_before": _num(a.get("skate_mm")),
@@ -443,6 +454,9 @@ def format_summary(rows: Sequence[dict[str, Any]], targets: Sequence[dict[str, A
         how: dict[str, int] = {}
         for r in ok:
             how[str(r.get("contacts_method"))] = how.get(str(r.get("contacts_method")), 0) + 1
+        planted: dict[str, int] = {}
+        for r in ok:
+            planted[str(r.get("planted"))] = planted.get(str(r.get("planted")), 0) + 1
         checks: dict[str, int] = {}
         for r in ok:
             checks[str(r.get("refine_check"))] = checks.get(str(r.get("refine_check")), 0) + 1
@@ -463,6 +477,8 @@ def format_summary(rows: Sequence[dict[str, Any]], targets: Sequence[dict[str, A
             f"(whole window {sum(s >= 1.0 for s in surv)}/{len(surv)}); sim MPJPE/L "
             f"{_f(_median(ok, 'sim_mpjpe_per_leg'), 3)}; contacts "
             + ", ".join(f"{k} {v}" for k, v in sorted(how.items()))
+            + "; planted "
+            + ", ".join(f"{k} {v}" for k, v in sorted(planted.items()))
             + "; refinement check "
             + ", ".join(f"{k} {v}" for k, v in sorted(checks.items()))
         )

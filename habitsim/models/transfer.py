@@ -434,12 +434,67 @@ def transfer_contacts(
 #: leg length ...
 PLANT_MAX_REACH_PER_LEG = 0.05
 #: ... and the pelvis is lowered by at most this share of leg length to reach them.
-#: Beyond, a stance run sweeps further than the leg reaches (a large source's stride
-#: sent to a small target keeps its cadence at the target's Froude speed, so the small
-#: animal's strides are longer in leg lengths): planting would crouch the animal and
-#: still leave toes off their footholds, so the decoded feet are kept and the report
-#: says why.
+#: Beyond, a stance run sweeps further than the leg reaches: the decoded feet slide in
+#: stance, so a foothold held for the whole run lies behind the hip at its end (and a
+#: large source's stride sent to a small target keeps its cadence at the target's
+#: Froude speed, so the small animal's strides are longer in leg lengths).
 PLANT_MAX_DROP_PER_LEG = 0.1
+#: When the legs do not reach, the body is moved only as far as its stance legs carry
+#: it (:func:`habitsim.planting.stance_driven_root`) and planted again, provided it keeps
+#: at least this share of its decoded speed; below, the action itself would change (a
+#: walk turned into a shuffle) and the decoded feet are kept. On the transfers of real
+#: dog clips to the cat and the tiger whose first planting missed, the carried body kept
+#: 47-119 % of its speed and every one was planted (``habitsim bench real``).
+PLANT_MIN_SPEED_RATIO = 0.4
+
+
+def _reaches(report: dict[str, Any]) -> bool:
+    return (
+        report["max_reach_error_per_leg"] <= PLANT_MAX_REACH_PER_LEG
+        and report["max_pelvis_drop_per_leg"] <= PLANT_MAX_DROP_PER_LEG
+    )
+
+
+def _plant(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]]:
+    """Plant ``out``'s feet on ``contacts``; fall back to the legs' own travel (module
+    constants above). Returns the motion to keep and the report of what was done."""
+    from ..planting import plant_motion, stance_driven_root
+
+    leg = out.species_info.leg_length
+    moved, report = plant_motion(out, contacts)
+    first = report.to_dict(leg)
+    if _reaches(first):
+        return moved, {**first, "kept": True, "root": "decoded"}
+    missed = (
+        f"the legs do not reach the footholds (toe {first['max_reach_error_per_leg']:.2f} "
+        f"leg lengths off, pelvis lowered {first['max_pelvis_drop_per_leg']:.2f}; limits "
+        f"{PLANT_MAX_REACH_PER_LEG}, {PLANT_MAX_DROP_PER_LEG})"
+    )
+    carried, ratio = stance_driven_root(out, contacts)
+    if ratio >= PLANT_MIN_SPEED_RATIO:
+        moved, report = plant_motion(carried, contacts)
+        second = report.to_dict(leg)
+        if _reaches(second):
+            return moved, {
+                **second,
+                "kept": True,
+                "root": "carried",
+                "speed_ratio": round(ratio, 3),
+                "reason": f"{missed} with the decoded root path; the body moved as far "
+                f"as its stance legs carry it ({100 * ratio:.0f} % of its decoded speed)",
+            }
+        why = "not even with the body carried by its stance legs"
+    else:
+        why = (
+            f"the stance legs carry the body only {100 * ratio:.0f} % of its decoded "
+            f"speed (< {100 * PLANT_MIN_SPEED_RATIO:.0f} %)"
+        )
+    return out, {
+        **first,
+        "kept": False,
+        "speed_ratio": round(ratio, 3),
+        "reason": f"{missed}, {why}: the decoded feet are kept",
+    }
 
 
 def _finish(out: Motion, source: Motion, info: dict[str, Any], plant: bool = False) -> Motion:
@@ -447,29 +502,18 @@ def _finish(out: Motion, source: Motion, info: dict[str, Any], plant: bool = Fal
     (:func:`transfer_contacts`) and, with ``plant``, its feet planted on them by leg IK
     (:func:`habitsim.planting.plant_motion`: each stance run held at one foothold on the
     ground, swing blended in between), kept when the legs reach
-    (:data:`PLANT_MAX_REACH_PER_LEG`, :data:`PLANT_MAX_DROP_PER_LEG`).
-    ``metadata["transfer"]["planted"]`` says what the planting did: ``False`` when it
-    was off or no foot is in stance, else its report with ``kept`` (and ``reason`` when
-    not)."""
-    from ..planting import plant_motion
-
+    (:data:`PLANT_MAX_REACH_PER_LEG`, :data:`PLANT_MAX_DROP_PER_LEG`); where they do not,
+    the body is moved as far as its stance legs carry it and planted again
+    (:data:`PLANT_MIN_SPEED_RATIO`). ``metadata["transfer"]["planted"]`` says what the
+    planting did: ``False`` when it was off or no foot is in stance, else its report with
+    ``kept``, ``root`` (``decoded`` or ``carried``) and ``reason`` where the first try
+    missed."""
     out = _resample(out, source.fps)
     meta = {k: v for k, v in source.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
     contacts, how = transfer_contacts(out, source, out.contacts)
     planted: Any = False
     if plant and contacts.any():
-        moved, report = plant_motion(out, contacts)
-        planted = report.to_dict(out.species_info.leg_length)
-        reach, drop = planted["max_reach_error_per_leg"], planted["max_pelvis_drop_per_leg"]
-        if reach <= PLANT_MAX_REACH_PER_LEG and drop <= PLANT_MAX_DROP_PER_LEG:
-            out, planted["kept"] = moved, True
-        else:
-            planted["kept"] = False
-            planted["reason"] = (
-                f"the legs do not reach the footholds (toe {reach:.2f} leg lengths off, "
-                f"pelvis lowered {drop:.2f}; limits {PLANT_MAX_REACH_PER_LEG}, "
-                f"{PLANT_MAX_DROP_PER_LEG}): the decoded feet are kept"
-            )
+        out, planted = _plant(out, contacts)
     meta["transfer"] = {**info, "contacts": how, "planted": planted}
     return Motion(out.species, out.fps, out.root_positions, out.rotations, contacts, meta)
 
