@@ -144,14 +144,14 @@ class TrunkStabilizer:
         ):
             if not (np.isfinite(val) and val >= 0):
                 raise ControllerError(f"{name} must be finite and >= 0, got {val}")
-        for name, val in (
+        for name, gain in (
             ("kp_pos", kp_pos),
             ("kd_pos", kd_pos),
             ("kp_rot", kp_rot),
             ("kd_rot", kd_rot),
         ):
-            if val is not None and not (np.isfinite(val) and val >= 0):
-                raise ControllerError(f"{name} must be finite and >= 0, got {val}")
+            if gain is not None and not (np.isfinite(gain) and gain >= 0):
+                raise ControllerError(f"{name} must be finite and >= 0, got {gain}")
         omega = 2 * np.pi * frequency_hz
         self.kp_pos = omega**2 if kp_pos is None else float(kp_pos)
         self.kd_pos = 2 * damping_ratio * omega if kd_pos is None else float(kd_pos)
@@ -226,13 +226,13 @@ class TrunkStabilizer:
         qa, da = self._qa, self._da
         pos, quat = data.qpos[qa : qa + 3], data.qpos[qa + 3 : qa + 7]
         rpos, rquat = ref.qpos[qa : qa + 3], ref.qpos[qa + 3 : qa + 7]
-        rot = np.zeros(9)
-        mujoco.mju_quat2Mat(rot, quat)
-        rot = rot.reshape(3, 3)
-        rrot = np.zeros(9)
+        rot9 = np.zeros(9)
+        mujoco.mju_quat2Mat(rot9, quat)
+        rot = rot9.reshape(3, 3)
+        rrot9 = np.zeros(9)
         rquat_n = rquat / max(np.linalg.norm(rquat), 1e-12)
-        mujoco.mju_quat2Mat(rrot, rquat_n)
-        rrot = rrot.reshape(3, 3)
+        mujoco.mju_quat2Mat(rrot9, rquat_n)
+        rrot = rrot9.reshape(3, 3)
         a_des = (
             ref.qacc[da : da + 3]
             + self.kp_pos * (rpos - pos)
@@ -354,7 +354,7 @@ class StabilizedController(BaseController):
 
     def _control(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:
         extra = joint_torques(self.stabilizer, model, data, ref, self.joint_names)
-        u = self.base._control_with(model, data, ref, extra)  # type: ignore[attr-defined]
+        u = self.base._control_with(model, data, ref, extra)
         self.stats.failures = self.stabilizer.stats.failures
         self.stats.extra.update(self.base.stats.extra)
         self.stats.extra["stance_mean_time_ms"] = self.stabilizer.stats.mean_time_ms

@@ -303,9 +303,9 @@ def _bench_refine(ns: argparse.Namespace) -> int:
             med = rec[st]["median_solve"]
             if not med <= TARGET_S[st]:  # NaN (every clip failed) misses too
                 missed.append(f"{sp} stage {st} median solve {med:.3f} s > {TARGET_S[st]} s")
-        before, after = rec.get("survival_before"), rec.get("survival_after")
-        if before is not None and not after >= before:
-            missed.append(f"{sp} survival after refinement {after:.2f} < before {before:.2f}")
+        s_before, s_after = rec.get("survival_before"), rec.get("survival_after")
+        if s_before is not None and not s_after >= s_before:
+            missed.append(f"{sp} survival after refinement {s_after:.2f} < before {s_before:.2f}")
 
     # ---------------------------------------------------------------- scaling
     print(f"\nscaling on {ns.scaling_species} (solve time summed over windows, one clip each):")
