@@ -3,6 +3,8 @@
 #   make test   - run the test suite
 # Both create or reuse .venv, install the CPU build of torch 2.13.0 first, then the project.
 # Also:
+#   make test-fast  - the tests not marked slow (no IPOPT solves, long rollouts, training,
+#                     subprocess command-line runs or rendering), about a minute
 #   make typecheck  - mypy on the package (.ci/typecheck.py)
 #   make lint       - ruff check, ruff format --check (code and tests), then typecheck;
 #                     CI (.ci/run) runs it before the tests
@@ -12,7 +14,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.habitsim-installed
 DEMO_OUT ?= demo_out
 
-.PHONY: demo test lint typecheck install clean fuzz
+.PHONY: demo test test-fast lint typecheck install clean fuzz
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -30,6 +32,10 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+
+# The quick subset: every test not marked `slow` (see the marker in pyproject.toml).
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -q -m "not slow"
 
 # ruff and mypy are dev tools, not dependencies of the package: installed on first use.
 $(BIN)/ruff: $(BIN)/python
