@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
@@ -45,12 +46,16 @@ from .base import (
     BaseController,
     ControllerError,
     ControllerStats,
+    PDController,
     Reference,
     actuated_joints,
     joint_torques,
 )
 from .gains import _point_body, _point_pos, _resolve_points
 from .stance_qp import StanceQP, distribute_wrench
+
+if TYPE_CHECKING:
+    from .servo import ServoController
 
 __all__ = ["TrunkStabilizer", "StabilizedController", "distribute_wrench", "StanceQP"]
 
@@ -324,14 +329,14 @@ class StabilizedController(BaseController):
     base's figures and ``stance_mean_time_ms``.
     """
 
-    def __init__(self, base: BaseController, stabilizer: TrunkStabilizer) -> None:
+    def __init__(self, base: PDController | ServoController, stabilizer: TrunkStabilizer) -> None:
         if not hasattr(base, "_control_with"):
             raise ControllerError(
                 f"StabilizedController needs a PDController or ServoController base, got "
                 f"{type(base).__name__}"
             )
         super().__init__(assist=base.assist)
-        names = tuple(base.joint_names)  # type: ignore[attr-defined]
+        names = tuple(base.joint_names)
         missing = [n for n in stabilizer.joint_names if n not in names]
         if missing:
             raise ControllerError(
@@ -343,7 +348,7 @@ class StabilizedController(BaseController):
 
     @property
     def joint_names(self) -> tuple[str, ...]:
-        return tuple(self.base.joint_names)  # type: ignore[attr-defined]
+        return tuple(self.base.joint_names)
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
         super().reset(model, data)

@@ -347,6 +347,8 @@ class RefinementProblem:
     nv: int
     build_time_s: float
     ng_blocks: dict[str, tuple[int, int]] = field(default_factory=dict)
+    #: the model a cached problem was built on, kept alive (its id is part of the cache key)
+    _model_ref: Any = field(default=None, repr=False, compare=False)
 
     # ---------------------------------------------------------------- layout helpers
     @property

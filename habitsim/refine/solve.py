@@ -382,7 +382,7 @@ def get_problem(
     if pr is None:
         m = _species_model(species) if model is None else model
         pr = build_refinement_problem(m, int(n_frames), bool(dynamics), settings)
-        pr._model_ref = m  # type: ignore[attr-defined]  # keep id(model) alive
+        pr._model_ref = m  # keep id(model) alive
         _PROBLEMS[key] = pr
         _BUILDS += 1
         while len(_PROBLEMS) > MAX_CACHED_PROBLEMS:
