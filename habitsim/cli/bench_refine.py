@@ -13,8 +13,7 @@ In one run:
   problems are built before the clocks start, so no column counts building (the
   ``build`` column times it once). The legend gives the process' thread count: IPOPT's
   linear algebra runs on the OpenBLAS thread pool, whose threads spin on a busy machine
-  (with ``OMP_NUM_THREADS=1``, ``cpu`` ≈ ``call``; on a busy 2-core machine the
-  single-threaded solve was also about twice as fast). Targets of the issue: stage A
+  (with ``OMP_NUM_THREADS=1``, ``cpu`` ≈ ``call``). Targets of the issue: stage A
   ≤ 0.5 s, stage B ≤ 2 s per clip;
 * survival of unassisted tracking (:func:`habitsim.sim.track`; ``--survival-controller``,
   default ``mpc``) of the same clips before and after stage-A refinement, per species
