@@ -65,6 +65,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -177,7 +178,7 @@ class BalanceConfig:
 
     @classmethod
     def scaled(
-        cls, mass: float, leg_length: float, gravity: float = 9.81, **overrides: float
+        cls, mass: float, leg_length: float, gravity: float = 9.81, **overrides: Any
     ) -> BalanceConfig:
         """The defaults for a body of ``mass`` [kg] and ``leg_length`` [m].
 
@@ -206,10 +207,10 @@ class BalanceConfig:
             raise ControllerError(
                 f"unknown balance option(s) {', '.join(bad)}; valid: {', '.join(sorted(known))}"
             )
-        cfg = replace(
-            cfg,
-            **{k: (v if isinstance(v, (dict, bool)) else float(v)) for k, v in overrides.items()},
-        )
+        changes: dict[str, Any] = {
+            k: (v if isinstance(v, (dict, bool)) else float(v)) for k, v in overrides.items()
+        }
+        cfg = replace(cfg, **changes)
         for name in known - {
             "extra",
             "null_space_posture",
@@ -329,7 +330,7 @@ class BalanceController(BaseController):
         solver: str = "daqp",
         assist=None,
         control_dt: float | None = None,
-        **options: float,
+        **options: Any,
     ) -> None:
         super().__init__(assist=assist)
         self.control_dt = float(model.opt.timestep if control_dt is None else control_dt)
@@ -395,7 +396,7 @@ class BalanceController(BaseController):
         self.last_wrench = np.zeros(6)
         self.last_modes = np.full(nf, STANCE)
         self.last_torque = np.zeros(n)
-        self._inertia = np.eye(3)
+        self._inertia: np.ndarray = np.eye(3)
         self._inertia_inv = np.eye(3)
         self._ticks = 0
         self._clipped = 0
@@ -685,7 +686,7 @@ class BalanceController(BaseController):
         jc: np.ndarray,
         force_sw: np.ndarray,
         modes: np.ndarray,
-    ) -> np.ndarray:
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(base, posture), each (n,): every torque but the stance forces' — ``base`` the
         bias, joint-damping compensation, inertial feed-forward and swing PD,
         ``posture`` the joint PD (null-space projected on the legs) and damping. ``jc``

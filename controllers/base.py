@@ -394,7 +394,8 @@ class PDController(BaseController):
             or np.any(self.kd < 0)
         ):
             raise ControllerError("PD gains must be finite and non-negative")
-        biased = [nm for nm, b in zip(self.map.names, self.map.biased, strict=True) if b]
+        flags = self.map.biased if self.map.biased is not None else [False] * len(self.map.names)
+        biased = [nm for nm, b in zip(self.map.names, flags, strict=True) if b]
         if biased:
             raise ControllerError(
                 f"PDController needs torque actuators; these joints have servo (biased) "

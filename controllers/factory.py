@@ -191,7 +191,7 @@ def make_controller(
     if name == "balance":
         from .balance import BalanceController
 
-        ctl: Controller = BalanceController(model, feet, **options)
+        ctl: BalanceController = BalanceController(model, feet, **options)
     else:
         from .mpc import MPCController
 
@@ -199,7 +199,7 @@ def make_controller(
     if qpos is not None:
         if fps is None:
             raise ControllerError("a reference qpos needs fps")
-        ctl.set_plan(qpos, fps, contacts)  # type: ignore[attr-defined]
+        ctl.set_plan(qpos, fps, contacts)
     return ctl
 
 

@@ -137,8 +137,8 @@ class LegSet:
         width = int(self.own.sum(axis=1).max())
         self.own_idx = np.full((nf, width), n, dtype=int)  # n = a zero column
         for i in range(nf):
-            k = np.flatnonzero(self.own[i])
-            self.own_idx[i, : k.size] = k
+            cols = np.flatnonzero(self.own[i])
+            self.own_idx[i, : cols.size] = cols
         kinds = {k for k, _ in self.points}
         self._kind = kinds.pop() if len(kinds) == 1 else "mixed"
         self._ids = np.array([i for _, i in self.points], dtype=int)

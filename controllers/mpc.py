@@ -228,9 +228,9 @@ class ConvexMPC:
         self._in = [np.zeros(fn.nnz_in(i)) for i in range(fn.n_in())]
         self._out = [np.zeros(fn.nnz_out(i)) for i in range(fn.n_out())]
         for i, a in enumerate(self._in):
-            self._buf.set_arg(i, memoryview(a))
+            self._buf.set_arg(i, a.data)
         for i, a in enumerate(self._out):
-            self._buf.set_res(i, memoryview(a))
+            self._buf.set_res(i, a.data)
         step = NX + 4 * self.nf  # constraint rows per step: dynamics, friction
         lbg = np.zeros(self.n * step)
         for k in range(self.n):
@@ -253,7 +253,9 @@ class ConvexMPC:
         iinv = casadi.SX.sym("iinv", 3, 3)
         mass, dt, mu, rw = (casadi.SX.sym(s) for s in ("m", "dt", "mu", "R"))
         q = casadi.SX.sym("Q", NX)
-        z, g, cost = [], [], 0
+        z: list[casadi.SX] = []
+        g: list[casadi.SX] = []
+        cost: casadi.SX | float = 0
         xk = x0
         fs = mass * x0[12]  # forces are decision variables in units of m·g
         for k in range(n):

@@ -13,7 +13,7 @@ Units: SI (m, s, kg, N, N·m, rad); world frame z up.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -117,6 +117,12 @@ class MotionPlan:
     liftoff: np.ndarray
     touchdown: np.ndarray
     stride_s: float
+    # Lookup tables of :meth:`sample`, derived by ``__post_init__``.
+    _pack: np.ndarray = field(init=False, repr=False, compare=False)
+    _foothold: np.ndarray = field(init=False, repr=False, compare=False)
+    _t_lo: np.ndarray = field(init=False, repr=False, compare=False)
+    _t_td: np.ndarray = field(init=False, repr=False, compare=False)
+    _feet_idx: np.ndarray = field(init=False, repr=False, compare=False)
 
     @property
     def n_frames(self) -> int:

@@ -523,6 +523,7 @@ class ServoController(BaseController):
         u[m.ctrl_index] = target
         vel_target = None
         if np.any(m.has_vel_target):
+            assert m.vel_ctrl_ids is not None  # has_vel_target is all False without them
             vel_target = m.gear * ref.qvel[m.dof_adr]
             ids = m.vel_ctrl_ids[m.has_vel_target]
             lim = model.actuator_ctrllimited[ids].astype(bool)

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
@@ -45,12 +46,16 @@ from .base import (
     BaseController,
     ControllerError,
     ControllerStats,
+    PDController,
     Reference,
     actuated_joints,
     joint_torques,
 )
 from .gains import _point_body, _point_pos, _resolve_points
 from .stance_qp import StanceQP, distribute_wrench
+
+if TYPE_CHECKING:
+    from .servo import ServoController
 
 __all__ = ["TrunkStabilizer", "StabilizedController", "distribute_wrench", "StanceQP"]
 
@@ -144,14 +149,14 @@ class TrunkStabilizer:
         ):
             if not (np.isfinite(val) and val >= 0):
                 raise ControllerError(f"{name} must be finite and >= 0, got {val}")
-        for name, val in (
+        for name, gain in (
             ("kp_pos", kp_pos),
             ("kd_pos", kd_pos),
             ("kp_rot", kp_rot),
             ("kd_rot", kd_rot),
         ):
-            if val is not None and not (np.isfinite(val) and val >= 0):
-                raise ControllerError(f"{name} must be finite and >= 0, got {val}")
+            if gain is not None and not (np.isfinite(gain) and gain >= 0):
+                raise ControllerError(f"{name} must be finite and >= 0, got {gain}")
         omega = 2 * np.pi * frequency_hz
         self.kp_pos = omega**2 if kp_pos is None else float(kp_pos)
         self.kd_pos = 2 * damping_ratio * omega if kd_pos is None else float(kd_pos)
@@ -226,13 +231,13 @@ class TrunkStabilizer:
         qa, da = self._qa, self._da
         pos, quat = data.qpos[qa : qa + 3], data.qpos[qa + 3 : qa + 7]
         rpos, rquat = ref.qpos[qa : qa + 3], ref.qpos[qa + 3 : qa + 7]
-        rot = np.zeros(9)
-        mujoco.mju_quat2Mat(rot, quat)
-        rot = rot.reshape(3, 3)
-        rrot = np.zeros(9)
+        rot9 = np.zeros(9)
+        mujoco.mju_quat2Mat(rot9, quat)
+        rot = rot9.reshape(3, 3)
+        rrot9 = np.zeros(9)
         rquat_n = rquat / max(np.linalg.norm(rquat), 1e-12)
-        mujoco.mju_quat2Mat(rrot, rquat_n)
-        rrot = rrot.reshape(3, 3)
+        mujoco.mju_quat2Mat(rrot9, rquat_n)
+        rrot = rrot9.reshape(3, 3)
         a_des = (
             ref.qacc[da : da + 3]
             + self.kp_pos * (rpos - pos)
@@ -324,14 +329,14 @@ class StabilizedController(BaseController):
     base's figures and ``stance_mean_time_ms``.
     """
 
-    def __init__(self, base: BaseController, stabilizer: TrunkStabilizer) -> None:
+    def __init__(self, base: PDController | ServoController, stabilizer: TrunkStabilizer) -> None:
         if not hasattr(base, "_control_with"):
             raise ControllerError(
                 f"StabilizedController needs a PDController or ServoController base, got "
                 f"{type(base).__name__}"
             )
         super().__init__(assist=base.assist)
-        names = tuple(base.joint_names)  # type: ignore[attr-defined]
+        names = tuple(base.joint_names)
         missing = [n for n in stabilizer.joint_names if n not in names]
         if missing:
             raise ControllerError(
@@ -343,7 +348,7 @@ class StabilizedController(BaseController):
 
     @property
     def joint_names(self) -> tuple[str, ...]:
-        return tuple(self.base.joint_names)  # type: ignore[attr-defined]
+        return tuple(self.base.joint_names)
 
     def reset(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
         super().reset(model, data)
@@ -354,7 +359,7 @@ class StabilizedController(BaseController):
 
     def _control(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:
         extra = joint_torques(self.stabilizer, model, data, ref, self.joint_names)
-        u = self.base._control_with(model, data, ref, extra)  # type: ignore[attr-defined]
+        u = self.base._control_with(model, data, ref, extra)
         self.stats.failures = self.stabilizer.stats.failures
         self.stats.extra.update(self.base.stats.extra)
         self.stats.extra["stance_mean_time_ms"] = self.stabilizer.stats.mean_time_ms

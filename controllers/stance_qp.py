@@ -179,9 +179,9 @@ class StanceQP:
         self._in = [np.zeros(self._fn.nnz_in(i)) for i in range(self._fn.n_in())]
         self._out = [np.zeros(self._fn.nnz_out(i)) for i in range(self._fn.n_out())]
         for i, a in enumerate(self._in):
-            self._buf.set_arg(i, memoryview(a))
+            self._buf.set_arg(i, a.data)  # type: ignore[call-arg]  # size: from the buffer
         for i, a in enumerate(self._out):
-            self._buf.set_res(i, memoryview(a))
+            self._buf.set_res(i, a.data)  # type: ignore[call-arg]  # size: from the buffer
         self._in[4][:] = -np.inf  # lbg
         self._in[5][:] = 0.0  # ubg
         self._np = 2 * nx + 15

@@ -234,6 +234,10 @@ class MotionEvaluator(nn.Module):
         config: the :class:`EvaluatorConfig` (class lists and sizes).
     """
 
+    # Buffers (registered in ``__init__``), declared for the type checker.
+    feat_mean: torch.Tensor
+    feat_std: torch.Tensor
+
     def __init__(self, config: EvaluatorConfig):
         super().__init__()
         if not config.species or not config.actions:
@@ -584,13 +588,14 @@ def train_evaluator(
     )
     order_len = np.array([a.shape[0] for a in xs])
     losses: list[float] = []
-    bar = range(cfg.epochs)
+    epochs: Iterable[int] = range(cfg.epochs)
+    bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(bar, desc="train evaluator", unit="epoch")
+        epochs = bar = tqdm(epochs, desc="train evaluator", unit="epoch")
     gen = torch.Generator().manual_seed(cfg.seed)
-    for _epoch in bar:
+    for _epoch in epochs:
         model.train()
         perm = rng.permutation(len(xs))
         # bucket by length within chunks: less padding, still shuffled
@@ -623,8 +628,8 @@ def train_evaluator(
             sched.step()
             tot += float(loss.detach()) * len(idx)
         losses.append(tot / len(xs))
-        if progress:
-            bar.set_postfix(loss=f"{losses[-1]:.3f}")  # type: ignore[union-attr]
+        if bar is not None:
+            bar.set_postfix(loss=f"{losses[-1]:.3f}")
 
     ev = Evaluator(model.eval())
     acc: dict[str, dict[str, float]] = {}

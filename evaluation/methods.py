@@ -101,7 +101,8 @@ def register_method(
 
 
 def _learned_transfer(source: Motion, target: str, *, seed: int, method: str) -> Motion:
-    from habitsim.models import MethodNotAvailableError, transfer
+    from habitsim.models import MethodNotAvailableError
+    from habitsim.models.transfer import transfer
 
     try:
         return transfer(source, to=target, method=method, seed=seed)

@@ -79,6 +79,7 @@ def evaluate_pair(task: PairTask) -> dict[str, Any]:
             return row
         out = run.transferred.motion
         ref = run.refined.motion
+        assert out is not None and ref is not None  # run_clip's transfer and refine ran
         row["time_transfer_s"] = run.times["transfer"]
         row.update(_paper_metrics(task, src, out))
         try:
@@ -178,7 +179,7 @@ def _write_trace(task: PairTask, src: Motion, out: Motion, ref: Motion, sim_res:
     """Contacts, tracking error and motions of a report pair (traces/<key>/)."""
     folder = Path(task.out) / "traces" / task.key
     make_dirs(folder)
-    arrays: dict[str, np.ndarray] = {
+    arrays: dict[str, Any] = {  # arrays for np.savez_compressed
         "fps": np.array(out.fps),
         "source_contacts": src.contacts if src.contacts is not None else src.detect_contacts(),
         "transferred_contacts": out.detect_contacts(),

@@ -61,7 +61,7 @@ def _reference_features(
     motions, species, clips = [], [], []
     splits = [x.strip() for x in cfg.reference_split.split(",") if x.strip()]
     for t in sorted(targets):
-        have = [sp for sp in splits if man.select(split=sp, species=t)]
+        have: list[str | None] = [sp for sp in splits if man.select(split=sp, species=t)]
         for sp in have or [None]:
             for e, m in iter_clips(man, split=sp, species=t):
                 motions.append(m)

@@ -1009,8 +1009,9 @@ def detect_frame(
             ("lh_hip", "lh_hock", False),
             ("lf_shoulder", "lf_wrist", True),
         ):
-            if joints.get(a) and joints.get(b):
-                leg = t.path_length(bvh.index(joints[a]), bvh.index(joints[b]))  # type: ignore[arg-type]
+            ja, jb = joints.get(a), joints.get(b)
+            if ja and jb:
+                leg = t.path_length(bvh.index(ja), bvh.index(jb))
                 if sp is not None:
                     target = sp.fore_leg_length if fore else sp.hind_leg_length
                     if b.endswith(("hock", "wrist")):

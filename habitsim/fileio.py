@@ -224,7 +224,8 @@ def atomic_write(path: str | Path, mode: str = "wb") -> Iterator[IO]:
     """
     with atomic_path(path) as tmp:
         try:
-            fh = open(tmp, mode, **({} if "b" in mode else {"encoding": "utf-8"}))
+            text: dict[str, Any] = {} if "b" in mode else {"encoding": "utf-8"}
+            fh = open(tmp, mode, **text)
         except OSError as e:
             raise _output_error(Path(path), e) from None
         with fh:

@@ -219,7 +219,9 @@ class Workspace:
         with np.load(p) as z:
             self.npz_seed = {k: z[k] for k in z.files}
         self.motion_file = p
-        self.toml_seed = load_species("dog").path.read_text(encoding="utf-8")
+        toml = load_species("dog").path
+        assert toml is not None  # a catalog species is read from its file
+        self.toml_seed = toml.read_text(encoding="utf-8")
         data = self.root / "dataset"
         build_dataset(
             data, clips_per_species=1, seed=0, species=["cat", "dog"], workers=1, progress=False
@@ -434,10 +436,10 @@ def _npz_file(ws: Workspace, rnd: random.Random) -> Path:
         raw = p.read_bytes()
         p.write_bytes(raw[: rnd.randrange(len(raw))])
     elif r < 0.20:  # bytes flipped
-        raw = bytearray(p.read_bytes())
+        flipped = bytearray(p.read_bytes())
         for _ in range(rnd.randint(1, 20)):
-            raw[rnd.randrange(len(raw))] = rnd.randrange(256)
-        p.write_bytes(bytes(raw))
+            flipped[rnd.randrange(len(flipped))] = rnd.randrange(256)
+        p.write_bytes(bytes(flipped))
     elif r < 0.24:
         with p.open("wb") as fh:
             np.save(fh, np.zeros(3))
@@ -861,8 +863,8 @@ def _run_cli(ws: Workspace, case: Case) -> None:
     if code not in (0, 1):
         raise RuntimeError(f"exit code {code}")
     if case.data[0] == "eval":  # a pair's raw exception is kept in its row, not raised
-        out = Path(case.data[case.data.index("--out") + 1])
-        for row in sorted((out / "rows").glob("*.json")):
+        out_dir = Path(case.data[case.data.index("--out") + 1])
+        for row in sorted((out_dir / "rows").glob("*.json")):
             note = str(json.loads(row.read_text(encoding="utf-8")).get("note", ""))
             if _RAW_NOTE.search(note):
                 raise RuntimeError(f"raw exception in the pair {row.stem}: {note[:300]}")
@@ -951,6 +953,7 @@ def campaign(
             outcome, exc = run_case(ws, case)
             counts[target][outcome] += 1
             if outcome == "raw" and len(raw) < keep:
+                assert exc is not None  # run_case returns the raw exception
                 raw.append((case, exc, "".join(traceback.format_exception(exc)[-4:])))
             if progress and (i + 1) % 500 == 0:
                 print(

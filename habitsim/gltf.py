@@ -75,7 +75,7 @@ _CHANNELS = ("Xposition", "Yposition", "Zposition") + tuple(f"{a}rotation" for a
 #: Relative spread of a scale vector below which it counts as uniform.
 _UNIFORM_TOL = 1e-4
 
-_DTYPES = {
+_DTYPES: dict[int, np.dtype] = {
     5120: np.dtype("<i1"),
     5121: np.dtype("<u1"),
     5122: np.dtype("<i2"),
@@ -565,14 +565,14 @@ def read_gltf(path: str | Path, animation: str | int | None = None, fps: float =
         r_scale *= float(_uniform(f, i, rs[None])[0])
     for k, i in enumerate(order):
         rt, _, rs = _rest_trs(f, i)
-        s = float(_uniform(f, i, rs[None])[0]) if i in has_kids else 1.0
+        s0 = float(_uniform(f, i, rs[None])[0]) if i in has_kids else 1.0
         if i == root:
             rest_off[k] = r_pos + r_rot.apply(rt * r_scale)
-            rest_cum[k] = r_scale * s
+            rest_cum[k] = r_scale * s0
         else:
             p = idx[par[i]]
             rest_off[k] = rt * rest_cum[p]
-            rest_cum[k] = rest_cum[p] * s
+            rest_cum[k] = rest_cum[p] * s0
 
     euler = np.degrees(quat_to_euler(quat[..., [3, 0, 1, 2]], _ORDER))  # (F, J, 3)
     node_names = _joint_names(f, order)

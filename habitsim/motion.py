@@ -260,7 +260,7 @@ class Motion:
         path = Path(path)
         if path.suffix != ".npz":
             raise MotionFileError(f"motion files end in .npz, got {path.name!r}")
-        arrays: dict[str, np.ndarray] = {
+        arrays: dict[str, Any] = {  # arrays for np.savez_compressed
             "format_version": np.array(FORMAT_VERSION),
             "species": np.array(self.species),
             "fps": np.array(self.fps),

@@ -280,6 +280,7 @@ def _refine(
 
     opts = options or RefineOptions(metrics=False)
     opts = replace(opts, dynamics=mode == "B", fallback=True)
+    assert stage.motion is not None  # the transfer stage always has a motion
     t0 = time.perf_counter()
     res = refine(stage.motion, opts, contacts=stage.contacts, model=model)
     wall = time.perf_counter() - t0

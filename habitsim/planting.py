@@ -24,7 +24,7 @@ the feet on the ground through a change of skeleton.
    cannot reach its foothold (the target's legs are shorter relative to the source's
    stride), the pelvis is lowered by the shortfall and the legs are solved again.
 
-Everything is vectorised over frames; a 10 s clip at 120 fps takes a few tens of ms.
+Everything is vectorised over frames.
 """
 
 from __future__ import annotations
@@ -156,6 +156,7 @@ def label_source_stance(
         rows = np.arange(t)
         low.append(np.concatenate([vel[rows, arg], sm[rows, arg, 2:3]], axis=-1))
     lowest = np.stack(low, axis=1)  # (T, 4, 3): horizontal velocity, lowest height
+    t = lowest.shape[0]
     speed = np.linalg.norm(lowest[..., :2], axis=-1)
     rest = speed < 0.3 * leg_length
     floors = np.empty(4)
@@ -249,7 +250,7 @@ def _planted_targets(raw: np.ndarray, contacts: np.ndarray) -> np.ndarray:
             out[a : b + 1, k, 2] = 0.0
         # swing phases (lo, hi exclusive of both): before the first run, between runs,
         # after the last
-        bounds = [(-1, runs[0][0], None, 0)]
+        bounds: list[tuple[int, int, int | None, int | None]] = [(-1, runs[0][0], None, 0)]
         bounds += [(runs[i][1], runs[i + 1][0], i, i + 1) for i in range(len(runs) - 1)]
         bounds.append((runs[-1][1], t, len(runs) - 1, None))
         for lo, hi, ip, inx in bounds:
@@ -260,6 +261,7 @@ def _planted_targets(raw: np.ndarray, contacts: np.ndarray) -> np.ndarray:
             d1 = None if inx is None else holds[inx] - raw[hi, k, :2]
             d0 = d1 if d0 is None else d0
             d1 = d0 if d1 is None else d1
+            assert d0 is not None and d1 is not None  # a swing has a stance run at one end
             w = _smoothstep(n)[:, None]
             out[lo + 1 : hi, k, :2] = raw[lo + 1 : hi, k, :2] + (1.0 - w) * d0 + w * d1
     return out

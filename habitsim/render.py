@@ -31,6 +31,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO, cast
 
 import mujoco
 import numpy as np
@@ -203,11 +204,13 @@ def render_frames(
     foot_points = _feet(model, feet, marks) if any(m is not None for m in marks) else None
     cam: str | int | mujoco.MjvCamera = camera
     pair_camera = ref is not None and camera == "track" and model.nbody > 1
-    if pair_camera:
-        cam = _tracking_camera(model)
-        cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+    if pair_camera and ref is not None:  # (pair_camera implies a reference)
+        free = _tracking_camera(model)
+        assert not isinstance(free, int)  # the model has a body to track
+        free.type = mujoco.mjtCamera.mjCAMERA_FREE
         h = _heading(model, ref[: len(q)])
-        cam.azimuth = float(np.degrees(np.arctan2(h[1], h[0]))) + 90.0
+        free.azimuth = float(np.degrees(np.arctan2(h[1], h[0]))) + 90.0
+        cam = free
     elif (
         isinstance(camera, str) and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera) < 0
     ):
@@ -431,7 +434,7 @@ def save_video(frames: np.ndarray, fps: float, path: str | Path) -> Path:
                 tmp, format="FFMPEG", mode="I", fps=float(fps), codec="libx264", macro_block_size=8
             ) as w:
                 for f in frames:
-                    w.append_data(f)
+                    w.append_data(f)  # type: ignore[attr-defined]  # imageio's stub: base class
         return path
     duration_ms = max(int(round(1000.0 / float(fps))), 20)
     if _has("PIL"):
@@ -451,7 +454,7 @@ def save_video(frames: np.ndarray, fps: float, path: str | Path) -> Path:
     import imageio.v2 as iio
 
     with atomic_write(path, "wb") as fh:
-        iio.mimsave(fh, list(frames), format="GIF", duration=duration_ms / 1000.0)
+        iio.mimsave(cast(BinaryIO, fh), list(frames), format="GIF", duration=duration_ms / 1000.0)
     return path
 
 

@@ -571,9 +571,9 @@ def trot(
     x0 = rl.home[a : a + 3].copy()
     x0[2] = rl.height
     quat0 = rl.home[a + 3 : a + 7] / np.linalg.norm(rl.home[a + 3 : a + 7])
-    rot0 = np.zeros(9)
-    mujoco.mju_quat2Mat(rot0, quat0)
-    rot0 = rot0.reshape(3, 3)
+    rot9 = np.zeros(9)
+    mujoco.mju_quat2Mat(rot9, quat0)
+    rot0 = rot9.reshape(3, 3)
     fwd = rot0[:, 0] * np.array([1.0, 1.0, 0.0])
     fwd /= max(float(np.linalg.norm(fwd)), 1e-9)
     trunk = x0[None, :] + trunk_x(t)[:, None] * fwd[None, :]

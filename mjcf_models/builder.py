@@ -41,6 +41,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import mujoco
 import numpy as np
@@ -198,7 +199,7 @@ def _bones_by_body(sp: Species) -> dict[str, list[tuple[str, np.ndarray, float]]
     """For each body (rotating skeleton joint), its bones as (child, offset, radius)."""
     skel = get_skeleton(sp)
     keys = bone_girth_keys()
-    bones: dict[str, list[tuple[np.ndarray, float]]] = {}
+    bones: dict[str, list[tuple[str, np.ndarray, float]]] = {}
     for j, p in enumerate(PARENTS):
         if p < 0:
             continue
@@ -213,7 +214,11 @@ def _bones_by_body(sp: Species) -> dict[str, list[tuple[str, np.ndarray, float]]
 
 def _body_meshes(sp: Species) -> dict[str, trimesh.Trimesh]:
     return {
-        body: trimesh.util.concatenate([_capsule(np.zeros(3), off, r) for _, off, r in bl])
+        # concatenating meshes gives a mesh
+        body: cast(
+            trimesh.Trimesh,
+            trimesh.util.concatenate([_capsule(np.zeros(3), off, r) for _, off, r in bl]),
+        )
         for body, bl in _bones_by_body(sp).items()
     }
 

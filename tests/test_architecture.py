@@ -15,6 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 BARE = ("controllers", "evaluation", "mjcf_models")
 
 
+@pytest.mark.slow
 def test_core_imports_without_torch() -> None:
     code = (
         "import sys\n"
@@ -27,6 +28,7 @@ def test_core_imports_without_torch() -> None:
     assert out.stdout.strip() == "[]"
 
 
+@pytest.mark.slow
 def test_cli_parser_without_torch() -> None:
     """``habitsim --help`` builds every command's parser without the learning core."""
     code = (
@@ -43,6 +45,7 @@ def test_cli_parser_without_torch() -> None:
     assert out.stdout.strip() == "[]"
 
 
+@pytest.mark.slow
 def test_models_names_stay_the_functions() -> None:
     """The learning core loads on first use; ``habitsim.models.transfer`` / ``.train`` stay
     the functions even when their submodules are imported first."""
@@ -62,6 +65,7 @@ def test_models_names_stay_the_functions() -> None:
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT / "tests")
 
 
+@pytest.mark.slow
 def test_refine_attribute_is_the_module() -> None:
     code = (
         "import types, habitsim\n"

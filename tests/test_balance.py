@@ -236,6 +236,7 @@ def test_dropped_robot_lands_and_stands(robot: mujoco.MjModel, kind: str) -> Non
     assert abs(log["fz"][-100:].mean() - weight) < 0.05 * weight
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["balance", "mpc"])
 def test_recovers_from_a_lateral_push(robot: mujoco.MjModel, kind: str) -> None:
     ctl = (BalanceController if kind == "balance" else MPCController)(robot)
@@ -248,6 +249,7 @@ def test_recovers_from_a_lateral_push(robot: mujoco.MjModel, kind: str) -> None:
     assert log["tilt"][-1] < 2.0
 
 
+@pytest.mark.slow
 def test_dog_recovers_from_a_lateral_push() -> None:
     from habitsim.qpos import load_species_model
 
@@ -288,6 +290,7 @@ def test_controller_rejects_bad_models() -> None:
         BalanceController(robot, ["FL_foot", "nope", "RL_foot", "RR_foot"])
 
 
+@pytest.mark.slow
 def test_dog_walk_balance_unassisted() -> None:
     """A species model follows a synthetic walk with the balance controller alone."""
     from habitsim.gaits import generate

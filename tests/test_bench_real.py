@@ -29,6 +29,7 @@ def folder(tmp_path_factory) -> Path:
     return d
 
 
+@pytest.mark.slow
 def test_bench_real_rows_and_json(folder: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "rows.json"
     args = [

@@ -30,6 +30,7 @@ def _commands(parser: argparse.ArgumentParser, prefix: str = ""):
                 yield from _commands(sub, path)
 
 
+@pytest.mark.slow
 def test_closed_pipe_exits_quietly() -> None:
     """``habitsim species list | head -1``: no BrokenPipeError traceback."""
     proc = subprocess.Popen(
@@ -45,6 +46,7 @@ def test_closed_pipe_exits_quietly() -> None:
     assert code == EXIT_CLOSED_PIPE
 
 
+@pytest.mark.slow
 def test_open_pipe_still_prints_everything() -> None:
     done = subprocess.run(
         [sys.executable, "-m", "habitsim", "species", "list"],

@@ -12,6 +12,7 @@ from habitsim.dataset import MANIFEST_NAME, build_dataset, load_manifest
 from habitsim.species import species_names
 
 
+@pytest.mark.slow
 def test_demo_runs_and_reruns(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "demo_out"
     args = [
@@ -34,6 +35,7 @@ def test_demo_runs_and_reruns(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert f"0 generated, {len(man.clips)} reused" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_demo_rebuilds_other_configuration(tmp_path: Path) -> None:
     out = tmp_path / "demo_out"
     build_dataset(out, clips_per_species=1, seed=5, species=["cat"], workers=1, progress=False)
@@ -48,6 +50,7 @@ def test_demo_rebuilds_other_configuration(tmp_path: Path) -> None:
     assert not list(out.glob("*/cat/*_0001.npz"))
 
 
+@pytest.mark.slow
 def test_demo_pipeline_two_sources_report_and_videos(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -114,6 +117,7 @@ def test_demo_on_a_file_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert capsys.readouterr().err.startswith("error:")
 
 
+@pytest.mark.slow
 def test_bench_data_small(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "bench"
     args = [

@@ -112,6 +112,7 @@ def test_pd_with_inverse_dynamics_feedforward_holds_home(robot) -> None:
     assert_holds(hold(robot, ctrl, 4.0))
 
 
+@pytest.mark.slow
 def test_pd_with_trunk_stabiliser_holds_home_better(robot) -> None:
     kp = stiffness_rule(robot)
     kd = critical_damping(robot, kp)
@@ -125,6 +126,7 @@ def test_pd_with_trunk_stabiliser_holds_home_better(robot) -> None:
     assert stats["stance_mean_time_ms"] > 0
 
 
+@pytest.mark.slow
 def test_servo_with_feedforward_and_stabiliser_reports_effort(robot) -> None:
     model = configure_servos(robot)
     base = ServoController(model, feedforward=InverseDynamicsFeedforward(model))
@@ -152,6 +154,7 @@ def test_pid_servos_from_spec_hold_home(robot) -> None:
     assert abs(res["height"] - 1) < 0.01 < abs(plain["height"] - 1)  # integral removes the sag
 
 
+@pytest.mark.slow
 def test_dog_servos_with_stabiliser_hold_home() -> None:
     dog = mujoco.MjModel.from_xml_path(str(DOG_SCENE))  # plain MuJoCo loading
     model = configure_servos(dog)

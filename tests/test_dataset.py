@@ -210,6 +210,7 @@ def test_split_rule_ratio() -> None:
 # ---------------------------------------------------------------------------- determinism
 
 
+@pytest.mark.slow
 def test_same_seed_identical_across_builds_and_workers(built: Built, tmp_path: Path) -> None:
     root, _ = built
     b2 = build(tmp_path / "w2", workers=2)

@@ -27,6 +27,7 @@ def mocap(tmp_path_factory):
     return root
 
 
+@pytest.mark.slow
 def test_a_folder_becomes_a_data_set(mocap, tmp_path):
     labels = tmp_path / "labels.csv"
     labels.write_text("file,action,split\nWalk 01.bvh,walk,\ntrot_02.bvh,trot,val\n")
@@ -105,6 +106,7 @@ def test_bad_label_files_are_named(tmp_path, text, match):
         read_labels(p)
 
 
+@pytest.mark.slow
 def test_the_command_line(mocap, tmp_path, capsys):
     out = tmp_path / "ds"
     assert (

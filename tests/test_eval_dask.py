@@ -21,6 +21,8 @@ from habitsim.dataset import build_dataset  # noqa: E402
 from habitsim.evaluation.executors import DaskExecutor, ExecutorError, make_executor  # noqa: E402
 from habitsim.evaluation.runner import VOLATILE_COLUMNS, EvalConfig, run_benchmark  # noqa: E402
 
+pytestmark = pytest.mark.slow
+
 
 def _rows(path: Path) -> list[dict[str, str]]:
     with open(path, newline="", encoding="utf-8") as fh:

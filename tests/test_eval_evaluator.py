@@ -49,6 +49,7 @@ def test_shipped_files_and_config() -> None:
     assert meta["accuracy"]["test"]["species"] >= SPECIES_FLOOR
 
 
+@pytest.mark.slow
 def test_accuracy_on_unseen_clips_above_floor(fresh_data: Path) -> None:
     ev = load_evaluator()
     motions, sp, ac, held = [], [], [], []
@@ -113,6 +114,7 @@ def test_corrupt_or_mismatched_checkpoints_are_rejected(tmp_path: Path) -> None:
         EvaluatorConfig(d_model=30, n_heads=4)
 
 
+@pytest.mark.slow
 def test_train_evaluator_writes_a_loadable_checkpoint(tmp_path: Path) -> None:
     data = tmp_path / "d"
     build_dataset(

@@ -29,6 +29,7 @@ def test_fid_identical_sets_is_zero() -> None:
     assert abs(fid(x, x)) < 1e-8
 
 
+@pytest.mark.slow
 def test_fid_same_distribution_is_small_and_one_nna_half() -> None:
     rng = np.random.default_rng(1)
     a = rng.normal(size=(3000, 4))

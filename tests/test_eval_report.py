@@ -65,6 +65,7 @@ def run_dir(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_report_files_are_self_contained(run_dir: Path) -> None:
     html = (run_dir / "report.html").read_text(encoding="utf-8")
     md = (run_dir / "report.md").read_text(encoding="utf-8")
@@ -83,6 +84,7 @@ def test_report_files_are_self_contained(run_dir: Path) -> None:
         assert section in html
 
 
+@pytest.mark.slow
 def test_report_renders_in_headless_chromium(run_dir: Path, tmp_path: Path) -> None:
     if _chromium() is None:
         pytest.skip("no Chromium on this machine (apt-get install chromium)")

@@ -72,6 +72,7 @@ def _read_csv(path: Path) -> list[dict[str, str]]:
         ]
 
 
+@pytest.mark.slow
 def test_rows_one_per_pair_and_table_layout(reference_run) -> None:
     res = reference_run
     tasks = plan_tasks(res.config)
@@ -101,6 +102,7 @@ def test_rows_one_per_pair_and_table_layout(reference_run) -> None:
     assert t.num_rows == 16 and "mpjpe_mm" in t.column_names
 
 
+@pytest.mark.slow
 def test_summary_equals_mean_of_rows(reference_run) -> None:
     res = reference_run
     for method, s in res.summary.items():
@@ -136,6 +138,7 @@ def _real(res):
         return z["features"], [str(s) for s in z["species"]], [str(c) for c in z["clips"]]
 
 
+@pytest.mark.slow
 def test_resume_after_kill_gives_the_same_table(data: Path, reference_run, tmp_path: Path) -> None:
     out = tmp_path / "killed"
     cmd = [
@@ -217,6 +220,7 @@ def _mirror_method(source, target, *, seed=0):
     return direct_transfer(source, target, seed=seed)
 
 
+@pytest.mark.slow
 def test_custom_method_and_bad_config(data: Path, tmp_path: Path) -> None:
     if "custom_direct" not in method_names():
         register_method("custom_direct", _mirror_method, "test method")
@@ -244,6 +248,7 @@ def test_custom_method_and_bad_config(data: Path, tmp_path: Path) -> None:
         plan_tasks(_cfg(data, tmp_path / "g", sources=("elephant",)))
 
 
+@pytest.mark.slow
 def test_refine_stage_runs(data: Path, tmp_path: Path) -> None:
     cfg = _cfg(
         data,
@@ -262,6 +267,7 @@ def test_refine_stage_runs(data: Path, tmp_path: Path) -> None:
     assert row["time_refine_s"] > 0.0
 
 
+@pytest.mark.slow
 def test_defaults_measure_the_product(data: Path, tmp_path: Path, monkeypatch) -> None:
     """With no options: habit beside the baselines, stage A, mpc; one clip per source."""
     from habitsim.cli import build_parser

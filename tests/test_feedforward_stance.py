@@ -20,6 +20,7 @@ def _ref(model, contacts) -> Reference:
     return Reference(0.0, model.key_qpos[0].copy(), z, z, np.asarray(contacts, dtype=bool))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stance", [(1, 1, 1, 1), (1, 0, 1, 1), (0, 1, 1, 0)])
 def test_stance_forces_carry_the_weight_inside_the_friction_pyramid(stance) -> None:
     model = _species_model("bear", True)
@@ -34,6 +35,7 @@ def test_stance_forces_carry_the_weight_inside_the_friction_pyramid(stance) -> N
         assert np.abs(ff.unsupported_root_wrench[:3]).max() < 0.02 * mg
 
 
+@pytest.mark.slow
 def test_stance_feedforward_holds_a_standing_body_better_than_the_contact_free_one() -> None:
     clip = generate("tiger", "idle", seed=0, duration_s=2.0)
     model = _species_model("tiger", True)

@@ -38,6 +38,7 @@ def _check(ws: fuzz.Workspace, case: fuzz.Case) -> None:
         raise AssertionError(f"raw {type(exc).__name__} on {case.target}: {exc}") from exc
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("target", ["bvh", "npz", "species", "manifest"])
 def test_mutated_inputs_are_read_or_refused(ws, target: str) -> None:
     @FAST
@@ -48,6 +49,7 @@ def test_mutated_inputs_are_read_or_refused(ws, target: str) -> None:
     check()
 
 
+@pytest.mark.slow
 def test_mutated_bvh_imports_are_read_or_refused(ws) -> None:
     @settings(FAST, max_examples=10)
     @given(rnd=st.randoms(use_true_random=False))
@@ -57,6 +59,7 @@ def test_mutated_bvh_imports_are_read_or_refused(ws) -> None:
     check()
 
 
+@pytest.mark.slow
 def test_cli_entry_points(ws) -> None:
     @settings(FAST, max_examples=15)
     @given(rnd=st.randoms(use_true_random=False))
@@ -66,6 +69,7 @@ def test_cli_entry_points(ws) -> None:
     check()
 
 
+@pytest.mark.slow
 @FAST
 @given(text=st.text(max_size=3000))
 def test_arbitrary_text_as_bvh(text: str) -> None:
@@ -194,6 +198,7 @@ def test_fuzz_module_entry_point_still_works(capsys) -> None:
     assert "total" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_heavy_commands_on_absurd_motions(ws) -> None:
     """transfer / refine / track / eval on valid-shaped but absurd motions (fps at the
     ends of its range, one frame, roots far away or under the floor, random rotations)."""

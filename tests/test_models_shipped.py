@@ -192,6 +192,7 @@ def test_transfer_cli_bvh_example_with_action(tmp_path, capsys):
     assert "valid: " in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_train_cli_small(tmp_path, capsys):
     from habitsim.dataset import build_dataset
 

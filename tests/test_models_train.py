@@ -74,6 +74,7 @@ def tiny_data(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_loss_falls_on_a_tiny_set():
     cfg = _tiny_config().replace(**{"train.lr": 1e-2, "model.net.width": 32})
     data = _tiny_clipset()
@@ -173,6 +174,7 @@ def test_learning_rate_schedules():
         step_cfg.replace(**{"train.lr_schedule": "linear"}).validate()
 
 
+@pytest.mark.slow
 def test_same_seed_same_weights_and_resume(tiny_data, tmp_path):
     text = _fake_text()
     cfg = _tiny_config(steps=6)
@@ -345,6 +347,7 @@ def test_missing_files_are_named(saved, tmp_path):
         load_checkpoint(other)
 
 
+@pytest.mark.slow
 def test_export_drops_training_state(tiny_data, tmp_path):
     from habitsim.models.checkpoint import export_checkpoint
 
@@ -374,6 +377,7 @@ def test_export_drops_training_state(tiny_data, tmp_path):
         )
 
 
+@pytest.mark.slow
 def test_fine_tune_starts_from_the_checkpoint(tiny_data, tmp_path):
     text = _fake_text()
     cfg = _tiny_config(steps=3)

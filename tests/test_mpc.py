@@ -225,6 +225,7 @@ def follow(model, ctl, qpos, fps, contacts):
     return {k: np.array(v) for k, v in log.items()}
 
 
+@pytest.mark.slow
 def test_robot_trots_in_place_under_mpc(robot: mujoco.MjModel) -> None:
     qpos, fps, contacts = trot_in_place(robot)
     ctl = MPCController(robot)
@@ -249,6 +250,7 @@ def test_robot_trots_in_place_under_mpc(robot: mujoco.MjModel) -> None:
     assert st["mpc_horizon_steps"] * st["mpc_dt_s"] >= 0.5 - 1e-9  # ≥ one stride
 
 
+@pytest.mark.slow
 def test_robot_trots_in_place_under_balance(robot: mujoco.MjModel) -> None:
     qpos, fps, contacts = trot_in_place(robot)
     log = follow(robot, BalanceController(robot), qpos, fps, contacts)
@@ -257,6 +259,7 @@ def test_robot_trots_in_place_under_balance(robot: mujoco.MjModel) -> None:
     assert np.linalg.norm(log["q"][-1, :2] - qpos[0, :2]) < 0.05
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("action", "seed", "max_mpjpe_per_leg", "min_solves"),
     [("walk", 2, 0.10, 80), ("trot", 0, 0.12, 80)],
@@ -435,6 +438,7 @@ def test_mpc_uses_the_centroidal_angular_velocity() -> None:
     assert np.linalg.norm(w_mpc - w_bal) > 0.1  # the legs and spine move: they differ
 
 
+@pytest.mark.slow
 def test_mpc_solves_again_on_contact_change(robot: mujoco.MjModel) -> None:
     qpos, fps, contacts = trot_in_place(robot, seconds=1.5)
     counts = {}

@@ -14,6 +14,8 @@ from habitsim.gaits import generate
 from habitsim.sim import track, track_many
 from habitsim.species import species_names
 
+pytestmark = pytest.mark.slow
+
 #: (abs, rel) tolerance per figure: simulation is deterministic for one MuJoCo version and
 #: machine; the slack covers floating-point differences between CPUs and BLAS builds.
 TOLERANCES = {

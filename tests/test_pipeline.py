@@ -189,6 +189,7 @@ def test_labels_travel_without_refinement(walk) -> None:
     )
 
 
+@pytest.mark.slow
 def test_refined_labels_reach_tracking_and_a_worse_refinement_is_reverted(
     walk, monkeypatch
 ) -> None:

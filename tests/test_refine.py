@@ -207,6 +207,7 @@ def test_casadi_gradients_match_finite_differences(dynamics):
         np.testing.assert_allclose(fd_g, jg[:, i], atol=1e-6, rtol=1e-5)
 
 
+@pytest.mark.slow
 def test_gauss_newton_hessian_is_exact_at_zero_residual():
     """With every least-squares residual zero, JᵀJ is the exact Hessian of the objective;
     and the objective equals the sum of squared residuals everywhere."""
@@ -237,6 +238,7 @@ def test_gauss_newton_hessian_is_exact_at_zero_residual():
 
 
 # --------------------------------------------------------------------------- stage A
+@pytest.mark.slow
 def test_stage_a_removes_artefacts(dog_artefacts):
     clean, bad, res = dog_artefacts
     leg = clean.species_info.leg_length
@@ -258,6 +260,7 @@ def test_stage_a_removes_artefacts(dog_artefacts):
     assert _mpjpe(res.motion, clean) < _mpjpe(bad, clean)
 
 
+@pytest.mark.slow
 def test_stage_a_removes_hovering_on_another_species():
     clean = _clip("cat", "walk", 64, seed=5)
     bad = inject_artefacts(clean, ["float", "jitter"], seed=2)
@@ -271,11 +274,13 @@ def test_stage_a_removes_hovering_on_another_species():
     assert _mpjpe(res.motion, clean) <= 0.03 * leg
 
 
+@pytest.mark.slow
 def test_clean_clip_stays_close(dog_trot_100):
     res = refine(dog_trot_100)
     assert _mpjpe(res.motion, dog_trot_100) <= 0.01 * dog_trot_100.species_info.leg_length
 
 
+@pytest.mark.slow
 def test_result_qpos_and_motion_agree(dog_artefacts):
     _, _, res = dog_artefacts
     model = load_species_model("dog")
@@ -290,6 +295,7 @@ def test_result_qpos_and_motion_agree(dog_artefacts):
     assert traj.qpos.shape == (100, model.nq) and traj.fps == 30.0
 
 
+@pytest.mark.slow
 def test_contacts_detected_or_given():
     clean = _clip("dog", "trot", 64, seed=4)
     plain = habitsim.Motion(clean.species, clean.fps, clean.root_positions, clean.rotations)
@@ -304,6 +310,7 @@ def test_contacts_detected_or_given():
 
 
 # --------------------------------------------------------------------------- stage B
+@pytest.mark.slow
 def test_dynamics_lower_root_residual():
     clean = _clip("dog", "trot", 64, seed=6)
     bad = inject_artefacts(clean, ["momentum"], seed=0)
@@ -344,6 +351,7 @@ def test_clip_lengths_map_to_two_window_lengths():
         RefineOptions(short_window=4)
 
 
+@pytest.mark.slow
 def test_problem_cache_keeps_the_most_recently_used(monkeypatch):
     monkeypatch.setattr(S, "MAX_CACHED_PROBLEMS", 2)
     monkeypatch.setattr(S, "_PROBLEMS", type(S._PROBLEMS)())
@@ -356,6 +364,7 @@ def test_problem_cache_keeps_the_most_recently_used(monkeypatch):
     assert S.get_problem("dog", 5) is not b and S._BUILDS == built + 1
 
 
+@pytest.mark.slow
 def test_window_seams_are_continuous():
     clean = _clip("dog", "trot", 150, seed=8)
     opts = RefineOptions(metrics=False, window=64, overlap=16)  # three windows, two seams
@@ -371,6 +380,7 @@ def test_window_seams_are_continuous():
 
 
 # --------------------------------------------------------------------------- failures
+@pytest.mark.slow
 def test_non_convergence_raises_or_falls_back():
     m = inject_artefacts(_clip("dog", "trot", 64, seed=9), ["sink", "slide"]).slice(0, 8)
     opts = RefineOptions(max_iter=1)
@@ -386,6 +396,7 @@ def test_non_convergence_raises_or_falls_back():
     assert res.report["success"] is False
 
 
+@pytest.mark.slow
 def test_bad_inputs_raise_typed_errors(dog_trot_100):
     m = dog_trot_100
     with pytest.raises(RefineInputError, match="needs a habitsim Motion"):
@@ -427,6 +438,7 @@ def test_bad_inputs_raise_typed_errors(dog_trot_100):
 
 
 # --------------------------------------------------------------------------- report
+@pytest.mark.slow
 def test_report_contents(dog_artefacts):
     _, _, res = dog_artefacts
     rep = json.loads(json.dumps(res.report, allow_nan=False))
@@ -453,6 +465,7 @@ def test_report_contents(dog_artefacts):
         assert k in rep["metrics_before"] and k in rep["metrics_after"]
 
 
+@pytest.mark.slow
 def test_report_cost_matches_the_solver_objective():
     """One window: the clip-level cost terms are the solver's objective at its optimum."""
     m = inject_artefacts(_clip("dog", "trot", 64, seed=10), ["slide"], seed=0)
@@ -463,6 +476,7 @@ def test_report_cost_matches_the_solver_objective():
     )
 
 
+@pytest.mark.slow
 def test_problem_is_built_apart_and_cached():
     pr = S.get_problem("dog", 64)
     assert S.get_problem("dog", 64, False, RefineOptions().settings) is pr
@@ -488,6 +502,7 @@ def test_public_names_resolve():
 
 
 # --------------------------------------------------------------------------- CLI
+@pytest.mark.slow
 def test_cli_refine_writes_outputs(tmp_path, capsys):
     m = inject_artefacts(_clip("dog", "trot", 64, seed=11), ["sink", "slide"], seed=0)
     src = m.save(tmp_path / "in.npz")
@@ -511,6 +526,7 @@ def test_cli_refine_writes_outputs(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.npz", "out.npz", "q.npz", "r.json"]
 
 
+@pytest.mark.slow
 def test_cli_refine_errors_and_fallback(tmp_path, capsys):
     m = inject_artefacts(_clip("dog", "trot", 64, seed=9), ["sink", "slide"]).slice(0, 8)
     src = m.save(tmp_path / "in.npz")
@@ -558,6 +574,7 @@ def test_cli_refine_errors_and_fallback(tmp_path, capsys):
     assert json.loads((tmp_path / "r.json").read_text())["success"] is False
 
 
+@pytest.mark.slow
 def test_bench_refine_smoke(capsys):
     code = main(
         [
@@ -581,6 +598,7 @@ def test_bench_refine_smoke(capsys):
     assert "dog" in text and "scaling on dog" in text and "IPOPT success" in text
 
 
+@pytest.mark.slow
 def test_bench_refine_draws_success_clips_from_the_test_split(tmp_path, capsys):
     from habitsim.dataset import build_dataset
 
@@ -626,6 +644,7 @@ def _shortened_stance(contacts: np.ndarray) -> np.ndarray:
     return c
 
 
+@pytest.mark.slow
 def test_swing_feet_clear_the_metric_contact_height():
     """Feet labelled swing that the input drags along the ground (a sliding trot whose
     stance labels cover only half of each stance) used to stay as low as the input, under
@@ -653,6 +672,7 @@ def test_swing_feet_clear_the_metric_contact_height():
     assert step[low].max(initial=0.0) <= 1e-3
 
 
+@pytest.mark.slow
 def test_jittery_input_is_not_made_jerkier(dog_artefacts):
     clean, bad, res = dog_artefacts
     v = res.report["verdict"]
@@ -708,6 +728,7 @@ def test_contact_labels_are_cleaned():
     assert kept[5:15, 2].all() and not kept[20, 0]
 
 
+@pytest.mark.slow
 def test_refine_reports_cleaned_labels():
     clean = _clip("dog", "trot", 64, seed=4)
     labels = clean.contacts.copy()

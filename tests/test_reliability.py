@@ -123,6 +123,7 @@ def test_transaction_refuses_one_path_twice(tmp_path: Path) -> None:
             pass
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "extra",
     [["--report", "{blocker}/r.json"], ["--qpos", "{blocker}/q.npz"]],
@@ -797,6 +798,7 @@ def test_same_seed_transfer_is_byte_identical(
     _same_bytes(a / "o.bvh", b / "o.bvh")
 
 
+@pytest.mark.slow
 def test_same_seed_refine_is_byte_identical(tmp_path: Path, motion_file: Path, capsys) -> None:
     a, b = _twice(
         tmp_path,
@@ -819,6 +821,7 @@ def test_same_seed_refine_is_byte_identical(tmp_path: Path, motion_file: Path, c
     _same_report(a / "r.json", b / "r.json")
 
 
+@pytest.mark.slow
 def test_same_seed_track_is_byte_identical(tmp_path: Path, motion_file: Path, capsys) -> None:
     a, b = _twice(
         tmp_path, capsys, ["track", motion_file, "--out", "{d}/s.npz", "--report", "{d}/s.json"]
@@ -1111,6 +1114,7 @@ def _absurd(species: str, frames: int, fps: float, root_shift=(0.0, 0.0, 0.0), f
     return Motion(species, fps, rp, q)
 
 
+@pytest.mark.slow
 def test_refine_far_root_summary_prints(tmp_path: Path, capsys) -> None:
     """A camel 75 km from the origin (3 frames at 240 fps): the report's verdict holds
     missing figures, which the summary printed with a TypeError."""

@@ -9,9 +9,12 @@ import pytest
 from habitsim import render
 from habitsim.qpos import load_species_model
 
-pytestmark = pytest.mark.skipif(
-    not render.render_available(), reason="no OpenGL backend for off-screen rendering"
-)
+pytestmark = [
+    pytest.mark.skipif(
+        not render.render_available(), reason="no OpenGL backend for off-screen rendering"
+    ),
+    pytest.mark.slow,
+]
 
 W, H = 320, 240
 

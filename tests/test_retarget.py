@@ -51,6 +51,7 @@ def _feet_world(model, qpos, names):
     return out
 
 
+@pytest.mark.slow
 def test_dog_walk_on_go1_reference(go1, walk, clip):
     rl = robot_legs(go1, FEET)
     assert clip.qpos.shape == (walk.num_frames, go1.nq) and clip.fps == walk.fps
@@ -93,6 +94,7 @@ def test_joint_limits_bind_and_hold(go1, walk):
     assert out.metadata["ik_residual_max_m"] > 1e-3  # the feet cannot all be reached
 
 
+@pytest.mark.slow
 def test_retargeted_walk_tracks_under_mpc(go1, clip):
     res = track_clip(clip, go1, controller="mpc")
     assert not res.failed and res.survival == 1.0
@@ -129,6 +131,7 @@ def test_bad_input_is_typed(go1, walk, tmp_path):
         load_robot_clip(tmp_path / "motion.npz")
 
 
+@pytest.mark.slow
 def test_cli_retarget_and_track(walk, tmp_path, capsys):
     src, out = walk.save(tmp_path / "walk.npz"), tmp_path / "go1_walk.npz"
     code = main(

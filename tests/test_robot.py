@@ -128,6 +128,7 @@ def test_fall_rule_on_the_robot(go1):
     assert "tilt" in det.check(1, d)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("speed", [0.0, 0.5])
 def test_go1_trots_under_mpc_through_track(go1, speed):
     """Trot in place and forward (shortened from the example's 10 s), no assistance:
@@ -154,6 +155,7 @@ def _readme_section_code() -> list[str]:
     return [b.split("\n", 1)[1] for b in sec.split("```")[1::2] if b.startswith("python")]
 
 
+@pytest.mark.slow
 def test_readme_robot_code_runs_as_written(monkeypatch, capsys):
     """The README section's code blocks, verbatim, from the repository root."""
     monkeypatch.chdir(Path(__file__).parents[1])
@@ -168,6 +170,7 @@ def test_readme_robot_code_runs_as_written(monkeypatch, capsys):
     assert float(survival) == 1.0 and float(mpjpe) < 15.0
 
 
+@pytest.mark.slow
 def test_robot_trot_example(capsys):
     from habitsim.examples.robot_trot import main, run
 
@@ -184,6 +187,7 @@ def test_menagerie_unitree_foot_names_are_found_by_default(go1):
     assert make_controller("mpc", go1).legs.feet == tuple(FEET)
 
 
+@pytest.mark.slow
 def test_mpc_trots_the_robot_on_its_own_servos(go1):
     """The user's own loop on the unconverted robot: mpc's torques reach the joints as
     servo targets, every step, and the Go1 trots forward."""

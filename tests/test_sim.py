@@ -168,6 +168,7 @@ def test_every_named_controller_runs(controller, dog) -> None:
         assert r.controller_stats["calls"] > 0
 
 
+@pytest.mark.slow
 def test_mpc_runs_its_torque_layer_at_its_rate_but_assisted_runs_every_step(walk) -> None:
     free = track(walk, controller="mpc")
     held = track(walk, controller="mpc", assist=True)
@@ -209,6 +210,7 @@ def test_bad_inputs_are_typed_errors(dog, walk) -> None:
 
 
 # ------------------------------------------------------------------ CLI
+@pytest.mark.slow
 def test_cli_track_writes_motion_and_report(tmp_path, walk) -> None:
     from habitsim.cli import main
 
@@ -244,6 +246,7 @@ def test_cli_missing_video_writer_fails_before_writing(tmp_path, walk, capsys, m
 
 
 # ------------------------------------------------------------------ rendering
+@pytest.mark.slow
 def test_render_frames(dog) -> None:
     from habitsim import render
 

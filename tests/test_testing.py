@@ -81,6 +81,7 @@ def test_golden_round_trip_and_diff(tmp_path) -> None:
     assert "survival" in msg and "MOVED" in msg and "sim_mpjpe_mm" not in msg
 
 
+@pytest.mark.slow
 def test_plugin_fixtures_in_a_user_suite(pytester: pytest.Pytester) -> None:
     pytester.makepyfile(
         test_user="""

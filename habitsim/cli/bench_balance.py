@@ -16,8 +16,7 @@ survive the whole clip under ``mpc``, and the issue's targets next to them. ``--
 first runs :func:`habitsim.refine.refine` on every clip (the issue's targets are stated
 for refined motions): stage A, or with ``--refine B`` stage B, whose centroidal dynamics
 give the clip a momentum the feet can supply (a fast pace's flight phases become
-ballistic); it adds 1–5 s per clip. ``--json`` prints one JSON object per run
-and a summary object.
+ballistic). ``--json`` prints one JSON object per run and a summary object.
 """
 
 from __future__ import annotations

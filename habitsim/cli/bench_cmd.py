@@ -14,11 +14,13 @@ species. Target of the issue: the default data set builds in ≤ 120 s on 2 core
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -69,6 +71,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         mod.register(sub)
 
 
+def _fk_all(fk_fn: Callable[..., object], batches: list[tuple[Any, Any, Any]]) -> list[object]:
+    """``fk_fn`` on every (skeleton, root, rotations) batch."""
+    return [fk_fn(s, r, q) for s, r, q in batches]
+
+
 def _best_time(fn: Callable[[], object], repeats: int = 3) -> float:
     """Fastest of ``repeats`` runs of ``fn`` [s] (after one warm-up run)."""
     fn()
@@ -112,7 +119,7 @@ def fk_throughput(out_dir: str | Path) -> dict[str, float]:
             for s, r, q in batches
         ]
         with torch.no_grad():
-            t = _best_time(lambda tb=tb: [fk_torch(s, r, q) for s, r, q in tb])
+            t = _best_time(functools.partial(_fk_all, fk_torch, tb))
         out[key] = frames / t
         if dtype == torch.float32:
             with torch.no_grad():

@@ -138,7 +138,8 @@ def transfer_quality(
     from ..planting import stance_driven_root
     from ..species import load_species
 
-    phase, in_band, rest, stance, methods = [], [], 0, 0, {}
+    phase, in_band, rest, stance = [], [], 0, 0
+    methods: dict[str, int] = {}
     rest_raw = stance_raw = n = 0
     carried: list[float] = []
     phase_feet: list[float] = []
@@ -149,6 +150,7 @@ def transfer_quality(
             if t == src.species:
                 continue
             out = transfer(src, to=t, method="habit", checkpoint=checkpoint, seed=0)
+            assert out.contacts is not None  # a transfer labels its output's stance
             n += 1
             how = out.metadata["transfer"]["contacts"]
             key = how["method"] + ("+source feet" if how.get("feet_from_source") else "")
@@ -290,6 +292,7 @@ def _bench_model(ns: argparse.Namespace) -> int:
             missed.append(f"{name}: phase error {q['phase_error_median']:.3f}")
         if not q["resting_share"] >= TARGET_RESTING_SHARE:
             missed.append(f"{name}: stance toes at rest {100 * q['resting_share']:.1f} %")
+    assert ck.path is not None  # a checkpoint loaded from its folder
     size = (Path(ck.path) / MODEL_FILE).stat().st_size / 1e6
     lat = transfer_latency(ns.checkpoint, 10)
     print(

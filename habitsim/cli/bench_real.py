@@ -619,8 +619,8 @@ def plan(ns: argparse.Namespace) -> tuple[list[WindowTask], list[str]]:
         raise BenchRealError("--targets names no species")
     if not methods:
         raise BenchRealError("--methods names no method")
-    for m in methods:
-        get_method(m)  # UnknownMethodError listing the registered ones
+    for method in methods:
+        get_method(method)  # UnknownMethodError listing the registered ones
     mode = refine_mode(ns.refine)
     files = source_files(ns.data)
     notes: list[str] = []

@@ -120,7 +120,7 @@ def raw_step_rate(model: Any, seconds: float = 2.0) -> float:
 def _clips(species: str, n: int, ns: argparse.Namespace, seed0: int = 0) -> list[Any]:
     from ..gaits import generate
 
-    extra = {"trunk_sway": 0.0} if ns.no_sway else {}
+    extra: dict[str, Any] = {"trunk_sway": 0.0} if ns.no_sway else {}
     return [
         generate(species, ns.action, seed=seed0 + i, duration_s=ns.duration, **extra)
         for i in range(n)

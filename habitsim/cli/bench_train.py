@@ -64,7 +64,8 @@ def training_throughput(config: str = "default", steps: int = 10) -> dict[str, f
     from ..species import species_names, training_species
 
     cfg = preset(config)
-    clips, keys, acts = [], [], []
+    clips, acts = [], []
+    keys: list[str | None] = []
     for sp in training_species():
         for k, action in enumerate(available_actions(sp)[:3]):
             m = generate(sp, action, seed=1000 + k, duration_s=4.0)

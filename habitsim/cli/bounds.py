@@ -54,8 +54,11 @@ def check_bounds(ns: argparse.Namespace) -> None:
             flag = "--" + dest.replace("_", "-")
             if lo is not None and hi is not None:
                 span = f"{_num(lo)} to {_num(hi)}"
+            elif lo is not None:
+                span = f"at least {_num(lo)}"
             else:
-                span = f"at least {_num(lo)}" if lo is not None else f"at most {_num(hi)}"
+                assert hi is not None  # every entry of BOUNDS has a bound
+                span = f"at most {_num(hi)}"
             raise ArgumentRangeError(f"{flag} {brief(v)}; valid: {span} ({what})")
 
 

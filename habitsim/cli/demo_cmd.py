@@ -199,6 +199,7 @@ def _pipeline(ns: argparse.Namespace) -> None:
         # a refinement that makes the clip track worse is reported and not kept
         run = run_clip(src, tgt, method="habit", refine="A", controller=ns.controller, seed=ns.seed)
         moved, ref = run.transferred.motion, run.refine_result
+        assert moved is not None and ref is not None  # refine="A" runs every stage
         info = moved.metadata.get("transfer", {})
         moved.save(out / f"{name}_to_{tgt}.npz")
         ref.motion.save(out / f"{name}_to_{tgt}_refined.npz")

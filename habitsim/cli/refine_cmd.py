@@ -179,10 +179,10 @@ def _summary(rep: dict) -> str:
         )
     v = rep.get("verdict")
     if v:
-        keys = ("skate_mm", "jerk", "penetration_mm")
+        verdict_keys = ("skate_mm", "jerk", "penetration_mm")
         lines.append(
             "  verdict: "
-            + ", ".join(f"{k} {_g(v['before'][k])} → {_g(v['after'][k])}" for k in keys)
+            + ", ".join(f"{k} {_g(v['before'][k])} → {_g(v['after'][k])}" for k in verdict_keys)
             + (" — not worse than the input" if v["ok"] else f" — WORSE on {', '.join(v['worse'])}")
         )
     if "residual_mg" in rep:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from collections.abc import Sequence
 from typing import Any
 
 from ..species import Species, all_species, load_species
@@ -69,7 +70,7 @@ def _list_rows(species: list[Species]) -> list[tuple[str, ...]]:
     ]
 
 
-def format_table(rows: list[tuple[str, ...]], header: tuple[str, ...] = _COLUMNS) -> str:
+def format_table(rows: Sequence[tuple[str, ...]], header: tuple[str, ...] = _COLUMNS) -> str:
     """Left-aligned text columns (numbers right-aligned), two spaces apart."""
     numeric = {2, 3, 4}
     widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]

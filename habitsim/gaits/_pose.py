@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
+from typing import TypedDict
 
 import numpy as np
 
@@ -41,8 +42,19 @@ REACH_MARGIN = 0.03
 FOOT_COMPLIANCE = 0.6
 
 
+class StandingInfo(TypedDict):
+    """What :func:`standing_info` returns (a plain dict)."""
+
+    root_z: float
+    pitch: float
+    neutral: np.ndarray
+    loc: dict[str, float]
+    d_stand: np.ndarray
+    trunk_span: float
+
+
 @functools.lru_cache(maxsize=64)
-def standing_info(sp: Species) -> dict[str, np.ndarray | float]:
+def standing_info(sp: Species) -> StandingInfo:
     """Standing root height, trunk values and neutral toe offsets of a species.
 
     Returns a dict with ``root_z`` [m], ``pitch`` (trunk, nose up) [rad], ``neutral``
@@ -58,14 +70,14 @@ def standing_info(sp: Species) -> dict[str, np.ndarray | float]:
     for k, leg in enumerate(LEGS):
         geo = leg_geometry(sp, leg)
         d_stand[k] = np.linalg.norm(pos[_J[geo.joints[1]]] - pos[_J[geo.joints[3]]])
-    return {
-        "root_z": float(root[2]),
-        "pitch": float(sp.trunk_pitch),
-        "neutral": toes[:, :2] - root[None, :2],
-        "loc": standing_leg_angles(sp),
-        "d_stand": d_stand,
-        "trunk_span": float(np.linalg.norm(pos[_J["spine3"], [0, 2]] - pos[_J["pelvis"], [0, 2]])),
-    }
+    return StandingInfo(
+        root_z=float(root[2]),
+        pitch=float(sp.trunk_pitch),
+        neutral=toes[:, :2] - root[None, :2],
+        loc=standing_leg_angles(sp),
+        d_stand=d_stand,
+        trunk_span=float(np.linalg.norm(pos[_J["spine3"], [0, 2]] - pos[_J["pelvis"], [0, 2]])),
+    )
 
 
 @dataclass
@@ -157,8 +169,9 @@ class LegPlan:
     targets: np.ndarray
     contacts: np.ndarray
     swing_s: np.ndarray
-    foot_extra: np.ndarray = field(default=None)  # type: ignore[assignment]
-    girdle_extra: np.ndarray = field(default=None)  # type: ignore[assignment]
+    # None: zeros (T, 4), set by __post_init__
+    foot_extra: np.ndarray = None  # type: ignore[assignment]
+    girdle_extra: np.ndarray = None  # type: ignore[assignment]
     sweep_gain: float = 1.0
 
     def __post_init__(self) -> None:

@@ -250,7 +250,7 @@ def biomech_metrics(
     allowance = DETECTED_DUTY_ALLOWANCE if detected else 0.0
     st = gait_statistics(motion, contacts)
     phases = dict(st.phase_offsets)
-    base = dict(
+    base: dict[str, Any] = dict(
         species=sp.name,
         froude=st.froude,
         duty_factor=st.duty_factor,
@@ -269,7 +269,7 @@ def biomech_metrics(
             stride_error=nan,
             score=nan,
         )
-    best: tuple[float, str, dict[str, float]] | None = None
+    best: tuple[float, str, dict[str, Any]] | None = None
     per_gait: dict[str, float] = {}
     for name in sorted(sp.gaits):
         comp = gait_errors(
@@ -283,5 +283,5 @@ def biomech_metrics(
             best = (score, name, comp)
     if best is None:  # pragma: no cover - the catalog requires a walk
         raise InvalidMotionError(f"species {sp.name!r} has no gait table")
-    score, gait, comp = best
-    return BiomechResult(**base, gait=gait, score=score, per_gait=per_gait, **comp)
+    score, gait, errors = best
+    return BiomechResult(**base, gait=gait, score=score, per_gait=per_gait, **errors)

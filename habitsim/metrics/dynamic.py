@@ -161,15 +161,15 @@ def inverse_dynamics(
             g = feet[f]
             point = d.geom_xpos[g] - np.array([0.0, 0.0, model.geom_size[g, 0]])
             mujoco.mj_jac(free_model, d, jac, None, point, int(model.geom_bodyid[g]))
-            for e in edges[f]:
-                cols.append(jac.T @ e)  # generalised force of a unit force along edge e
-                dirs.append((f, e))
+            for edge in edges[f]:
+                cols.append(jac.T @ edge)  # generalised force of a unit force along edge
+                dirs.append((f, edge))
         if cols:
             a = np.array(cols).T  # (nv, m)
             beta, _ = nnls(weight[:, None] * a[root], weight * tau[root], maxiter=200)
             tau = tau - a @ beta
-            for b, (f, e) in zip(beta, dirs, strict=True):
-                forces[k, f] += b * e
+            for b, (f, edge) in zip(beta, dirs, strict=True):
+                forces[k, f] += b * edge
         root_f[k], root_t[k] = tau[r0 : r0 + 3], tau[r0 + 3 : r0 + 6]
         joint_tau[k] = tau[amap.dof_adr]
     return InverseDynamics(

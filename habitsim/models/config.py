@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, cast
 
 from .errors import ConfigError
 
@@ -374,7 +374,7 @@ class Config:
             if parts[-1] not in node:
                 raise ConfigError(f"unknown config key {key!r}; valid here: {', '.join(node)}")
             node[parts[-1]] = (
-                dataclasses.asdict(value) if dataclasses.is_dataclass(value) else value
+                dataclasses.asdict(cast(Any, value)) if dataclasses.is_dataclass(value) else value
             )
         return Config.from_dict(d)
 
@@ -391,7 +391,7 @@ def _from_dict(cls: type, d: Any, where: str) -> Any:
         if name not in d:
             continue
         v = d[name]
-        default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default  # type: ignore[misc]
+        default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
         if dataclasses.is_dataclass(default):
             kwargs[name] = _from_dict(type(default), v, f"{where}.{name}")
             continue

@@ -15,6 +15,7 @@ At transfer time z_c is *sampled from the target species' prior* (w ~ N(0, I), z
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import torch
 from torch import nn
@@ -43,6 +44,8 @@ class AffineCoupling(nn.Module):
     so a fresh layer is the identity.
     """
 
+    mask: torch.Tensor  # buffer (registered in ``__init__``)
+
     def __init__(self, dim: int, hidden: int, mask: torch.Tensor):
         super().__init__()
         self.register_buffer("mask", mask.to(torch.float32))
@@ -53,8 +56,9 @@ class AffineCoupling(nn.Module):
             nn.GELU(),
             nn.Linear(hidden, 2 * dim),
         )
-        nn.init.zeros_(self.net[-1].weight)
-        nn.init.zeros_(self.net[-1].bias)
+        last = cast(nn.Linear, self.net[-1])
+        nn.init.zeros_(last.weight)
+        nn.init.zeros_(last.bias)
         self.scale = nn.Parameter(torch.ones(dim))
 
     def _st(self, x_masked: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -100,7 +104,7 @@ class RealNVP(nn.Module):
         """w = F⁻¹(z) and log|det ∂F⁻¹/∂z|."""
         logdet = z.new_zeros(z.shape[:-1])
         for layer in reversed(self.layers):
-            z, ld = layer.inverse(z)
+            z, ld = cast(AffineCoupling, layer).inverse(z)
             logdet = logdet + ld
         return z, logdet
 

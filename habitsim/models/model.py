@@ -10,6 +10,7 @@ decoder's output is de-normalised with them.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import cast
 
 import torch
 from torch import nn
@@ -33,6 +34,11 @@ class HabitVQVAE(nn.Module):
         text_names: species whose text embeddings are stored (rows of ``text_table``).
         text_dim: dimension of the raw sentence embeddings.
     """
+
+    # Buffers (registered in ``__init__``), declared for the type checker.
+    feat_mean: torch.Tensor
+    feat_std: torch.Tensor
+    text_table: torch.Tensor
 
     def __init__(
         self, cfg: ModelConfig, species: Sequence[str], text_names: Sequence[str], text_dim: int
@@ -82,7 +88,7 @@ class HabitVQVAE(nn.Module):
         :func:`~habitsim.models.quantizer.residual_quantize`)."""
         levels = [self.quantizer]
         if self.cfg.quantizer.levels > 1:
-            levels += list(self.residual_quantizers)
+            levels += [cast(EMAQuantizer, q) for q in self.residual_quantizers]
         return residual_quantize(levels, f, **kw)
 
     def decode(self, codes: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
@@ -118,13 +124,16 @@ class HabitVQVAE(nn.Module):
             ls = ls.index_copy(0, ii, lg)
         return mu, ls
 
+    def _prior(self, species: str) -> RealNVP:
+        return cast(RealNVP, self.priors[species])
+
     def prior_log_prob(self, z: torch.Tensor, species: Sequence[str]) -> torch.Tensor:
         """log p_c(z) (B,), each row under its species' flow prior."""
         self._check_species(species)
         out = z.new_zeros(z.shape[0])
         for s, idx in self._groups(species).items():
             ii = torch.as_tensor(idx, dtype=torch.long, device=z.device)
-            out = out.index_copy(0, ii, self.priors[s].log_prob(z[ii]))
+            out = out.index_copy(0, ii, self._prior(s).log_prob(z[ii]))
         return out
 
     def sample_posterior(
@@ -147,7 +156,7 @@ class HabitVQVAE(nn.Module):
     ) -> torch.Tensor:
         """n habit latents z_c ~ p_c (n, z_dim) from a training species' flow prior."""
         self._check_species([species])
-        return self.priors[species].sample(n, generator, temperature)
+        return self._prior(species).sample(n, generator, temperature)
 
     # ------------------------------------------------------------------ text embedding
     def text_embedding(self, species: Sequence[str]) -> torch.Tensor:

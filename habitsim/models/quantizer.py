@@ -69,6 +69,12 @@ class EMAQuantizer(nn.Module):
         reset: reset dead codes (False = the ``habit_ema`` variant).
     """
 
+    # Buffers (registered in ``__init__``), declared for the type checker.
+    codebook: torch.Tensor
+    code_sum: torch.Tensor
+    code_count: torch.Tensor
+    initialized: torch.Tensor
+
     def __init__(self, cfg: QuantizerConfig, reset: bool = True):
         super().__init__()
         self.num_codes = cfg.num_codes

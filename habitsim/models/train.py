@@ -38,7 +38,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -296,7 +296,8 @@ def compute_losses(
     dec_in = torch.cat(codes, dim=0)
     cond = None
     if cond_a is not None:
-        cond = torch.cat([cond_a, cond_b], dim=0) if n_pair else cond_a
+        # cond_b is set whenever cond_a is (same model, same condition kinds)
+        cond = torch.cat([cond_a, cast(torch.Tensor, cond_b)], dim=0) if n_pair else cond_a
     y = model.decode(dec_in, cond)
     b = batch.x.shape[0]
     lq, lv = _recon_terms(y[:b], batch.x, batch.valid, cfg)

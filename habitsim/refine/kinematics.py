@@ -134,15 +134,15 @@ def gibbs_to_matrix(g: Sequence[_Scalar]) -> _Mat:
     """
     gx, gy, gz = (g[i] for i in range(3))
     k = [[0.0, -gz, gy], [gz, 0.0, -gx], [-gy, gx, 0.0]]
-    k2 = _matmul(k, k)  # type: ignore[arg-type]
+    k2 = _matmul(k, k)
     s = 2.0 / (1.0 + gx * gx + gy * gy + gz * gz)
     return [
         [(1.0 if i == j else 0.0) + s * (k[i][j] + k2[i][j]) for j in range(3)] for i in range(3)
     ]
 
 
-def _axis_angle_mat(axis: np.ndarray, angle: ca.SX) -> _Mat:
-    """Rodrigues rotation about a numeric unit axis by a symbolic angle."""
+def _axis_angle_mat(axis: np.ndarray, angle: _Scalar) -> _Mat:
+    """Rodrigues rotation about a numeric unit axis by a symbolic (or numeric) angle."""
     a = np.asarray(axis, dtype=np.float64)
     a = a / np.linalg.norm(a)
     c, s = ca.cos(angle), ca.sin(angle)

@@ -93,6 +93,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import casadi as ca
 import mujoco
@@ -346,6 +347,8 @@ class RefinementProblem:
     nv: int
     build_time_s: float
     ng_blocks: dict[str, tuple[int, int]] = field(default_factory=dict)
+    #: the model a cached problem was built on, kept alive (its id is part of the cache key)
+    _model_ref: Any = field(default=None, repr=False, compare=False)
 
     # ---------------------------------------------------------------- layout helpers
     @property
@@ -647,7 +650,7 @@ def _expressions(kin: _Kin, w: int, dynamics: bool, jerk_rows: bool = True) -> _
         r_f = d2(com) * fps**2 / grav + ez @ ca.DM.ones(1, w - 2) - ftot[:, 1:-1]
         mom = _srb_momentum(info.inertia).map(w - 1)(R[:, :-1], R[:, 1:]) * fps  # L at t + ½
         ldot = (mom[:, 1:] - mom[:, :-1]) * fps
-        torque = 0
+        torque: ca.MX | float = 0
         for f in range(4):
             lever_f = (S[:, f::4] - com)[:, 1:-1] / L
             torque = torque + ca.cross(lever_f, forces[f][:, 1:-1])
@@ -753,7 +756,12 @@ def build_refinement_problem(
     e = _expressions(kin, w, dynamics, jerk_rows=settings.jerk)
     x = ca.vec(e.X)
     nlp = {"x": x, "p": e.P, "f": ca.sum1(e.terms), "g": e.g}
-    opts = {"expand": True, "print_time": False, "error_on_fail": False, "ipopt": settings.ipopt()}
+    opts: dict[str, Any] = {
+        "expand": True,
+        "print_time": False,
+        "error_on_fail": False,
+        "ipopt": settings.ipopt(),
+    }
     if settings.hessian == "gauss-newton":
         opts["hess_lag"] = _gauss_newton_hessian(e)
     solver = ca.nlpsol("refine", "ipopt", nlp, opts)

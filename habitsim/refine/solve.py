@@ -382,7 +382,7 @@ def get_problem(
     if pr is None:
         m = _species_model(species) if model is None else model
         pr = build_refinement_problem(m, int(n_frames), bool(dynamics), settings)
-        pr._model_ref = m  # type: ignore[attr-defined]  # keep id(model) alive
+        pr._model_ref = m  # keep id(model) alive
         _PROBLEMS[key] = pr
         _BUILDS += 1
         while len(_PROBLEMS) > MAX_CACHED_PROBLEMS:
@@ -896,15 +896,17 @@ def _solve_windows(
                 clearance=None if prep.clearance is None else prep.clearance[sl],
                 pins=prep.pins[win.start : win.stop - 1],
             )
+            solver = pr.solver
+            assert solver is not None  # get_problem builds the solver
             t0 = time.perf_counter()
-            sol = pr.solver(x0=pr.pack(x_start), p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+            sol = solver(x0=pr.pack(x_start), p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
             dt = time.perf_counter() - t0
-            st = pr.solver.stats()
+            st = solver.stats()
             status = str(st["return_status"])
             xw = pr.unpack(np.asarray(sol["x"]).ravel())
             ok = status in SUCCESS_STATUSES and bool(np.all(np.isfinite(xw)))
             if k == 0:
-                entry = {
+                entry: dict[str, Any] = {
                     "start": win.start,
                     "stop": win.stop,
                     "n_fixed": win.n_fixed,
@@ -1093,7 +1095,8 @@ def refine(
             }
         )
         previous = (attempt, verdict, opts)
-        opts = replace(opts, **{k: _escalate(k, getattr(opts, k)) for k in GUARD_WEIGHTS})
+        escalated: dict[str, Any] = {k: _escalate(k, getattr(opts, k)) for k in GUARD_WEIGHTS}
+        opts = replace(opts, **escalated)
         prep.glob.update(opts.weights)
     x, log, status, failure, checks, qpos, out, _ = attempt
     prep.glob.update(opts.weights)

@@ -95,8 +95,12 @@ def _resolve(
     if isinstance(motion_or_qpos, QposTrajectory | np.ndarray):
         if species is None and model is None:
             raise SimulationError("a qpos trajectory needs species= (or model=)")
-        sp = load_species(species) if species is not None else None
-        base = _species_model(sp.name, False) if model is None else model
+        spq = load_species(species) if species is not None else None
+        if model is None:
+            assert spq is not None  # species= is given without model= (checked above)
+            base = _species_model(spq.name, False)
+        else:
+            base = model
         if isinstance(motion_or_qpos, QposTrajectory):
             q, f = motion_or_qpos.qpos, motion_or_qpos.fps
         else:
@@ -104,14 +108,14 @@ def _resolve(
                 raise SimulationError("a bare qpos array needs fps=")
             q, f = motion_or_qpos, fps
         q = _check_qpos(base, q)
-        leg = sp.leg_length if sp is not None else _model_leg_length(base, feet)
+        leg = spq.leg_length if spq is not None else _model_leg_length(base, feet)
         nf = 4 if feet is None else len(feet)
         if contacts is not None:
             contacts = _check_contacts(contacts, len(q), nf)
         else:
             contacts = contacts_from_feet(_foot_points(base, q, feet), f, leg)
-        name = sp.name if sp is not None else "model"
-        if sp is None and feet is not None:
+        name = spq.name if spq is not None else "model"
+        if spq is None and feet is not None:
             name = bytes(base.names).split(b"\0", 1)[0].decode() or "robot"
         return _Clip(name, base, q, float(f), contacts, leg, feet)
     raise SimulationError(

@@ -58,8 +58,8 @@ class FallDetector:
         self.model = model
         self.fps = float(fps)
         self.trunk = _free_body(model)
-        feet = foot_geoms(model, feet)
-        self.foot_bodies = set(int(model.geom_bodyid[g]) for g in feet)
+        geoms = foot_geoms(model, feet)
+        self.foot_bodies = set(int(model.geom_bodyid[g]) for g in geoms)
         self.ground = set(int(g) for g in np.flatnonzero(model.geom_bodyid == 0))
         q = _check_qpos(model, ref_qpos)
         # reference trunk height, up axis and bodies resting on the ground per frame

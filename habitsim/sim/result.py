@@ -152,7 +152,7 @@ def _finish(
     if end and duration == 0:
         survival = 0.0
     contacts = run.touch > TOUCH_THRESHOLD_MG * mg
-    report = dict(run.assist_report) if run.assist_report else {"assist_on": False}
+    report: dict[str, Any] = dict(run.assist_report) if run.assist_report else {"assist_on": False}
     report.setdefault("assist_force_mg", 0.0)
     res = TrackResult(
         species=clip.species,

@@ -126,8 +126,8 @@ def _run_rollout(
         )
     # wall time per clip: the shared rollout and all pre/post-processing, split evenly
     per_clip = (time.perf_counter() - wall0) / len(clips)
-    for r in runs:
-        r.wall_time_s = per_clip
+    for run in runs:
+        run.wall_time_s = per_clip
     return runs
 
 
