@@ -242,7 +242,12 @@ def _row(name: str, q: dict[str, Any]) -> list[str]:
         f"{'met' if ok_p else 'MISSED'})",
         f"    (on the contacts detected on the output's toes: median "
         f"{q['phase_error_feet_median']:.3f} cycle)",
-        f"    duty factor in the target's band  {100 * q['duty_in_band']:.0f} %",
+        "    duty factor in the target's band  "
+        + (
+            f"{100 * q['duty_in_band']:.0f} %"
+            if np.isfinite(q["duty_in_band"])
+            else "- (the sources' gait is not known)"
+        ),
         f"    stance toes at rest    {100 * q['resting_share']:.1f} % of {q['stance_frames']} "
         f"stance frames ≤ {TARGET_TOE_SPEED} leg/s (target ≥ {100 * TARGET_RESTING_SHARE:.0f} %: "
         f"{'met' if ok_r else 'MISSED'})",
