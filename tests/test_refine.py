@@ -396,6 +396,20 @@ def test_non_convergence_raises_or_falls_back():
     assert res.report["success"] is False
 
 
+def test_bad_contacts_fail_before_a_problem_is_built(monkeypatch) -> None:
+    import habitsim.refine.solve as solve_module
+
+    def no_build(*args, **kwargs):
+        raise AssertionError("a refinement problem was built for a bad input")
+
+    monkeypatch.setattr(solve_module, "get_problem", no_build)
+    m = habitsim.generate("dog", "trot", seed=0, duration_s=1.0)
+    with pytest.raises(RefineInputError, match=r"shape \(30, 4\)"):
+        refine(m, contacts=np.ones((5, 4), bool))
+    with pytest.raises(RefineInputError, match="booleans"):
+        refine(m, contacts=np.full((m.num_frames, 4), 0.5))
+
+
 @pytest.mark.slow
 def test_bad_inputs_raise_typed_errors(dog_trot_100):
     m = dog_trot_100

@@ -1058,6 +1058,8 @@ def refine(
     if fallback is not None:
         opts = replace(opts, fallback=bool(fallback))
     motion = _check_motion(motion)
+    if contacts is not None:
+        _resolve_contacts(motion, contacts)  # bad labels fail before a problem is built
     motion_in = motion
     m = _species_model(motion.species) if model is None else model
     t = motion.num_frames
