@@ -394,8 +394,10 @@ def _tracking_bars(rows: list[dict], controller: str) -> bytes:
 #: The legend printed under the console table (and under the table in the reports).
 LEGEND = (
     "habit of = species whose habit prior was used (a held-out target borrows a training "
-    "species'); contacts = how\nthe stance labels were found (source footfalls, detected "
-    "resting feet, or the target's duty factor);\nrefine/check = solver status and "
+    "species'); contacts = how\nthe stance labels were found (decoded: the model's "
+    "own, a foot that disagrees with the source taking\nthe source's footfalls; source "
+    "footfalls; detected resting feet; or the target's duty factor);\nrefine/check = "
+    "solver status and "
     "whether the refined clip was kept (reverted: it tracked worse); skate mm =\nfoot "
     "skating before → after refinement; survival = share of the clip before a fall (1 = "
     "no fall); MPJPE/leg =\nsimulated vs reference joint error / leg length (lower is "
