@@ -41,6 +41,7 @@ import json
 import math
 import statistics
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -451,15 +452,9 @@ def format_summary(rows: Sequence[dict[str, Any]], targets: Sequence[dict[str, A
         ok = [r for r in mr if r["status"] == "ok"]
         surv = [r["survival"] for r in ok if r.get("survival") is not None]
         f1 = [r["import_contact_f1_mean"] for r in ok if r.get("import_contact_f1_mean")]
-        how: dict[str, int] = {}
-        for r in ok:
-            how[str(r.get("contacts_method"))] = how.get(str(r.get("contacts_method")), 0) + 1
-        planted: dict[str, int] = {}
-        for r in ok:
-            planted[str(r.get("planted"))] = planted.get(str(r.get("planted")), 0) + 1
-        checks: dict[str, int] = {}
-        for r in ok:
-            checks[str(r.get("refine_check"))] = checks.get(str(r.get("refine_check")), 0) + 1
+        how = Counter(str(r.get("contacts_method")) for r in ok)
+        planted = Counter(str(r.get("planted")) for r in ok)
+        checks = Counter(str(r.get("refine_check")) for r in ok)
         lines.append(
             f"  {m:8s} rows {len(ok)}/{len(mr)}; import F1 "
             f"{_f(float(np.mean(f1)) if f1 else None)}; toe/L import "
