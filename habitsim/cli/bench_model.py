@@ -23,6 +23,11 @@ the learning core:
   how far the decoder's stance legs carry its body (the travel left when the stance toes
   are held still, :func:`habitsim.planting.stance_driven_root`, over the decoded travel:
   1 for legs that push the body, near 0 for feet that slide along with it).
+* **What the frozen evaluator sees** (:mod:`habitsim.evaluation.evaluator`, the
+  classifier behind ``habitsim eval``'s habit and action accuracy): the share of
+  transfers it classifies as the target species (targets it was trained on; target
+  ≥ 0.95) and, for sources with an action label, as the source's action (target ≥ 0.85).
+  A checkpoint can reconstruct better and still transfer worse; these two figures say so.
 * **Size and latency**: ``model.safetensors`` (target ≤ 30 MB) and one 64-frame transfer
   (:func:`habitsim.cli.bench_train.transfer_latency`, target ≤ 20 ms).
 """
@@ -48,6 +53,8 @@ TARGET_TOE_SPEED = 0.1  # leg lengths per second
 TARGET_RESTING_SHARE = 0.9
 TARGET_SIZE_MB = 30.0
 TARGET_LATENCY_MS = 20.0
+TARGET_HABIT_ACCURACY = 0.95
+TARGET_ACTION_ACCURACY = 0.85
 #: Cyclic actions whose footfall phases are compared.
 CYCLIC_ACTIONS = ("walk", "trot", "pace", "canter", "gallop", "turn_left", "turn_right")
 DEFAULT_TARGETS = ("cat", "dog", "horse", "camel", "elephant")
@@ -132,6 +139,7 @@ def transfer_quality(
 ) -> dict[str, Any]:
     """Gait and stance figures of every source × target transfer (``habit`` method)."""
     from ..errors import HabitsimError
+    from ..evaluation.evaluator import load_evaluator
     from ..gait_stats import gait_statistics
     from ..gaits import action_gait
     from ..models.transfer import transfer
@@ -143,6 +151,8 @@ def transfer_quality(
     rest_raw = stance_raw = n = 0
     carried: list[float] = []
     phase_feet: list[float] = []
+    outs: list[Any] = []
+    wanted: list[tuple[str, str | None]] = []  # (target, source action) of each output
     for src in sources:
         src_phases = gait_statistics(src).phase_offsets if src.contacts is not None else {}
         action = src.metadata.get("action")
@@ -152,6 +162,8 @@ def transfer_quality(
             out = transfer(src, to=t, method="habit", checkpoint=checkpoint, seed=0)
             assert out.contacts is not None  # a transfer labels its output's stance
             n += 1
+            outs.append(out)
+            wanted.append((t, None if action is None else str(action)))
             how = out.metadata["transfer"]["contacts"]
             key = how["method"] + ("+source feet" if how.get("feet_from_source") else "")
             methods[key] = methods.get(key, 0) + 1
@@ -177,8 +189,24 @@ def transfer_quality(
                 if habit is not None and math.isfinite(gs.duty_factor):
                     lo, hi = habit.duty_factor
                     in_band.append(lo <= gs.duty_factor <= hi)
+    ev = load_evaluator()
+    pred = ev.predict(outs) if outs else None
+    habit_ok = [
+        pred.species[i] == t
+        for i, (t, _) in enumerate(wanted)
+        if pred is not None and t in ev.config.species
+    ]
+    action_ok = [
+        pred.actions[i] == a
+        for i, (_, a) in enumerate(wanted)
+        if pred is not None and a in ev.config.actions
+    ]
     return {
         "transfers": n,
+        "habit_accuracy": float(np.mean(habit_ok)) if habit_ok else math.nan,
+        "habit_classified": len(habit_ok),
+        "action_accuracy": float(np.mean(action_ok)) if action_ok else math.nan,
+        "action_classified": len(action_ok),
         "phase_error_median": statistics.median(phase) if phase else math.nan,
         "phase_error_share_ok": float(np.mean(np.array(phase) <= TARGET_PHASE_ERROR))
         if phase
@@ -256,7 +284,25 @@ def _row(name: str, q: dict[str, Any]) -> list[str]:
         "travel, median)",
         "    stance labels          "
         + ", ".join(f"{k} {v}" for k, v in sorted(q["contact_methods"].items())),
+        "    evaluator              " + _accuracy_text(q),
     ]
+
+
+def _accuracy_text(q: dict[str, Any]) -> str:
+    """The frozen evaluator's habit and action accuracy of a set of transfers."""
+    parts = []
+    for key, what, target in (
+        ("habit", "habit accuracy", TARGET_HABIT_ACCURACY),
+        ("action", "action accuracy", TARGET_ACTION_ACCURACY),
+    ):
+        acc, n = q[f"{key}_accuracy"], q[f"{key}_classified"]
+        if not n:
+            why = "no target it knows" if key == "habit" else "the sources' action is not known"
+            parts.append(f"{what} - ({why})")
+            continue
+        verdict = "met" if acc >= target else "MISSED"
+        parts.append(f"{what} {acc:.3f} of {n} (target ≥ {target:g}: {verdict})")
+    return "; ".join(parts)
 
 
 def _bench_model(ns: argparse.Namespace) -> int:
@@ -297,6 +343,10 @@ def _bench_model(ns: argparse.Namespace) -> int:
             missed.append(f"{name}: phase error {q['phase_error_median']:.3f}")
         if not q["resting_share"] >= TARGET_RESTING_SHARE:
             missed.append(f"{name}: stance toes at rest {100 * q['resting_share']:.1f} %")
+        if q["habit_classified"] and q["habit_accuracy"] < TARGET_HABIT_ACCURACY:
+            missed.append(f"{name}: habit accuracy {q['habit_accuracy']:.3f}")
+        if q["action_classified"] and q["action_accuracy"] < TARGET_ACTION_ACCURACY:
+            missed.append(f"{name}: action accuracy {q['action_accuracy']:.3f}")
     assert ck.path is not None  # a checkpoint loaded from its folder
     size = (Path(ck.path) / MODEL_FILE).stat().st_size / 1e6
     lat = transfer_latency(ns.checkpoint, 10)
