@@ -407,3 +407,76 @@ def test_fine_tune_starts_from_the_checkpoint(tiny_data, tmp_path):
             log=lambda s: None,
             init=base.out_dir,
         )
+
+
+def test_clip_sets_add_up_and_the_sampler_follows_its_weights():
+    a = _tiny_clipset()
+    both = a + a
+    assert len(both.clips) == 2 * len(a.clips) and both.pair_keys == a.pair_keys * 2
+    with pytest.raises(TrainingDataError, match="cannot mix clips at 30 fps with clips at 60"):
+        a + ClipSet(a.clips, a.pair_keys, a.actions, 60.0)
+
+    # the horse's clips in a second set: all the weight on it, every window is a horse's
+    def part(keep):
+        idx = [i for i, c in enumerate(a.clips) if keep(c.species)]
+        return ClipSet(
+            [a.clips[i] for i in idx],
+            [a.pair_keys[i] for i in idx],
+            [a.actions[i] for i in idx],
+            30.0,
+        )
+
+    first, second = part(lambda s: s != "horse"), part(lambda s: s == "horse")
+    mixed = first + second
+    for w_second, want in ((1.0, {"horse"}), (0.0, {"cat", "dog"})):
+        w = np.r_[np.full(len(first.clips), 1.0 - w_second), np.full(len(second.clips), w_second)]
+        sampler = WindowSampler(mixed, 16, np.random.default_rng(0), paired=False, weights=w)
+        assert set(sampler.sample(24).species) == want
+
+
+@pytest.mark.slow
+def test_fine_tune_rehearses_a_second_data_set(tiny_data, tmp_path):
+    """A fine-tune on one species' clips can mix in another data set's clips of the
+    model's species; validation stays on the fine-tune data's own clips."""
+    text = _fake_text()
+    cfg = _tiny_config(steps=2)
+    base = train(
+        tiny_data, tmp_path / "base", cfg, progress=False, log=lambda s: None, text_embeddings=text
+    )
+    one = tmp_path / "one"
+    build_dataset(
+        one, clips_per_species=10, seed=4, species=[SPECIES[0]], workers=1, progress=False
+    )
+    ft_cfg = cfg.replace(**{"train.steps": 2})
+    lines: list[str] = []
+    ft = train(
+        one,
+        tmp_path / "ft",
+        ft_cfg,
+        progress=False,
+        log=lines.append,
+        init=base.out_dir,
+        rehearse=tiny_data,
+        rehearse_share=0.5,
+    )
+    doc = json.loads((ft.out_dir / "config.json").read_text())
+    assert doc["data"]["rehearse"] == {"dir": str(tiny_data.resolve()), "share": 0.5}
+    alone = train(
+        one, tmp_path / "ft1", ft_cfg, progress=False, log=lambda s: None, init=base.out_dir
+    )
+    mixed_n = doc["data"]["train_clips"]
+    alone_n = json.loads((alone.out_dir / "config.json").read_text())["data"]["train_clips"]
+    assert mixed_n > alone_n  # the rehearsal set's clips were added
+    assert f"of {len(SPECIES)} species" in lines[0]
+    with pytest.raises(TrainingDataError, match=r"rehearse_share must be in \(0, 1\)"):
+        train(
+            one,
+            tmp_path / "bad",
+            ft_cfg,
+            progress=False,
+            log=lambda s: None,
+            init=base.out_dir,
+            rehearse=tiny_data,
+            rehearse_share=1.0,
+        )
+    assert not (tmp_path / "bad").exists() or not any((tmp_path / "bad").iterdir())

@@ -50,6 +50,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         "model) with its model configuration; --config then only sets the schedule, "
         f"by default {FINETUNE_STEPS} steps at lr {FINETUNE_LR:g}",
     )
+    p.add_argument(
+        "--rehearse",
+        type=Path,
+        metavar="DIR",
+        help="mix in the train clips of this data set too (e.g. the synthetic one the model "
+        "was trained on), so that a fine-tune on a few clips of one species keeps the others",
+    )
+    p.add_argument(
+        "--rehearse-share",
+        type=float,
+        default=0.5,
+        metavar="F",
+        help="share of the training windows drawn from --rehearse, in (0, 1) (default 0.5)",
+    )
     p.add_argument("--resume", action="store_true", help="continue the training state in CKPT")
     p.add_argument("--overwrite", action="store_true", help="replace a checkpoint already in CKPT")
     p.add_argument("--steps", type=int, metavar="N", help="override the number of steps")
@@ -137,6 +151,8 @@ def _train(ns: argparse.Namespace) -> int:
         overwrite=ns.overwrite,
         progress=not ns.no_progress,
         init=ns.init,
+        rehearse=ns.rehearse,
+        rehearse_share=ns.rehearse_share,
     )
     ref = record_reference_error(ns.out)
     wall = time.perf_counter() - t0

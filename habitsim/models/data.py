@@ -45,6 +45,19 @@ class ClipSet:
     def species(self) -> list[str]:
         return sorted({c.species for c in self.clips})
 
+    def __add__(self, other: ClipSet) -> ClipSet:
+        """Both sets' clips in one (same frame rate; pair keys are kept as they are)."""
+        if other.fps != self.fps:
+            raise TrainingDataError(
+                f"cannot mix clips at {self.fps:g} fps with clips at {other.fps:g} fps"
+            )
+        return ClipSet(
+            self.clips + other.clips,
+            self.pair_keys + other.pair_keys,
+            self.actions + other.actions,
+            self.fps,
+        )
+
     def partners(self) -> list[list[int]]:
         """For each clip, the clips of *other* species with its pair key and length."""
         by_key: dict[str, list[int]] = {}
@@ -165,21 +178,31 @@ class Batch:
 
 
 class WindowSampler:
-    """Uniform random clip, uniform random start; paired window when one exists."""
+    """Random clip (uniform, or by ``weights``), uniform random start; paired window when
+    one exists."""
 
-    def __init__(self, data: ClipSet, window: int, rng: np.random.Generator, paired: bool = True):
+    def __init__(
+        self,
+        data: ClipSet,
+        window: int,
+        rng: np.random.Generator,
+        paired: bool = True,
+        weights: np.ndarray | None = None,
+    ):
         self.data = data
         self.window = int(window)
         self.rng = rng
         self.paired = paired
         self.partners = data.partners() if paired else [[] for _ in data.clips]
+        self.p = None if weights is None else np.asarray(weights, float) / np.sum(weights)
 
     def sample(self, batch_size: int) -> Batch:
         xs, vs, sp = [], [], []
         pxs, pvs, psp, psrc = [], [], [], []
         w = self.window
         for b in range(batch_size):
-            i = int(self.rng.integers(len(self.data.clips)))
+            n = len(self.data.clips)
+            i = int(self.rng.integers(n) if self.p is None else self.rng.choice(n, p=self.p))
             c = self.data.clips[i]
             start = int(self.rng.integers(max(1, c.num_frames - w + 1)))
             f, v, _ = canonical_window(c, start, w)

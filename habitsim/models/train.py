@@ -523,6 +523,8 @@ def train(
     log: Callable[[str], None] = print,
     text_embeddings: dict[str, np.ndarray] | None = None,
     init: str | Path | None = None,
+    rehearse: str | Path | None = None,
+    rehearse_share: float = 0.5,
 ) -> TrainResult:
     """Train a model on a synthetic data set and write a checkpoint folder.
 
@@ -542,6 +544,12 @@ def train(
             variant name such as ``habit``) instead of a fresh model. ``config.model``
             must equal the checkpoint's; its species, text embeddings and feature
             normalisation are kept, and the data's clips of its species are trained on.
+        rehearse: a second data set folder whose ``train`` clips (of the model's species)
+            are mixed in, so that a fine-tune on a few clips of one species does not
+            forget the others (rehearsal; fine-tuned on six real dog clips alone, the
+            shipped model's habit accuracy fell from 0.98 to 0.32).
+        rehearse_share: with ``rehearse``, the share of training windows drawn from it
+            (the rest from ``data_dir``), in (0, 1).
 
     Raises:
         TrainingDataError: no training clips.
@@ -585,8 +593,38 @@ def train(
                 [tr.actions[i] for i in keep],
                 tr.fps,
             )
+        weights = None
+        data_species = species  # validation stays on the data's own clips
+        if rehearse is not None:
+            if not 0.0 < rehearse_share < 1.0:
+                raise TrainingDataError(
+                    f"rehearse_share must be in (0, 1) (a share of the training windows), "
+                    f"got {rehearse_share}"
+                )
+            extra = load_clip_set(rehearse, "train", mirror=t.mirror, speeds=speeds)
+            keep = [i for i, c in enumerate(extra.clips) if c.species in known]
+            if not keep:
+                raise TrainingDataError(
+                    f"{rehearse}: the train split has no clip of the model's species "
+                    f"({', '.join(sorted(known))}) to rehearse"
+                )
+            extra = ClipSet(
+                [extra.clips[i] for i in keep],
+                [extra.pair_keys[i] for i in keep],
+                [extra.actions[i] for i in keep],
+                extra.fps,
+            )
+            n_new, n_old = len(tr.clips), len(extra.clips)
+            tr = tr + extra
+            weights = np.concatenate(
+                [
+                    np.full(n_new, (1.0 - rehearse_share) / n_new),
+                    np.full(n_old, rehearse_share / n_old),
+                ]
+            )
+            species = sorted(s for s in tr.species if s in known)
         try:
-            val: ClipSet | None = load_clip_set(data_dir, "val", species=species)
+            val: ClipSet | None = load_clip_set(data_dir, "val", species=data_species)
         except TrainingDataError:
             val = None
         fps = tr.fps
@@ -652,7 +690,9 @@ def train(
         elif resume:
             log(f"{out}: nothing to resume, starting from step 0")
 
-        sampler = WindowSampler(tr, cfg.model.window, rng, paired=t.paired_weight > 0)
+        sampler = WindowSampler(
+            tr, cfg.model.window, rng, paired=t.paired_weight > 0, weights=weights
+        )
         validator = _Validator(val, cfg.model.window) if val is not None else None
         n_pairs = sum(1 for p in sampler.partners if p)
         log(
@@ -669,6 +709,9 @@ def train(
                 "text": text_meta,
                 "data": {
                     "dir": str(Path(data_dir).resolve()),
+                    "rehearse": None
+                    if rehearse is None
+                    else {"dir": str(Path(rehearse).resolve()), "share": rehearse_share},
                     "train_clips": len(tr.clips),
                     "val_clips": 0 if val is None else len(val.clips),
                 },
