@@ -45,6 +45,17 @@ class ClipSet:
     def species(self) -> list[str]:
         return sorted({c.species for c in self.clips})
 
+    def of_species(self, names: Iterable[str]) -> ClipSet:
+        """Only the clips of these species."""
+        keep = set(names)
+        idx = [i for i, c in enumerate(self.clips) if c.species in keep]
+        return ClipSet(
+            [self.clips[i] for i in idx],
+            [self.pair_keys[i] for i in idx],
+            [self.actions[i] for i in idx],
+            self.fps,
+        )
+
     def __add__(self, other: ClipSet) -> ClipSet:
         """Both sets' clips in one (same frame rate; pair keys are kept as they are)."""
         if other.fps != self.fps:

@@ -586,13 +586,7 @@ def train(
                 )
             )
         if len(species) != len(tr.species):
-            keep = [i for i, c in enumerate(tr.clips) if c.species in known]
-            tr = ClipSet(
-                [tr.clips[i] for i in keep],
-                [tr.pair_keys[i] for i in keep],
-                [tr.actions[i] for i in keep],
-                tr.fps,
-            )
+            tr = tr.of_species(known)
         weights = None
         data_species = species  # validation stays on the data's own clips
         if rehearse is not None:
@@ -602,18 +596,12 @@ def train(
                     f"got {rehearse_share}"
                 )
             extra = load_clip_set(rehearse, "train", mirror=t.mirror, speeds=speeds)
-            keep = [i for i, c in enumerate(extra.clips) if c.species in known]
-            if not keep:
+            extra = extra.of_species(known)
+            if not extra.clips:
                 raise TrainingDataError(
                     f"{rehearse}: the train split has no clip of the model's species "
                     f"({', '.join(sorted(known))}) to rehearse"
                 )
-            extra = ClipSet(
-                [extra.clips[i] for i in keep],
-                [extra.pair_keys[i] for i in keep],
-                [extra.actions[i] for i in keep],
-                extra.fps,
-            )
             n_new, n_old = len(tr.clips), len(extra.clips)
             tr = tr + extra
             weights = np.concatenate(
