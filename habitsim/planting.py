@@ -56,6 +56,7 @@ __all__ = [
     "PlantReport",
     "plant_legs",
     "plant_motion",
+    "stance_reach_shortfall",
     "stance_driven_root",
     "leg_pose_angles",
     "contact_f1",
@@ -76,6 +77,10 @@ FLOOR_SPREAD_PER_LEG = 0.1
 FLOOR_RISE_PER_LEG = 0.05
 #: Below this many resting frames a foot's floor is taken from all its frames.
 _MIN_REST_FRAMES = 3
+#: A stance run whose shoulder / hip travels this far [leg lengths] gets the foothold
+#: centred under its sweep (:func:`plant_motion` with ``centre``); shorter runs blend
+#: towards the toe path's own median.
+CENTRE_TRAVEL_PER_LEG = 0.2
 
 
 @dataclass(frozen=True)
@@ -235,8 +240,44 @@ def _smoothstep(n: int) -> np.ndarray:
     return s * s * (3.0 - 2.0 * s)
 
 
-def _planted_targets(raw: np.ndarray, contacts: np.ndarray) -> np.ndarray:
-    """Toe targets (T, 4, 3): stance runs fixed on the ground, swing blended in between."""
+def _centred_hold(raw: np.ndarray, anchors: np.ndarray, leg: float) -> np.ndarray:
+    """Foothold (2,) of one stance run whose sweep is centred under its anchor.
+
+    Args:
+        raw: (n, 2) the run's toe path; anchors: (n, 2) its shoulder / hip path; leg: leg
+            length [m].
+
+    Along the anchor's travel over the run the foothold sits half-way between where the
+    anchor starts and ends, so the leg reaches as far behind the joint at lift-off as in
+    front of it at touch-down (the foothold a leg of given length holds over the longest
+    sweep); across it the toe path's median offset from the anchor is kept (the gait's
+    stance width). A run that hardly travels keeps the toe path's median, and in between
+    the two are blended.
+    """
+    hold = np.median(raw, axis=0)
+    travel = anchors[-1] - anchors[0]
+    dist = float(np.linalg.norm(travel))
+    w = min(1.0, dist / (CENTRE_TRAVEL_PER_LEG * leg))
+    if w <= 0.0:
+        return hold
+    u = travel / dist
+    off = np.median(raw - anchors, axis=0)
+    side = off - (off @ u) * u
+    centred = 0.5 * (anchors[0] + anchors[-1]) + side
+    return (1.0 - w) * hold + w * centred
+
+
+def _planted_targets(
+    raw: np.ndarray, contacts: np.ndarray, anchors: np.ndarray | None = None, leg: float = 1.0
+) -> np.ndarray:
+    """Toe targets (T, 4, 3): stance runs fixed on the ground, swing blended in between.
+
+    Each run's foothold is the median of its toe path, or with ``anchors`` ((T, 4, 3)
+    shoulder / hip paths) and ``leg`` (leg length [m]) the foothold that centres the run's
+    sweep under the joint (:func:`_centred_hold`); then a
+    swing between two runs goes straight from one foothold to the next (smoothstep, the
+    toe path's height kept).
+    """
     out = raw.copy()
     out[..., 2] = np.maximum(out[..., 2], 0.0)
     t = raw.shape[0]
@@ -244,7 +285,13 @@ def _planted_targets(raw: np.ndarray, contacts: np.ndarray) -> np.ndarray:
         if not segs:
             continue
         runs = [(a, b - 1) for a, b in segs]  # inclusive last stance frame
-        holds = [np.median(raw[a : b + 1, k, :2], axis=0) for a, b in runs]
+        if anchors is None:
+            holds = [np.median(raw[a : b + 1, k, :2], axis=0) for a, b in runs]
+        else:
+            holds = [
+                _centred_hold(raw[a : b + 1, k, :2], anchors[a : b + 1, k, :2], leg)
+                for a, b in runs
+            ]
         for (a, b), h in zip(runs, holds, strict=True):
             out[a : b + 1, k, :2] = h
             out[a : b + 1, k, 2] = 0.0
@@ -257,12 +304,17 @@ def _planted_targets(raw: np.ndarray, contacts: np.ndarray) -> np.ndarray:
             n = hi - lo - 1
             if n <= 0:
                 continue
+            w = _smoothstep(n)[:, None]
+            if anchors is not None and ip is not None and inx is not None:
+                # centred footholds: the toe goes from one to the next (the toe path
+                # between them may belong to another cadence than the labels)
+                out[lo + 1 : hi, k, :2] = (1.0 - w) * holds[ip] + w * holds[inx]
+                continue
             d0 = None if ip is None else holds[ip] - raw[lo, k, :2]
             d1 = None if inx is None else holds[inx] - raw[hi, k, :2]
             d0 = d1 if d0 is None else d0
             d1 = d0 if d1 is None else d1
             assert d0 is not None and d1 is not None  # a swing has a stance run at one end
-            w = _smoothstep(n)[:, None]
             out[lo + 1 : hi, k, :2] = raw[lo + 1 : hi, k, :2] + (1.0 - w) * d0 + w * d1
     return out
 
@@ -457,17 +509,62 @@ def stance_driven_root(motion: Motion, contacts: np.ndarray) -> tuple[Motion, fl
     return out, float(new / old) if old > 1e-12 else 1.0
 
 
+def _own_targets(motion: Motion, c: np.ndarray, centre: bool) -> np.ndarray:
+    """:func:`plant_motion`'s toe targets (T, 4, 3) before any swing floor."""
+    raw = motion.foot_positions()
+    if not centre:
+        return _planted_targets(raw, c)
+    anchors = motion.global_positions()[:, [_IDX[n] for n in FOOT_ANCHORS]]
+    return _planted_targets(raw, c, anchors, motion.species_info.leg_length)
+
+
+def stance_reach_shortfall(
+    motion: Motion, contacts: np.ndarray, centre: bool = False, max_drop: float = 0.0
+) -> float:
+    """How far [m] the farthest stance foothold of :func:`plant_motion` lies beyond the
+    fully stretched leg, with the pelvis lowered by ``max_drop`` [m]; 0 when every
+    foothold is within reach.
+
+    A cheap test (one forward-kinematics pass, no IK) of whether a planting can succeed:
+    the distance from each stance frame's shoulder / hip to its foothold against the
+    upper + lower + foot segment lengths.
+
+    Raises:
+        InvalidMotionError: contacts that do not match the motion.
+    """
+    from .ik import leg_geometry
+
+    t = motion.num_frames
+    c = np.asarray(contacts, dtype=bool)
+    if c.shape != (t, 4):
+        raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
+    if not c.any():
+        return 0.0
+    targets = _own_targets(motion, c, centre)
+    anchors = motion.global_positions()[:, [_IDX[n] for n in FOOT_ANCHORS]]
+    d = targets - anchors
+    d[..., 2] = np.minimum(d[..., 2] + max_drop, 0.0)  # the pelvis comes down to the foot
+    dist = np.linalg.norm(d, axis=-1)
+    geo = [leg_geometry(motion.species, leg) for leg in ("LF", "RF", "LH", "RH")]
+    reach = np.array([g.upper + g.lower + g.foot for g in geo])
+    return max(float(np.where(c, dist - reach[None, :], 0.0).max()), 0.0)
+
+
 def plant_motion(
     motion: Motion,
     contacts: np.ndarray,
     swing_floor: np.ndarray | None = None,
     iterations: int = 3,
+    centre: bool = False,
 ) -> tuple[Motion, PlantReport]:
     """Plant a motion's own feet on its stance labels, by leg IK.
 
     Each stance run of a foot is held at one foothold (the median of the run's toe
-    positions) on the ground; in swing the differences to the neighbouring footholds are
-    blended in (so lift-off and touch-down do not jump), and the toe is lifted to at
+    positions, or with ``centre`` the foothold that centres the run's sweep under the
+    shoulder / hip, :func:`_centred_hold`) on the ground; in swing the differences to the
+    neighbouring footholds are blended in (with ``centre``: the toe goes straight from
+    one foothold to the next), so lift-off and touch-down do not jump, and the toe is
+    lifted to at
     least ``swing_floor``, held over the foothold wherever that floor is below
     :data:`habitsim.contacts.CONTACT_HEIGHT_PER_LEG` (a foot rises before it moves). The
     legs are re-solved with the motion's own girdle flexion and foot inclination; the
@@ -479,6 +576,10 @@ def plant_motion(
         contacts: (T, 4) bool stance labels.
         swing_floor: optional (T, 4) lowest toe height [m] in swing (NaN: none).
         iterations: pelvis-lowering passes.
+        centre: centre each travelling stance run's sweep under its shoulder / hip (for
+            decoded legs whose feet slide: the median of a sliding toe path can lie so
+            far ahead of or behind the joint that the leg cannot reach it at one end of
+            the run).
 
     Returns:
         ``(planted motion with ``contacts`` set, report)``.
@@ -487,8 +588,7 @@ def plant_motion(
     c = np.asarray(contacts, dtype=bool)
     if c.shape != (t, 4):
         raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
-    raw = motion.foot_positions()
-    targets = _planted_targets(raw, c)
+    targets = _own_targets(motion, c, centre)
     if swing_floor is not None:
         fl = np.asarray(swing_floor, dtype=np.float64)
         if fl.shape != (t, 4):

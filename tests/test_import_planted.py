@@ -376,3 +376,53 @@ def test_stance_driven_root_measures_how_far_the_legs_carry_the_body():
     np.testing.assert_array_equal(back.root_positions[:, 2], fast[:, 2])
     with pytest.raises(habitsim.errors.InvalidMotionError, match="contacts must have shape"):
         stance_driven_root(m, m.contacts[:-1])
+
+
+def test_centred_footholds_hold_the_sweep_under_the_joint_and_reach_further():
+    from habitsim.contacts import contact_segments
+    from habitsim.motion import Motion
+    from habitsim.planting import FOOT_ANCHORS, plant_motion, stance_reach_shortfall
+    from habitsim.skeleton import JOINT_NAMES
+
+    m = habitsim.generate("dog", "walk", seed=2, duration_s=2.0)
+    leg = m.species_info.leg_length
+    c = m.contacts
+
+    def sliding(k):  # the same legs, the body travelling k times as far: feet slide
+        fast = m.root_positions.copy()
+        fast[:, :2] = fast[0, :2] + k * (fast[:, :2] - fast[0, :2])
+        return Motion("dog", m.fps, fast, m.rotations, c)
+
+    slide = sliding(1.3)
+    out, rep = plant_motion(slide, c, centre=True)
+    toes = out.foot_positions()
+    anchors = slide.global_positions()[:, [JOINT_NAMES.index(n) for n in FOOT_ANCHORS]]
+    checked = 0
+    for k, runs in enumerate(contact_segments(c)):
+        for a, b in runs:
+            travel = anchors[b - 1, k, :2] - anchors[a, k, :2]
+            if np.linalg.norm(travel) < 0.2 * leg or a == 0 or b == len(c):
+                continue  # short or cut runs blend towards the toe path's median
+            u = travel / np.linalg.norm(travel)
+            hold = toes[a:b, k, :2].mean(axis=0)
+            mid = 0.5 * (anchors[a, k, :2] + anchors[b - 1, k, :2])
+            assert abs((hold - mid) @ u) <= 0.01 * leg  # centred along the travel
+            assert np.ptp(toes[a:b, k, :2], axis=0).max() <= 0.01 * leg  # and held
+            checked += 1
+    assert checked >= 6
+    for k in (1.3, 1.6, 2.0):
+        s = sliding(k)
+        med = plant_motion(s, c)[1].reach_error[c].max()
+        cen = plant_motion(s, c, centre=True)[1].reach_error[c].max()
+        assert cen <= med + 1e-9, k
+    # the reach test without IK: nothing out of reach for the clip's own stance, and a
+    # shortfall beyond the limit whenever the IK cannot hold the footholds either
+    assert stance_reach_shortfall(m, c) == 0.0
+    for k in (1.6, 3.0):
+        s = sliding(k)
+        short = stance_reach_shortfall(s, c, max_drop=0.1 * leg)
+        _, rep = plant_motion(s, c)
+        assert short > 0.05 * leg
+        assert rep.reach_error.max() > 0.05 * leg or rep.pelvis_drop.max() > 0.1 * leg
+    with pytest.raises(habitsim.errors.InvalidMotionError, match="contacts must have shape"):
+        stance_reach_shortfall(m, c[:-1])

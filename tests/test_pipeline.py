@@ -105,6 +105,26 @@ def test_planting_out_of_reach_keeps_the_decoded_feet_and_says_why(trot) -> None
     np.testing.assert_array_equal(out.rotations, raw.rotations)
 
 
+def test_planting_falls_back_to_footholds_centred_under_the_joints(monkeypatch) -> None:
+    # a dog walk sent to the horse: the decoded stance feet slide, and the median of a
+    # sliding toe path lies too far ahead of or behind the shoulder / hip at one end of a
+    # run; the foothold half-way along the joint's travel is in reach
+    walk = generate("dog", "walk", seed=0, duration_s=2.0)
+    out = transfer(walk, to="horse", method="habit", seed=0)
+    raw = transfer(walk, to="horse", method="habit", seed=0, plant=False)
+    report = out.metadata["transfer"]["planted"]
+    assert report["kept"] and report["root"] == "decoded" and report["footholds"] == "centred"
+    assert _reaches(report) and report["solved"]
+    c = out.contacts
+    assert _resting(out, c) >= 0.95 > _resting(raw, c)
+    # with the median footholds alone the decoded root path is not planted
+    transfer_module = importlib.import_module("habitsim.models.transfer")
+    monkeypatch.setattr(transfer_module, "FOOTHOLD_RULES", (False,))
+    median = transfer(walk, to="horse", method="habit", seed=0).metadata["transfer"]["planted"]
+    assert median["footholds"] == "median"
+    assert not (median["kept"] and median["root"] == "decoded")
+
+
 def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot, monkeypatch):
     # the horse's trot sent to the tiger: the decoded stance feet slide, so a foothold
     # held for a whole stance run is out of reach with the decoded root path
