@@ -49,6 +49,8 @@ __all__ = [
     "touchdown_frames",
     "drop_short_runs",
     "warp_contacts",
+    "stride_period",
+    "quicken_contacts",
 ]
 
 
@@ -299,3 +301,55 @@ def warp_contacts(contacts: np.ndarray, n_frames: int) -> np.ndarray:
         return np.repeat(c[:1], n, axis=0)
     src = np.rint(np.arange(n) * (t - 1) / (n - 1)).astype(int)
     return c[np.clip(src, 0, t - 1)]
+
+
+def stride_period(contacts: np.ndarray) -> float | None:
+    """The stride period of a footfall schedule [frames]: the median interval between a
+    foot's successive touchdowns, over every foot that touches down at least twice.
+
+    Args:
+        contacts: (T, F) bool contact flags.
+
+    Returns:
+        The period, or ``None`` when fewer than two feet touch down twice (a clip that
+        does not step: standing, sitting, a single jump).
+    """
+    gaps = [np.diff(td) for td in touchdown_frames(contacts) if len(td) >= 2]
+    if len(gaps) < 2:
+        return None
+    return float(np.median(np.concatenate(gaps)))
+
+
+def quicken_contacts(contacts: np.ndarray, rate: np.ndarray, period: float) -> np.ndarray:
+    """A footfall schedule played faster where ``rate`` > 1, over the same frames.
+
+    Frame ``t`` of the result takes the label of schedule time Σ rate[1..t] (nearest
+    frame): where the rate is 1 the schedule is unchanged, where it is 2 the feet step
+    twice as often; the duty factor and the feet's phase offsets stay the schedule's.
+    Schedule times past the clip's end are wrapped back by whole periods into its last
+    stride, so a cyclic gait keeps stepping.
+
+    Args:
+        contacts: (T, F) bool contact flags.
+        rate: (T,) playback rate per frame, ≥ 1.
+        period: the schedule's stride period [frames] (:func:`stride_period`), ≤ T.
+
+    Returns:
+        (T, F) bool, a new array.
+
+    Raises:
+        InvalidMotionError: shapes that do not match, a rate below 1, a bad period.
+    """
+    c = np.asarray(contacts, dtype=bool)
+    if c.ndim != 2 or c.shape[0] < 1:
+        raise InvalidMotionError(f"contacts must have shape (T, F) with T >= 1, got {c.shape}")
+    t = c.shape[0]
+    r = np.asarray(rate, dtype=np.float64)
+    if r.shape != (t,) or not np.all(np.isfinite(r)) or np.any(r < 1.0):
+        raise InvalidMotionError(f"rate must be ({t},) finite values >= 1, got shape {r.shape}")
+    if not (0.0 < float(period) <= t):
+        raise InvalidMotionError(f"period must be in (0, {t}] frames, got {period}")
+    pos = np.concatenate([[0.0], np.cumsum(r[1:])])
+    lo = t - float(period)  # start of the clip's last stride
+    pos = np.where(pos >= t, lo + np.mod(pos - lo, float(period)), pos)
+    return c[np.clip(np.rint(pos).astype(int), 0, t - 1)]

@@ -57,6 +57,7 @@ __all__ = [
     "plant_legs",
     "plant_motion",
     "stance_reach_shortfall",
+    "stance_sweep_limit",
     "stance_driven_root",
     "leg_pose_angles",
     "contact_f1",
@@ -518,6 +519,14 @@ def _own_targets(motion: Motion, c: np.ndarray, centre: bool) -> np.ndarray:
     return _planted_targets(raw, c, anchors, motion.species_info.leg_length)
 
 
+def _stretched(species: str) -> np.ndarray:
+    """(4,) shoulder / hip → toe length of each stretched leg (LF, RF, LH, RH) [m]."""
+    from .ik import leg_geometry
+
+    geo = [leg_geometry(species, leg) for leg in ("LF", "RF", "LH", "RH")]
+    return np.array([g.upper + g.lower + g.foot for g in geo])
+
+
 def stance_reach_shortfall(
     motion: Motion, contacts: np.ndarray, centre: bool = False, max_drop: float = 0.0
 ) -> float:
@@ -532,8 +541,6 @@ def stance_reach_shortfall(
     Raises:
         InvalidMotionError: contacts that do not match the motion.
     """
-    from .ik import leg_geometry
-
     t = motion.num_frames
     c = np.asarray(contacts, dtype=bool)
     if c.shape != (t, 4):
@@ -545,9 +552,18 @@ def stance_reach_shortfall(
     d = targets - anchors
     d[..., 2] = np.minimum(d[..., 2] + max_drop, 0.0)  # the pelvis comes down to the foot
     dist = np.linalg.norm(d, axis=-1)
-    geo = [leg_geometry(motion.species, leg) for leg in ("LF", "RF", "LH", "RH")]
-    reach = np.array([g.upper + g.lower + g.foot for g in geo])
-    return max(float(np.where(c, dist - reach[None, :], 0.0).max()), 0.0)
+    return max(float(np.where(c, dist - _stretched(motion.species)[None, :], 0.0).max()), 0.0)
+
+
+def stance_sweep_limit(motion: Motion, reach_share: float = 0.92) -> float:
+    """The longest distance [m] the body can travel over one planted foot: twice the
+    horizontal reach of the shortest-reaching leg from its shoulder / hip (at its median
+    height over the clip) to the ground, the leg stretched to ``reach_share`` of its
+    upper + lower + foot segments (a fully straight leg cannot push)."""
+    anchors = motion.global_positions()[:, [_IDX[n] for n in FOOT_ANCHORS], 2]
+    h = np.median(anchors, axis=0)
+    half = np.sqrt(np.maximum((reach_share * _stretched(motion.species)) ** 2 - h**2, 0.0))
+    return float(2.0 * half.min())
 
 
 def plant_motion(

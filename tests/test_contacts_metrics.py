@@ -403,3 +403,27 @@ def test_contacts_by_duty_finds_stance_of_a_skating_gait():
     assert (got == stance).mean() > 0.95
     with pytest.raises(InvalidMotionError, match="duty factors must lie in"):
         contacts_by_duty(feet, fps, leg, 1.2)
+
+
+def test_stride_period_and_quicken_contacts_keep_the_footfall_pattern():
+    from habitsim.contacts import quicken_contacts, stride_period, touchdown_frames
+
+    # a trot: diagonal pairs, 20-frame strides, duty 0.5, 100 frames
+    t = np.arange(100)
+    a = (t % 20) < 10
+    c = np.stack([a, ~a, ~a, a], axis=1)
+    assert stride_period(c) == 20.0
+    assert stride_period(np.ones((50, 4), bool)) is None  # standing: no stride
+    same = quicken_contacts(c, np.ones(100), 20.0)
+    np.testing.assert_array_equal(same, c)
+    fast = quicken_contacts(c, np.full(100, 2.0), 20.0)
+    assert stride_period(fast) == 10.0  # twice the cadence, over the whole clip
+    assert fast.mean(axis=0) == pytest.approx(c.mean(axis=0), abs=0.03)  # duty kept
+    np.testing.assert_array_equal(fast[:, 0], fast[:, 3])  # the diagonals stay paired
+    np.testing.assert_array_equal(fast[:, 0], ~fast[:, 1])
+    # past the schedule's end it keeps stepping in its last stride
+    assert len(touchdown_frames(fast)[0]) >= 9
+    with pytest.raises(InvalidMotionError, match="rate"):
+        quicken_contacts(c, np.full(100, 0.5), 20.0)
+    with pytest.raises(InvalidMotionError, match="period"):
+        quicken_contacts(c, np.ones(100), 200.0)

@@ -125,6 +125,38 @@ def test_planting_falls_back_to_footholds_centred_under_the_joints(monkeypatch) 
     assert not (median["kept"] and median["root"] == "decoded")
 
 
+def test_planting_steps_faster_when_the_body_outruns_the_decoded_stride(walk) -> None:
+    # a dog walk sent to the cat: the decoder keeps the dog's cadence and gives the cat its
+    # own speed, so one stance would have to hold while the body travels further than a
+    # cat's leg sweeps; the labels are played faster instead
+    from habitsim.contacts import stride_period
+    from habitsim.gait_stats import gait_statistics
+
+    out = transfer(walk, to="cat", method="habit", seed=0)
+    raw = transfer(walk, to="cat", method="habit", seed=0, plant=False)
+    report = out.metadata["transfer"]["planted"]
+    assert report["kept"] and report["root"] == "decoded" and _reaches(report), report
+    step = report["restep"]
+    assert step["rate"] > 1.2 and "step faster" in report["reason"]
+    before, after = raw.contacts, out.contacts
+    assert stride_period(after) == pytest.approx(stride_period(before) / step["rate"], rel=0.15)
+    assert step["period_s"][1] < step["period_s"][0]
+    assert after.mean() == pytest.approx(before.mean(), abs=0.05)  # duty factor kept
+    p0 = gait_statistics(raw).phase_offsets
+    p1 = gait_statistics(out).phase_offsets
+    for foot in ("LF", "RF", "RH"):  # the footfall sequence kept
+        d = (p0[foot] - p1[foot]) % 1.0
+        assert min(d, 1.0 - d) <= 0.1, (foot, p0, p1)
+    assert _resting(out, after) >= 0.95
+    # the body is the decoder's; only the legs step on the new labels
+    np.testing.assert_allclose(out.root_positions[:, :2], raw.root_positions[:, :2], atol=1e-9)
+    # a swing toe clears the ground by the cat's habitual swing height at mid-swing
+    toes = out.foot_positions()[..., 2]
+    assert toes[~after].max() >= 0.5 * out.species_info.habits.swing_height * (
+        out.species_info.leg_length
+    )
+
+
 def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot, monkeypatch):
     # the horse's trot sent to the tiger: the decoded stance feet slide, so a foothold
     # held for a whole stance run is out of reach with the decoded root path

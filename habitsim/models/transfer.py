@@ -529,11 +529,96 @@ def _plant(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]]:
             f"the stance legs carry the body only {100 * ratio:.0f} % of its decoded "
             f"speed (< {100 * PLANT_MIN_SPEED_RATIO:.0f} %)"
         )
+    restep = _restep(out, contacts)
+    tried: dict[str, Any] = {}
+    if restep is not None:
+        moved, rep = restep
+        tried = {
+            "restep": {
+                **rep["restep"],
+                "max_reach_error_per_leg": rep["max_reach_error_per_leg"],
+                "max_pelvis_drop_per_leg": rep["max_pelvis_drop_per_leg"],
+            }
+        }
+        if _reaches(rep):
+            return moved, {
+                **rep,
+                "kept": True,
+                "root": "decoded",
+                "reason": f"{missed}, {why}: the legs step faster "
+                f"(stride {rep['restep']['period_s'][0]:.2f} s → "
+                f"{rep['restep']['period_s'][1]:.2f} s)",
+            }
+    if tried:
+        why += ", not even stepping faster"
     return out, {
         **first,
+        **tried,
         "kept": False,
         "speed_ratio": round(ratio, 3),
         "reason": f"{missed}, {why}: the decoded feet are kept",
+    }
+
+
+#: Restepping (:func:`_restep`): a leg stretched to this share of its length sets the
+#: longest stance sweep (:func:`habitsim.planting.stance_sweep_limit`) ...
+RESTEP_REACH_SHARE = 0.92
+#: ... and no stride gets shorter than this many frames.
+RESTEP_MIN_PERIOD = 4.0
+
+
+def _restep(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]] | None:
+    """The decoded motion with its legs stepping fast enough for its body, or ``None``
+    when its labels do not step or already fit.
+
+    A decoder that gives a small target the source's slow cadence and the target's own
+    speed (a camel's walk sent to the cat: strides of 1.4 s at 2.4 leg lengths per
+    second) asks each stance foot to hold while the body travels further than the legs
+    sweep. The stance labels are played faster (:func:`habitsim.contacts.quicken_contacts`,
+    one rate for the clip: the body's mean travel over one stance ÷ the longest sweep),
+    which keeps the duty factor and the feet's phase offsets; the legs are solved by IK
+    onto footholds centred under each shoulder / hip sweep
+    (:func:`habitsim.planting.plant_motion` with ``centre``), lifted in swing on a
+    half-sine of the species' habitual swing height. The trunk, neck and tail and the
+    root path stay the decoder's.
+
+    Returns:
+        ``(planted motion with the new labels, planting report with a ``restep`` entry)``.
+    """
+    from ..contacts import contact_segments, quicken_contacts, stride_period
+    from ..planting import plant_motion, stance_sweep_limit
+
+    period = stride_period(contacts)
+    t = out.num_frames
+    if period is None or t < 2 or period > t:
+        return None
+    sweep = stance_sweep_limit(out, RESTEP_REACH_SHARE)
+    speed = np.linalg.norm(np.diff(out.root_positions[:, :2], axis=0), axis=1).mean() * out.fps
+    stance_s = float(contacts.mean()) * period / out.fps
+    k = min(speed * stance_s / max(sweep, 1e-9), period / RESTEP_MIN_PERIOD)
+    if k <= 1.0:
+        return None
+    # one rate for the whole clip: a rate that follows the speed frame by frame makes the
+    # stances of a short stride uneven by a frame or two, enough for a leg to miss
+    rate = np.full(t, k)
+    labels = quicken_contacts(contacts, rate, period)
+    leg = out.species_info.leg_length
+    lift = np.full(labels.shape, np.nan)
+    height = out.species_info.habits.swing_height * leg
+    for f, runs in enumerate(contact_segments(~labels)):
+        for a, b in runs:
+            lift[a:b, f] = height * np.sin(np.pi * (np.arange(b - a) + 0.5) / (b - a))
+    moved, report = plant_motion(out, labels, lift, centre=True)
+    new_period = stride_period(labels)
+    return moved, {
+        **report.to_dict(leg),
+        "footholds": "centred",
+        "solved": True,
+        "restep": {
+            "period_s": [round(period / out.fps, 3), round((new_period or period) / out.fps, 3)],
+            "rate": round(float(rate[0]), 3),
+            "sweep_limit_per_leg": round(sweep / leg, 3),
+        },
     }
 
 
@@ -556,6 +641,9 @@ def _finish(out: Motion, source: Motion, info: dict[str, Any], plant: bool = Fal
     planted: Any = False
     if plant and contacts.any():
         out, planted = _plant(out, contacts)
+        if "restep" in planted and planted["kept"]:
+            assert out.contacts is not None  # plant_motion labels its output
+            contacts = out.contacts  # the labels the legs now step on
     meta["transfer"] = {**info, "contacts": how, "planted": planted}
     return Motion(out.species, out.fps, out.root_positions, out.rotations, contacts, meta)
 
