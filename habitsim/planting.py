@@ -241,6 +241,14 @@ def _smoothstep(n: int) -> np.ndarray:
     return s * s * (3.0 - 2.0 * s)
 
 
+def _median0(x: np.ndarray) -> np.ndarray:
+    """Median along the first axis of a short (n, d) array (``np.median``'s result,
+    without its overhead: the planting takes one per stance run and rule)."""
+    xs = np.sort(x, axis=0)
+    n = xs.shape[0]
+    return xs[n // 2] if n % 2 else 0.5 * (xs[n // 2 - 1] + xs[n // 2])
+
+
 def _centred_hold(raw: np.ndarray, anchors: np.ndarray, leg: float) -> np.ndarray:
     """Foothold (2,) of one stance run whose sweep is centred under its anchor.
 
@@ -255,14 +263,14 @@ def _centred_hold(raw: np.ndarray, anchors: np.ndarray, leg: float) -> np.ndarra
     stance width). A run that hardly travels keeps the toe path's median, and in between
     the two are blended.
     """
-    hold = np.median(raw, axis=0)
+    hold = _median0(raw)
     travel = anchors[-1] - anchors[0]
     dist = float(np.linalg.norm(travel))
     w = min(1.0, dist / (CENTRE_TRAVEL_PER_LEG * leg))
     if w <= 0.0:
         return hold
     u = travel / dist
-    off = np.median(raw - anchors, axis=0)
+    off = _median0(raw - anchors)
     side = off - (off @ u) * u
     centred = 0.5 * (anchors[0] + anchors[-1]) + side
     return (1.0 - w) * hold + w * centred
@@ -287,7 +295,7 @@ def _planted_targets(
             continue
         runs = [(a, b - 1) for a, b in segs]  # inclusive last stance frame
         if anchors is None:
-            holds = [np.median(raw[a : b + 1, k, :2], axis=0) for a, b in runs]
+            holds = [_median0(raw[a : b + 1, k, :2]) for a, b in runs]
         else:
             holds = [
                 _centred_hold(raw[a : b + 1, k, :2], anchors[a : b + 1, k, :2], leg)
@@ -510,12 +518,16 @@ def stance_driven_root(motion: Motion, contacts: np.ndarray) -> tuple[Motion, fl
     return out, float(new / old) if old > 1e-12 else 1.0
 
 
-def _own_targets(motion: Motion, c: np.ndarray, centre: bool) -> np.ndarray:
-    """:func:`plant_motion`'s toe targets (T, 4, 3) before any swing floor."""
-    raw = motion.foot_positions()
+def _own_targets(
+    motion: Motion, c: np.ndarray, centre: bool, glob: np.ndarray | None = None
+) -> np.ndarray:
+    """:func:`plant_motion`'s toe targets (T, 4, 3) before any swing floor (``glob``: the
+    motion's global joint positions, if already at hand)."""
+    g = motion.global_positions() if glob is None else glob
+    raw = g[:, motion.skeleton.foot_indices]
     if not centre:
         return _planted_targets(raw, c)
-    anchors = motion.global_positions()[:, [_IDX[n] for n in FOOT_ANCHORS]]
+    anchors = g[:, [_IDX[n] for n in FOOT_ANCHORS]]
     return _planted_targets(raw, c, anchors, motion.species_info.leg_length)
 
 
@@ -547,8 +559,9 @@ def stance_reach_shortfall(
         raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
     if not c.any():
         return 0.0
-    targets = _own_targets(motion, c, centre)
-    anchors = motion.global_positions()[:, [_IDX[n] for n in FOOT_ANCHORS]]
+    glob = motion.global_positions()
+    targets = _own_targets(motion, c, centre, glob)
+    anchors = glob[:, [_IDX[n] for n in FOOT_ANCHORS]]
     d = targets - anchors
     d[..., 2] = np.minimum(d[..., 2] + max_drop, 0.0)  # the pelvis comes down to the foot
     dist = np.linalg.norm(d, axis=-1)
