@@ -49,6 +49,7 @@ __all__ = [
     "touchdown_frames",
     "drop_short_runs",
     "warp_contacts",
+    "foot_stride_periods",
     "stride_period",
     "quicken_contacts",
 ]
@@ -303,9 +304,24 @@ def warp_contacts(contacts: np.ndarray, n_frames: int) -> np.ndarray:
     return c[np.clip(src, 0, t - 1)]
 
 
+def foot_stride_periods(contacts: np.ndarray) -> np.ndarray:
+    """(F,) each foot's stride period [frames]: the median interval between its successive
+    touchdowns (NaN for a foot that touches down fewer than twice).
+
+    Args:
+        contacts: (T, F) bool contact flags.
+    """
+    return np.array(
+        [
+            float(np.median(np.diff(td))) if len(td) >= 2 else np.nan
+            for td in touchdown_frames(contacts)
+        ]
+    )
+
+
 def stride_period(contacts: np.ndarray) -> float | None:
-    """The stride period of a footfall schedule [frames]: the median interval between a
-    foot's successive touchdowns, over every foot that touches down at least twice.
+    """The stride period of a footfall schedule [frames]: the median of the feet's own
+    periods (:func:`foot_stride_periods`), when at least two feet touch down twice.
 
     Args:
         contacts: (T, F) bool contact flags.
@@ -314,10 +330,9 @@ def stride_period(contacts: np.ndarray) -> float | None:
         The period, or ``None`` when fewer than two feet touch down twice (a clip that
         does not step: standing, sitting, a single jump).
     """
-    gaps = [np.diff(td) for td in touchdown_frames(contacts) if len(td) >= 2]
-    if len(gaps) < 2:
-        return None
-    return float(np.median(np.concatenate(gaps)))
+    per_foot = foot_stride_periods(contacts)
+    finite = per_foot[np.isfinite(per_foot)]
+    return float(np.median(finite)) if len(finite) >= 2 else None
 
 
 def quicken_contacts(contacts: np.ndarray, rate: np.ndarray, period: float) -> np.ndarray:

@@ -50,7 +50,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .body import center_of_mass
-from .contacts import detect_contacts, touchdown_frames
+from .contacts import detect_contacts, foot_stride_periods, touchdown_frames
 from .errors import InvalidMotionError
 from .species import FEET
 
@@ -236,16 +236,13 @@ def gait_statistics(motion: Motion, contacts: np.ndarray | None = None) -> GaitS
     leg = sp.leg_length
 
     tds = touchdown_frames(c)
+    per_foot = foot_stride_periods(c)
     duty: dict[str, float] = {}
     periods: dict[str, float] = {}
     for k, foot in enumerate(FEET):
         td = tds[k]
-        if td.size >= 2:
-            duty[foot] = float(c[td[0] : td[-1], k].mean())
-            periods[foot] = float(np.median(np.diff(td))) / fps
-        else:
-            duty[foot] = float(c[:, k].mean())
-            periods[foot] = math.nan
+        duty[foot] = float(c[td[0] : td[-1], k].mean() if td.size >= 2 else c[:, k].mean())
+        periods[foot] = float(per_foot[k]) / fps
     finite_p = [v for v in periods.values() if math.isfinite(v)]
     period = float(np.median(finite_p)) if finite_p else math.nan
 
