@@ -66,6 +66,8 @@ __all__ = [
 #: The habitsim joint each foot's offset is measured from (its shoulder / hip joint).
 FOOT_ANCHORS: tuple[str, ...] = ("lf_shoulder", "rf_shoulder", "lh_hip", "rh_hip")
 _IDX = {n: i for i, n in enumerate(JOINT_NAMES)}
+#: Joint indices of :data:`FOOT_ANCHORS`.
+_ANCHOR_IDX = [_IDX[n] for n in FOOT_ANCHORS]
 _FORE = ("scapula", "shoulder", "elbow", "wrist")
 _HIND = ("ilium", "hip", "knee", "hock")
 #: Smoothing window of the foot path before labelling [s].
@@ -283,9 +285,8 @@ def _planted_targets(
 
     Each run's foothold is the median of its toe path, or with ``anchors`` ((T, 4, 3)
     shoulder / hip paths) and ``leg`` (leg length [m]) the foothold that centres the run's
-    sweep under the joint (:func:`_centred_hold`); then a
-    swing between two runs goes straight from one foothold to the next (smoothstep, the
-    toe path's height kept).
+    sweep under the joint (:func:`_centred_hold`); then a swing between two runs goes
+    straight from one foothold to the next (smoothstep, the toe path's height kept).
     """
     out = raw.copy()
     out[..., 2] = np.maximum(out[..., 2], 0.0)
@@ -373,7 +374,7 @@ def plant_legs(
     ]
     rot_std[:, girdles] = stand[girdles]
     std = Motion(motion.species, motion.fps, motion.root_positions, rot_std)
-    anchors_t = std.global_positions()[:, [_IDX[n] for n in FOOT_ANCHORS]]
+    anchors_t = std.global_positions()[:, _ANCHOR_IDX]
     rel = (np.asarray(source_feet) - np.asarray(source_anchors)) * scale
     raw = np.empty((t, 4, 3))
     raw[..., :2] = anchors_t[..., :2] + rel[..., :2]
@@ -527,7 +528,7 @@ def _own_targets(
     raw = g[:, motion.skeleton.foot_indices]
     if not centre:
         return _planted_targets(raw, c)
-    anchors = g[:, [_IDX[n] for n in FOOT_ANCHORS]]
+    anchors = g[:, _ANCHOR_IDX]
     return _planted_targets(raw, c, anchors, motion.species_info.leg_length)
 
 
@@ -561,7 +562,7 @@ def stance_reach_shortfall(
         return 0.0
     glob = motion.global_positions()
     targets = _own_targets(motion, c, centre, glob)
-    anchors = glob[:, [_IDX[n] for n in FOOT_ANCHORS]]
+    anchors = glob[:, _ANCHOR_IDX]
     d = targets - anchors
     d[..., 2] = np.minimum(d[..., 2] + max_drop, 0.0)  # the pelvis comes down to the foot
     dist = np.linalg.norm(d, axis=-1)
@@ -573,7 +574,7 @@ def stance_sweep_limit(motion: Motion, reach_share: float = 0.92) -> float:
     horizontal reach of the shortest-reaching leg from its shoulder / hip (at its median
     height over the clip) to the ground, the leg stretched to ``reach_share`` of its
     upper + lower + foot segments (a fully straight leg cannot push)."""
-    anchors = motion.global_positions()[:, [_IDX[n] for n in FOOT_ANCHORS], 2]
+    anchors = motion.global_positions()[:, _ANCHOR_IDX, 2]
     h = np.median(anchors, axis=0)
     half = np.sqrt(np.maximum((reach_share * _stretched(motion.species)) ** 2 - h**2, 0.0))
     return float(2.0 * half.min())
