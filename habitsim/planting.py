@@ -57,6 +57,7 @@ __all__ = [
     "plant_legs",
     "plant_motion",
     "stance_reach_shortfall",
+    "stance_run_shortfall",
     "stance_sweep_limit",
     "stance_driven_root",
     "leg_pose_angles",
@@ -279,7 +280,11 @@ def _centred_hold(raw: np.ndarray, anchors: np.ndarray, leg: float) -> np.ndarra
 
 
 def _planted_targets(
-    raw: np.ndarray, contacts: np.ndarray, anchors: np.ndarray | None = None, leg: float = 1.0
+    raw: np.ndarray,
+    contacts: np.ndarray,
+    anchors: np.ndarray | None = None,
+    leg: float = 1.0,
+    free: np.ndarray | None = None,
 ) -> np.ndarray:
     """Toe targets (T, 4, 3): stance runs fixed on the ground, swing blended in between.
 
@@ -287,6 +292,8 @@ def _planted_targets(
     shoulder / hip paths) and ``leg`` (leg length [m]) the foothold that centres the run's
     sweep under the joint (:func:`_centred_hold`); then a swing between two runs goes
     straight from one foothold to the next (smoothstep, the toe path's height kept).
+    A run with a frame in ``free`` ((T, 4) bool) is not held: its toes keep their own
+    path (not under the ground), and the swings around it start and end where it does.
     """
     out = raw.copy()
     out[..., 2] = np.maximum(out[..., 2], 0.0)
@@ -302,8 +309,13 @@ def _planted_targets(
                 _centred_hold(raw[a : b + 1, k, :2], anchors[a : b + 1, k, :2], leg)
                 for a, b in runs
             ]
-        for (a, b), h in zip(runs, holds, strict=True):
-            out[a : b + 1, k, :2] = h
+        # where each run starts and ends (a held run: its foothold)
+        starts, ends = list(holds), list(holds)
+        for i, (a, b) in enumerate(runs):
+            if free is not None and free[a : b + 1, k].any():
+                starts[i], ends[i] = out[a, k, :2].copy(), out[b, k, :2].copy()
+                continue
+            out[a : b + 1, k, :2] = holds[i]
             out[a : b + 1, k, 2] = 0.0
         # swing phases (lo, hi exclusive of both): before the first run, between runs,
         # after the last
@@ -318,10 +330,10 @@ def _planted_targets(
             if anchors is not None and ip is not None and inx is not None:
                 # centred footholds: the toe goes from one to the next (the toe path
                 # between them may belong to another cadence than the labels)
-                out[lo + 1 : hi, k, :2] = (1.0 - w) * holds[ip] + w * holds[inx]
+                out[lo + 1 : hi, k, :2] = (1.0 - w) * ends[ip] + w * starts[inx]
                 continue
-            d0 = None if ip is None else holds[ip] - raw[lo, k, :2]
-            d1 = None if inx is None else holds[inx] - raw[hi, k, :2]
+            d0 = None if ip is None else ends[ip] - raw[lo, k, :2]
+            d1 = None if inx is None else starts[inx] - raw[hi, k, :2]
             d0 = d1 if d0 is None else d0
             d1 = d0 if d1 is None else d1
             assert d0 is not None and d1 is not None  # a swing has a stance run at one end
@@ -393,6 +405,7 @@ def _solve_planted(
     foot_inclination: np.ndarray | None,
     iterations: int,
     limit_abduction: bool = False,
+    free: np.ndarray | None = None,
 ) -> tuple[Motion, PlantReport]:
     """Leg IK onto toe targets; the pelvis lowered where a stance foot is out of reach."""
     sp: Species = load_species(motion.species)
@@ -413,7 +426,7 @@ def _solve_planted(
         solved = np.stack([lg.toe for lg in pose.legs], axis=1)
         moved = targets.copy()
         moved[..., :2] = np.where(c[..., None], solved[..., :2], targets[..., :2])
-        targets = _planted_targets(moved, c)
+        targets = _planted_targets(moved, c, free=free)
         pose = pose_from_targets(
             sp, root, rot, targets, girdle_flex, foot_inclination, limit_abduction=True
         )
@@ -520,16 +533,20 @@ def stance_driven_root(motion: Motion, contacts: np.ndarray) -> tuple[Motion, fl
 
 
 def _own_targets(
-    motion: Motion, c: np.ndarray, centre: bool, glob: np.ndarray | None = None
+    motion: Motion,
+    c: np.ndarray,
+    centre: bool,
+    glob: np.ndarray | None = None,
+    free: np.ndarray | None = None,
 ) -> np.ndarray:
     """:func:`plant_motion`'s toe targets (T, 4, 3) before any swing floor (``glob``: the
     motion's global joint positions, if already at hand)."""
     g = motion.global_positions() if glob is None else glob
     raw = g[:, motion.skeleton.foot_indices]
     if not centre:
-        return _planted_targets(raw, c)
+        return _planted_targets(raw, c, free=free)
     anchors = g[:, _ANCHOR_IDX]
-    return _planted_targets(raw, c, anchors, motion.species_info.leg_length)
+    return _planted_targets(raw, c, anchors, motion.species_info.leg_length, free)
 
 
 def _stretched(species: str) -> np.ndarray:
@@ -540,16 +557,20 @@ def _stretched(species: str) -> np.ndarray:
     return np.array([g.upper + g.lower + g.foot for g in geo])
 
 
-def stance_reach_shortfall(
-    motion: Motion, contacts: np.ndarray, centre: bool = False, max_drop: float = 0.0
-) -> float:
-    """How far [m] the farthest stance foothold of :func:`plant_motion` lies beyond the
-    fully stretched leg, with the pelvis lowered by ``max_drop`` [m]; 0 when every
-    foothold is within reach.
+def stance_run_shortfall(
+    motion: Motion,
+    contacts: np.ndarray,
+    centre: bool = False,
+    max_drop: float = 0.0,
+    free: np.ndarray | None = None,
+) -> np.ndarray:
+    """(T, 4) how far [m] each stance frame's foothold of :func:`plant_motion` lies beyond
+    the fully stretched leg, with the pelvis lowered by ``max_drop`` [m] (0 within reach,
+    and on swing frames and stance runs left ``free``).
 
-    A cheap test (one forward-kinematics pass, no IK) of whether a planting can succeed:
-    the distance from each stance frame's shoulder / hip to its foothold against the
-    upper + lower + foot segment lengths.
+    A cheap test (one forward-kinematics pass, no IK): the distance from each stance
+    frame's shoulder / hip to its foothold against the upper + lower + foot segment
+    lengths.
 
     Raises:
         InvalidMotionError: contacts that do not match the motion.
@@ -559,14 +580,28 @@ def stance_reach_shortfall(
     if c.shape != (t, 4):
         raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
     if not c.any():
-        return 0.0
+        return np.zeros((t, 4))
     glob = motion.global_positions()
-    targets = _own_targets(motion, c, centre, glob)
+    targets = _own_targets(motion, c, centre, glob, free)
     anchors = glob[:, _ANCHOR_IDX]
     d = targets - anchors
     d[..., 2] = np.minimum(d[..., 2] + max_drop, 0.0)  # the pelvis comes down to the foot
     dist = np.linalg.norm(d, axis=-1)
-    return max(float(np.where(c, dist - _stretched(motion.species)[None, :], 0.0).max()), 0.0)
+    held = c if free is None else c & ~np.asarray(free, dtype=bool)
+    return np.where(held, np.maximum(dist - _stretched(motion.species)[None, :], 0.0), 0.0)
+
+
+def stance_reach_shortfall(
+    motion: Motion, contacts: np.ndarray, centre: bool = False, max_drop: float = 0.0
+) -> float:
+    """How far [m] the farthest stance foothold of :func:`plant_motion` lies beyond the
+    fully stretched leg, with the pelvis lowered by ``max_drop`` [m]; 0 when every
+    foothold is within reach (the largest of :func:`stance_run_shortfall`).
+
+    Raises:
+        InvalidMotionError: contacts that do not match the motion.
+    """
+    return float(stance_run_shortfall(motion, contacts, centre, max_drop).max(initial=0.0))
 
 
 def stance_sweep_limit(motion: Motion, reach_share: float = 0.92) -> float:
@@ -586,6 +621,7 @@ def plant_motion(
     swing_floor: np.ndarray | None = None,
     iterations: int = 3,
     centre: bool = False,
+    free: np.ndarray | None = None,
 ) -> tuple[Motion, PlantReport]:
     """Plant a motion's own feet on its stance labels, by leg IK.
 
@@ -610,6 +646,9 @@ def plant_motion(
             decoded legs whose feet slide: the median of a sliding toe path can lie so
             far ahead of or behind the joint that the leg cannot reach it at one end of
             the run).
+        free: optional (T, 4) bool; a stance run with a frame in it is not held but
+            keeps its own toe path (not under the ground), e.g. a run whose foothold
+            no leg reaches (:func:`stance_run_shortfall`).
 
     Returns:
         ``(planted motion with ``contacts`` set, report)``.
@@ -618,7 +657,10 @@ def plant_motion(
     c = np.asarray(contacts, dtype=bool)
     if c.shape != (t, 4):
         raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
-    targets = _own_targets(motion, c, centre)
+    if free is not None and np.shape(free) != (t, 4):
+        raise InvalidMotionError(f"free must have shape ({t}, 4), got {np.shape(free)}")
+    free = None if free is None else np.asarray(free, dtype=bool)
+    targets = _own_targets(motion, c, centre, free=free)
     if swing_floor is not None:
         fl = np.asarray(swing_floor, dtype=np.float64)
         if fl.shape != (t, 4):
@@ -633,4 +675,6 @@ def plant_motion(
                 near = stance[np.abs(frames[:, None] - stance[None, :]).argmin(axis=1)]
                 targets[frames, k, :2] = targets[near, k, :2]
     girdle, incl = leg_pose_angles(motion)
-    return _solve_planted(motion, targets, c, girdle, incl, iterations, limit_abduction=True)
+    return _solve_planted(
+        motion, targets, c, girdle, incl, iterations, limit_abduction=True, free=free
+    )

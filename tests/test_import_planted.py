@@ -426,3 +426,43 @@ def test_centred_footholds_hold_the_sweep_under_the_joint_and_reach_further():
         assert rep.reach_error.max() > 0.05 * leg or rep.pelvis_drop.max() > 0.1 * leg
     with pytest.raises(habitsim.errors.InvalidMotionError, match="contacts must have shape"):
         stance_reach_shortfall(m, c[:-1])
+
+
+def test_free_stance_runs_keep_their_own_toe_path_and_the_reach_test_skips_them():
+    from habitsim.contacts import contact_segments
+    from habitsim.motion import Motion
+    from habitsim.planting import plant_motion, stance_run_shortfall
+
+    m = habitsim.generate("dog", "walk", seed=2, duration_s=2.0)
+    leg = m.species_info.leg_length
+    c = m.contacts
+    fast = m.root_positions.copy()
+    fast[:, :2] = fast[0, :2] + 1.3 * (fast[:, :2] - fast[0, :2])  # feet slide in stance
+    slide = Motion("dog", m.fps, fast, m.rotations, c)
+    runs = contact_segments(c)[0]
+    a, b = next((a, b) for a, b in runs if a > 0 and b < len(c))  # an inner LF run
+    free = np.zeros_like(c)
+    free[a + 1, 0] = True  # one frame marks the whole run
+    out, _ = plant_motion(slide, c, centre=True, free=free)
+    held, _ = plant_motion(slide, c, centre=True)
+    toes, raw = out.foot_positions(), slide.foot_positions()
+    # the free run follows the sliding toe path; held, it stays put
+    np.testing.assert_allclose(toes[a:b, 0, :2], raw[a:b, 0, :2], atol=0.01 * leg)
+    assert np.ptp(raw[a:b, 0, :2], axis=0).max() > 0.05 * leg
+    assert np.ptp(held.foot_positions()[a:b, 0, :2], axis=0).max() <= 0.01 * leg
+    # the other runs are held as before
+    other = c.copy()
+    other[a:b, 0] = False
+    np.testing.assert_allclose(toes[other], held.foot_positions()[other], atol=0.01 * leg)
+    # the per-frame reach test: zero off stance and on free runs
+    k = 3.0
+    far = m.root_positions.copy()
+    far[:, :2] = far[0, :2] + k * (far[:, :2] - far[0, :2])
+    s = Motion("dog", m.fps, far, m.rotations, c)
+    short = stance_run_shortfall(s, c, centre=True)
+    assert short.shape == c.shape and (short[~c] == 0).all() and short.max() > 0.05 * leg
+    mask = np.zeros_like(c)
+    mask[:, 0] = c[:, 0]
+    assert (stance_run_shortfall(s, c, True, 0.0, mask)[:, 0] == 0).all()
+    with pytest.raises(habitsim.errors.InvalidMotionError, match="free must have shape"):
+        plant_motion(slide, c, free=free[:-1])

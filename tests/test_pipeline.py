@@ -120,6 +120,7 @@ def test_planting_falls_back_to_footholds_centred_under_the_joints(monkeypatch) 
     # with the median footholds alone the decoded root path is not planted
     transfer_module = importlib.import_module("habitsim.models.transfer")
     monkeypatch.setattr(transfer_module, "FOOTHOLD_RULES", (False,))
+    monkeypatch.setattr(transfer_module, "PARTIAL_MAX_FREE_SHARE", -1.0)  # no partial planting
     median = transfer(walk, to="horse", method="habit", seed=0).metadata["transfer"]["planted"]
     assert median["footholds"] == "median"
     assert not (median["kept"] and median["root"] == "decoded")
@@ -181,6 +182,7 @@ def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot, 
     assert 0.2 <= report["speed_ratio"] < 0.99
     # a body its legs carry too little is not moved: the decoded feet are kept
     monkeypatch.setattr(transfer_module, "PLANT_MIN_SPEED_RATIO", 0.99)
+    monkeypatch.setattr(transfer_module, "PARTIAL_MAX_FREE_SHARE", -1.0)  # no partial planting
     slow = transfer(trot, to="tiger", method="habit", seed=0)
     report = slow.metadata["transfer"]["planted"]
     assert not report["kept"] and "carry the body only" in report["reason"]
@@ -281,3 +283,103 @@ def test_one_model_cache_and_explicit_track_contacts(walk) -> None:
     assert species_model("dog", servos=True) is _species_model("dog", True)
     with pytest.raises(SimulationError, match=r"contacts must have shape \(60, 4\)"):
         track(walk.slice(0, 60), contacts=np.ones((10, 4), bool))
+
+
+def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
+    # the dog walk with its body travelling three times as fast over its second half:
+    # the stance runs there are out of reach, the first half's are held
+    from habitsim.contacts import contact_segments
+    from habitsim.motion import Motion
+
+    mod = importlib.import_module("habitsim.models.transfer")
+    c = walk.contacts
+    leg = walk.species_info.leg_length
+    t = len(c)
+    half = t // 2
+    step = np.diff(walk.root_positions[:, :2], axis=0)
+    step[half:] *= 3.0
+    root = walk.root_positions.copy()
+    root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
+    fast = Motion("dog", walk.fps, root, walk.rotations, c)
+    moved, rep = mod._plant_partly(fast, c)
+    assert rep["free_runs"][0] >= 1 and 0 < rep["free_share"] <= mod.PARTIAL_MAX_FREE_SHARE
+    assert rep["max_reach_error_per_leg"] <= PLANT_MAX_REACH_PER_LEG
+    assert rep["max_pelvis_drop_per_leg"] <= mod.PLANT_MAX_DROP_PER_LEG
+    toes = moved.foot_positions()
+    early = 0
+    for k, runs in enumerate(contact_segments(c)):
+        for a, b in runs:
+            if b <= half - 2:  # a run of the slow half: held
+                assert np.ptp(toes[a:b, k, :2], axis=0).max() <= 0.01 * leg
+                early += 1
+    assert early >= 3
+    np.testing.assert_array_equal(moved.root_positions[:, :2], fast.root_positions[:, :2])
+    # the whole clip that fast: more than the allowed share would be free
+    step = np.diff(walk.root_positions[:, :2], axis=0) * 3.0
+    root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
+    assert mod._plant_partly(Motion("dog", walk.fps, root, walk.rotations, c), c) is None
+
+
+def test_decoded_speed_is_bounded_by_the_source_speed_at_equal_froude(walk) -> None:
+    from habitsim.motion import Motion
+
+    mod = importlib.import_module("habitsim.models.transfer")
+    cat = generate("cat", like=walk)
+    assert cat.num_frames == walk.num_frames
+    # a cat walking where the source dog walks at the same Froude number: unchanged
+    same, info = mod._bound_speed(cat, walk)
+    assert info is None and same is cat
+    # ... where the dog stands still: the cat's body does not travel either
+    t = walk.num_frames
+    still = Motion(
+        "dog",
+        walk.fps,
+        np.repeat(walk.root_positions[:1], t, axis=0),
+        np.repeat(walk.rotations[:1], t, axis=0),
+    )
+    stood, info = mod._bound_speed(cat, still)
+    assert info is not None and info["frames"] >= t - 2
+    travel = np.linalg.norm(np.diff(stood.root_positions[:, :2], axis=0), axis=1).sum()
+    assert travel <= 1e-6
+    np.testing.assert_allclose(stood.rotations, cat.rotations, atol=1e-12)
+    np.testing.assert_allclose(stood.root_positions[:, 2], cat.root_positions[:, 2], atol=1e-12)
+    # ... and where the dog runs three times as fast: the cat speeds up to a third of it
+    # (the band's lower edge) along its own path
+    root = walk.root_positions.copy()
+    root[:, :2] = root[0, :2] + 3.0 * 1.5 * (root[:, :2] - root[0, :2])
+    quick = Motion("dog", walk.fps, root, walk.rotations)
+    sped, info = mod._bound_speed(cat, quick)
+    assert info is not None
+    v0 = np.linalg.norm(np.diff(cat.root_positions[:, :2], axis=0), axis=1).sum()
+    v1 = np.linalg.norm(np.diff(sped.root_positions[:, :2], axis=0), axis=1).sum()
+    assert v1 / v0 == pytest.approx(3.0 * 1.5 / mod.SPEED_BAND, rel=0.1)
+
+
+def test_decoded_height_excursions_are_bounded_by_the_source(walk) -> None:
+    from habitsim.motion import Motion
+
+    mod = importlib.import_module("habitsim.models.transfer")
+    cat = generate("cat", like=walk)
+    leg = cat.species_info.leg_length
+    # the same gait's bob: unchanged
+    same, info = mod._bound_height(cat, walk)
+    assert info is None and same is cat
+    # a body that sinks by a fifth of its leg over the clip while the dog walks level:
+    # the sinking is cut to the band around the dog's own bob
+    t = cat.num_frames
+    root = cat.root_positions.copy()
+    root[:, 2] -= np.linspace(0.0, 0.2 * leg, t)
+    sinking = Motion("cat", cat.fps, root, cat.rotations)
+    level, info = mod._bound_height(sinking, walk)
+    assert info is not None and info["range_per_leg"][0] > 0.15
+    dev = walk.root_positions[:, 2] - np.median(walk.root_positions[:, 2])
+    src = np.abs(dev).max() / walk.species_info.leg_length
+    allowed = max(mod.HEIGHT_BAND * src, mod.HEIGHT_FLOOR_PER_LEG)
+    z = level.root_positions[:, 2]
+    assert np.abs(z - np.median(root[:, 2])).max() <= 1.2 * allowed * leg  # smoothed envelope
+    np.testing.assert_allclose(level.root_positions[:, :2], root[:, :2])
+    # a source that jumps keeps the target's jump
+    jump = generate("dog", "jump", seed=0)
+    leap = generate("cat", like=jump)
+    _, info = mod._bound_height(leap, jump)
+    assert info is None or info["range_per_leg"][1] >= 0.95 * info["range_per_leg"][0]

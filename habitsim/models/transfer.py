@@ -551,12 +551,105 @@ def _plant(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]]:
             }
     if tried:
         why += ", not even stepping faster"
+    partly = _plant_partly(out, contacts)
+    if partly is not None:
+        moved, rep = partly
+        return moved, {
+            **rep,
+            **tried,
+            "kept": True,
+            "root": "decoded",
+            "reason": f"{missed}, {why}: the stance runs out of reach keep the decoded "
+            f"feet ({rep['free_runs'][0]} of {rep['free_runs'][1]} runs, "
+            f"{100 * rep['free_share']:.0f} % of the stance frames)",
+        }
     return out, {
         **first,
         **tried,
         "kept": False,
         "speed_ratio": round(ratio, 3),
         "reason": f"{missed}, {why}: the decoded feet are kept",
+    }
+
+
+#: Partial planting (:func:`_plant_partly`) keeps the decoded feet of at most this share
+#: of the stance frames ...
+PARTIAL_MAX_FREE_SHARE = 0.5
+#: ... found in at most this many IK passes.
+PARTIAL_PASSES = 4
+
+
+def _run_mask(contacts: np.ndarray, hit: np.ndarray) -> np.ndarray:
+    """(T, 4) bool: the whole stance runs of ``contacts`` that have a frame in ``hit``."""
+    from ..contacts import contact_segments
+
+    out = np.zeros_like(contacts, dtype=bool)
+    for k, segs in enumerate(contact_segments(contacts)):
+        for a, b in segs:
+            if hit[a:b, k].any():
+                out[a:b, k] = True
+    return out
+
+
+def _plant_partly(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]] | None:
+    """The decoded motion planted on every stance run its legs reach, the other runs
+    keeping the decoded feet; ``None`` when that leaves more than
+    :data:`PARTIAL_MAX_FREE_SHARE` of the stance frames unplanted.
+
+    A long clip whose speed changes (a real walk that breaks into a run, a standing
+    start the decoder already walks through) can have a few stance runs that sweep
+    further than the legs reach while the rest are fine; all-or-nothing planting would
+    leave every foot sliding. Runs are released where their centred foothold is beyond
+    the stretched leg with the pelvis at its lowest (:func:`~habitsim.planting.
+    stance_run_shortfall`), then, pass by pass, where the IK misses the foothold or the
+    pelvis would come down further than :data:`PLANT_MAX_DROP_PER_LEG` (the runs whose
+    legs are short there). The released runs stay stance (the foot is on the ground);
+    the swings around them start and end where they do.
+    """
+    from ..planting import plant_motion, stance_run_shortfall
+
+    c = np.asarray(contacts, dtype=bool)
+    stance = int(c.sum())
+    if stance == 0:
+        return None
+    leg = out.species_info.leg_length
+    reach, low = PLANT_MAX_REACH_PER_LEG * leg, PLANT_MAX_DROP_PER_LEG * leg
+    free = _run_mask(c, stance_run_shortfall(out, c, True, low) > reach)
+    hang = stance_run_shortfall(out, c, True, 0.0) > 0.0
+    width = max(1, int(round(0.1 * out.fps)))
+    for _ in range(PARTIAL_PASSES):
+        if free.sum() > PARTIAL_MAX_FREE_SHARE * stance:
+            return None
+        moved, report = plant_motion(out, c, centre=True, free=free)
+        held = c & ~free
+        miss = held & (report.reach_error > reach)
+        deep = report.pelvis_drop > low
+        if deep.any():
+            near = np.convolve(deep.astype(float), np.ones(2 * width + 1), "same") > 0
+            cand = held & near[:, None]
+            miss |= cand & hang if (cand & hang).any() else cand
+        if not miss.any():
+            break
+        free |= _run_mask(c, miss)
+    else:
+        return None
+    n_free = int(free.sum())
+    if n_free > PARTIAL_MAX_FREE_SHARE * stance:
+        return None
+    from ..contacts import contact_segments
+
+    runs = sum(len(s) for s in contact_segments(c))
+    loose = sum(len(s) for s in contact_segments(free))
+    summary = report.to_dict(leg)
+    summary["max_reach_error_per_leg"] = round(
+        float(np.where(held, report.reach_error, 0.0).max()) / leg, 5
+    )
+    return moved, {
+        **summary,
+        "footholds": "centred",
+        "solved": True,
+        "free_runs": [loose, runs],
+        "free_share": round(n_free / stance, 3),
     }
 
 
@@ -622,6 +715,109 @@ def _restep(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]] 
     }
 
 
+#: The decoded body's horizontal speed is kept within this factor of the source's speed
+#: at the same Froude number (:func:`_bound_speed`) ...
+SPEED_BAND = 1.5
+#: ... both speeds smoothed with a Gaussian of this standard deviation [s] (about half a
+#: stride of a walk), so the band bounds the pace, not the bob within a stride.
+SPEED_SMOOTH_S = 0.25
+
+
+def _bound_speed(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] | None]:
+    """The decoded motion with its horizontal root speed within :data:`SPEED_BAND` of the
+    source's, and what was changed (``None``: nothing).
+
+    The decoder reads a window of about two seconds; a source that stands and then walks
+    off (a real clip's first seconds, a pause between runs) can decode as a target that
+    walks the whole time, and legs planted on the source's footfalls (all four feet down
+    while it stands) cannot carry a body that travels. Dynamic similarity gives the speed
+    the target would have at the source's gait (equal Froude numbers v²/(g·L): v_target
+    = v_source·√(L_target / L_source), L the leg length); each frame's decoded velocity
+    is scaled so its smoothed speed lies within a factor :data:`SPEED_BAND` of that
+    (below for a standing source, a zero speed). The direction of travel, the height and
+    every joint stay the decoder's.
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    t = out.num_frames
+    if t < 3 or source.num_frames != t:
+        return out, None
+    sigma = max(1.0, SPEED_SMOOTH_S * out.fps)
+    step = np.diff(out.root_positions[:, :2], axis=0)
+    src_step = np.diff(source.root_positions[:, :2], axis=0) * (out.fps / source.fps)
+    ratio = float(np.sqrt(out.species_info.leg_length / source.species_info.leg_length))
+    v_dec = gaussian_filter1d(np.linalg.norm(step, axis=1), sigma, mode="nearest")
+    v_eq = gaussian_filter1d(np.linalg.norm(src_step, axis=1), sigma, mode="nearest") * ratio
+    bounded = np.clip(v_dec, v_eq / SPEED_BAND, v_eq * SPEED_BAND)
+    scale = np.where(v_dec > 1e-9, bounded / np.maximum(v_dec, 1e-9), 1.0)
+    changed = np.abs(scale - 1.0) > 1e-3
+    if not changed.any():
+        return out, None
+    root = np.array(out.root_positions, dtype=np.float64)
+    root[1:, :2] = root[0, :2] + np.cumsum(step * scale[:, None], axis=0)
+    moved = Motion(out.species, out.fps, root, out.rotations, out.contacts, dict(out.metadata))
+    fps, leg = out.fps, out.species_info.leg_length
+    return moved, {
+        "frames": int(changed.sum()),
+        "speed_per_leg": [
+            round(float(v_dec.mean() * fps / leg), 3),
+            round(float(bounded.mean() * fps / leg), 3),
+        ],
+    }
+
+
+#: The decoded root height's deviation from its median is kept within this factor of the
+#: source's (both in leg lengths, :func:`_bound_height`) ...
+HEIGHT_BAND = 1.5
+#: ... or within this share of leg length, whichever is larger (the decoder's own bob).
+HEIGHT_FLOOR_PER_LEG = 0.01
+#: Half-width [s] of the window the deviations' envelopes are taken over.
+HEIGHT_WINDOW_S = 0.5
+
+
+def _bound_height(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] | None]:
+    """The decoded motion with its root height's excursions within :data:`HEIGHT_BAND`
+    of the source's, and what was changed (``None``: nothing).
+
+    A decoded root height drifts over a clip (one window decodes lower than the next):
+    a standing source whose pelvis moves by a few millimetres can come out as a target
+    that rises from a crouch, which reads as the start of a jump. Each frame's deviation
+    from the clip's median height, in leg lengths, is scaled down where its envelope
+    (the largest deviation within :data:`HEIGHT_WINDOW_S`) exceeds the source's envelope
+    times :data:`HEIGHT_BAND` (at least :data:`HEIGHT_FLOOR_PER_LEG`). A gait's bob, a
+    sit or a jump keep their size: the source has it too.
+    """
+    from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+
+    t = out.num_frames
+    if t < 3 or source.num_frames != t:
+        return out, None
+    leg, src_leg = out.species_info.leg_length, source.species_info.leg_length
+    z = out.root_positions[:, 2]
+    mid = float(np.median(z))
+    dev = (z - mid) / leg
+    src_z = source.root_positions[:, 2]
+    src_dev = (src_z - float(np.median(src_z))) / src_leg
+    size = 2 * max(1, int(round(HEIGHT_WINDOW_S * out.fps))) + 1
+    sigma = max(1.0, 0.5 * HEIGHT_WINDOW_S * out.fps)
+
+    def envelope(x: np.ndarray) -> np.ndarray:
+        return gaussian_filter1d(maximum_filter1d(np.abs(x), size, mode="nearest"), sigma)
+
+    env, allowed = envelope(dev), np.maximum(HEIGHT_BAND * envelope(src_dev), HEIGHT_FLOOR_PER_LEG)
+    scale = np.minimum(1.0, allowed / np.maximum(env, 1e-12))
+    changed = scale < 1.0 - 1e-3
+    if not changed.any():
+        return out, None
+    root = np.array(out.root_positions, dtype=np.float64)
+    root[:, 2] = mid + dev * scale * leg
+    moved = Motion(out.species, out.fps, root, out.rotations, out.contacts, dict(out.metadata))
+    return moved, {
+        "frames": int(changed.sum()),
+        "range_per_leg": [round(float(np.ptp(dev)), 4), round(float(np.ptp(dev * scale)), 4)],
+    }
+
+
 def _finish(out: Motion, source: Motion, info: dict[str, Any], plant: bool = False) -> Motion:
     """The decoded motion at the source's frame rate with its stance labels
     (:func:`transfer_contacts`) and, with ``plant``, its feet planted on them by leg IK
@@ -636,6 +832,12 @@ def _finish(out: Motion, source: Motion, info: dict[str, Any], plant: bool = Fal
     the footholds were out of reach without IK) and ``reason`` where the first try
     missed."""
     out = _resample(out, source.fps)
+    out, bounded = _bound_speed(out, source)
+    if bounded is not None:
+        info = {**info, "speed_bounded": bounded}
+    out, lowered = _bound_height(out, source)
+    if lowered is not None:
+        info = {**info, "height_bounded": lowered}
     meta = {k: v for k, v in source.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
     contacts, how = transfer_contacts(out, source, out.contacts)
     planted: Any = False
