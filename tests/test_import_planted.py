@@ -466,3 +466,23 @@ def test_free_stance_runs_keep_their_own_toe_path_and_the_reach_test_skips_them(
     assert (stance_run_shortfall(s, c, True, 0.0, mask)[:, 0] == 0).all()
     with pytest.raises(habitsim.errors.InvalidMotionError, match="free must have shape"):
         plant_motion(slide, c, free=free[:-1])
+
+
+def test_pelvis_lowering_is_a_slow_carriage_not_a_dip_per_stance():
+    from habitsim.motion import Motion
+    from habitsim.planting import DROP_SMOOTH_S, plant_motion
+
+    m = habitsim.generate("dog", "walk", seed=2, duration_s=3.0)
+    leg = m.species_info.leg_length
+    fast = m.root_positions.copy()
+    fast[:, :2] = fast[0, :2] + 1.6 * (fast[:, :2] - fast[0, :2])  # strides out of reach
+    s = Motion("dog", m.fps, fast, m.rotations, m.contacts)
+    _, rep = plant_motion(s, m.contacts)
+    drop = rep.pelvis_drop
+    assert drop.max() > 0.02 * leg  # the pelvis does come down
+    # no dip per stance: over one stride (about 0.6 s) the lowering changes by a small
+    # share of its depth, and its frame-to-frame rate stays that of a slow sink
+    rate = np.abs(np.diff(drop)) * m.fps
+    assert rate.max() <= drop.max() / DROP_SMOOTH_S
+    mid = drop[len(drop) // 4 : -len(drop) // 4]
+    assert np.ptp(mid) <= 0.5 * drop.max()

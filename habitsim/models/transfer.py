@@ -39,7 +39,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -60,6 +60,9 @@ from .features import (
     uncanonicalize,
 )
 from .text import Retrieval, retrieve_neighbour
+
+if TYPE_CHECKING:
+    from ..planting import PlantReport
 
 __all__ = [
     "TransferMethod",
@@ -464,6 +467,20 @@ PLANT_MIN_SPEED_RATIO = 0.7
 FOOTHOLD_RULES: tuple[bool, ...] = (False, True)
 
 
+def _summary(report: PlantReport, held: np.ndarray, leg: float) -> dict[str, Any]:
+    """A planting report for the metadata: :meth:`PlantReport.to_dict` with the largest
+    reach error over the held stance frames (what decides whether a planting is kept)
+    and, apart, over the other frames (a swing toe short of its path: near the clip's
+    ends, where the swing has no foothold to head for, the IK may leave a toe behind)."""
+    d = report.to_dict(leg)
+    c = np.asarray(held, dtype=bool)
+    d["max_reach_error_per_leg"] = round(float(np.where(c, report.reach_error, 0.0).max()) / leg, 5)
+    d["max_swing_reach_error_per_leg"] = round(
+        float(np.where(c, 0.0, report.reach_error).max()) / leg, 5
+    )
+    return d
+
+
 def _reaches(report: dict[str, Any]) -> bool:
     return (
         report["max_reach_error_per_leg"] <= PLANT_MAX_REACH_PER_LEG
@@ -496,7 +513,7 @@ def _plant(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]]:
                 moved = motion
             else:
                 moved, report = plant_motion(motion, contacts, centre=centre)
-                rep = {**report.to_dict(leg), "footholds": rule, "solved": True}
+                rep = {**_summary(report, contacts, leg), "footholds": rule, "solved": True}
             first = rep if first is None else first
             if _reaches(rep):
                 break
@@ -640,10 +657,7 @@ def _plant_partly(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, 
 
     runs = sum(len(s) for s in contact_segments(c))
     loose = sum(len(s) for s in contact_segments(free))
-    summary = report.to_dict(leg)
-    summary["max_reach_error_per_leg"] = round(
-        float(np.where(held, report.reach_error, 0.0).max()) / leg, 5
-    )
+    summary = _summary(report, held, leg)
     return moved, {
         **summary,
         "footholds": "centred",
@@ -704,7 +718,7 @@ def _restep(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]] 
     moved, report = plant_motion(out, labels, lift, centre=True)
     new_period = stride_period(labels)
     return moved, {
-        **report.to_dict(leg),
+        **_summary(report, labels, leg),
         "footholds": "centred",
         "solved": True,
         "restep": {
