@@ -72,9 +72,10 @@ def test_shipped_checkpoint_size_and_config():
     size = (SHIPPED / MODEL_FILE).stat().st_size
     assert size <= 30e6
     doc = json.loads((SHIPPED / "config.json").read_text())
-    assert doc["config"]["name"] == "default" and doc["config"]["model"]["variant"] == "habit"
+    assert doc["config"]["name"] == "large" and doc["config"]["model"]["variant"] == "habit"
     q = doc["config"]["model"]["quantizer"]
-    assert (q["num_codes"], q["code_dim"]) == (512, 512)
+    assert (q["num_codes"], q["code_dim"], q["levels"]) == (512, 512, 4)
+    assert doc["training"]["step"] == doc["config"]["train"]["steps"]  # trained to the end
     assert not (SHIPPED / "train_state.safetensors").exists()  # shipped without optimiser state
 
 

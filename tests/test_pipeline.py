@@ -393,19 +393,30 @@ def test_decoded_height_excursions_are_bounded_by_the_source(walk) -> None:
     assert info is None or info["range_per_leg"][1] >= 0.95 * info["range_per_leg"][0]
 
 
-def test_plant_summary_keeps_swing_misses_apart() -> None:
+def test_plant_summary_keeps_swing_misses_at_the_clip_ends_apart() -> None:
     from habitsim.planting import PlantReport
 
     mod = importlib.import_module("habitsim.models.transfer")
     c = np.zeros((6, 4), dtype=bool)
     c[:3] = True
+    c[5, 1] = True  # foot RF steps again: its frames 3-4 are an inner swing
     err = np.zeros((6, 4))
     err[1, 2] = 0.02  # a stance toe 2 cm off
-    err[5, 0] = 0.30  # a swing toe left behind at the clip's end
+    err[5, 0] = 0.30  # LF's swing after its last stance: left behind at the clip's end
     rep = PlantReport(err, np.zeros(6), np.zeros(4), 0.0)
     d = mod._summary(rep, c, leg=1.0)
     assert d["max_reach_error_per_leg"] == pytest.approx(0.02)
-    assert d["max_swing_reach_error_per_leg"] == pytest.approx(0.30)
-    assert _reaches(d)  # whether a planting is kept depends on its stance feet
-    d2 = mod._summary(rep, np.ones((6, 4), dtype=bool), leg=1.0)
-    assert not _reaches(d2)
+    assert d["max_edge_reach_error_per_leg"] == pytest.approx(0.30)
+    assert _reaches(d)  # an edge swing does not decide whether a planting is kept
+    inner = err.copy()
+    inner[3, 1] = 0.30  # ... an inner swing does
+    d = mod._summary(PlantReport(inner, np.zeros(6), np.zeros(4), 0.0), c, leg=1.0)
+    assert d["max_swing_reach_error_per_leg"] == pytest.approx(0.30) and not _reaches(d)
+    inner[3, 1] = 0.5 * (mod.PLANT_MAX_REACH_PER_LEG + mod.PLANT_MAX_SWING_REACH_PER_LEG)
+    d = mod._summary(PlantReport(inner, np.zeros(6), np.zeros(4), 0.0), c, leg=1.0)
+    assert _reaches(d)  # a swing may miss by more than a stance foot
+    # a free stance run is not judged either
+    free = np.zeros_like(c)
+    free[:3, 2] = True
+    d = mod._summary(rep, c, leg=1.0, free=free)
+    assert d["max_reach_error_per_leg"] == 0.0
