@@ -571,6 +571,7 @@ def stance_run_shortfall(
     centre: bool = False,
     max_drop: float = 0.0,
     free: np.ndarray | None = None,
+    glob: np.ndarray | None = None,
 ) -> np.ndarray:
     """(T, 4) how far [m] each stance frame's foothold of :func:`plant_motion` lies beyond
     the fully stretched leg, with the pelvis lowered by ``max_drop`` [m] (0 within reach,
@@ -589,7 +590,7 @@ def stance_run_shortfall(
         raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
     if not c.any():
         return np.zeros((t, 4))
-    glob = motion.global_positions()
+    glob = motion.global_positions() if glob is None else glob
     targets = _own_targets(motion, c, centre, glob, free)
     anchors = glob[:, _ANCHOR_IDX]
     d = targets - anchors
@@ -600,7 +601,11 @@ def stance_run_shortfall(
 
 
 def stance_reach_shortfall(
-    motion: Motion, contacts: np.ndarray, centre: bool = False, max_drop: float = 0.0
+    motion: Motion,
+    contacts: np.ndarray,
+    centre: bool = False,
+    max_drop: float = 0.0,
+    glob: np.ndarray | None = None,
 ) -> float:
     """How far [m] the farthest stance foothold of :func:`plant_motion` lies beyond the
     fully stretched leg, with the pelvis lowered by ``max_drop`` [m]; 0 when every
@@ -609,15 +614,18 @@ def stance_reach_shortfall(
     Raises:
         InvalidMotionError: contacts that do not match the motion.
     """
-    return float(stance_run_shortfall(motion, contacts, centre, max_drop).max(initial=0.0))
+    short = stance_run_shortfall(motion, contacts, centre, max_drop, glob=glob)
+    return float(short.max(initial=0.0))
 
 
-def stance_sweep_limit(motion: Motion, reach_share: float = 0.92) -> float:
+def stance_sweep_limit(
+    motion: Motion, reach_share: float = 0.92, glob: np.ndarray | None = None
+) -> float:
     """The longest distance [m] the body can travel over one planted foot: twice the
     horizontal reach of the shortest-reaching leg from its shoulder / hip (at its median
     height over the clip) to the ground, the leg stretched to ``reach_share`` of its
     upper + lower + foot segments (a fully straight leg cannot push)."""
-    anchors = motion.global_positions()[:, _ANCHOR_IDX, 2]
+    anchors = (motion.global_positions() if glob is None else glob)[:, _ANCHOR_IDX, 2]
     h = np.median(anchors, axis=0)
     half = np.sqrt(np.maximum((reach_share * _stretched(motion.species)) ** 2 - h**2, 0.0))
     return float(2.0 * half.min())

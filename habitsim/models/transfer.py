@@ -513,14 +513,17 @@ def _plant(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]]:
 
     leg = out.species_info.leg_length
 
-    def attempt(motion: Motion) -> tuple[Motion, dict[str, Any], dict[str, Any]]:
+    def attempt(motion: Motion, glob: np.ndarray) -> tuple[Motion, dict[str, Any], dict[str, Any]]:
         """(planted motion, its report, the first rule's report): the first foothold
-        rule whose legs reach, else the last rule's result."""
+        rule whose legs reach, else the last rule's result (``glob``: the motion's
+        global joint positions)."""
         first: dict[str, Any] | None = None
         moved = motion
         for centre in FOOTHOLD_RULES:
             rule = "centred" if centre else "median"
-            short = stance_reach_shortfall(motion, contacts, centre, PLANT_MAX_DROP_PER_LEG * leg)
+            short = stance_reach_shortfall(
+                motion, contacts, centre, PLANT_MAX_DROP_PER_LEG * leg, glob
+            )
             if short > PLANT_MAX_REACH_PER_LEG * leg:  # no IK can hold these footholds
                 rep = {
                     "max_reach_error_per_leg": round(short / leg, 5),
@@ -538,7 +541,8 @@ def _plant(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]]:
         assert first is not None  # FOOTHOLD_RULES is not empty
         return moved, rep, first
 
-    moved, rep, first = attempt(out)
+    glob = out.global_positions()  # one forward-kinematics pass for every reach test
+    moved, rep, first = attempt(out, glob)
     if _reaches(rep):
         return moved, {**rep, "kept": True, "root": "decoded"}
     missed = (
@@ -549,7 +553,9 @@ def _plant(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]]:
     )
     carried, ratio = stance_driven_root(out, contacts)
     if ratio >= PLANT_MIN_SPEED_RATIO:
-        moved, second, _ = attempt(carried)
+        # the carried body only translates: its joints move with its root
+        shift = (carried.root_positions - out.root_positions)[:, None, :]
+        moved, second, _ = attempt(carried, glob + shift)
         if _reaches(second):
             return moved, {
                 **second,
@@ -565,7 +571,7 @@ def _plant(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]]:
             f"the stance legs carry the body only {100 * ratio:.0f} % of its decoded "
             f"speed (< {100 * PLANT_MIN_SPEED_RATIO:.0f} %)"
         )
-    restep = _restep(out, contacts)
+    restep = _restep(out, contacts, glob)
     tried: dict[str, Any] = {}
     if restep is not None:
         moved, rep = restep
@@ -693,7 +699,9 @@ RESTEP_REACH_SHARE = 0.92
 RESTEP_MIN_PERIOD = 4.0
 
 
-def _restep(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]] | None:
+def _restep(
+    out: Motion, contacts: np.ndarray, glob: np.ndarray | None = None
+) -> tuple[Motion, dict[str, Any]] | None:
     """The decoded motion with its legs stepping fast enough for its body, or ``None``
     when its labels do not step or already fit.
 
@@ -718,7 +726,7 @@ def _restep(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]] 
     t = out.num_frames
     if period is None or t < 2 or period > t:
         return None
-    sweep = stance_sweep_limit(out, RESTEP_REACH_SHARE)
+    sweep = stance_sweep_limit(out, RESTEP_REACH_SHARE, glob)
     speed = np.linalg.norm(np.diff(out.root_positions[:, :2], axis=0), axis=1).mean() * out.fps
     stance_s = float(contacts.mean()) * period / out.fps
     k = min(speed * stance_s / max(sweep, 1e-9), period / RESTEP_MIN_PERIOD)
