@@ -593,7 +593,7 @@ def _plant(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]]:
             }
     if tried:
         why += ", not even stepping faster"
-    partly = _plant_partly(out, contacts)
+    partly = _plant_partly(out, contacts, glob)
     if partly is not None:
         moved, rep = partly
         return moved, {
@@ -633,7 +633,9 @@ def _run_mask(contacts: np.ndarray, hit: np.ndarray) -> np.ndarray:
     return out
 
 
-def _plant_partly(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]] | None:
+def _plant_partly(
+    out: Motion, contacts: np.ndarray, glob: np.ndarray | None = None
+) -> tuple[Motion, dict[str, Any]] | None:
     """The decoded motion planted on every stance run its legs reach, the other runs
     keeping the decoded feet; ``None`` when that leaves more than
     :data:`PARTIAL_MAX_FREE_SHARE` of the stance frames unplanted.
@@ -646,8 +648,10 @@ def _plant_partly(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, 
     stance_run_shortfall`), then, pass by pass, where the IK misses the foothold or the
     pelvis would come down further than :data:`PLANT_MAX_DROP_PER_LEG` (the runs whose
     legs are short there). The released runs stay stance (the foot is on the ground);
-    the swings around them start and end where they do.
+    the swings around them start and end where they do. ``glob``: the motion's global
+    joint positions, if already at hand.
     """
+    from ..contacts import contact_segments
     from ..planting import plant_motion, stance_run_shortfall
 
     c = np.asarray(contacts, dtype=bool)
@@ -656,8 +660,9 @@ def _plant_partly(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, 
         return None
     leg = out.species_info.leg_length
     reach, low = PLANT_MAX_REACH_PER_LEG * leg, PLANT_MAX_DROP_PER_LEG * leg
-    free = _run_mask(c, stance_run_shortfall(out, c, True, low) > reach)
-    hang = stance_run_shortfall(out, c, True, 0.0) > 0.0
+    glob = out.global_positions() if glob is None else glob
+    free = _run_mask(c, stance_run_shortfall(out, c, True, low, glob=glob) > reach)
+    hang = stance_run_shortfall(out, c, True, 0.0, glob=glob) > 0.0
     width = max(1, int(round(0.1 * out.fps)))
     for _ in range(PARTIAL_PASSES):
         if free.sum() > PARTIAL_MAX_FREE_SHARE * stance:
@@ -675,11 +680,7 @@ def _plant_partly(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, 
         free |= _run_mask(c, miss)
     else:
         return None
-    n_free = int(free.sum())
-    if n_free > PARTIAL_MAX_FREE_SHARE * stance:
-        return None
-    from ..contacts import contact_segments
-
+    n_free = int(free.sum())  # checked before the last pass, which freed nothing more
     runs = sum(len(s) for s in contact_segments(c))
     loose = sum(len(s) for s in contact_segments(free))
     summary = _summary(report, c, leg, free)
