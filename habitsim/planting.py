@@ -90,8 +90,8 @@ CENTRE_TRAVEL_PER_LEG = 0.2
 #: body sinks into a lower carriage instead of dipping at every stance. A dip per stance
 #: is a bob the source does not have: with 0.05 s the frozen evaluator read a camel's
 #: planted backward walk (dips of 0.07 leg lengths) as a jump, with 0.3 s as the
-#: backward walk it is (test-split action accuracy 0.744 → 0.749 with the shipped model,
-#: 0.822 → 0.849 with a ``large`` one).
+#: backward walk it is (test-split action accuracy 0.744 → 0.749 with the default-config model,
+#: 0.822 → 0.849 with the shipped ``large`` one).
 DROP_SMOOTH_S = 0.3
 
 
