@@ -221,16 +221,24 @@ def _as_rotmats(r: np.ndarray, t: int) -> np.ndarray:
 
 def _ry(a: np.ndarray) -> np.ndarray:
     c, s = np.cos(a), np.sin(a)
-    z, o = np.zeros_like(a), np.ones_like(a)
-    rows = [np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)]
-    return np.stack(rows, -2)
+    m = np.zeros((*np.shape(a), 3, 3))
+    m[..., 0, 0] = c
+    m[..., 0, 2] = s
+    m[..., 1, 1] = 1.0
+    m[..., 2, 0] = -s
+    m[..., 2, 2] = c
+    return m
 
 
 def _rx(a: np.ndarray) -> np.ndarray:
     c, s = np.cos(a), np.sin(a)
-    z, o = np.zeros_like(a), np.ones_like(a)
-    rows = [np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)]
-    return np.stack(rows, -2)
+    m = np.zeros((*np.shape(a), 3, 3))
+    m[..., 0, 0] = 1.0
+    m[..., 1, 1] = c
+    m[..., 1, 2] = -s
+    m[..., 2, 1] = s
+    m[..., 2, 2] = c
+    return m
 
 
 def _mv(m: np.ndarray, v: np.ndarray) -> np.ndarray:

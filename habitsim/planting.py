@@ -463,7 +463,7 @@ def _solve_planted(
             sp, root, rot, targets, girdle_flex, foot_inclination, limit_abduction=limit_abduction
         )
     out = Motion(motion.species, motion.fps, root, pose.rotations, c.copy(), dict(motion.metadata))
-    toes = out.foot_positions()[..., 2]
+    toes = np.stack([lg.toe[:, 2] for lg in pose.legs], axis=1)  # the IK's toes are the FK's
     stance_h = np.array(
         [np.median(toes[c[:, k], k]) if c[:, k].any() else np.nan for k in range(4)]
     )
@@ -638,6 +638,7 @@ def plant_motion(
     iterations: int = 3,
     centre: bool = False,
     free: np.ndarray | None = None,
+    glob: np.ndarray | None = None,
 ) -> tuple[Motion, PlantReport]:
     """Plant a motion's own feet on its stance labels, by leg IK.
 
@@ -665,6 +666,8 @@ def plant_motion(
         free: optional (T, 4) bool; a stance run with a frame in it is not held but
             keeps its own toe path (not under the ground), e.g. a run whose foothold
             no leg reaches (:func:`stance_run_shortfall`).
+        glob: optional (T, J, 3) global joint positions of ``motion``
+            (:meth:`~habitsim.motion.Motion.global_positions`), when already at hand.
 
     Returns:
         ``(planted motion with ``contacts`` set, report)``.
@@ -676,7 +679,11 @@ def plant_motion(
     if free is not None and np.shape(free) != (t, 4):
         raise InvalidMotionError(f"free must have shape ({t}, 4), got {np.shape(free)}")
     free = None if free is None else np.asarray(free, dtype=bool)
-    targets = _own_targets(motion, c, centre, free=free)
+    if glob is not None and np.shape(glob) != (t, motion.skeleton.num_joints, 3):
+        raise InvalidMotionError(
+            f"glob must have shape ({t}, {motion.skeleton.num_joints}, 3), got {np.shape(glob)}"
+        )
+    targets = _own_targets(motion, c, centre, glob, free)
     if swing_floor is not None:
         fl = np.asarray(swing_floor, dtype=np.float64)
         if fl.shape != (t, 4):

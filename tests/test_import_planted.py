@@ -466,6 +466,18 @@ def test_free_stance_runs_keep_their_own_toe_path_and_the_reach_test_skips_them(
     assert (stance_run_shortfall(s, c, True, 0.0, mask)[:, 0] == 0).all()
     with pytest.raises(habitsim.errors.InvalidMotionError, match="free must have shape"):
         plant_motion(slide, c, free=free[:-1])
+    # joint positions handed in give the same planting; a wrong shape is refused
+    glob = slide.global_positions()
+    again, rep = plant_motion(slide, c, centre=True, free=free, glob=glob)
+    np.testing.assert_array_equal(again.rotations, out.rotations)
+    np.testing.assert_array_equal(again.root_positions, out.root_positions)
+    # the report's stance heights and lowest toe are the planted motion's own
+    z = out.foot_positions()[..., 2]
+    med = [np.median(z[c[:, k], k]) for k in range(4)]
+    np.testing.assert_allclose(rep.stance_toe_height, med, atol=1e-12)
+    assert rep.min_toe_height == pytest.approx(z.min(), abs=1e-12)
+    with pytest.raises(habitsim.errors.InvalidMotionError, match="glob must have shape"):
+        plant_motion(slide, c, glob=glob[:, :-1])
 
 
 def test_pelvis_lowering_is_a_slow_carriage_not_a_dip_per_stance():

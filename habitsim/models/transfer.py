@@ -533,7 +533,7 @@ def _plant(out: Motion, contacts: np.ndarray) -> tuple[Motion, dict[str, Any]]:
                 }
                 moved = motion
             else:
-                moved, report = plant_motion(motion, contacts, centre=centre)
+                moved, report = plant_motion(motion, contacts, centre=centre, glob=glob)
                 rep = {**_summary(report, contacts, leg), "footholds": rule, "solved": True}
             first = rep if first is None else first
             if _reaches(rep):
@@ -667,7 +667,7 @@ def _plant_partly(
     for _ in range(PARTIAL_PASSES):
         if free.sum() > PARTIAL_MAX_FREE_SHARE * stance:
             return None
-        moved, report = plant_motion(out, c, centre=True, free=free)
+        moved, report = plant_motion(out, c, centre=True, free=free, glob=glob)
         held = c & ~free
         miss = held & (report.reach_error > reach)
         deep = report.pelvis_drop > low
@@ -743,7 +743,7 @@ def _restep(
     for f, runs in enumerate(contact_segments(~labels)):
         for a, b in runs:
             lift[a:b, f] = height * np.sin(np.pi * (np.arange(b - a) + 0.5) / (b - a))
-    moved, report = plant_motion(out, labels, lift, centre=True)
+    moved, report = plant_motion(out, labels, lift, centre=True, glob=glob)
     new_period = stride_period(labels)
     return moved, {
         **_summary(report, labels, leg),
