@@ -393,6 +393,43 @@ def test_decoded_height_excursions_are_bounded_by_the_source(walk) -> None:
     assert info is None or info["range_per_leg"][1] >= 0.95 * info["range_per_leg"][0]
 
 
+def test_a_sloping_decoded_trunk_is_levelled_about_the_pelvis(walk) -> None:
+    from habitsim.models.features import heading_yaw
+    from habitsim.motion import Motion
+    from habitsim.rotations import quat_from_axis_angle, quat_mul
+
+    mod = importlib.import_module("habitsim.models.transfer")
+    gir = generate("giraffe", like=walk)
+    c = gir.contacts
+    # its own walk stands level: left as it is
+    same, info = mod._level_trunk(gir, c)
+    assert info is None and same is gir
+    # the trunk tipped nose-down by 8° about the pelvis: the fore toes go under the ground
+    # by 6 % of a leg more than the hind ones; pitched back to within the tolerance (a
+    # second pass finds nothing to do), legs and root path untouched
+    yaw = heading_yaw(gir.rotations[:, 0])
+    left = np.stack([-np.sin(yaw), np.cos(yaw), np.zeros_like(yaw)], axis=-1)
+    rot = gir.rotations.copy()
+    rot[:, 0] = quat_mul(quat_from_axis_angle(left, np.full(len(yaw), np.radians(8.0))), rot[:, 0])
+    sloped = Motion("giraffe", gir.fps, gir.root_positions, rot, c)
+    level, info = mod._level_trunk(sloped, c)
+    assert info is not None and info["fore_minus_hind_per_leg"] < -0.05
+    assert -8.0 < info["pitch_deg"] < -4.0
+    assert mod._level_trunk(level, c)[1] is None
+    np.testing.assert_allclose(level.rotations[:, 1:], sloped.rotations[:, 1:], atol=1e-12)
+    np.testing.assert_array_equal(level.root_positions, sloped.root_positions)
+    # tipped the other way: pitched the other way
+    rot[:, 0] = quat_mul(
+        quat_from_axis_angle(left, np.full(len(yaw), np.radians(-8.0))), gir.rotations[:, 0]
+    )
+    _, info = mod._level_trunk(Motion("giraffe", gir.fps, gir.root_positions, rot, c), c)
+    assert info is not None and 4.0 < info["pitch_deg"] < 8.0
+    # no frame with both girdles in stance: nothing to compare
+    fore = np.zeros_like(c)
+    fore[:, :2] = True
+    assert mod._level_trunk(sloped, fore)[1] is None
+
+
 def test_plant_summary_keeps_swing_misses_at_the_clip_ends_apart() -> None:
     from habitsim.planting import PlantReport
 
