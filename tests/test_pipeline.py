@@ -101,7 +101,7 @@ def test_planting_out_of_reach_keeps_the_decoded_feet_and_says_why(trot, monkeyp
     # nothing holds the feet
     transfer_module = importlib.import_module("habitsim.models.transfer")
     monkeypatch.setattr(transfer_module, "_restep", lambda *_: None)
-    monkeypatch.setattr(transfer_module, "PARTIAL_MAX_FREE_SHARE", -1.0)
+    monkeypatch.setattr(transfer_module, "_plant_partly", lambda *a, **k: None)
     out = transfer(trot, to="cat", method="habit", seed=0)
     raw = transfer(trot, to="cat", method="habit", seed=0, plant=False)
     report = out.metadata["transfer"]["planted"]
@@ -124,7 +124,9 @@ def test_planting_falls_back_to_footholds_centred_under_the_joints(trot, monkeyp
     # with the median footholds alone the decoded root path is not planted
     transfer_module = importlib.import_module("habitsim.models.transfer")
     monkeypatch.setattr(transfer_module, "FOOTHOLD_RULES", (False,))
-    monkeypatch.setattr(transfer_module, "PARTIAL_MAX_FREE_SHARE", -1.0)  # no partial planting
+    monkeypatch.setattr(
+        transfer_module, "_plant_partly", lambda *a, **k: None
+    )  # no partial planting
     monkeypatch.setattr(transfer_module, "_restep", lambda *_: None)  # nor restepping
     median = transfer(trot, to="tiger", method="habit", seed=0).metadata["transfer"]["planted"]
     assert median["footholds"] == "median"
@@ -189,7 +191,9 @@ def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot, 
     assert 0.2 <= report["speed_ratio"] < 0.99
     # a body its legs carry too little is not moved: the decoded feet are kept
     monkeypatch.setattr(transfer_module, "PLANT_MIN_SPEED_RATIO", 0.99)
-    monkeypatch.setattr(transfer_module, "PARTIAL_MAX_FREE_SHARE", -1.0)  # no partial planting
+    monkeypatch.setattr(
+        transfer_module, "_plant_partly", lambda *a, **k: None
+    )  # no partial planting
     monkeypatch.setattr(transfer_module, "_restep", lambda *_: None)  # nor restepping
     slow = transfer(trot, to="tiger", method="habit", seed=0)
     report = slow.metadata["transfer"]["planted"]
@@ -310,7 +314,7 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
     root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
     fast = Motion("dog", walk.fps, root, walk.rotations, c)
     moved, rep = mod._plant_partly(fast, c)
-    assert rep["free_runs"][0] >= 1 and 0 < rep["free_share"] <= mod.PARTIAL_MAX_FREE_SHARE
+    assert rep["free_runs"][0] >= 1 and 0 < rep["free_share"] <= 0.5
     assert rep["max_reach_error_per_leg"] <= PLANT_MAX_REACH_PER_LEG
     assert rep["max_pelvis_drop_per_leg"] <= mod.PLANT_MAX_DROP_PER_LEG
     toes = moved.foot_positions()
@@ -322,9 +326,21 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
                 early += 1
     assert early >= 3
     np.testing.assert_array_equal(moved.root_positions[:, :2], fast.root_positions[:, :2])
-    # the whole clip that fast: more than the allowed share would be free
+    # the whole clip that fast: most runs are free, the ones the legs reach still held
     step = np.diff(walk.root_positions[:, :2], axis=0) * 3.0
     root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
+    moved, rep = mod._plant_partly(Motion("dog", walk.fps, root, walk.rotations, c), c)
+    loose, runs = rep["free_runs"]
+    assert rep["free_share"] > 0.5 and 0 < runs - loose
+    toes = moved.foot_positions()
+    still = sum(
+        np.ptp(toes[a:b, k, :2], axis=0).max() <= 0.01 * leg
+        for k, segs in enumerate(contact_segments(c))
+        for a, b in segs
+    )
+    assert still >= runs - loose
+    # six times as fast: no run can be held
+    root[1:, :2] = root[0, :2] + np.cumsum(2.0 * step, axis=0)
     assert mod._plant_partly(Motion("dog", walk.fps, root, walk.rotations, c), c) is None
 
 

@@ -618,10 +618,8 @@ def _plant(
     }
 
 
-#: Partial planting (:func:`_plant_partly`) keeps the decoded feet of at most this share
-#: of the stance frames ...
-PARTIAL_MAX_FREE_SHARE = 0.5
-#: ... found in at most this many IK passes.
+#: Partial planting (:func:`_plant_partly`) finds the runs to leave free in at most this
+#: many IK passes.
 PARTIAL_PASSES = 4
 
 
@@ -641,8 +639,8 @@ def _plant_partly(
     out: Motion, contacts: np.ndarray, glob: np.ndarray | None = None
 ) -> tuple[Motion, dict[str, Any]] | None:
     """The decoded motion planted on every stance run its legs reach, the other runs
-    keeping the decoded feet; ``None`` when that leaves more than
-    :data:`PARTIAL_MAX_FREE_SHARE` of the stance frames unplanted.
+    keeping the decoded feet; ``None`` when no run can be held (or the runs to free are
+    not settled within :data:`PARTIAL_PASSES` passes).
 
     A long clip whose speed changes (a real walk that breaks into a run, a standing
     start the decoder already walks through) can have a few stance runs that sweep
@@ -652,8 +650,10 @@ def _plant_partly(
     stance_run_shortfall`), then, pass by pass, where the IK misses the foothold or the
     pelvis would come down further than :data:`PLANT_MAX_DROP_PER_LEG` (the runs whose
     legs are short there). The released runs stay stance (the foot is on the ground);
-    the swings around them start and end where they do. ``glob``: the motion's global
-    joint positions, if already at hand.
+    the swings around them start and end where they do. Each run held is a foot at
+    rest, however many others are free: there is no share of free runs beyond which the
+    held ones are given up. ``glob``: the motion's global joint positions, if already
+    at hand.
     """
     from ..contacts import contact_segments
     from ..planting import plant_motion, stance_run_shortfall
@@ -669,7 +669,7 @@ def _plant_partly(
     hang = stance_run_shortfall(out, c, True, 0.0, glob=glob) > 0.0
     width = max(1, int(round(0.1 * out.fps)))
     for _ in range(PARTIAL_PASSES):
-        if free.sum() > PARTIAL_MAX_FREE_SHARE * stance:
+        if free.sum() >= stance:  # no run left to hold
             return None
         moved, report = plant_motion(out, c, centre=True, free=free, glob=glob)
         held = c & ~free
