@@ -938,7 +938,9 @@ def _finish(out: Motion, source: Motion, info: dict[str, Any], plant: bool = Fal
     """The decoded motion at the source's frame rate with its stance labels
     (:func:`transfer_contacts`) and, with ``plant``, its feet planted on them by leg IK
     (:func:`habitsim.planting.plant_motion`: each stance run held at one foothold on the
-    ground, swing blended in between; footholds by the rules of :data:`FOOTHOLD_RULES`),
+    ground, swing blended in between; footholds by the rules of :data:`FOOTHOLD_RULES`;
+    a trunk whose fore and hind stance feet stand at different heights pitched level
+    first, :func:`_level_trunk`, recorded as ``metadata["transfer"]["levelled"]``),
     kept when the legs reach (:data:`PLANT_MAX_REACH_PER_LEG`,
     :data:`PLANT_MAX_DROP_PER_LEG`); where they do not, the body is moved as far as its
     stance legs carry it and planted again (:data:`PLANT_MIN_SPEED_RATIO`).
