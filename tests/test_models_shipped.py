@@ -168,6 +168,11 @@ def test_transfer_cli(tmp_path, capsys, trot):
     assert "borrowing the habit latent of horse" in text and "zebra" in text
     m = load_motion(out)
     assert m.species == "zebra" and bvh.is_file()
+    # the shipped model slopes a zebra's trunk (its legs are not the horse's): levelled,
+    # and said with its pitch
+    lv = m.metadata["transfer"].get("levelled")
+    assert lv is not None and lv["pitch_deg"] < 0.0
+    assert f"trunk pitched {lv['pitch_deg']:+.1f}°" in text
     assert main(["transfer", str(src), "--to", "cat", "--out", str(tmp_path / "x.txt")]) == 2
     assert main(["transfer", str(src), "--to", "cat", "--out", str(out), "--method", "nope"]) == 2
     assert "valid: habit" in capsys.readouterr().err

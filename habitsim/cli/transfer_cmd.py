@@ -153,6 +153,13 @@ def _transfer_outputs(ns: argparse.Namespace) -> int:
     info = out.metadata.get("transfer", {})
     if info.get("retrieval"):
         print(info["retrieval"]["explanation"])
+    if info.get("levelled"):
+        lv = info["levelled"]
+        dz = lv["fore_minus_hind_per_leg"]
+        print(
+            f"trunk pitched {lv['pitch_deg']:+.1f}° before planting: the decoded fore stance "
+            f"toes stood {abs(dz):.3f} leg lengths {'below' if dz < 0 else 'above'} the hind ones"
+        )
     how = info.get("contacts") or {}
     if how.get("method") == "duty":
         print(
