@@ -1,5 +1,3 @@
-import sys
+from habitsim.cli import run
 
-from habitsim.cli import main
-
-sys.exit(main())
+run()

@@ -75,5 +75,8 @@ def stop_pool(pool: cf.ProcessPoolExecutor, timeout_s: float = 5.0) -> None:
             if p.is_alive():
                 p.kill()
                 p.join(1.0)
-    with contextlib.suppress(Exception):
-        pool.shutdown(wait=True)
+    # Not ``shutdown(wait=True)``: its join has no timeout, and the pool's manager thread
+    # can be stuck on a future lock an interrupt left held (see ``habitsim.cli.run``).
+    manager = getattr(pool, "_executor_manager_thread", None)
+    if manager is not None:
+        manager.join(max(0.0, deadline - time.monotonic()) + 1.0)

@@ -145,3 +145,38 @@ def test_dask_eval_workers_die_with_the_parent(tmp_path: Path, eval_data: Path, 
     files = sorted(out.rglob("*"))
     time.sleep(1.0)
     assert sorted(out.rglob("*")) == files
+
+
+_HELD_LOCK_SCRIPT = """
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+import habitsim.cli
+from habitsim.workers import stop_pool
+
+if __name__ == "__main__":
+    pool = ProcessPoolExecutor(1)
+    future = pool.submit(time.sleep, 60)
+    while not future.running():
+        time.sleep(0.01)
+    # what an interrupt inside ``as_completed`` leaves behind: a future's lock held by
+    # the main thread, so the pool's manager thread blocks when it cancels that future
+    future._condition.acquire()
+    stop_pool(pool, timeout_s=1.0)
+    print("stopped", flush=True)
+    habitsim.cli.main = lambda: 130  # a command that was interrupted
+    habitsim.cli.run()
+"""
+
+
+def test_an_interrupt_that_left_a_future_lock_held_still_exits(tmp_path: Path) -> None:
+    """With a future's lock left held, the pool's manager thread never ends; ``stop_pool``
+    returns anyway, and ``habitsim.cli.run`` leaves with 130 instead of hanging in the exit
+    hook of ``concurrent.futures`` that joins that thread."""
+    script = tmp_path / "run.py"
+    script.write_text(_HELD_LOCK_SCRIPT)
+    proc = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=60, cwd=tmp_path
+    )
+    assert proc.stdout.strip() == "stopped", proc.stderr[-500:]
+    assert proc.returncode == 130

@@ -95,6 +95,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
 
+def run() -> None:
+    """Entry point of the ``habitsim`` console script and of ``python -m habitsim``.
+
+    Runs :func:`main` and exits with its code. After an interrupt (Ctrl-C or SIGTERM) the
+    command's own cleanup has already run (pools stopped, partial outputs removed), and
+    the process leaves with :func:`os._exit`: an interrupt that lands while
+    ``concurrent.futures`` holds a future's lock leaves that lock held, and the module's
+    exit hook would then wait forever for its pool's manager thread.
+    """
+    code = main()
+    if code == 130:
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 #: Exit code when stdout is a pipe its reader closed (128 + SIGPIPE).
 EXIT_CLOSED_PIPE = 141
 
@@ -130,4 +148,4 @@ def _sigterm_as_interrupt() -> Iterator[None]:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    run()
