@@ -141,6 +141,15 @@ def test_targets_and_exit_code() -> None:
     assert evaluate_targets(slow, seconds=10)[-1]["verdict"] == "met"  # 25 s per 10 s window
     t = evaluate_targets(rows, seconds=4, refine="none", tracked=False)
     assert [x["verdict"] for x in t][:4] == ["n/a"] * 4
+    # the MPJPE target is the median over every tracked window; the habit median is shown
+    mixed = [
+        _row("habit", 1.0, sim_mpjpe_per_leg=0.2),
+        _row("direct", 1.0, sim_mpjpe_per_leg=0.1),
+        _row("direct", 1.0, sim_mpjpe_per_leg=0.1),
+    ]
+    m = next(x for x in evaluate_targets(mixed, seconds=4) if "MPJPE" in x["name"])
+    assert m["value"] == pytest.approx(0.1) and m["verdict"] == "met"
+    assert m["shown"] == "0.100 of 3 (habit 0.200)"
 
 
 def test_bad_input(folder: Path, tmp_path: Path, capsys) -> None:
