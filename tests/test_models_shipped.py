@@ -247,3 +247,41 @@ def test_train_cli_small(tmp_path, capsys):
         == 0
     )
     assert json.loads((ck / "config.json").read_text())["training"]["step"] == 3
+
+
+@needs_ckpt
+def test_a_posture_the_training_rigs_never_took_does_not_stop_the_decoded_gait(monkeypatch):
+    """A real rig holds its third spine and second tail joints in postures the synthetic
+    training rigs never take (their rotation spread sits at the 0.01 floor). Bent 25° there,
+    a dog trot still decodes at nearly its own speed because the encoders clip rotation
+    inputs to ± ROTATION_INPUT_CLIP σ; unclipped, the same input loses ~45 % of its Froude
+    number (measured: 1.46 → 1.35 clipped, → 0.82 unclipped)."""
+    import importlib
+
+    import habitsim.models.model as model_module
+    from habitsim.motion import Motion
+    from habitsim.rotations import quat_mul
+    from habitsim.skeleton import JOINT_NAMES
+
+    tr = importlib.import_module("habitsim.models.transfer")
+    ck = load_model()
+    dog = generate("dog", "trot", seed=5, duration_s=3.0)
+    q = dog.rotations.copy()
+    bend = np.array([np.cos(np.deg2rad(12.5)), 0.0, np.sin(np.deg2rad(12.5)), 0.0])
+    for name in ("spine3", "tail2"):
+        j = JOINT_NAMES.index(name)
+        q[:, j] = quat_mul(np.broadcast_to(bend, q[:, j].shape), q[:, j])
+    bent = Motion(dog.species, dog.fps, dog.root_positions, q, dog.contacts, dict(dog.metadata))
+
+    def froude(m: Motion) -> float:
+        v = np.linalg.norm(np.diff(m.root_positions[:, :2], axis=0), axis=1).mean() * m.fps
+        return float(v * v / 9.81 / m.species_info.leg_length)
+
+    def decoded(m: Motion) -> Motion:
+        return tr._run_network(ck, m, "dog", seed=0, temperature=1.0)[0]
+
+    plain = froude(decoded(dog))
+    assert plain == pytest.approx(froude(dog), rel=0.1)
+    assert froude(decoded(bent)) > 0.85 * plain
+    monkeypatch.setattr(model_module, "ROTATION_INPUT_CLIP", float("inf"))
+    assert froude(decoded(bent)) < 0.7 * plain  # the failure the clip prevents
