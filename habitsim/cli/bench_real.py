@@ -344,7 +344,6 @@ def evaluate_targets(
         }
     )
 
-    # median sim MPJPE
     # median sim MPJPE, over every tracked window (habit and direct); the habit windows'
     # own median is shown beside it
     e = [r["sim_mpjpe_per_leg"] for r in trk if r.get("sim_mpjpe_per_leg") is not None]
