@@ -465,10 +465,16 @@ def run_clip(
 
 
 def track_reference(
-    run: ClipRun, *, controller: str, assist: bool | str = False, seed: int | None = None
+    run: ClipRun,
+    *,
+    controller: str,
+    assist: bool | str = False,
+    seed: int | None = None,
+    init_noise: float = 0.0,
 ) -> TrackResult:
-    """Track a run's kept reference again (another controller, with assistance), with the
-    same reference contact labels."""
+    """Track a run's kept reference again (another controller, with assistance, or from a
+    perturbed initial state: ``init_noise`` of :func:`habitsim.sim.track`), with the same
+    reference contact labels."""
     from .sim import track
 
     return track(
@@ -477,4 +483,5 @@ def track_reference(
         assist=assist,
         seed=run.seed if seed is None else seed,
         contacts=run.reference_contacts,
+        init_noise=init_noise,
     )

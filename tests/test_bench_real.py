@@ -15,6 +15,7 @@ from habitsim.cli.bench_real import (
     evaluate_targets,
     exit_code,
     source_files,
+    survival_runs,
 )
 from habitsim.gaits import generate
 
@@ -49,6 +50,8 @@ def test_bench_real_rows_and_json(folder: Path, tmp_path: Path, capsys) -> None:
         "servo",
         "--workers",
         "1",
+        "--repeats",
+        "2",
         "--json",
         str(out),
     ]
@@ -76,9 +79,16 @@ def test_bench_real_rows_and_json(folder: Path, tmp_path: Path, capsys) -> None:
         "time_transfer_s",
         "time_refine_s",
         "time_track_s",
+        "reference_residual_mg",
+        "reference_torque_saturation",
     ):
         assert isinstance(row[k], float), k
+    assert 0.0 <= row["reference_torque_saturation"] <= 1.0
     assert row["refine_check"] in ("kept", "reverted", "fallback")
+    # --repeats 2: the row's own run, then one from a perturbed initial state
+    assert len(row["survival_runs"]) == 2 and row["survival_runs"][0] == row["survival"]
+    assert row["whole_runs"] == sum(x >= 1.0 for x in row["survival_runs"])
+    assert "2 runs per window" in text and "over every run (2)" in text
     names = [t["name"] for t in doc["targets"]]
     assert len(names) == 5 and doc["targets"][1]["verdict"] == "n/a"  # servo, not mpc
     assert "targets:" in text and "walk@" in text
@@ -152,6 +162,23 @@ def test_targets_and_exit_code() -> None:
     assert m["shown"] == "0.100 of 3 (habit 0.200)"
 
 
+def test_survival_targets_count_every_run_of_every_window() -> None:
+    """With ``--repeats`` a window that survives one run in two counts half."""
+    rows = [
+        _row("habit", 1.0, survival_runs=[1.0, 0.5]),
+        _row("habit", 1.0, survival_runs=[1.0, 1.0]),
+        _row("direct", 1.0, survival_runs=[1.0, 1.0]),
+    ]
+    t = {x["name"].split(" ")[0]: x for x in evaluate_targets(rows, seconds=4)}
+    habit = next(x for x in evaluate_targets(rows, seconds=4) if "surviving" in x["name"])
+    assert habit["value"] == pytest.approx(0.75) and habit["verdict"] == "MISSED"
+    assert habit["shown"] == "75 % of 4 runs"
+    assert t["habit"]["value"] == pytest.approx(0.875 - 1.0)  # mean over runs, not rows
+    assert t["habit"]["verdict"] == "MISSED"
+    assert survival_runs(_row("direct", 0.3)) == [0.3]  # one run without repeats
+    assert survival_runs(_row("direct", None)) == []
+
+
 def test_bad_input(folder: Path, tmp_path: Path, capsys) -> None:
     empty = tmp_path / "empty"
     empty.mkdir()
@@ -171,4 +198,8 @@ def test_bad_input(folder: Path, tmp_path: Path, capsys) -> None:
     assert "unknown species 'hores'" in capsys.readouterr().err
     assert main([*base, "--data", str(folder), "--methods", "nope"]) == 2
     assert "valid:" in capsys.readouterr().err
+    assert main([*base, "--data", str(folder), "--repeats", "0"]) == 2
+    assert "--repeats 0; valid: 1 to" in capsys.readouterr().err
+    assert main([*base, "--data", str(folder), "--perturb", "-1"]) == 2
+    assert "--perturb must be a finite rate > 0" in capsys.readouterr().err
     assert not out.exists()

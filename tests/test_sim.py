@@ -146,6 +146,35 @@ def test_rollout_and_python_loop_agree(walk) -> None:
     assert a.work_j == pytest.approx(b.work_j, rel=1e-6)
 
 
+def test_initial_velocity_noise_is_seeded_and_reaches_both_loops(walk) -> None:
+    """``init_noise`` perturbs the first state from ``seed``, the same way on the rollout
+    path and in the Python loop; without it the seed changes nothing."""
+    base = track(walk, use_rollout=True, stop_on_fall=False)
+    np.testing.assert_array_equal(
+        track(walk, use_rollout=True, stop_on_fall=False, seed=7).qpos, base.qpos
+    )
+    runs = {
+        (path, seed): track(
+            walk, use_rollout=path, stop_on_fall=False, seed=seed, init_noise=0.05
+        ).qpos
+        for path in (True, False)
+        for seed in (1, 2)
+    }
+    np.testing.assert_allclose(runs[True, 1], runs[False, 1], atol=1e-9)
+    np.testing.assert_array_equal(
+        runs[True, 1],
+        track(walk, use_rollout=True, stop_on_fall=False, seed=1, init_noise=0.05).qpos,
+    )
+    n = min(len(runs[True, 1]), len(runs[True, 2]), len(base.qpos))
+    assert np.abs(runs[True, 1][:n] - base.qpos[:n]).max() > 1e-4
+    assert np.abs(runs[True, 1][:n] - runs[True, 2][:n]).max() > 1e-4
+    # the free joint starts with the reference's velocity: the root's first step agrees
+    np.testing.assert_allclose(runs[True, 1][1, :3], base.qpos[1, :3], atol=5e-3)
+    for bad in (-1e-3, float("nan"), float("inf")):
+        with pytest.raises(SimulationError, match="init_noise must be finite and >= 0"):
+            track(walk, init_noise=bad)
+
+
 def test_track_many_matches_track(walk, dog) -> None:
     still = _still(dog, 1.0)
     many = track_many([walk, still, walk], threads=2)

@@ -17,7 +17,11 @@ Per row: the import's contact F1 against the source's own feet (the importer's
 none), the stance toe height (median height of the labelled-stance toes / leg length:
 the import's own labels, and the transfer's), how the transfer's stance labels were
 found, skate / jerk / penetration before and after refinement, the refinement check,
-survival, sim MPJPE / leg length and the wall time per stage. Skating is docs/metrics.md's
+survival, sim MPJPE / leg length, the wall time per stage, and the dynamic plausibility
+of the tracked reference (docs/metrics.md's ``root_residual_mg`` and
+``torque_saturation`` under its stance labels: a window whose reference needs a large
+"hand of god" force, or more torque than the motors have, cannot be tracked by any
+controller without falling or deviating). Skating is docs/metrics.md's
 ``skate_mm`` (toes within 2 % of leg length of the ground count as in contact, labelled
 or not); the JSON rows and the summary also give it over the labelled stance frames only
 (``skate_labelled_mm_*``), the frames the refinement plants. The summary checks the
@@ -31,6 +35,15 @@ target does not apply to the run):
   windows' own median is shown beside it);
 * habit ≥ direct on mean survival;
 * transfer + refine + track of one 4 s window ≤ 10 s (median; scaled with ``--seconds``).
+
+``--repeats K`` tracks every kept reference K times: once from the reference's own
+state (the row's figures) and K − 1 times with Gaussian noise of ``--perturb`` rad/s
+(default 10⁻³) on the initial joint velocities, one seed each
+(:func:`habitsim.sim.track`'s ``init_noise``). A window near its balance limit survives
+or falls on float-level differences (thread counts, a library version), so one run is one
+sample; with repeats the two survival targets count every run (share of whole runs, mean
+survival over all runs) and each row says in how many of its runs it was tracked whole.
+The sim MPJPE and the wall times stay those of the unperturbed run.
 
 A run that misses a target exits with code 1 (bad input: 2, as every command).
 """
@@ -71,6 +84,8 @@ SURVIVAL_SHARE = 0.90
 MPJPE_PER_LEG = 0.15
 #: Transfer + refine + track of one 4 s window [s].
 SECONDS_PER_4S_CLIP = 10.0
+#: Initial joint-velocity noise [rad/s] of the repeated runs (``--perturb``).
+PERTURB_QVEL = 1e-3
 #: A window starts at the first frame whose pelvis speed (0.5 s moving average) exceeds
 #: this many leg lengths per second (frame 0 when the animal never does).
 MOVING_SPEED_PER_LEG = 0.25
@@ -183,6 +198,8 @@ class WindowTask:
     track: bool
     guard: bool
     seed: int
+    repeats: int = 1
+    perturb: float = PERTURB_QVEL
 
 
 def _num(v: Any) -> float | None:
@@ -201,6 +218,18 @@ def _import_f1(motion: Motion) -> list[float] | None:
     return [v for v in vals if v is not None] or None
 
 
+def _reference_dynamics(run: Any) -> dict[str, float]:
+    """docs/metrics.md's dynamic plausibility of the tracked reference under its stance
+    labels (``root_residual_mg``, ``torque_saturation``, …): how far from what the
+    animal's ground forces and motors can do the clip is; {} when it cannot be measured."""
+    from ..metrics.dynamic import dynamic_metrics
+
+    try:
+        return dynamic_metrics(run.reference, run.model, run.reference_contacts)
+    except HabitsimError:
+        return {}
+
+
 def run_window(task: WindowTask) -> list[dict[str, Any]]:
     """Every method of one (window, target) through the pipeline: one row per method.
 
@@ -208,7 +237,7 @@ def run_window(task: WindowTask) -> list[dict[str, Any]]:
     message in ``note``; the benchmark goes on.
     """
     from ..evaluation.methods import MethodUnavailable
-    from ..pipeline import run_clip, stance_toe_height
+    from ..pipeline import run_clip, stance_toe_height, track_reference
 
     src = task.motion
     f1 = _import_f1(src)
@@ -250,6 +279,24 @@ def run_window(task: WindowTask) -> list[dict[str, Any]]:
             continue
         a, b = run.transferred.metrics, run.refined.metrics
         tm = run.tracked.metrics
+        runs: list[float] = []
+        t_rep = time.perf_counter()
+        if run.track_result is not None:
+            runs.append(float(run.track_result.survival))
+            for i in range(1, task.repeats):
+                try:
+                    again = track_reference(
+                        run,
+                        controller=task.controller,
+                        seed=task.seed + i,
+                        init_noise=task.perturb,
+                    )
+                except HabitsimError as e:
+                    row["note"] = f"repeat {i} failed: {e}"
+                    continue
+                runs.append(float(again.survival))
+        t_rep = time.perf_counter() - t_rep
+        dyn = _reference_dynamics(run) if task.track else {}
         row.update(
             {
                 "contacts_method": run.transferred.contacts_method,
@@ -269,10 +316,15 @@ def run_window(task: WindowTask) -> list[dict[str, Any]]:
                 "refine_note": run.refine_note,
                 "track_status": run.tracked.status,
                 "survival": _num(tm.get("survival")),
+                "survival_runs": runs or None,
+                "whole_runs": sum(x >= 1.0 for x in runs) if runs else None,
+                "time_repeats_s": t_rep,
+                "reference_residual_mg": _num(dyn.get("root_residual_mg")),
+                "reference_torque_saturation": _num(dyn.get("torque_saturation")),
                 "sim_mpjpe_per_leg": _num(tm.get("sim_mpjpe_per_leg")),
                 "contact_f1_sim": _num(tm.get("contact_f1")),
                 **{f"time_{k}_s": v for k, v in run.times.items()},
-                "time_total_s": time.perf_counter() - t0,
+                "time_total_s": time.perf_counter() - t0 - t_rep,
             }
         )
         rows.append(row)
@@ -280,6 +332,15 @@ def run_window(task: WindowTask) -> list[dict[str, Any]]:
 
 
 # ---------------------------------------------------------------------------- targets
+
+
+def survival_runs(row: dict[str, Any]) -> list[float]:
+    """Survival of every tracking run of a row (the unperturbed run first; one run
+    without ``--repeats``)."""
+    runs = row.get("survival_runs")
+    if runs:
+        return [float(x) for x in runs]
+    return [] if row.get("survival") is None else [float(row["survival"])]
 
 
 def _verdict(ok: bool | None) -> str:
@@ -329,16 +390,22 @@ def evaluate_targets(
         }
     )
 
-    # survival of habit transfers under mpc, unassisted
+    # survival of habit transfers under mpc, unassisted (every run of every window)
     trk = [r for r in ok if tracked and r.get("survival") is not None]
     habit = [r for r in trk if r["method"] == "habit"]
     applies = tracked and controller == "mpc" and habit
-    share = (sum(r["survival"] >= 1.0 for r in habit) / len(habit)) if applies else None
+    hruns = [x for r in habit for x in survival_runs(r)]
+    share = (sum(x >= 1.0 for x in hruns) / len(hruns)) if applies else None
+    shown = "-"
+    if share is not None:
+        shown = f"{100 * share:.0f} % of {len(habit)}"
+        if len(hruns) > len(habit):
+            shown = f"{100 * share:.0f} % of {len(hruns)} runs"
     out.append(
         {
             "name": "habit transfers surviving unassisted (mpc)",
             "value": share,
-            "shown": "-" if share is None else f"{100 * share:.0f} % of {len(habit)}",
+            "shown": shown,
             "target": f"≥ {100 * SURVIVAL_SHARE:.0f} %",
             "verdict": _verdict(None if share is None else share >= SURVIVAL_SHARE),
         }
@@ -365,8 +432,8 @@ def evaluate_targets(
     # habit ≥ direct on survival
     direct = [r for r in trk if r["method"] == "direct"]
     if habit and direct:
-        sh = float(np.mean([r["survival"] for r in habit]))
-        sd = float(np.mean([r["survival"] for r in direct]))
+        sh = float(np.mean([x for r in habit for x in survival_runs(r)]))
+        sd = float(np.mean([x for r in direct for x in survival_runs(r)]))
         shown, verdict, value = f"{sh:.2f} vs {sd:.2f}", _verdict(sh >= sd - 1e-9), sh - sd
     else:
         shown, verdict, value = "-", "n/a", None
@@ -421,7 +488,10 @@ LEGEND = (
     "stance toe height per hind-leg length; contacts: how the stance labels were found; "
     "b→a: before → after refinement (skate, pen: mm; jerk: m/s³); check: the refinement "
     "check (kept, reverted, fallback); surv: share of the window tracked before a fall; "
-    "MPJPE/L: sim MPJPE per hind-leg length; t: wall time of transfer / refine / track [s])"
+    "MPJPE/L: sim MPJPE per hind-leg length; t: wall time of transfer / refine / track [s]; "
+    "resid: residual root force [m·g] the tracked reference needs beyond what its stance "
+    "feet can push, docs/metrics.md's root_residual_mg; whole k/K runs: with --repeats, "
+    "the runs of the window tracked whole, and their mean survival)"
 )
 
 
@@ -432,6 +502,12 @@ def format_row(r: dict[str, Any]) -> str:
     if r["status"] != "ok":
         return f"{lead} {r['status']}: {r['note']}"
     toe = r.get("stance_toe_height_import")
+    runs = survival_runs(r)
+    tail = ""
+    if r.get("reference_residual_mg") is not None:
+        tail += f"  resid {r['reference_residual_mg']:.2f}"
+    if len(runs) > 1:
+        tail = f"  whole {sum(x >= 1.0 for x in runs)}/{len(runs)} runs (mean {np.mean(runs):.2f})"
     return (
         f"{lead} {_f(r.get('import_contact_f1_mean')):>6s} {_f(toe, 3):>6s} "
         f"{str(r.get('contacts_method'))[:8]:8s} "
@@ -441,7 +517,7 @@ def format_row(r: dict[str, Any]) -> str:
         f"{str(r.get('refine_check'))[:9]:9s} {_f(r.get('survival')):>4s} "
         f"{_f(r.get('sim_mpjpe_per_leg'), 3):>7s} "
         f"{_f(r.get('time_transfer_s'), 1)}/{_f(r.get('time_refine_s'), 1)}/"
-        f"{_f(r.get('time_track_s'), 1)}"
+        f"{_f(r.get('time_track_s'), 1)}{tail}"
     )
 
 
@@ -473,6 +549,16 @@ def format_summary(rows: Sequence[dict[str, Any]], targets: Sequence[dict[str, A
             f" penetration {_f(_median(ok, 'penetration_mm_before'), 1)}→"
             f"{_f(_median(ok, 'penetration_mm_after'), 1)} mm"
         )
+        runs = [survival_runs(r) for r in ok if survival_runs(r)]
+        if any(len(x) > 1 for x in runs):
+            flat = [x for rr in runs for x in rr]
+            every = sum(all(x >= 1.0 for x in rr) for rr in runs)
+            never = sum(not any(x >= 1.0 for x in rr) for rr in runs)
+            lines.append(
+                f"           over every run ({len(flat)}): survival {np.mean(flat):.2f}, "
+                f"whole runs {sum(x >= 1.0 for x in flat)}/{len(flat)}; windows whole in "
+                f"every run {every}/{len(runs)}, in none {never}/{len(runs)}"
+            )
         lines.append(
             f"           survival {_f(float(np.mean(surv)) if surv else None)} "
             f"(whole window {sum(s >= 1.0 for s in surv)}/{len(surv)}); sim MPJPE/L "
@@ -482,6 +568,11 @@ def format_summary(rows: Sequence[dict[str, Any]], targets: Sequence[dict[str, A
             + ", ".join(f"{k} {v}" for k, v in sorted(planted.items()))
             + "; refinement check "
             + ", ".join(f"{k} {v}" for k, v in sorted(checks.items()))
+        )
+        lines.append(
+            f"           tracked reference: residual root force "
+            f"{_f(_median(ok, 'reference_residual_mg'))} m·g, torque beyond the motors on "
+            f"{_f(_median(ok, 'reference_torque_saturation'))} of its frames (medians)"
         )
         lines.append(
             f"           wall time per stage [s]: transfer {_f(_median(ok, 'time_transfer_s'))},"
@@ -576,6 +667,26 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
     p.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        metavar="K",
+        help=(
+            "track every kept reference K times: once as is, K-1 times from initial joint "
+            "velocities perturbed by --perturb (seeds S+1..S+K-1); the survival targets "
+            "count every run (default 1)"
+        ),
+    )
+    p.add_argument(
+        "--perturb",
+        type=float,
+        default=PERTURB_QVEL,
+        metavar="RAD_S",
+        help=(
+            f"initial joint-velocity noise of the repeated runs [rad/s] (default {PERTURB_QVEL:g})"
+        ),
+    )
+    p.add_argument(
         "--workers",
         type=int,
         default=None,
@@ -609,6 +720,12 @@ def plan(ns: argparse.Namespace) -> tuple[list[WindowTask], list[str]]:
         raise BenchRealError(f"--windows-per-clip must be >= 1, got {ns.windows_per_clip}")
     if not (math.isfinite(ns.fps) and ns.fps >= 0):
         raise BenchRealError(f"--fps must be >= 0, got {ns.fps}")
+    repeats = int(getattr(ns, "repeats", 1))
+    perturb = float(getattr(ns, "perturb", PERTURB_QVEL))
+    if repeats < 1:
+        raise BenchRealError(f"--repeats must be >= 1, got {repeats}")
+    if not (math.isfinite(perturb) and perturb > 0):
+        raise BenchRealError(f"--perturb must be a finite rate > 0 [rad/s], got {perturb}")
     if ns.controller not in CONTROLLERS:
         from ..errors import unknown_choice
 
@@ -660,6 +777,8 @@ def plan(ns: argparse.Namespace) -> tuple[list[WindowTask], list[str]]:
             not ns.no_track,
             not ns.no_check,
             ns.seed,
+            repeats,
+            perturb,
         )
         for t in targets  # grouped by target: a process keeps few built refinement problems
         for clip, start, w in windows
@@ -682,6 +801,12 @@ def _bench_real(ns: argparse.Namespace) -> int:
         f"(imported onto {ns.species}, {ns.fps:g} fps) × {', '.join(targets)} × "
         f"{', '.join(methods)}; refine {tasks[0].refine}; "
         + (f"tracking unassisted ({ns.controller})" if not ns.no_track else "no tracking")
+        + (
+            f"; {tasks[0].repeats} runs per window (the first as is, the others with "
+            f"{tasks[0].perturb:g} rad/s initial joint-velocity noise)"
+            if tasks[0].repeats > 1 and not ns.no_track
+            else ""
+        )
     )
     for n in notes:
         print(f"  note: {n}")

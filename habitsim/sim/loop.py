@@ -47,8 +47,10 @@ def _run_python(
     settle_s: float,
     stop_on_fall: bool,
     detector: FallDetector,
+    v0_offset: np.ndarray | None = None,
 ) -> _Run:
-    """Step-by-step loop with the controller (and assistance) called in Python."""
+    """Step-by-step loop with the controller (and assistance) called in Python
+    (``v0_offset``: (nv,) added to the initial velocity)."""
     from ..controllers import Reference
 
     dt = model.opt.timestep
@@ -57,7 +59,8 @@ def _run_python(
     n_total = int(fsteps[-1])
     adr, feet = _touch_adr(model, clip.feet), foot_geoms(model, clip.feet)
     jdofs = _joint_dofs(model)
-    data = _init_data(model, clip.qpos[0], ref.qvel[0] if settle_s <= 0 else np.zeros(model.nv))
+    v0 = ref.qvel[0] if settle_s <= 0 else np.zeros(model.nv)
+    data = _init_data(model, clip.qpos[0], v0 if v0_offset is None else v0 + v0_offset)
     # the assist rides on the controller when it can (Controller.control applies it)
     external_assist = None
     if assist is not None:

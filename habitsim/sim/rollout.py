@@ -36,12 +36,14 @@ def _run_rollout(
     settle_s: float,
     stop_on_fall: bool,
     detectors: Sequence[FallDetector],
+    v0_offsets: Sequence[np.ndarray | None] | None = None,
 ) -> list[_Run]:
     """All clips of one servo model in one ``mujoco.rollout`` call (no Python per step).
 
     Controls are :func:`servo_targets` of the reference at every step. Rollout freezes a
     clip's state after a MuJoCo warning, so a stalled clock or a NaN marks instability.
     Falls are found afterwards on the recorded frames (same :class:`FallDetector`).
+    ``v0_offsets``: per clip, (nv,) added to its initial velocity (or None).
     """
     from mujoco import rollout
 
@@ -60,7 +62,9 @@ def _run_rollout(
             ctrl[b, :n_settle] = servo_targets(model, r.qpos[:1])[0]  # held at rest: no lead
         ctrl[b, n_settle : n_settle + n] = u
         ctrl[b, n_settle + n :] = u[-1]
-        d = _init_data(model, c.qpos[0], r.qvel[0] if n_settle == 0 else np.zeros(model.nv))
+        v0 = r.qvel[0] if n_settle == 0 else np.zeros(model.nv)
+        dv = None if v0_offsets is None else v0_offsets[b]
+        d = _init_data(model, c.qpos[0], v0 if dv is None else v0 + dv)
         mujoco.mj_getState(model, d, x0[b], _FULL)
     datas = [mujoco.MjData(model) for _ in range(max(1, threads))]
     state, _ = rollout.rollout(model, datas, x0, ctrl)

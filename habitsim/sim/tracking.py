@@ -29,6 +29,17 @@ def _check_settle(settle_s: float) -> None:
         raise SimulationError(f"settle_s must be finite and >= 0, got {settle_s}")
 
 
+def _velocity_noise(model: mujoco.MjModel, std: float, seed: int | None) -> np.ndarray | None:
+    """(nv,) Gaussian noise of ``std`` on the hinge joints' velocities (None for 0)."""
+    if std == 0:
+        return None
+    dv = np.zeros(model.nv)
+    hinge = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE)
+    dofs = model.jnt_dofadr[hinge]
+    dv[dofs] = np.random.default_rng(0 if seed is None else int(seed)).normal(0.0, std, len(dofs))
+    return dv
+
+
 def track(
     motion_or_qpos: Motion | QposTrajectory,
     *,
@@ -43,6 +54,7 @@ def track(
     use_rollout: bool | None = None,
     contacts: np.ndarray | None = None,
     feet: Sequence[str] | None = None,
+    init_noise: float = 0.0,
 ) -> TrackResult:
     """Track a reference motion in MuJoCo with a controller.
 
@@ -74,7 +86,8 @@ def track(
         settle_s: seconds to hold the first frame (from rest) before the clip starts.
         stop_on_fall: stop at the first fall (else simulate to the end; metrics still
             use the survived part only).
-        seed: accepted for a uniform signature; every stage here is deterministic.
+        seed: seed of the ``init_noise`` draw (default 0). Without noise every stage
+            here is deterministic and the seed is not used.
         use_rollout: force (True) or forbid (False) the ``mujoco.rollout`` path; by
             default it is used for ``"servo"`` without assistance at the full rate.
         contacts: (T, 4) bool reference contact labels (LF, RF, LH, RH): the contact
@@ -91,6 +104,12 @@ def track(
             one from a Motion). A robot with position servos is simulated with torque
             motors of the same strength for ``pd``, ``balance`` and ``mpc``
             (:func:`habitsim.controllers.robot.torque_model`).
+        init_noise: standard deviation [rad/s] of Gaussian noise added to the initial
+            velocity of every hinge joint (the free joint keeps the reference's), drawn
+            from ``seed``. A tracking whose outcome changes under noise far below any
+            measurement's (10⁻³ rad/s) sits at its balance limit; repeating it with a few
+            seeds measures how often it survives (``habitsim bench real --repeats``).
+            0 (default): the reference's velocity exactly.
 
     Returns:
         The :class:`TrackResult` (metrics in :attr:`TrackResult.metrics`).
@@ -100,10 +119,12 @@ def track(
             not fit the model (joints, nq) or is not finite, contacts of the wrong shape.
         UnknownSpeciesError: unknown species.
     """
-    del seed
     _check_settle(settle_s)
+    if not (math.isfinite(init_noise) and init_noise >= 0):
+        raise SimulationError(f"init_noise must be finite and >= 0 [rad/s], got {init_noise}")
     clip = _resolve(motion_or_qpos, species, model, contacts=contacts, feet=feet)
     sim_model = _sim_model(controller, clip, model)
+    dv0 = _velocity_noise(sim_model, init_noise, seed)
     asst = _make_assist(assist, sim_model)
     if control_hz is None and controller == "mpc" and asst is None:
         # (a root assist is an explicit wrench held over a control period: its gains are
@@ -115,12 +136,12 @@ def track(
         raise SimulationError("use_rollout needs controller='servo', no assist, full rate")
     detector = FallDetector(sim_model, clip.qpos, clip.fps, clip.leg_length, clip.feet)
     if use_rollout if use_rollout is not None else fast:
-        run = _run_rollout(sim_model, [clip], 1, settle_s, stop_on_fall, [detector])[0]
+        run = _run_rollout(sim_model, [clip], 1, settle_s, stop_on_fall, [detector], [dv0])[0]
         return _finish(clip, sim_model, run, "servo", _rollout_stats(1))
     ctl = _make_controller(
         controller, sim_model, clip, None if every == 1 else every * sim_model.opt.timestep
     )
-    run = _run_python(sim_model, clip, ctl, asst, every, settle_s, stop_on_fall, detector)
+    run = _run_python(sim_model, clip, ctl, asst, every, settle_s, stop_on_fall, detector, dv0)
     name = controller if isinstance(controller, str) else str(getattr(ctl, "name", "custom"))
     return _finish(clip, sim_model, run, name, ctl.stats.to_dict())
 
