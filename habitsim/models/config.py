@@ -176,10 +176,19 @@ class TextConfig:
 
 @dataclass(frozen=True)
 class ModelConfig:
-    """Everything that fixes the model's tensors (a checkpoint must match it exactly)."""
+    """Everything that fixes the model's tensors (a checkpoint must match it exactly).
+
+    ``path_condition``: the decoder also takes the source's pelvis path, its horizontal
+    velocity averaged over each code's frames (in Froude units, so a transfer gets the
+    speed dynamic similarity gives the target), un-quantized, beside the codes. The root
+    is then not integrated from quantized velocities and does not drift; the target
+    species' condition still decides how its body moves along the path. Every preset
+    sets it; the field's default (False) is what a checkpoint trained before it reads.
+    """
 
     variant: str = "habit"
     window: int = 64
+    path_condition: bool = False
     net: NetConfig = field(default_factory=NetConfig)
     quantizer: QuantizerConfig = field(default_factory=QuantizerConfig)
     habit: HabitConfig = field(default_factory=HabitConfig)
@@ -414,7 +423,9 @@ def _from_dict(cls: type, d: Any, where: str) -> Any:
 
 def _default() -> Config:
     """The shipped model's configuration: ≤ 20 min on an idle 2-core CPU (2 threads)."""
-    return Config(name="default", train=TrainConfig(threads=2))
+    return Config(
+        name="default", model=ModelConfig(path_condition=True), train=TrainConfig(threads=2)
+    )
 
 
 def _small() -> Config:
@@ -423,6 +434,7 @@ def _small() -> Config:
         name="small",
         model=ModelConfig(
             window=32,
+            path_condition=True,
             net=NetConfig(width=64, depth=1),
             quantizer=QuantizerConfig(num_codes=128, code_dim=64),
             habit=HabitConfig(
@@ -453,7 +465,9 @@ def _large() -> Config:
     about twice as large; see the shipped checkpoint's README for the figures)."""
     return Config(
         name="large",
-        model=ModelConfig(net=NetConfig(width=192), quantizer=QuantizerConfig(levels=4)),
+        model=ModelConfig(
+            path_condition=True, net=NetConfig(width=192), quantizer=QuantizerConfig(levels=4)
+        ),
         train=TrainConfig(
             steps=12000,
             lr_schedule="cosine",
