@@ -423,9 +423,7 @@ def _from_dict(cls: type, d: Any, where: str) -> Any:
 
 def _default() -> Config:
     """The shipped model's configuration: ≤ 20 min on an idle 2-core CPU (2 threads)."""
-    return Config(
-        name="default", model=ModelConfig(path_condition=True), train=TrainConfig(threads=2)
-    )
+    return Config(name="default", train=TrainConfig(threads=2))
 
 
 def _small() -> Config:
@@ -434,7 +432,6 @@ def _small() -> Config:
         name="small",
         model=ModelConfig(
             window=32,
-            path_condition=True,
             net=NetConfig(width=64, depth=1),
             quantizer=QuantizerConfig(num_codes=128, code_dim=64),
             habit=HabitConfig(
@@ -465,9 +462,7 @@ def _large() -> Config:
     about twice as large; see the shipped checkpoint's README for the figures)."""
     return Config(
         name="large",
-        model=ModelConfig(
-            path_condition=True, net=NetConfig(width=192), quantizer=QuantizerConfig(levels=4)
-        ),
+        model=ModelConfig(net=NetConfig(width=192), quantizer=QuantizerConfig(levels=4)),
         train=TrainConfig(
             steps=12000,
             lr_schedule="cosine",
