@@ -253,9 +253,14 @@ def test_train_cli_small(tmp_path, capsys):
 def test_a_posture_the_training_rigs_never_took_does_not_stop_the_decoded_gait(monkeypatch):
     """A real rig holds its third spine and second tail joints in postures the synthetic
     training rigs never take (their rotation spread sits at the 0.01 floor). Bent 25° there,
-    a dog trot still decodes at nearly its own speed because the encoders clip rotation
-    inputs to ± ROTATION_INPUT_CLIP σ; unclipped, the same input loses ~45 % of its Froude
-    number (measured: 1.46 → 1.35 clipped, → 0.82 unclipped)."""
+    a dog trot still decodes as a trot because the encoders clip rotation inputs to
+    ± ROTATION_INPUT_CLIP σ: its legs swing about the pelvis nearly as fast as unbent;
+    unclipped, the same input decodes to legs that barely move (measured: toe speed about
+    the pelvis 4.41 leg lengths/s unbent, 4.30 bent, 1.35 unclipped; the body's Froude
+    number 1.46, 1.35, 0.82). Leg motion, not the body's speed, is what the test reads: a
+    decoder conditioned on the source's path (``model.path_condition``) keeps the speed
+    even when it loses the gait (path-conditioned model: 4.31, 4.14, 1.27 leg lengths/s at
+    Froude 1.45, 1.45, 1.44)."""
     import importlib
 
     import habitsim.models.model as model_module
@@ -277,11 +282,17 @@ def test_a_posture_the_training_rigs_never_took_does_not_stop_the_decoded_gait(m
         v = np.linalg.norm(np.diff(m.root_positions[:, :2], axis=0), axis=1).mean() * m.fps
         return float(v * v / 9.81 / m.species_info.leg_length)
 
+    def limbs(m: Motion) -> float:  # mean toe speed about the pelvis [leg lengths / s]
+        p = m.foot_positions() - m.root_positions[:, None]
+        step = np.linalg.norm(np.diff(p, axis=0), axis=-1).mean()
+        return float(step * m.fps / m.species_info.leg_length)
+
     def decoded(m: Motion) -> Motion:
         return tr._run_network(ck, m, "dog", seed=0, temperature=1.0)[0]
 
-    plain = froude(decoded(dog))
-    assert plain == pytest.approx(froude(dog), rel=0.1)
-    assert froude(decoded(bent)) > 0.85 * plain
+    plain = decoded(dog)
+    assert froude(plain) == pytest.approx(froude(dog), rel=0.1)
+    assert limbs(plain) == pytest.approx(limbs(dog), rel=0.2)
+    assert limbs(decoded(bent)) > 0.85 * limbs(plain)
     monkeypatch.setattr(model_module, "ROTATION_INPUT_CLIP", float("inf"))
-    assert froude(decoded(bent)) < 0.7 * plain  # the failure the clip prevents
+    assert limbs(decoded(bent)) < 0.5 * limbs(plain)  # the failure the clip prevents

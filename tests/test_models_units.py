@@ -14,6 +14,7 @@ from habitsim.models.config import Config, ModelConfig, NetConfig, QuantizerConf
 from habitsim.models.errors import ConfigError, TextEncoderError
 from habitsim.models.features import (
     FEAT_DIM,
+    Q_DIM,
     batched_fk,
     canonical_window,
     clip_arrays,
@@ -66,10 +67,40 @@ def test_model_shapes_every_variant(levels):
         z = m.posterior(x, species)[0] if cfg.use_z else None
         cond = m.condition(species, z)
         assert (cond is None) == (m.cond_dim == 0)
-        y = m.decode(q.quantized, cond)
+        y = m.decode(q.quantized, cond, m.path(x))
         assert y.shape == x.shape
         if cfg.use_z:
             assert m.sample_prior("cat", 5).shape == (5, cfg.habit.z_dim)
+
+
+def test_path_conditioned_decoder_follows_the_path_it_is_given():
+    """A ``path_condition`` model reads the pelvis path of the source windows (per code,
+    un-quantized) and its output depends on it; without a path it refuses to decode; a
+    configuration without the key (older checkpoints) is a model without the input."""
+    cfg = preset("small").replace(**{"model.path_condition": True}).model
+    m = HabitVQVAE(cfg, ["cat", "horse"], ["cat", "horse"], 8).eval()
+    clip = generate("cat", "trot", seed=0, duration_s=2.0)
+    x = torch.from_numpy(canonical_window(clip_arrays(clip), 0, cfg.window)[0][None])
+    p = m.path(x)
+    assert p.shape == (1, 2, cfg.window // cfg.rate)
+    # the mean of each code's frames of the normalised pelvis velocity (x, y)
+    sl = slice(Q_DIM, Q_DIM + 2)
+    v = ((x[0, :, sl] - m.feat_mean[sl]) / m.feat_std[sl]).numpy()
+    want = v.reshape(-1, cfg.rate, 2).mean(axis=1).T
+    np.testing.assert_allclose(p[0].numpy(), want, rtol=1e-6)
+    codes = m.quantize(m.encode(x), sample=False, update=False).quantized
+    cond = m.condition(["cat"], m.posterior(x, ["cat"])[0])
+    with torch.no_grad():
+        y1 = m.decode(codes, cond, p)
+        y2 = m.decode(codes, cond, p + 1.0)
+    assert (y1 - y2).abs().max() > 1e-3
+    with pytest.raises(ValueError, match="path"):
+        m.decode(codes, cond)
+    d = preset("small").to_dict()
+    d["model"].pop("path_condition")
+    assert Config.from_dict(d).model.path_condition is False
+    plain = HabitVQVAE(Config.from_dict(d).model, ["cat"], ["cat"], 8)
+    assert not any("path" in k for k in plain.state_dict())
 
 
 # ---------------------------------------------------------------------------- quantizer

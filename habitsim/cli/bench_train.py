@@ -133,7 +133,7 @@ def transfer_latency(checkpoint: str | Path | None = None, repeats: int = 20) ->
             t = time.perf_counter()
             codes = m.quantize(m.encode(x), sample=False, update=False).quantized
             z = m.sample_prior("cat", 1, torch.Generator().manual_seed(1)) if m.cfg.use_z else None
-            m.decode(codes, m.condition(["cat"], z))
+            m.decode(codes, m.condition(["cat"], z), m.path(x))
             net.append(time.perf_counter() - t)
     return {
         "frames": float(clip.num_frames),

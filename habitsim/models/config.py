@@ -176,10 +176,19 @@ class TextConfig:
 
 @dataclass(frozen=True)
 class ModelConfig:
-    """Everything that fixes the model's tensors (a checkpoint must match it exactly)."""
+    """Everything that fixes the model's tensors (a checkpoint must match it exactly).
+
+    ``path_condition``: the decoder also takes the source's pelvis path, its horizontal
+    velocity averaged over each code's frames (in Froude units, so a transfer gets the
+    speed dynamic similarity gives the target), un-quantized, beside the codes. The root
+    is then not integrated from quantized velocities and does not drift; the target
+    species' condition still decides how its body moves along the path. Every preset
+    sets it; the field's default (False) is what a checkpoint trained before it reads.
+    """
 
     variant: str = "habit"
     window: int = 64
+    path_condition: bool = False
     net: NetConfig = field(default_factory=NetConfig)
     quantizer: QuantizerConfig = field(default_factory=QuantizerConfig)
     habit: HabitConfig = field(default_factory=HabitConfig)

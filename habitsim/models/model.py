@@ -36,6 +36,9 @@ __all__ = ["HabitVQVAE", "ROTATION_INPUT_CLIP"]
 #: beyond 3 σ and are real.
 ROTATION_INPUT_CLIP = 3.0
 
+#: Channels of the decoder's path input (pelvis velocity x, y): see ``ModelConfig``.
+PATH_DIM = 2
+
 
 class HabitVQVAE(nn.Module):
     """Motion VQ-VAE whose decoder takes the habit latent z_c and the text embedding g_c.
@@ -73,7 +76,8 @@ class HabitVQVAE(nn.Module):
             )
         cond = (cfg.habit.z_dim if cfg.use_z else 0) + (cfg.text.proj_dim if cfg.use_g else 0)
         self.cond_dim = cond
-        self.decoder = MotionDecoder(qc.code_dim, cond, FEAT_DIM, cfg.net)
+        self.path_dim = PATH_DIM if cfg.path_condition else 0
+        self.decoder = MotionDecoder(qc.code_dim, cond, FEAT_DIM, cfg.net, self.path_dim)
         if cfg.use_z:
             h = cfg.habit
             self.posteriors = nn.ModuleDict({s: HabitPosterior(FEAT_DIM, h) for s in self.species})
@@ -107,9 +111,26 @@ class HabitVQVAE(nn.Module):
             levels += [cast(EMAQuantizer, q) for q in self.residual_quantizers]
         return residual_quantize(levels, f, **kw)
 
-    def decode(self, codes: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
-        """Codes (B, code_dim, T') and condition (B, C) → raw windows (B, T'·rate, F)."""
-        return self.denormalize(self.decoder(codes, cond).transpose(1, 2))
+    def decode(
+        self, codes: torch.Tensor, cond: torch.Tensor | None, path: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """Codes (B, code_dim, T'), condition (B, C) and, for a path-conditioned model,
+        the source windows' :meth:`path` (B, 2, T') → raw windows (B, T'·rate, F)."""
+        if not self.path_dim:
+            path = None
+        elif path is None:
+            raise ValueError("this model decodes along a path: pass path=model.path(x)")
+        return self.denormalize(self.decoder(codes, cond, path).transpose(1, 2))
+
+    def path(self, x: torch.Tensor) -> torch.Tensor:
+        """Raw windows (B, T, F) → the pelvis path the decoder follows (B, 2, T / rate):
+        the horizontal pelvis velocity (Froude units, the window's frame), normalised, mean
+        over each code's frames."""
+        sl = slice(Q_DIM, Q_DIM + PATH_DIM)
+        v = (x[..., sl] - self.feat_mean[sl]) / self.feat_std[sl]
+        b, t, _ = v.shape
+        r = self.cfg.rate
+        return v.reshape(b, t // r, r, PATH_DIM).mean(dim=2).transpose(1, 2)
 
     # ------------------------------------------------------------------ habit latent
     def _check_species(self, names: Sequence[str]) -> None:

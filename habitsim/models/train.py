@@ -298,7 +298,10 @@ def compute_losses(
     if cond_a is not None:
         # cond_b is set whenever cond_a is (same model, same condition kinds)
         cond = torch.cat([cond_a, cast(torch.Tensor, cond_b)], dim=0) if n_pair else cond_a
-    y = model.decode(dec_in, cond)
+    path = model.path(x_in) if model.path_dim else None
+    if path is not None and n_pair:  # a paired window follows its source's path
+        path = torch.cat([path, path[batch.pair_src]], dim=0)
+    y = model.decode(dec_in, cond, path)
     b = batch.x.shape[0]
     lq, lv = _recon_terms(y[:b], batch.x, batch.valid, cfg)
     recon = lq + t.alpha * lv
@@ -375,7 +378,7 @@ def evaluate_windows(
         qo = model.quantize(model.encode(xb), sample=False, update=False)
         if target_species is None:
             z = model.posterior(xb, sp)[0] if model.cfg.use_z else None
-            y = model.decode(qo.quantized, model.condition(sp, z))
+            y = model.decode(qo.quantized, model.condition(sp, z), model.path(xb))
             m, fr = _mpjpe(y, xb, valid[s : s + batch], sp, fps)
         else:
             assert target_x is not None and target_valid is not None
@@ -383,7 +386,7 @@ def evaluate_windows(
             z = None
             if model.cfg.use_z:
                 z = torch.cat([model.sample_prior(t, 1, gen) for t in tsp], dim=0)
-            y = model.decode(qo.quantized, model.condition(tsp, z))
+            y = model.decode(qo.quantized, model.condition(tsp, z), model.path(xb))
             m, fr = _mpjpe(y, target_x[s : s + batch], target_valid[s : s + batch], tsp, fps)
         out_m.append(m)
         out_f.append(fr)

@@ -294,7 +294,7 @@ def _run_network(
             gen = torch.Generator().manual_seed(0 if seed is None else int(seed))
             z = model.sample_prior(habit_sp, 1, gen, temperature).expand(k, -1)
     cond = model.condition([to] * k, z, _text_rows(ck, to, k) if model.cfg.use_g else None)
-    y = model.decode(codes, cond).numpy()
+    y = model.decode(codes, cond, model.path(x)).numpy()
     world = [uncanonicalize(y[i], wins[i][2]) for i in range(k)]
     feats = _blend(world, starts, n, window)
     ratio = load_species(to).hip_height / load_species(src.species).hip_height

@@ -68,15 +68,20 @@ class MotionEncoder(nn.Module):
 
 
 class MotionDecoder(nn.Module):
-    """(B, code_dim, T') codes + (B, cond_dim) condition → (B, out_dim, T'·2^down_t)."""
+    """(B, code_dim, T') codes + (B, cond_dim) condition [+ (B, path_dim, T') path at the
+    code rate] → (B, out_dim, T'·2^down_t)."""
 
-    def __init__(self, code_dim: int, cond_dim: int, out_dim: int, cfg: NetConfig):
+    def __init__(
+        self, code_dim: int, cond_dim: int, out_dim: int, cfg: NetConfig, path_dim: int = 0
+    ):
         super().__init__()
         w = cfg.width
         self.cond_dim = cond_dim
-        self.inp = nn.Conv1d(code_dim + cond_dim, w, 3, padding=1)
+        self.path_dim = path_dim
+        self.inp = nn.Conv1d(code_dim + cond_dim + path_dim, w, 3, padding=1)
         self.stages = nn.ModuleList()
         self.cond_bias = nn.ModuleList()
+        self.path_bias = nn.ModuleList()
         for _ in range(cfg.down_t):
             self.stages.append(
                 nn.Sequential(
@@ -87,12 +92,23 @@ class MotionDecoder(nn.Module):
             )
             if cond_dim:
                 self.cond_bias.append(nn.Linear(cond_dim, w))
+            if path_dim:
+                self.path_bias.append(nn.Conv1d(path_dim, w, 1))
         self.out = nn.Sequential(
             nn.Conv1d(w, w, 3, padding=1), nn.ReLU(), nn.Conv1d(w, out_dim, 3, padding=1)
         )
 
-    def forward(self, codes: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
+    def forward(
+        self, codes: torch.Tensor, cond: torch.Tensor | None, path: torch.Tensor | None = None
+    ) -> torch.Tensor:
         x = codes
+        if self.path_dim:
+            if path is None or path.shape != (codes.shape[0], self.path_dim, codes.shape[-1]):
+                raise ValueError(
+                    f"decoder expects a path of shape ({codes.shape[0]}, {self.path_dim}, "
+                    f"{codes.shape[-1]})"
+                )
+            x = torch.cat([x, path], dim=1)
         if self.cond_dim:
             if cond is None or cond.shape != (codes.shape[0], self.cond_dim):
                 raise ValueError(
@@ -104,4 +120,8 @@ class MotionDecoder(nn.Module):
             x = stage(x)
             if self.cond_dim:
                 x = x + self.cond_bias[i](cond)[:, :, None]
+            if self.path_dim:
+                assert path is not None
+                up = path.repeat_interleave(x.shape[-1] // path.shape[-1], dim=-1)
+                x = x + self.path_bias[i](up)
         return self.out(x)
