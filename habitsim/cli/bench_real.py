@@ -507,7 +507,7 @@ def format_row(r: dict[str, Any]) -> str:
     if r.get("reference_residual_mg") is not None:
         tail += f"  resid {r['reference_residual_mg']:.2f}"
     if len(runs) > 1:
-        tail = f"  whole {sum(x >= 1.0 for x in runs)}/{len(runs)} runs (mean {np.mean(runs):.2f})"
+        tail += f"  whole {sum(x >= 1.0 for x in runs)}/{len(runs)} runs (mean {np.mean(runs):.2f})"
     return (
         f"{lead} {_f(r.get('import_contact_f1_mean')):>6s} {_f(toe, 3):>6s} "
         f"{str(r.get('contacts_method'))[:8]:8s} "

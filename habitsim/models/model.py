@@ -116,16 +116,16 @@ class HabitVQVAE(nn.Module):
     ) -> torch.Tensor:
         """Codes (B, code_dim, T'), condition (B, C) and, for a path-conditioned model,
         the source windows' :meth:`path` (B, 2, T') → raw windows (B, T'·rate, F)."""
-        if not self.path_dim:
-            path = None
-        elif path is None:
+        if self.path_dim and path is None:
             raise ValueError("this model decodes along a path: pass path=model.path(x)")
         return self.denormalize(self.decoder(codes, cond, path).transpose(1, 2))
 
-    def path(self, x: torch.Tensor) -> torch.Tensor:
+    def path(self, x: torch.Tensor) -> torch.Tensor | None:
         """Raw windows (B, T, F) → the pelvis path the decoder follows (B, 2, T / rate):
         the horizontal pelvis velocity (Froude units, the window's frame), normalised, mean
-        over each code's frames."""
+        over each code's frames; None for a model without the path input."""
+        if not self.path_dim:
+            return None
         sl = slice(Q_DIM, Q_DIM + PATH_DIM)
         v = (x[..., sl] - self.feat_mean[sl]) / self.feat_std[sl]
         b, t, _ = v.shape

@@ -298,7 +298,7 @@ def compute_losses(
     if cond_a is not None:
         # cond_b is set whenever cond_a is (same model, same condition kinds)
         cond = torch.cat([cond_a, cast(torch.Tensor, cond_b)], dim=0) if n_pair else cond_a
-    path = model.path(x_in) if model.path_dim else None
+    path = model.path(x_in)
     if path is not None and n_pair:  # a paired window follows its source's path
         path = torch.cat([path, path[batch.pair_src]], dim=0)
     y = model.decode(dec_in, cond, path)
