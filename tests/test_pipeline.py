@@ -10,15 +10,18 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from habitsim.contacts import drop_short_runs, warp_contacts
+from habitsim.contacts import contact_segments, drop_short_runs, lengthen_stance, warp_contacts
+from habitsim.errors import InvalidMotionError
 from habitsim.gaits import generate
 from habitsim.models import transfer
 from habitsim.models.transfer import (
     MAX_DUTY_GAP,
     MIN_SOURCE_AGREEMENT,
     PLANT_MAX_REACH_PER_LEG,
+    WALK_MIN_DUTY,
     _reaches,
     transfer_contacts,
+    walking_stance,
 )
 from habitsim.motion import resample_motion
 from habitsim.pipeline import PipelineError, refine_mode, run_clip, stance_toe_height
@@ -50,6 +53,51 @@ def test_drop_short_runs_and_warp() -> None:
     np.testing.assert_array_equal(warp_contacts(lab, 10), lab)
     w = warp_contacts(lab, 19)  # twice the frames over the same span
     assert w.shape == (19, 4) and w[:, 0].sum() == 8 and w[4:11, 0].all()
+
+
+def test_lengthen_stance_keeps_the_middles_of_the_runs() -> None:
+    c = np.zeros((60, 3), bool)
+    c[10:20, 0] = c[40:50, 0] = True  # stands 1/3 of the clip
+    c[0:6, 1] = True  # a run at the clip's start, 10 %
+    c[:45, 2] = True  # already stands 75 %
+    out = lengthen_stance(c, 0.5)
+    # foot 0: 3 frames more at both ends of both runs, 32 of 60 (2 more give 28 < 30)
+    assert contact_segments(out[:, :1]) == [[(7, 23), (37, 53)]]
+    # foot 1 grows inward only; foot 2 is kept; nothing else changes
+    assert contact_segments(out[:, 1:2]) == [[(0, 30)]]
+    np.testing.assert_array_equal(out[:, 2], c[:, 2])
+    np.testing.assert_array_equal(lengthen_stance(c, 0.0), c)
+    with pytest.raises(InvalidMotionError, match="min_share"):
+        lengthen_stance(c, 1.5)
+    with pytest.raises(InvalidMotionError, match="shape"):
+        lengthen_stance(c[:, 0], 0.5)
+
+
+def test_walking_stance_only_where_the_target_walks() -> None:
+    """A cat at a walking Froude number gets no aerial phase; a trot, a faster clip and a
+    jump keep their labels."""
+    slow = generate("cat", "walk", seed=1, duration_s=3.0, froude=0.3, duty_factor=0.35)
+    assert slow.contacts is not None and slow.contacts.mean(0).max() < WALK_MIN_DUTY
+    labels, info = walking_stance(slow, slow.contacts, slow)
+    assert info is not None and info["froude"] <= info["walk_froude_max"] == 0.45
+    assert labels.mean(0).min() >= WALK_MIN_DUTY
+    assert (labels | ~slow.contacts).all()  # stance only grows
+    assert info["duty_after"] == pytest.approx(labels.mean(0).round(3).tolist())
+    # the same footfalls with no action known: decided by the Froude number alone
+    bare = slow.slice(0)
+    bare.metadata = {}
+    np.testing.assert_array_equal(walking_stance(bare, slow.contacts, bare)[0], labels)
+    # a trot is a trot
+    trot = generate("cat", "trot", seed=1, duration_s=3.0, froude=0.6, duty_factor=0.4)
+    kept, none = walking_stance(trot, trot.contacts, trot)
+    assert none is None and (kept == trot.contacts).all()
+    # faster than the cat walks, no action known: kept
+    bare = trot.slice(0)
+    bare.metadata = {}
+    assert walking_stance(bare, trot.contacts, bare)[1] is None
+    # a jump is not a cyclic gait
+    jump = generate("cat", "jump", seed=1)
+    assert walking_stance(jump, jump.contacts, jump)[1] is None
 
 
 def test_transfer_keeps_the_source_footfalls(trot) -> None:

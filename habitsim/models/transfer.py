@@ -73,6 +73,8 @@ __all__ = [
     "reconstruct",
     "direct_transfer",
     "transfer_contacts",
+    "walking_stance",
+    "WALK_MIN_DUTY",
     "resolve_checkpoint",
     "load_model",
     "shipped_checkpoint",
@@ -431,6 +433,66 @@ def transfer_contacts(
         "feet_by_duty": [n for n, lo in zip(FEET, low, strict=True) if lo],
     }
     return labels, info
+
+
+#: A gait whose duty factor is below one half has an aerial phase (BIOMECH.md, footfall
+#: table); a target species that walks at the transfer's speed has none, so a transfer
+#: below the top of the target's walking Froude band has every foot in stance at least
+#: this share of the clip (:func:`walking_stance`). Measured with ``habitsim bench real``:
+#: a real Labrador's fast lateral-sequence walk (duty factor 0.31–0.50, Froude 0.28–0.54)
+#: sent to the cat kept its single-foot frames, which need a residual root force of
+#: 0.28 m·g against 0.09 with two feet down (README, "Real motion").
+WALK_MIN_DUTY = 0.5
+
+
+def walking_stance(
+    out: Motion, contacts: np.ndarray, source: Motion
+) -> tuple[np.ndarray, dict[str, Any] | None]:
+    """The stance labels of a transfer to a species that walks at the transfer's speed.
+
+    When the transferred motion moves at a Froude number within the target's walking
+    band (at most the top of ``gaits.walk.froude`` in its species file), every foot
+    standing less than :data:`WALK_MIN_DUTY` of the clip has its stance runs lengthened
+    at both ends (:func:`habitsim.contacts.lengthen_stance`): the source's footfall
+    phases stay, the aerial phases and single-foot supports of a faster source go. Kept
+    as they are: labels of a gait that is not cyclic (a foot with fewer than two
+    touchdowns: a jump, a stand), of a source whose action the target performs in
+    another gait than its walk, and of a target species without a walk.
+
+    Returns:
+        ``(labels, info)``: the labels (the input when nothing changed) and None, or the
+        lengthened labels with what was done (``froude``, ``walk_froude_max``,
+        ``duty_before``, ``duty_after``).
+    """
+    from ..contacts import lengthen_stance, touchdown_frames
+    from ..gait_stats import gait_statistics
+    from ..gaits import action_gait
+    from ..gaits.actions import ACTIONS
+
+    walk = load_species(out.species).gaits.get("walk")
+    c = np.asarray(contacts, dtype=bool)
+    duty = c.mean(axis=0)
+    if walk is None or c.ndim != 2 or duty.min() >= WALK_MIN_DUTY:
+        return c, None
+    action = source.metadata.get("action")
+    if action in ACTIONS:
+        try:
+            if action_gait(out.species, str(action)) != "walk":
+                return c, None
+        except HabitsimError:  # an action the target lacks
+            return c, None
+    if any(td.size < 2 for td in touchdown_frames(c)):
+        return c, None
+    froude = gait_statistics(out, c).froude
+    if not froude <= walk.froude[1]:
+        return c, None
+    longer = lengthen_stance(c, WALK_MIN_DUTY)
+    return longer, {
+        "froude": round(float(froude), 3),
+        "walk_froude_max": float(walk.froude[1]),
+        "duty_before": [round(float(v), 3) for v in duty],
+        "duty_after": [round(float(v), 3) for v in longer.mean(axis=0)],
+    }
 
 
 #: Planting is kept only when every planted toe reaches its target within this share of
@@ -936,7 +998,8 @@ def _bound_height(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] |
 
 def _finish(out: Motion, source: Motion, info: dict[str, Any], plant: bool = False) -> Motion:
     """The decoded motion at the source's frame rate with its stance labels
-    (:func:`transfer_contacts`) and, with ``plant``, its feet planted on them by leg IK
+    (:func:`transfer_contacts`; without aerial phases at a speed the target walks,
+    :func:`walking_stance`) and, with ``plant``, its feet planted on them by leg IK
     (:func:`habitsim.planting.plant_motion`: each stance run held at one foothold on the
     ground, swing blended in between; footholds by the rules of :data:`FOOTHOLD_RULES`;
     a trunk whose fore and hind stance feet stand at different heights pitched level
@@ -958,6 +1021,9 @@ def _finish(out: Motion, source: Motion, info: dict[str, Any], plant: bool = Fal
         info = {**info, "height_bounded": lowered}
     meta = {k: v for k, v in source.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
     contacts, how = transfer_contacts(out, source, out.contacts)
+    contacts, walking = walking_stance(out, contacts, source)
+    if walking is not None:
+        how = {**how, "walking_stance": walking}
     planted: Any = False
     if plant and contacts.any():
         glob: np.ndarray | None = out.global_positions()
