@@ -139,6 +139,18 @@ def test_habit_transfer_plants_its_feet_on_its_labels(trot) -> None:
     assert _resting(planted, c) >= 0.95 > _resting(raw, c)
     z = planted.foot_positions()[..., 2][c] / planted.species_info.leg_length
     assert np.median(np.abs(z)) <= 0.01  # stance toes on the ground
+    # swing feet are lifted: in the middle of each swing run the toe is near the
+    # elephant's habitual swing height, not shuffling at the ground as decoded
+    leg = planted.species_info.leg_length
+    height = planted.species_info.habits.swing_height * leg
+    mid_planted, mid_raw = [], []
+    for f, runs in enumerate(contact_segments(~c)):
+        for a, b in runs:
+            if b - a >= 5 and a > 0 and b < len(c):  # whole swings between two stances
+                mid_planted.append(planted.foot_positions()[(a + b) // 2, f, 2])
+                mid_raw.append(raw.foot_positions()[(a + b) // 2, f, 2])
+    assert mid_planted and np.median(mid_planted) >= 0.8 * height
+    assert np.median(mid_raw) < 0.5 * height
     # the trunk is the decoder's: planting re-solves the legs only
     np.testing.assert_allclose(planted.root_positions[:, :2], raw.root_positions[:, :2], atol=1e-9)
 
