@@ -49,6 +49,7 @@ __all__ = [
     "touchdown_frames",
     "drop_short_runs",
     "lengthen_stance",
+    "fill_support",
     "warp_contacts",
     "foot_stride_periods",
     "stride_period",
@@ -311,6 +312,48 @@ def lengthen_stance(contacts: np.ndarray, min_share: float) -> np.ndarray:
                 break
         out[:, f] = grown
     return out
+
+
+def fill_support(contacts: np.ndarray, min_feet: int = 2) -> np.ndarray:
+    """Contact labels with at least ``min_feet`` feet in stance on every frame.
+
+    Frame by frame from the first short one, the stance run nearest in time to it is
+    lengthened to cover it: the run of a foot that lifted off last is held longer, or
+    the run of the foot that lands next lands earlier, whichever changes fewer frames.
+    A frame no run can reach (a foot with no stance at all) stays short.
+
+    Args:
+        contacts: (T, F) bool contact flags.
+        min_feet: the least number of feet in stance, in [0, F].
+
+    Returns:
+        (T, F) bool, a new array.
+    """
+    c = np.array(contacts, dtype=bool)
+    if c.ndim != 2:
+        raise InvalidMotionError(f"contacts must have shape (T, F), got {c.shape}")
+    t, nf = c.shape
+    if not 0 <= int(min_feet) <= nf:
+        raise InvalidMotionError(f"min_feet must lie in [0, {nf}], got {min_feet!r}")
+    skip = np.zeros(t, dtype=bool)
+    while True:
+        short = np.flatnonzero((c.sum(axis=1) < int(min_feet)) & ~skip)
+        if short.size == 0:
+            return c
+        k = int(short[0])
+        best: tuple[int, int, int, int] | None = None  # (cost, foot, lo, hi)
+        for foot in np.flatnonzero(~c[k]).tolist():
+            on = np.flatnonzero(c[:, foot])
+            before, after = on[on < k], on[on > k]
+            if before.size and (best is None or k - before[-1] < best[0]):
+                best = (k - int(before[-1]), foot, int(before[-1]) + 1, k + 1)
+            if after.size and (best is None or after[0] - k < best[0]):
+                best = (int(after[0]) - k, foot, k, int(after[0]))
+        if best is None:
+            skip[k] = True
+            continue
+        _, foot, lo, hi = best
+        c[lo:hi, foot] = True
 
 
 def warp_contacts(contacts: np.ndarray, n_frames: int) -> np.ndarray:

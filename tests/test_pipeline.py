@@ -10,7 +10,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from habitsim.contacts import contact_segments, drop_short_runs, lengthen_stance, warp_contacts
+from habitsim.contacts import (
+    contact_segments,
+    drop_short_runs,
+    fill_support,
+    lengthen_stance,
+    warp_contacts,
+)
 from habitsim.errors import InvalidMotionError
 from habitsim.gaits import generate
 from habitsim.models import transfer
@@ -19,6 +25,7 @@ from habitsim.models.transfer import (
     MIN_SOURCE_AGREEMENT,
     PLANT_MAX_REACH_PER_LEG,
     WALK_MIN_DUTY,
+    WALK_MIN_FEET,
     _reaches,
     transfer_contacts,
     walking_stance,
@@ -73,6 +80,33 @@ def test_lengthen_stance_keeps_the_middles_of_the_runs() -> None:
         lengthen_stance(c[:, 0], 0.5)
 
 
+def test_fill_support_lengthens_the_nearest_run() -> None:
+    c = np.zeros((30, 4), bool)
+    c[0:10, 0] = c[12:30, 0] = True  # foot 0 lifts for frames 10-11
+    c[0:8, 1] = True  # foot 1 lifted off at frame 8 ...
+    c[15:30, 1] = True  # ... and lands again at 15
+    c[:, 2] = False  # foot 2 never stands
+    c[0:3, 3] = c[25:30, 3] = True
+    out = fill_support(c, 2)
+    assert (out.sum(axis=1) >= 2).all()
+    assert (out | ~c).all()  # stance only grows
+    # frames 8-14 had one foot or none: each short frame took the nearest run, one frame
+    # at a time (foot 1 held on from frame 8, foot 0 from frame 10, foot 1 again from 12):
+    # both gaps close, feet 2 and 3 are untouched
+    assert out[:, 0].all() and out[:, 1].all()
+    np.testing.assert_array_equal(out[:, 3], c[:, 3])
+    np.testing.assert_array_equal(out[:, 2], c[:, 2])
+    # a frame no run can reach stays short
+    lone = np.zeros((5, 2), bool)
+    lone[:, 0] = True
+    np.testing.assert_array_equal(fill_support(lone, 2), lone)
+    np.testing.assert_array_equal(fill_support(c, 0), c)
+    with pytest.raises(InvalidMotionError, match="min_feet"):
+        fill_support(c, 5)
+    with pytest.raises(InvalidMotionError, match="shape"):
+        fill_support(c[:, 0], 2)
+
+
 def test_walking_stance_only_where_the_target_walks() -> None:
     """A cat at a walking Froude number gets no aerial phase; a trot, a faster clip and a
     jump keep their labels."""
@@ -81,6 +115,7 @@ def test_walking_stance_only_where_the_target_walks() -> None:
     labels, info = walking_stance(slow, slow.contacts, slow)
     assert info is not None and info["froude"] <= info["walk_froude_max"] == 0.45
     assert labels.mean(0).min() >= WALK_MIN_DUTY
+    assert (labels.sum(axis=1) >= WALK_MIN_FEET).all()  # never fewer than two feet down
     assert (labels | ~slow.contacts).all()  # stance only grows
     assert info["duty_after"] == pytest.approx(labels.mean(0).round(3).tolist())
     # the same footfalls with no action known: decided by the Froude number alone

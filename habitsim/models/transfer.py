@@ -443,6 +443,14 @@ def transfer_contacts(
 #: sent to the cat kept its single-foot frames, which need a residual root force of
 #: 0.28 m·g against 0.09 with two feet down (README, "Real motion").
 WALK_MIN_DUTY = 0.5
+#: ... and at least this many feet down on every frame (:func:`habitsim.contacts.
+#: fill_support`; 0 switches it off): a duty factor of one half with the uneven footfall
+#: spacing of a real walk, or a clip that speeds up at its end, still left single-foot
+#: supports (a cat transfer of a Labrador walk that speeds up stood on one foot for the
+#: last 0.3 s and fell there). With it the habit references of ``habitsim bench real``
+#: need a median residual root force of 0.078 m·g instead of 0.108 (the cat's three
+#: walking windows 0.07–0.08 instead of 0.10–0.12).
+WALK_MIN_FEET = 2
 
 
 def walking_stance(
@@ -453,8 +461,10 @@ def walking_stance(
     When the transferred motion moves at a Froude number within the target's walking
     band (at most the top of ``gaits.walk.froude`` in its species file), every foot
     standing less than :data:`WALK_MIN_DUTY` of the clip has its stance runs lengthened
-    at both ends (:func:`habitsim.contacts.lengthen_stance`): the source's footfall
-    phases stay, the aerial phases and single-foot supports of a faster source go. Kept
+    at both ends (:func:`habitsim.contacts.lengthen_stance`), then every frame with
+    fewer than :data:`WALK_MIN_FEET` feet down takes the stance run nearest in time
+    (:func:`habitsim.contacts.fill_support`): the source's footfall phases stay, the
+    aerial phases and single-foot supports of a faster source go. Kept
     as they are: labels of a gait that is not cyclic (a foot with fewer than two
     touchdowns: a jump, a stand), of a source whose action the target performs in
     another gait than its walk, and of a target species without a walk.
@@ -464,7 +474,7 @@ def walking_stance(
         lengthened labels with what was done (``froude``, ``walk_froude_max``,
         ``duty_before``, ``duty_after``).
     """
-    from ..contacts import lengthen_stance, touchdown_frames
+    from ..contacts import fill_support, lengthen_stance, touchdown_frames
     from ..gait_stats import gait_statistics
     from ..gaits import action_gait
     from ..gaits.actions import ACTIONS
@@ -487,6 +497,8 @@ def walking_stance(
     if not froude <= walk.froude[1]:
         return c, None
     longer = lengthen_stance(c, WALK_MIN_DUTY)
+    if WALK_MIN_FEET:
+        longer = fill_support(longer, WALK_MIN_FEET)
     return longer, {
         "froude": round(float(froude), 3),
         "walk_froude_max": float(walk.froude[1]),
