@@ -293,6 +293,26 @@ def test_label_source_stance_floor_and_hold():
     assert st.contacts[:, 2].all() and st.contacts[:, 3].all()
 
 
+def test_label_source_stance_follows_a_floor_that_steps_down():
+    # Four feet walking (stride 0.5 s, duty 0.6, 6 cm swings) on a capture floor that is
+    # 2 cm lower after 2 s (a mat's edge, a sloping floor): every stance frame on either
+    # side is found, also the ones just before the step, where a floor window much
+    # longer than a stride would already reach the lower floor.
+    fps, leg, t = 60.0, 0.6, 240
+    tt = np.arange(t) / fps
+    floor = np.where(tt < 2.0, 0.03, 0.01)
+    ph = (tt % 0.5) / 0.5
+    stance = ph < 0.6
+    sw = np.clip((ph - 0.6) / 0.4, 0, 1)
+    z = floor + np.where(stance, 0.0, 0.06 * np.sin(np.pi * sw))
+    x = np.floor(tt / 0.5) * 0.5 + np.where(stance, 0.0, 0.5 * (3 * sw**2 - 2 * sw**3))
+    pts = [np.stack([x + o, np.zeros(t), z], -1)[:, None] for o in (0.0, 0.1, 0.2, 0.3)]
+    st = label_source_stance(pts, fps, leg)
+    for k in range(4):
+        assert st.contacts[stance, k].mean() >= 0.99
+        assert not st.contacts[(sw > 0.2) & (sw < 0.8), k].any()  # swings stay swings
+
+
 def test_cli_inspect_and_import_with_warning(rig, tmp_path, capsys):
     p = tmp_path / "rig.bvh"
     p.write_text(rig.to_text())
