@@ -75,6 +75,7 @@ __all__ = [
     "transfer_contacts",
     "walking_stance",
     "WALK_MIN_DUTY",
+    "WALK_MIN_FEET",
     "resolve_checkpoint",
     "load_model",
     "shipped_checkpoint",
@@ -587,7 +588,7 @@ def _reaches(report: dict[str, Any]) -> bool:
 #: model`` (182 synthetic transfers) action accuracy 0.714 → 0.802 (the frozen evaluator
 #: reads a shuffling walk as another action), stance toes at rest unchanged (95.7 %);
 #: ``habitsim bench real`` habit transfers' skate before refinement 42.5 → 0.0 mm/frame
-#: (median) and refinement time 2.9 → 1.2 s per window (median).
+#: (median).
 SWING_LIFT = True
 
 
