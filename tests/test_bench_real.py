@@ -85,6 +85,8 @@ def test_bench_real_rows_and_json(folder: Path, tmp_path: Path, capsys) -> None:
         assert isinstance(row[k], float), k
     assert 0.0 <= row["reference_torque_saturation"] <= 1.0
     assert row["refine_check"] in ("kept", "reverted", "fallback")
+    assert row["walking_stance"] is None  # direct keeps the source's labels
+    assert "contacts source 1 (walking stance 0)" in text
     # --repeats 2: the row's own run, then one from a perturbed initial state
     assert len(row["survival_runs"]) == 2 and row["survival_runs"][0] == row["survival"]
     assert row["whole_runs"] == sum(x >= 1.0 for x in row["survival_runs"])

@@ -230,6 +230,13 @@ def _reference_dynamics(run: Any) -> dict[str, float]:
         return {}
 
 
+def _walking_stance(motion: Any) -> dict[str, Any] | None:
+    """What :func:`habitsim.models.transfer.walking_stance` did to a transfer's labels
+    (None: not applied)."""
+    how = ((motion.metadata or {}).get("transfer") or {}).get("contacts") or {}
+    return how.get("walking_stance") if isinstance(how, dict) else None
+
+
 def run_window(task: WindowTask) -> list[dict[str, Any]]:
     """Every method of one (window, target) through the pipeline: one row per method.
 
@@ -300,6 +307,7 @@ def run_window(task: WindowTask) -> list[dict[str, Any]]:
         row.update(
             {
                 "contacts_method": run.transferred.contacts_method,
+                "walking_stance": _walking_stance(run.transferred.motion),
                 "planted": _planted(run.transferred.motion),
                 "stance_toe_height_transfer": _num(a.get("stance_toe_height_per_leg")),
                 "stance_toe_height_refined": _num(b.get("stance_toe_height_per_leg")),
@@ -564,6 +572,7 @@ def format_summary(rows: Sequence[dict[str, Any]], targets: Sequence[dict[str, A
             f"(whole window {sum(s >= 1.0 for s in surv)}/{len(surv)}); sim MPJPE/L "
             f"{_f(_median(ok, 'sim_mpjpe_per_leg'), 3)}; contacts "
             + ", ".join(f"{k} {v}" for k, v in sorted(how.items()))
+            + f" (walking stance {sum(r.get('walking_stance') is not None for r in ok)})"
             + "; planted "
             + ", ".join(f"{k} {v}" for k, v in sorted(planted.items()))
             + "; refinement check "
