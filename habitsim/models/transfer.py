@@ -482,8 +482,10 @@ def walking_stance(
 
     walk = load_species(out.species).gaits.get("walk")
     c = np.asarray(contacts, dtype=bool)
+    if walk is None or c.ndim != 2:
+        return c, None
     duty = c.mean(axis=0)
-    if walk is None or c.ndim != 2 or duty.min() >= WALK_MIN_DUTY:
+    if duty.min() >= WALK_MIN_DUTY:
         return c, None
     action = source.metadata.get("action")
     if action in ACTIONS:
