@@ -439,6 +439,59 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
     assert mod._plant_partly(Motion("dog", walk.fps, root, walk.rotations, c), c) is None
 
 
+def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) -> None:
+    # the dog walk with its body three times as fast: long stance runs sweep beyond the
+    # legs; trimmed at both ends they are held, and fewer stance frames slide
+    from habitsim.contacts import contact_segments
+    from habitsim.motion import Motion
+
+    mod = importlib.import_module("habitsim.models.transfer")
+    c = walk.contacts
+    step = np.diff(walk.root_positions[:, :2], axis=0) * 3.0
+    root = walk.root_positions.copy()
+    root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
+    fast = Motion("dog", walk.fps, root, walk.rotations, c)
+    labels, rep = mod._trim_to_reach(fast, c)
+    assert rep is not None and rep["runs"] >= 3
+    assert not (labels & ~c).any()  # only stance frames are taken off
+    assert rep["frames"] == int((c & ~labels).sum()) > 0
+    t = len(c)
+    shortest = max(2, round(mod.TRIM_MIN_RUN_S * walk.fps))
+    for k, segs in enumerate(contact_segments(c)):
+        for a, b in segs:
+            kept = np.flatnonzero(labels[a:b, k])
+            if kept.size == b - a:
+                continue
+            assert kept.size >= shortest and np.all(np.diff(kept) == 1)  # one run left
+            head, tail = kept[0], (b - a) - 1 - kept[-1]
+            if 0 < a and b < t:
+                assert abs(int(head) - int(tail)) <= 1  # centred: the footfall phase stays
+    # only the runs asked for
+    first = np.zeros_like(c)
+    first[: len(c) // 4] = True
+    part, _ = mod._trim_to_reach(fast, c, only=first)
+    assert np.array_equal(part[len(c) // 2 :], c[len(c) // 2 :]) and (part != c).any()
+    # the partial planting holds more of the stance on the trimmed labels, and with
+    # ``trim`` it trims the runs it would leave free and steps on the new labels
+    _, loose = mod._plant_partly(fast, c)
+    _, tight = mod._plant_partly(fast, labels)
+    held = (1.0 - tight["free_share"]) * labels.sum()
+    assert held > (1.0 - loose["free_share"]) * c.sum()
+    assert tight["free_share"] < loose["free_share"]
+    moved, rep = mod._plant_partly(fast, c, trim=True)
+    assert rep["trimmed"]["frames"] > 0 and rep["free_share"] < loose["free_share"]
+    assert not (moved.contacts & ~c).any() and (moved.contacts != c).any()
+    leg = walk.species_info.leg_length
+    toes = moved.foot_positions()
+    held_runs = [
+        (k, a, b)
+        for k, segs in enumerate(contact_segments(moved.contacts))
+        for a, b in segs
+        if np.ptp(toes[a:b, k, :2], axis=0).max() <= 0.01 * leg
+    ]
+    assert len(held_runs) > loose["free_runs"][1] - loose["free_runs"][0]
+
+
 def test_decoded_speed_is_bounded_by_the_source_speed_at_equal_froude(walk) -> None:
     from habitsim.motion import Motion
 
