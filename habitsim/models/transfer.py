@@ -797,11 +797,11 @@ def _trim_to_reach(
     from ..contacts import contact_segments
     from ..planting import stance_run_shortfall
 
-    c = np.asarray(contacts, dtype=bool).copy()
+    before = np.asarray(contacts, dtype=bool)  # read only
+    c = before.copy()
     margin = TRIM_MARGIN_PER_LEG * out.species_info.leg_length
     glob = out.global_positions() if glob is None else glob
     shortest = max(2, int(round(TRIM_MIN_RUN_S * out.fps)))
-    before = c.copy()
     short = stance_run_shortfall(out, c, True, -margin, glob=glob)
     # (foot, start, stop) of the runs to trim, by their original extent
     active = [
