@@ -279,28 +279,35 @@ class Motion:
 _REQUIRED = ("format_version", "species", "fps", "root_positions", "rotations", "joint_names")
 
 
-def resample_motion(motion: Motion, fps: float) -> Motion:
+def resample_motion(motion: Motion, fps: float, num_frames: int | None = None) -> Motion:
     """The motion at another frame rate, over the same duration.
 
     Rotations are slerped, the root interpolated linearly and contact labels taken from
-    the nearest frame; ``(T − 1) / fps_old · fps`` is rounded to whole frames. The same
-    motion object is returned when the rates match.
+    the nearest frame; ``(T − 1) / fps_old · fps`` is rounded to whole frames unless
+    ``num_frames`` fixes the count (frames past the motion's end hold its last frame).
+    The same motion object is returned when the rates and frame counts match.
 
     Args:
         motion: the motion.
         fps: the new frame rate [Hz], > 0.
+        num_frames: the number of frames to return (default: the same duration).
 
     Returns:
         A new :class:`Motion` (metadata copied).
+
+    Raises:
+        InvalidMotionError: a rate that is not > 0 or a frame count < 1.
     """
     if not (np.isfinite(fps) and fps > 0):
         raise InvalidMotionError(f"fps must be > 0, got {fps!r}")
-    if abs(motion.fps - fps) < 1e-9:
-        return motion
+    if num_frames is not None and num_frames < 1:
+        raise InvalidMotionError(f"num_frames must be ≥ 1, got {num_frames!r}")
     n = motion.num_frames
+    if abs(motion.fps - fps) < 1e-9 and num_frames in (None, n):
+        return motion
     dur = (n - 1) / motion.fps
-    m = max(1, int(round(dur * fps)) + 1)
-    t = np.arange(m) / fps * motion.fps  # fractional source frame
+    m = max(1, int(round(dur * fps)) + 1) if num_frames is None else int(num_frames)
+    t = np.minimum(np.arange(m) / fps * motion.fps, n - 1)  # fractional source frame
     i0 = np.clip(np.floor(t).astype(int), 0, n - 1)
     i1 = np.minimum(i0 + 1, n - 1)
     a = (t - i0)[:, None]

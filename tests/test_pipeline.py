@@ -557,6 +557,57 @@ def test_decoded_height_excursions_are_bounded_by_the_source(walk) -> None:
     assert info is None or info["range_per_leg"][1] >= 0.95 * info["range_per_leg"][0]
 
 
+def test_a_wagging_decoded_heading_is_slowed_to_the_bound(walk) -> None:
+    from habitsim.models.features import heading_yaw
+    from habitsim.motion import Motion
+    from habitsim.rotations import quat_from_axis_angle, quat_mul
+
+    mod = importlib.import_module("habitsim.models.transfer")
+    cat = generate("cat", like=walk)
+    t = cat.num_frames
+    axis = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (t, 3))
+
+    def turned(angle: np.ndarray) -> Motion:
+        rot = cat.rotations.copy()
+        rot[:, 0] = quat_mul(quat_from_axis_angle(axis, angle), rot[:, 0])
+        return Motion("cat", cat.fps, cat.root_positions, rot, cat.contacts)
+
+    def rate(m: Motion) -> np.ndarray:
+        dev = np.unwrap(heading_yaw(m.rotations[:, 0])) - np.unwrap(
+            heading_yaw(cat.rotations[:, 0])
+        )
+        return np.abs(np.gradient(dev)) * m.fps
+
+    # the same heading, or a slow drift of 20° over the clip: left as decoded
+    same, info = mod._bound_heading(cat, walk)
+    assert info is None and same is cat
+    drift = turned(np.linspace(0.0, np.radians(20.0), t))
+    assert mod._bound_heading(drift, walk)[1] is None
+    # the body wagged by ±60° at 4 Hz about the pelvis (a decoder off its data):
+    # the wag is low-passed away, the root path and every other joint kept
+    sec = np.arange(t) / cat.fps
+    wag = turned(np.radians(60.0) * np.sin(2.0 * np.pi * 4.0 * sec))
+    assert rate(wag).max() > 5.0 * mod.HEADING_MAX_RATE
+    calm, info = mod._bound_heading(wag, walk)
+    assert info is not None and info["max_rate"][0] > 5.0 * mod.HEADING_MAX_RATE
+    inner = rate(calm)[t // 4 : -t // 4]  # away from the ends the filter pads
+    assert inner.max() < mod.HEADING_MAX_RATE
+    np.testing.assert_array_equal(calm.root_positions, wag.root_positions)
+    np.testing.assert_allclose(calm.rotations[:, 1:], wag.rotations[:, 1:], atol=1e-12)
+    # a steady turn away to 90° over the clip (a target turning at its own rate): kept
+    away = turned(np.linspace(0.0, np.radians(90.0), t))
+    assert mod._bound_heading(away, walk)[1] is None
+    # a swing out to 80° and back within a second, under the rate bound: cut to the band
+    # about the departure's slow trend
+    swing = np.radians(80.0) * np.exp(-0.5 * ((sec - sec.mean()) / 0.3) ** 2)
+    assert rate(turned(swing)).max() < mod.HEADING_MAX_RATE
+    held, info = mod._bound_heading(turned(swing), walk)
+    assert info is not None and info["max_departure_deg"][0] > 79.0
+    dev = np.unwrap(heading_yaw(held.rotations[:, 0])) - np.unwrap(heading_yaw(cat.rotations[:, 0]))
+    # the 1 s trend of a 0.3 s swing rises by about a quarter of it: 45° + ~24°
+    assert np.radians(60.0) < np.abs(dev).max() < np.radians(72.0)
+
+
 def test_a_sloping_decoded_trunk_is_levelled_about_the_pelvis(walk) -> None:
     from habitsim.models.features import heading_yaw
     from habitsim.motion import Motion
@@ -621,3 +672,20 @@ def test_plant_summary_keeps_swing_misses_at_the_clip_ends_apart() -> None:
     free[:3, 2] = True
     d = mod._summary(rep, c, leg=1.0, free=free)
     assert d["max_reach_error_per_leg"] == 0.0
+
+
+def test_a_transfer_keeps_the_sources_frame_count_through_the_models_rate(walk) -> None:
+    # 120 fps, 478 frames: 3.98 s that the model's 30 fps grid does not divide; the
+    # round trip to its rate and back would add or drop a frame at the end, and the
+    # source-relative bounds (speed, height, heading) compare frame for frame
+    long = generate("dog", "walk", seed=2, duration_s=4.5)
+    src = resample_motion(long, 120.0, 478)
+    assert src.num_frames == 478
+    held = resample_motion(walk, 120.0, 300)  # 2.5 s of a 2 s clip: its last frame held
+    np.testing.assert_allclose(held.root_positions[-60:], walk.root_positions[[-1] * 60])
+    with pytest.raises(InvalidMotionError, match="num_frames"):
+        resample_motion(walk, 120.0, 0)
+    for method in ("habit", "direct"):
+        out = transfer(src, to="cat", method=method, seed=0)
+        assert out.num_frames == src.num_frames and out.fps == src.fps
+        assert out.contacts is not None and out.contacts.shape == (src.num_frames, 4)

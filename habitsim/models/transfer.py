@@ -1157,6 +1157,72 @@ def _bound_height(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] |
     }
 
 
+#: The decoded heading may turn away from the source's at most this fast [rad/s] (the
+#: rate of the difference of the two pelvis headings, :func:`_bound_heading`) ...
+HEADING_MAX_RATE = 3.0
+#: ... beyond, the difference is low-passed by a Gaussian of this standard deviation [s] ...
+HEADING_SMOOTH_S = 0.25
+#: ... and it never swings further than this angle [rad] (45°) from its own slow trend,
+#: the departure low-passed by :data:`HEADING_TREND_S` (a target that turns at its own
+#: rate departs steadily from the source's heading through a turn; that is kept).
+HEADING_BAND = np.pi / 4
+HEADING_TREND_S = 1.0
+
+
+def _bound_heading(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] | None]:
+    """The decoded motion with its heading's departures from the source's slowed to
+    :data:`HEADING_MAX_RATE` and held within :data:`HEADING_BAND`, and what was changed
+    (``None``: nothing).
+
+    A transfer keeps the source's action, turns included: where the decoded pelvis
+    heading swings away from the source's faster than any trunk turns (a decoder off
+    its training data can wag the whole body by ±90° a few times a second, or spin it
+    round, on a backward walk), the heading difference is replaced by its low-pass
+    (:data:`HEADING_SMOOTH_S`), blended in where the swing exceeds the bound, and its
+    swing about its own slow trend is clipped to the band. The body turns about the
+    pelvis; the root path is kept. A decoded heading that departs slowly (a habitual
+    drift, or a turn at the target's own rate) stays as decoded.
+    """
+    from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+
+    from ..rotations import quat_from_axis_angle, quat_mul
+    from .features import heading_yaw
+
+    t = out.num_frames
+    if t < 3 or source.num_frames != t:
+        return out, None
+    sigma = max(1.0, HEADING_SMOOTH_S * out.fps)
+    # against the source's heading low-passed alike (a mocap pelvis jitters in yaw)
+    src = gaussian_filter1d(np.unwrap(heading_yaw(source.rotations[:, 0])), sigma, mode="nearest")
+    dev = np.unwrap(heading_yaw(out.rotations[:, 0])) - src
+    rate = np.abs(np.gradient(dev)) * out.fps
+    new = dev
+    if rate.max() > HEADING_MAX_RATE:
+        size = 2 * int(round(sigma)) + 1
+        env = gaussian_filter1d(maximum_filter1d(rate, size, mode="nearest"), sigma)
+        w = np.clip(env / HEADING_MAX_RATE - 1.0, 0.0, 1.0)
+        new = dev + w * (gaussian_filter1d(dev, sigma, mode="nearest") - dev)
+    trend = gaussian_filter1d(dev, max(1.0, HEADING_TREND_S * out.fps), mode="nearest")
+    new = trend + np.clip(new - trend, -HEADING_BAND, HEADING_BAND)
+    turn = new - dev
+    changed = np.abs(turn) > 1e-6
+    if not changed.any():
+        return out, None
+    rot = np.array(out.rotations, dtype=np.float64, copy=True)
+    axis = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (t, 3))
+    rot[:, 0] = quat_mul(quat_from_axis_angle(axis, turn), rot[:, 0])
+    moved = Motion(out.species, out.fps, out.root_positions, rot, out.contacts, dict(out.metadata))
+    after = np.abs(np.gradient(new)) * out.fps
+    return moved, {
+        "frames": int(changed.sum()),
+        "max_rate": [round(float(rate.max()), 2), round(float(after.max()), 2)],
+        "max_departure_deg": [
+            round(float(np.degrees(np.abs(dev).max())), 1),
+            round(float(np.degrees(np.abs(new).max())), 1),
+        ],
+    }
+
+
 def _finish(out: Motion, source: Motion, info: dict[str, Any], plant: bool = False) -> Motion:
     """The decoded motion at the source's frame rate with its stance labels
     (:func:`transfer_contacts`; without aerial phases at a speed the target walks,
@@ -1174,13 +1240,18 @@ def _finish(out: Motion, source: Motion, info: dict[str, Any], plant: bool = Fal
     the footholds were out of reach without IK), ``trimmed`` where stance runs were
     shortened to the legs' reach (the labels returned are then the trimmed ones,
     :func:`_trim_to_reach`) and ``reason`` where the first try missed."""
-    out = _resample(out, source.fps)
+    # frame for frame with the source (a round trip through the model's rate can add or
+    # drop a frame at the end)
+    out = resample_motion(out, source.fps, source.num_frames)
     out, bounded = _bound_speed(out, source)
     if bounded is not None:
         info = {**info, "speed_bounded": bounded}
     out, lowered = _bound_height(out, source)
     if lowered is not None:
         info = {**info, "height_bounded": lowered}
+    out, turned = _bound_heading(out, source)
+    if turned is not None:
+        info = {**info, "heading_bounded": turned}
     meta = {k: v for k, v in source.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
     contacts, how = transfer_contacts(out, source, out.contacts)
     contacts, walking = walking_stance(out, contacts, source)
