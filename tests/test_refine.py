@@ -396,6 +396,36 @@ def test_non_convergence_raises_or_falls_back():
     assert res.report["success"] is False
 
 
+def test_guard_retry_starts_from_the_previous_solution(monkeypatch, dog_trot_100) -> None:
+    """A guard retry (the first result called worse here) warm-starts from the first
+    attempt's solution with the exact Hessian and its jerk weights switched on."""
+    calls: list[tuple[np.ndarray | None, np.ndarray, list[dict], float]] = []
+    solve_windows, compare = S._solve_windows, S.compare_metrics
+
+    def spy(prep, motion, opts, plan, model_arg, info, x_init=None):
+        out = solve_windows(prep, motion, opts, plan, model_arg, info, x_init)
+        calls.append(
+            (None if x_init is None else x_init.copy(), out[0].copy(), out[1], opts.w_jerk)
+        )
+        return out
+
+    def first_worse(a, b):
+        v = compare(a, b)
+        return {**v, "worse": ["jerk"], "ok": False} if len(calls) == 1 else v
+
+    monkeypatch.setattr(S, "_solve_windows", spy)
+    monkeypatch.setattr(S, "compare_metrics", first_worse)
+    clip = dog_trot_100.slice(0, 40)
+    res = refine(clip, RefineOptions(guard=1))
+    assert res.success and len(res.report["guard"]) == 1 and len(calls) == 2
+    (x0, first, log0, jerk0), (warm, _, log1, jerk1) = calls
+    assert x0 is None and warm is not None
+    np.testing.assert_array_equal(warm, first)
+    assert jerk0 == 0.0 and jerk1 == S.GUARD_START["w_jerk"]
+    assert log0[0]["hessian"] == "gauss-newton"
+    assert all(e["hessian"] == "exact" and "retry_of" not in e for e in log1)
+
+
 def test_bad_contacts_fail_before_a_problem_is_built(monkeypatch) -> None:
     import habitsim.refine.solve as solve_module
 
