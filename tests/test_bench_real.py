@@ -14,6 +14,7 @@ from habitsim.cli.bench_real import (
     _read_source,
     evaluate_targets,
     exit_code,
+    format_summary,
     source_files,
     survival_runs,
 )
@@ -179,6 +180,23 @@ def test_survival_targets_count_every_run_of_every_window() -> None:
     assert t["habit"]["verdict"] == "MISSED"
     assert survival_runs(_row("direct", 0.3)) == [0.3]  # one run without repeats
     assert survival_runs(_row("direct", None)) == []
+
+
+def test_summary_shows_survival_per_target() -> None:
+    """Each target's line averages every run of its windows, per method."""
+    rows = [
+        _row("habit", 1.0, target="cat", survival_runs=[1.0, 0.5]),
+        _row("habit", 1.0, target="horse"),
+        _row("direct", 0.8, target="cat", survival_runs=[0.8, 1.0]),
+        _row("direct", None, target="horse", status="error"),
+    ]
+    text = format_summary(rows, evaluate_targets(rows, seconds=4))
+    lines = text.splitlines()
+    head = lines.index("  mean survival per target over every run (habit / direct):")
+    assert lines[head + 1].split() == ["cat", "0.75", "/", "0.90"]
+    assert lines[head + 2].split() == ["horse", "1.00", "/", "-"]
+    untracked = [_row("habit", None, target="cat")]
+    assert "per target" not in format_summary(untracked, evaluate_targets(untracked, seconds=4))
 
 
 def test_bad_input(folder: Path, tmp_path: Path, capsys) -> None:

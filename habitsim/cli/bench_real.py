@@ -534,6 +534,28 @@ def _median(rows: Sequence[dict[str, Any]], key: str) -> float | None:
     return float(statistics.median(v)) if v else None
 
 
+def _per_target_survival(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """One line per target: the mean survival of each method over every tracking run of
+    its windows (where habit and direct part), or nothing without tracking."""
+    ok = [r for r in rows if r.get("status") == "ok" and survival_runs(r)]
+    methods = list(dict.fromkeys(r["method"] for r in ok))
+    if not ok:
+        return []
+    lines = [f"  mean survival per target over every run ({' / '.join(methods)}):"]
+    for tgt in dict.fromkeys(str(r.get("target")) for r in ok):
+        cells = []
+        for m in methods:
+            runs = [
+                x
+                for r in ok
+                if r["method"] == m and str(r.get("target")) == tgt
+                for x in survival_runs(r)
+            ]
+            cells.append(f"{np.mean(runs):.2f}" if runs else "-")
+        lines.append(f"    {tgt:10s} {' / '.join(cells)}")
+    return lines
+
+
 def format_summary(rows: Sequence[dict[str, Any]], targets: Sequence[dict[str, Any]]) -> str:
     """Per-method figures, wall time per stage and the targets block."""
     lines = ["", "summary per method (medians over the windows; survival: mean):"]
@@ -589,6 +611,7 @@ def format_summary(rows: Sequence[dict[str, Any]], targets: Sequence[dict[str, A
             f"{_f(_median(ok, 'time_track_s'))} (with the check's run of the unrefined "
             f"clip), total {_f(_median(ok, 'time_total_s'))}"
         )
+    lines += _per_target_survival(rows)
     reverted = [r for r in rows if r.get("refine_check") == "reverted"]
     for r in reverted:
         lines.append(
