@@ -537,21 +537,16 @@ def _median(rows: Sequence[dict[str, Any]], key: str) -> float | None:
 def _per_target_survival(rows: Sequence[dict[str, Any]]) -> list[str]:
     """One line per target: the mean survival of each method over every tracking run of
     its windows (where habit and direct part), or nothing without tracking."""
-    ok = [r for r in rows if r.get("status") == "ok" and survival_runs(r)]
-    methods = list(dict.fromkeys(r["method"] for r in ok))
-    if not ok:
+    runs: dict[tuple[str, str], list[float]] = {}
+    for r in rows:
+        if r.get("status") == "ok" and survival_runs(r):
+            runs.setdefault((str(r.get("target")), r["method"]), []).extend(survival_runs(r))
+    if not runs:
         return []
+    methods = list(dict.fromkeys(m for _, m in runs))
     lines = [f"  mean survival per target over every run ({' / '.join(methods)}):"]
-    for tgt in dict.fromkeys(str(r.get("target")) for r in ok):
-        cells = []
-        for m in methods:
-            runs = [
-                x
-                for r in ok
-                if r["method"] == m and str(r.get("target")) == tgt
-                for x in survival_runs(r)
-            ]
-            cells.append(f"{np.mean(runs):.2f}" if runs else "-")
+    for tgt in dict.fromkeys(t for t, _ in runs):
+        cells = [f"{np.mean(runs[tgt, m]):.2f}" if (tgt, m) in runs else "-" for m in methods]
         lines.append(f"    {tgt:10s} {' / '.join(cells)}")
     return lines
 

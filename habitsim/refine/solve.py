@@ -881,8 +881,8 @@ def _solve_windows(
     x_init: np.ndarray | None = None,
 ) -> tuple[np.ndarray, list[dict], str, float]:
     """Solve the windows of ``plan`` in turn from ``prep.x0``, or from ``x_init`` (a
-    guard retry: the previous attempt's solution, solved with the exact Hessian only,
-    :data:`GUARD_WEIGHTS`)."""
+    guard retry, :data:`GUARD_WEIGHTS`: the previous attempt's solution, solved with the
+    exact Hessian only)."""
     x = (prep.x0 if x_init is None else x_init).copy()
     log: list[dict] = []
     build_s = 0.0
