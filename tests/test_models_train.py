@@ -17,7 +17,7 @@ from habitsim.models.checkpoint import MODEL_FILE, load_checkpoint, save_checkpo
 from habitsim.models.config import preset
 from habitsim.models.data import ClipSet, WindowSampler, feature_stats
 from habitsim.models.errors import CheckpointError, TrainingDataError
-from habitsim.models.features import clip_arrays
+from habitsim.models.features import canonical_window, clip_arrays
 from habitsim.models.train import build_untrained, compute_losses, train
 from habitsim.species import load_species, species_names
 
@@ -406,6 +406,62 @@ def test_fine_tune_starts_from_the_checkpoint(tiny_data, tmp_path):
             progress=False,
             log=lambda s: None,
             init=base.out_dir,
+        )
+
+
+def test_fine_tune_adds_the_heading_to_a_path_conditioned_checkpoint(tiny_data, tmp_path):
+    """``model.path_heading`` may be switched on when fine-tuning a path-conditioned
+    checkpoint: the decoder's weights on the new heading channels start at zero, so on a
+    path whose heading stays the window's the fine-tune starts from the base's decoder
+    exactly; on a checkpoint without the path it stays refused."""
+    text = _fake_text()
+    cfg = _tiny_config(steps=3, **{"model.path_condition": True})
+    base = train(
+        tiny_data, tmp_path / "base", cfg, progress=False, log=lambda s: None, text_embeddings=text
+    )
+    b = load_checkpoint(base.out_dir).model
+    ft_cfg = cfg.replace(
+        **{
+            "model.path_heading": True,
+            "train.steps": 1,
+            "train.lr": 1e-12,
+            "train.lr_final": 1e-12,
+            "train.input_noise": 0.0,
+        }
+    )
+    ft = train(
+        tiny_data, tmp_path / "ft", ft_cfg, progress=False, log=lambda s: None, init=base.out_dir
+    )
+    m = load_checkpoint(ft.out_dir).model
+    assert m.cfg.path_heading and m.path_dim == b.path_dim + 2
+    w = m.state_dict()["decoder.inp.weight"]
+    c = cfg.model.quantizer.code_dim
+    assert float(w[:, c + 2 : c + 4].abs().max()) < 1e-6  # the heading channels start at zero
+    clip = generate("cat", "trot", seed=0, duration_s=1.0)
+    x = torch.from_numpy(canonical_window(clip_arrays(clip), 0, cfg.model.window)[0][None])
+    x[..., :4] = torch.tensor([1.0, 0.0, 0.0, 0.0])  # a heading that stays the window's
+    with torch.no_grad():
+        codes = b.quantize(b.encode(x), sample=False, update=False).quantized
+        cond = b.condition(["cat"], b.posterior(x, ["cat"])[0])
+        torch.testing.assert_close(
+            m.decode(codes, cond, m.path(x)), b.decode(codes, cond, b.path(x)), atol=1e-4, rtol=0
+        )
+    plain = train(
+        tiny_data,
+        tmp_path / "plain",
+        _tiny_config(steps=1),
+        progress=False,
+        log=lambda s: None,
+        text_embeddings=text,
+    )
+    with pytest.raises(CheckpointError, match="model configuration differs"):
+        train(
+            tiny_data,
+            tmp_path / "bad",
+            ft_cfg,
+            progress=False,
+            log=lambda s: None,
+            init=plain.out_dir,
         )
 
 

@@ -103,6 +103,36 @@ def test_path_conditioned_decoder_follows_the_path_it_is_given():
     assert not any("path" in k for k in plain.state_dict())
 
 
+def test_path_heading_gives_the_heading_and_the_velocity_in_its_frame():
+    """With ``path_heading`` the path's last two channels are (cos ψ, sin ψ) of the pelvis
+    heading in the window's frame and its first two the velocity in the heading's frame,
+    per code: a turning walk keeps moving forwards on it, a backward walk backwards, while
+    the heading turns; the flag needs the path input."""
+    cfg = preset("small").replace(**{"model.path_condition": True, "model.path_heading": True})
+    m = HabitVQVAE(cfg.model, ["dog"], ["dog"], 8).eval()
+    w = cfg.model.window
+    for action, sign in (("turn_left", 1.0), ("walk_backward", -1.0)):
+        clip = generate("dog", action, seed=1, duration_s=3.0)
+        arrays = clip_arrays(clip)
+        x = torch.from_numpy(canonical_window(arrays, 0, w)[0][None])
+        p = m.path(x)[0].numpy()
+        assert p.shape == (4, w // cfg.model.rate)
+        yaw = arrays.yaw[:w] - arrays.yaw[0]
+        want = np.stack([np.cos(yaw), np.sin(yaw)]).reshape(2, -1, cfg.model.rate).mean(-1)
+        np.testing.assert_allclose(p[2:], want, atol=1e-4)
+        v = x[0, :, Q_DIM : Q_DIM + 2].numpy()  # the pelvis velocity in the window's frame
+        c, s_ = np.cos(yaw), np.sin(yaw)
+        own = np.stack([c * v[:, 0] + s_ * v[:, 1], c * v[:, 1] - s_ * v[:, 0]], -1)
+        mean, std = m.feat_mean[Q_DIM : Q_DIM + 2].numpy(), m.feat_std[Q_DIM : Q_DIM + 2].numpy()
+        own = ((own - mean) / std).reshape(-1, cfg.model.rate, 2).mean(1).T
+        np.testing.assert_allclose(p[:2], own, atol=1e-3)
+        assert np.all(sign * (p[0] * std[0] + mean[0]) > 0)  # forwards (backwards) throughout
+        turned = float(np.arctan2(p[3], p[2])[-1])
+        assert turned > 0.1 if action == "turn_left" else abs(turned) < 0.05
+    with pytest.raises(ConfigError, match="path_heading needs model.path_condition"):
+        preset("small").replace(**{"model.path_heading": True})
+
+
 # ---------------------------------------------------------------------------- quantizer
 
 

@@ -182,13 +182,22 @@ class ModelConfig:
     velocity averaged over each code's frames (in Froude units, so a transfer gets the
     speed dynamic similarity gives the target), un-quantized, beside the codes. The root
     is then not integrated from quantized velocities and does not drift; the target
-    species' condition still decides how its body moves along the path. Every preset
-    sets it; the field's default (False) is what a checkpoint trained before it reads.
+    species' condition still decides how its body moves along the path. No preset sets
+    it (``--set model.path_condition=true``); the default (False) is also what a
+    checkpoint trained before the field existed reads.
+
+    ``path_heading`` (needs ``path_condition``): the path is the source pelvis' heading,
+    (cos ψ, sin ψ) relative to the window's first frame, and its velocity in that
+    heading's frame (forward, left), so the direction of travel no longer tells the
+    decoder which way to face. With the velocity in the window's frame alone, the lateral
+    wobble of a real Labrador's backward trot on a slight curve spun the decoded body
+    round by up to 500° in 4 s (the synthetic backward walks are straight).
     """
 
     variant: str = "habit"
     window: int = 64
     path_condition: bool = False
+    path_heading: bool = False
     net: NetConfig = field(default_factory=NetConfig)
     quantizer: QuantizerConfig = field(default_factory=QuantizerConfig)
     habit: HabitConfig = field(default_factory=HabitConfig)
@@ -219,6 +228,11 @@ class ModelConfig:
         _check(
             self.window >= self.rate and self.window % self.rate == 0,
             f"window ({self.window}) must be a positive multiple of the rate {self.rate}",
+        )
+        _check(
+            self.path_condition or not self.path_heading,
+            "model.path_heading needs model.path_condition=true (the heading is part of the "
+            "path input)",
         )
         self.net.validate()
         self.quantizer.validate()

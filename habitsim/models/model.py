@@ -38,6 +38,8 @@ ROTATION_INPUT_CLIP = 3.0
 
 #: Channels of the decoder's path input (pelvis velocity x, y): see ``ModelConfig``.
 PATH_DIM = 2
+#: Channels the path gains with ``ModelConfig.path_heading`` (cos ψ, sin ψ of the pelvis).
+HEADING_DIM = 2
 
 
 class HabitVQVAE(nn.Module):
@@ -76,7 +78,9 @@ class HabitVQVAE(nn.Module):
             )
         cond = (cfg.habit.z_dim if cfg.use_z else 0) + (cfg.text.proj_dim if cfg.use_g else 0)
         self.cond_dim = cond
-        self.path_dim = PATH_DIM if cfg.path_condition else 0
+        self.path_dim = (
+            (PATH_DIM + (HEADING_DIM if cfg.path_heading else 0)) if cfg.path_condition else 0
+        )
         self.decoder = MotionDecoder(qc.code_dim, cond, FEAT_DIM, cfg.net, self.path_dim)
         if cfg.use_z:
             h = cfg.habit
@@ -121,16 +125,31 @@ class HabitVQVAE(nn.Module):
         return self.denormalize(self.decoder(codes, cond, path).transpose(1, 2))
 
     def path(self, x: torch.Tensor) -> torch.Tensor | None:
-        """Raw windows (B, T, F) → the pelvis path the decoder follows (B, 2, T / rate):
-        the horizontal pelvis velocity (Froude units, the window's frame), normalised, mean
-        over each code's frames; None for a model without the path input."""
+        """Raw windows (B, T, F) → the pelvis path the decoder follows
+        (B, path_dim, T / rate): the horizontal pelvis velocity (Froude units, the window's
+        frame), normalised; with ``path_heading`` that velocity in the pelvis' heading frame
+        instead, followed by the heading (cos ψ, sin ψ in the window's frame). Each is the
+        mean over a code's frames. None for a model without the path input."""
         if not self.path_dim:
             return None
         sl = slice(Q_DIM, Q_DIM + PATH_DIM)
-        v = (x[..., sl] - self.feat_mean[sl]) / self.feat_std[sl]
-        b, t, _ = v.shape
+        v = x[..., sl]
+        if self.cfg.path_heading:
+            w, qx, qy, qz = x[..., :4].unbind(-1)  # the pelvis quaternion comes first
+            fx = 1.0 - 2.0 * (qy * qy + qz * qz)
+            fy = 2.0 * (qx * qy + w * qz)
+            n = torch.sqrt(fx * fx + fy * fy).clamp_min(1e-6)
+            c, s = fx / n, fy / n
+            # the velocity in the pelvis' own heading frame (forward, left): its direction
+            # then no longer tells the heading (backwards stays backwards on a curve)
+            v = torch.stack([c * v[..., 0] + s * v[..., 1], c * v[..., 1] - s * v[..., 0]], -1)
+            v = (v - self.feat_mean[sl]) / self.feat_std[sl]
+            v = torch.cat([v, torch.stack([c, s], dim=-1)], dim=-1)
+        else:
+            v = (v - self.feat_mean[sl]) / self.feat_std[sl]
+        b, t, d = v.shape
         r = self.cfg.rate
-        return v.reshape(b, t // r, r, PATH_DIM).mean(dim=2).transpose(1, 2)
+        return v.reshape(b, t // r, r, d).mean(dim=2).transpose(1, 2)
 
     # ------------------------------------------------------------------ habit latent
     def _check_species(self, names: Sequence[str]) -> None:

@@ -32,6 +32,7 @@ sampler (:class:`numpy.random.Generator`) and the stochastic layers (a
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -54,7 +55,7 @@ from .checkpoint import (
     read_checkpoint_config,
     save_checkpoint,
 )
-from .config import Config
+from .config import Config, ModelConfig
 from .data import (
     Batch,
     ClipSet,
@@ -545,8 +546,10 @@ def train(
             descriptions with ``config.model.text.model`` (tests, custom texts).
         init: fine-tune: start from this checkpoint's weights (a folder, or a shipped
             variant name such as ``habit``) instead of a fresh model. ``config.model``
-            must equal the checkpoint's; its species, text embeddings and feature
-            normalisation are kept, and the data's clips of its species are trained on.
+            must equal the checkpoint's, except that ``model.path_heading`` may be
+            switched on for a path-conditioned checkpoint (the new channels start at
+            zero); its species, text embeddings and feature normalisation are kept, and
+            the data's clips of its species are trained on.
         rehearse: a second data set folder whose ``train`` clips (of the model's species)
             are mixed in, so that a fine-tune on a few clips of one species does not
             forget the others (rehearsal; fine-tuned on six real dog clips alone, the
@@ -643,7 +646,7 @@ def train(
             stats = feature_stats(tr, cfg.model.window)
         model = build_untrained(cfg, species, text, stats)
         if base is not None:
-            model.load_state_dict(base.model.state_dict())
+            model.load_state_dict(_init_state(base.model, model))
         opt = torch.optim.AdamW(
             model.parameters(),
             lr=t.lr,
@@ -807,12 +810,49 @@ def resolve_init(init: str | Path) -> Path:
 def _load_init(init: str | Path, cfg: Config) -> LoadedCheckpoint:
     """The checkpoint a fine-tune starts from (folder or shipped variant name)."""
     base = load_checkpoint(resolve_init(init))
-    if base.config.model != cfg.model:
+    if base.config.model != cfg.model and not _adds_heading(base.config.model, cfg.model):
         raise CheckpointError(
             f"--init {init}: its model configuration differs from this run's; fine-tuning "
-            "keeps the checkpoint's model (only training settings may change)"
+            "keeps the checkpoint's model (only training settings may change, or "
+            "model.path_heading be switched on for a path-conditioned checkpoint)"
         )
     return base
+
+
+def _adds_heading(old: ModelConfig, new: ModelConfig) -> bool:
+    """``new`` is the path-conditioned ``old`` with the path's heading channels added."""
+    return (
+        old.path_condition
+        and not old.path_heading
+        and new.path_heading
+        and dataclasses.replace(new, path_heading=False) == old
+    )
+
+
+def _init_state(base: HabitVQVAE, model: HabitVQVAE) -> dict[str, torch.Tensor]:
+    """``base``'s tensors for ``model``. When ``model``'s path also carries the heading
+    (:func:`_adds_heading`), the decoder's weights on the new heading channels start at
+    zero, so the fine-tune starts from the base's decoder (exactly so on windows whose
+    heading stays the first frame's; a turning window's velocity is now read in the
+    turning heading's frame)."""
+    state = dict(base.state_dict())
+    if model.path_dim == base.path_dim:
+        return state
+    old, code_dim = base.path_dim, base.cfg.quantizer.code_dim
+    for key, new in model.state_dict().items():
+        v = state[key]
+        if v.shape == new.shape:
+            continue
+        w = torch.zeros_like(new)
+        if key == "decoder.inp.weight":  # input channels: codes, path, condition
+            w[:, : code_dim + old] = v[:, : code_dim + old]
+            w[:, code_dim + model.path_dim :] = v[:, code_dim + old :]
+        elif key.startswith("decoder.path_bias."):
+            w[:, :old] = v
+        else:
+            raise CheckpointError(f"cannot carry tensor {key} {tuple(v.shape)} into the model")
+        state[key] = w
+    return state
 
 
 def record_metrics(out_dir: str | Path, metrics: dict[str, Any]) -> None:
