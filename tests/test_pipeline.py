@@ -260,6 +260,36 @@ def test_planting_steps_faster_when_the_body_outruns_the_decoded_stride(walk) ->
     )
 
 
+def test_partial_planting_holds_the_faster_steps_when_restepping_misses(walk, monkeypatch):
+    # the dog walk sent to the cat steps faster (see above); when the faster steps still
+    # miss a foothold (here: the restep's report made to miss), the partial planting holds
+    # the runs the legs reach on the faster labels, not on the decoder's slower ones
+    from habitsim.contacts import stride_period
+
+    transfer_module = importlib.import_module("habitsim.models.transfer")
+    real_restep = transfer_module._restep
+
+    def missing(*a, **k):
+        got = real_restep(*a, **k)
+        assert got is not None
+        return got[0], {**got[1], "max_reach_error_per_leg": 1.0}
+
+    monkeypatch.setattr(transfer_module, "_restep", missing)
+    raw = transfer(walk, to="cat", method="habit", seed=0, plant=False)
+    out = transfer(walk, to="cat", method="habit", seed=0)
+    report = out.metadata["transfer"]["planted"]
+    assert report["kept"] and "free_runs" in report and "on the faster steps" in report["reason"]
+    rate = report["restep"]["rate"]
+    assert rate > 1.2
+    assert stride_period(out.contacts) == pytest.approx(
+        stride_period(raw.contacts) / rate, rel=0.15
+    )
+    assert _resting(out, out.contacts) >= 0.9
+    monkeypatch.setattr(transfer_module, "PARTLY_ON_RESTEP", False)
+    slow = transfer(walk, to="cat", method="habit", seed=0)
+    assert stride_period(slow.contacts) == pytest.approx(stride_period(raw.contacts), rel=0.15)
+
+
 def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot, monkeypatch):
     # the horse's trot sent to the tiger: the decoded stance feet slide, so a foothold
     # held for a whole stance run is out of reach with the decoded root path

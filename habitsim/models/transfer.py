@@ -705,7 +705,15 @@ def _plant(
             }
     if tried:
         why += ", not even stepping faster"
-    partly = _plant_partly(out, contacts, glob, trim=TRIM_TO_REACH)
+    partly = None
+    if restep is not None and PARTLY_ON_RESTEP:
+        # the quickened labels ask the legs for the shorter sweeps: hold what they reach
+        assert restep[0].contacts is not None  # plant_motion labels its output
+        partly = _plant_partly(out, restep[0].contacts, glob, trim=TRIM_TO_REACH)
+        if partly is not None:
+            why += " in every stance run; on the faster steps"
+    if partly is None:
+        partly = _plant_partly(out, contacts, glob, trim=TRIM_TO_REACH)
     if partly is not None:
         moved, rep = partly
         trimmed = rep.get("trimmed")
@@ -733,6 +741,10 @@ def _plant(
     }
 
 
+#: When the legs stepping faster (:func:`_restep`) still miss some footholds, the partial
+#: planting (:func:`_plant_partly`) holds the runs they reach on the faster steps, not on
+#: the slower decoded ones, whose longer sweeps leave more runs to free or shorten.
+PARTLY_ON_RESTEP = True
 #: Partial planting (:func:`_plant_partly`) finds the runs to leave free in at most this
 #: many IK passes.
 PARTIAL_PASSES = 4
