@@ -133,6 +133,39 @@ def test_path_heading_gives_the_heading_and_the_velocity_in_its_frame():
         preset("small").replace(**{"model.path_heading": True})
 
 
+def test_heading_relative_decoder_turns_its_output_with_the_source_heading():
+    """With ``heading_relative`` the decoder's output is turned, frame by frame, by the
+    source's heading read from the path (within 0.01 rad of the turning source's own
+    pelvis heading away from the window's ends); the flag needs the heading channels."""
+    from habitsim.models.model import turn_windows
+
+    cfg = preset("small").replace(
+        **{
+            "model.path_condition": True,
+            "model.path_heading": True,
+            "model.heading_relative": True,
+        }
+    )
+    m = HabitVQVAE(cfg.model, ["dog"], ["dog"], 8).eval()
+    w, r = cfg.model.window, cfg.model.rate
+    arrays = clip_arrays(generate("dog", "turn_left", seed=3, duration_s=3.0))
+    x = torch.from_numpy(canonical_window(arrays, 0, w)[0][None])
+    path = m.path(x)
+    psi = m.path_heading_frames(path, w)[0].numpy()
+    want = np.unwrap(arrays.yaw[:w] - arrays.yaw[0])
+    assert want[-1] > 0.2  # the window turns
+    np.testing.assert_allclose(psi[r:-r], want[r:-r], atol=0.01)
+    codes = m.quantize(m.encode(x), sample=False, update=False).quantized
+    cond = m.condition(["dog"], m.posterior(x, ["dog"])[0])
+    with torch.no_grad():
+        y = m.decode(codes, cond, path)
+        raw = m.denormalize(m.decoder(codes, cond, path).transpose(1, 2))
+    torch.testing.assert_close(y, turn_windows(raw, torch.from_numpy(psi)[None]))
+    assert (y - raw).abs().max() > 1e-3
+    with pytest.raises(ConfigError, match="heading_relative needs model.path_heading"):
+        preset("small").replace(**{"model.path_condition": True, "model.heading_relative": True})
+
+
 # ---------------------------------------------------------------------------- quantizer
 
 

@@ -192,12 +192,19 @@ class ModelConfig:
     decoder which way to face. With the velocity in the window's frame alone, the lateral
     wobble of a real Labrador's backward trot on a slight curve spun the decoded body
     round by up to 500° in 4 s (the synthetic backward walks are straight).
+
+    ``heading_relative`` (needs ``path_heading``): the decoder's pelvis orientation and
+    velocities are read in the source's heading frame, frame by frame (the path's
+    heading interpolated between codes), and turned into the window's frame after the
+    decoder: the source's heading is the action and is kept by construction, the
+    decoder adds only the target's departures from it.
     """
 
     variant: str = "habit"
     window: int = 64
     path_condition: bool = False
     path_heading: bool = False
+    heading_relative: bool = False
     net: NetConfig = field(default_factory=NetConfig)
     quantizer: QuantizerConfig = field(default_factory=QuantizerConfig)
     habit: HabitConfig = field(default_factory=HabitConfig)
@@ -233,6 +240,11 @@ class ModelConfig:
             self.path_condition or not self.path_heading,
             "model.path_heading needs model.path_condition=true (the heading is part of the "
             "path input)",
+        )
+        _check(
+            self.path_heading or not self.heading_relative,
+            "model.heading_relative needs model.path_heading=true (the heading it follows "
+            "comes with the path)",
         )
         self.net.validate()
         self.quantizer.validate()

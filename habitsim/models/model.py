@@ -17,7 +17,7 @@ from torch import nn
 
 from ..errors import UnknownSpeciesError
 from .config import ModelConfig
-from .features import FEAT_DIM, Q_DIM
+from .features import FEAT_DIM, H_INDEX, Q_DIM
 from .habit import HabitPosterior, RealNVP, gaussian_log_prob
 from .quantizer import EMAQuantizer, QuantizerOutput, residual_quantize
 from .vqvae import MotionDecoder, MotionEncoder
@@ -40,6 +40,28 @@ ROTATION_INPUT_CLIP = 3.0
 PATH_DIM = 2
 #: Channels the path gains with ``ModelConfig.path_heading`` (cos ψ, sin ψ of the pelvis).
 HEADING_DIM = 2
+
+
+def turn_windows(x: torch.Tensor, turn: torch.Tensor) -> torch.Tensor:
+    """Raw windows (B, T, F) turned about the vertical by ``turn`` [rad], one angle per
+    window (B,) or per frame (B, T): the pelvis quaternion and every joint velocity (the
+    features' only quantities in the window's frame)."""
+    if turn.dim() == 1:
+        turn = turn[:, None].expand(-1, x.shape[1])
+    y = x.clone()
+    half = 0.5 * turn
+    cw, sz = torch.cos(half), torch.sin(half)
+    w, qx, qy, qz = x[..., 0], x[..., 1], x[..., 2], x[..., 3]
+    y[..., 0] = cw * w - sz * qz  # (cos ½θ, 0, 0, sin ½θ) ⊗ q
+    y[..., 1] = cw * qx - sz * qy
+    y[..., 2] = cw * qy + sz * qx
+    y[..., 3] = cw * qz + sz * w
+    b, t = x.shape[:2]
+    v = x[..., Q_DIM:H_INDEX].reshape(b, t, -1, 3)
+    c, s = torch.cos(turn)[..., None], torch.sin(turn)[..., None]
+    r = torch.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1], v[..., 2]], -1)
+    y[..., Q_DIM:H_INDEX] = r.reshape(b, t, -1)
+    return y
 
 
 class HabitVQVAE(nn.Module):
@@ -122,7 +144,23 @@ class HabitVQVAE(nn.Module):
         the source windows' :meth:`path` (B, 2, T') → raw windows (B, T'·rate, F)."""
         if self.path_dim and path is None:
             raise ValueError("this model decodes along a path: pass path=model.path(x)")
-        return self.denormalize(self.decoder(codes, cond, path).transpose(1, 2))
+        y = self.denormalize(self.decoder(codes, cond, path).transpose(1, 2))
+        if self.cfg.heading_relative:
+            assert path is not None
+            y = turn_windows(y, self.path_heading_frames(path, y.shape[1]))
+        return y
+
+    def path_heading_frames(self, path: torch.Tensor, frames: int) -> torch.Tensor:
+        """The path's heading (B, path_dim, T') → ψ per frame (B, frames) [rad]: each code's
+        mean heading placed at the middle of its frames, unwrapped and linearly
+        interpolated between codes (held at the window's ends)."""
+        a = torch.atan2(path[:, -1], path[:, -2])
+        d = torch.diff(a, dim=1)
+        d = torch.remainder(d + torch.pi, 2 * torch.pi) - torch.pi
+        a = torch.cat([a[:, :1], a[:, :1] + torch.cumsum(d, dim=1)], dim=1)
+        return nn.functional.interpolate(
+            a[:, None], size=frames, mode="linear", align_corners=False
+        )[:, 0]
 
     def path(self, x: torch.Tensor) -> torch.Tensor | None:
         """Raw windows (B, T, F) → the pelvis path the decoder follows

@@ -820,12 +820,16 @@ def _load_init(init: str | Path, cfg: Config) -> LoadedCheckpoint:
 
 
 def _adds_heading(old: ModelConfig, new: ModelConfig) -> bool:
-    """``new`` is the path-conditioned ``old`` with the path's heading channels added."""
+    """``new`` is the path-conditioned ``old`` with the path's heading channels and / or
+    the heading-relative output switched on."""
     return (
         old.path_condition
-        and not old.path_heading
-        and new.path_heading
-        and dataclasses.replace(new, path_heading=False) == old
+        and new.path_heading >= old.path_heading
+        and new.heading_relative >= old.heading_relative
+        and dataclasses.replace(
+            new, path_heading=old.path_heading, heading_relative=old.heading_relative
+        )
+        == old
     )
 
 
