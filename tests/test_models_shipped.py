@@ -72,7 +72,13 @@ def test_shipped_checkpoint_size_and_config():
     size = (SHIPPED / MODEL_FILE).stat().st_size
     assert size <= 30e6
     doc = json.loads((SHIPPED / "config.json").read_text())
-    assert doc["config"]["name"] == "large" and doc["config"]["model"]["variant"] == "habit"
+    # the large preset, then two fine-tunes (the checkpoint's recipe names every stage)
+    assert doc["config"]["name"].endswith("large") and doc["config"]["model"]["variant"] == "habit"
+    m = doc["config"]["model"]
+    assert m["path_condition"] and m["path_heading"] and m["heading_relative"]
+    stages = doc["recipe"]["stages"]
+    assert [st["steps"] for st in stages] == [12000, 3000, 3000]
+    assert sum(st["wall_time_s"] for st in stages) == doc["recipe"]["wall_time_s"] <= 2.5 * 3600
     q = doc["config"]["model"]["quantizer"]
     assert (q["num_codes"], q["code_dim"], q["levels"]) == (512, 512, 4)
     assert doc["training"]["step"] == doc["config"]["train"]["steps"]  # trained to the end
