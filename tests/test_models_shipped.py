@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -302,3 +303,75 @@ def test_a_posture_the_training_rigs_never_took_does_not_stop_the_decoded_gait(m
     assert limbs(decoded(bent)) > 0.85 * limbs(plain)
     monkeypatch.setattr(model_module, "ROTATION_INPUT_CLIP", float("inf"))
     assert limbs(decoded(bent)) < 0.5 * limbs(plain)  # the failure the clip prevents
+
+
+@needs_ckpt
+def test_the_large_preset_trains_the_shipped_models_configuration():
+    """What ``habitsim train --config large`` writes as its last stage is the shipped
+    checkpoint's configuration, model and schedule (only the thread count may differ)."""
+    import dataclasses
+
+    from habitsim.models.config import Config, preset
+    from habitsim.models.recipe import RECIPES, stage_configs
+
+    doc = json.loads((SHIPPED / "config.json").read_text())
+    shipped = Config.from_dict(doc["config"])
+    last = stage_configs(preset("large"), RECIPES["large"])[-1]
+    assert last.model == shipped.model
+    assert dataclasses.replace(last.train, threads=None) == dataclasses.replace(
+        shipped.train, threads=None
+    )
+    assert [st.steps or 12000 for st in RECIPES["large"]] == [
+        st["steps"] for st in doc["recipe"]["stages"]
+    ]
+
+
+@pytest.mark.slow
+def test_train_cli_staged_large_and_single_run(tmp_path, capsys, monkeypatch):
+    """``--config large`` runs the preset's stages (here shortened to one step each) into
+    CKPT/stages/ and CKPT, prints every stage and records the recipe; ``--single-run``
+    trains the final model in one run; a clashing ``--set`` is refused before training."""
+    from habitsim.dataset import build_dataset
+    from habitsim.models import recipe
+
+    short = tuple(dataclasses.replace(st, steps=1) for st in recipe.RECIPES["large"])
+    monkeypatch.setitem(recipe.RECIPES, "large", short)
+    data = tmp_path / "data"
+    build_dataset(
+        data, clips_per_species=3, seed=1, species=["cat", "dog"], workers=1, progress=False
+    )
+    small = ["--no-progress", "--threads", "1"] + [
+        a
+        for kv in (
+            "model.net.width=16",
+            "model.quantizer.num_codes=16",
+            "model.quantizer.code_dim=16",
+            "train.batch_size=2",
+            "train.warmup_steps=0",
+        )
+        for a in ("--set", kv)
+    ]
+    ck = tmp_path / "ck"
+    base = ["train", "--data", str(data), "--config", "large"]
+    assert main([*base, "--out", str(ck), *small]) == 0
+    out = capsys.readouterr().out
+    assert "3 stages, 3 steps" in out and "stages/2-heading" in out
+    doc = json.loads((ck / "config.json").read_text())
+    assert (
+        doc["config"]["model"]["heading_relative"]
+        and doc["config"]["name"] == "large:heading-relative"
+    )
+    assert [st["name"] for st in doc["recipe"]["stages"]] == ["path", "heading", "heading-relative"]
+    assert "reference" in doc["metrics"]
+    assert (ck / "stages" / "1-path" / "model.safetensors").is_file()
+    assert main([*base, "--out", str(ck), *small]) == 2  # refuses to overwrite
+    assert "--resume" in capsys.readouterr().err
+    one = tmp_path / "one"
+    assert main([*base, "--out", str(one), "--single-run", "--steps", "1", *small]) == 0
+    m = json.loads((one / "config.json").read_text())["config"]["model"]
+    assert m["path_condition"] and m["path_heading"] and m["heading_relative"]
+    assert not (one / "stages").exists()
+    capsys.readouterr()
+    bad = [*base, "--out", str(tmp_path / "bad"), "--set", "model.path_heading=false", *small]
+    assert main(bad) == 2
+    assert "--single-run" in capsys.readouterr().err and not (tmp_path / "bad").exists()

@@ -536,3 +536,116 @@ def test_fine_tune_rehearses_a_second_data_set(tiny_data, tmp_path):
             rehearse_share=1.0,
         )
     assert not (tmp_path / "bad").exists() or not any((tmp_path / "bad").iterdir())
+
+
+def _tiny_stages():
+    from habitsim.models.recipe import Stage
+
+    return (
+        Stage("path", {"model.path_condition": True}),
+        Stage("heading", {"model.path_heading": True}, steps=2, lr=3e-4),
+        Stage("heading-relative", {"model.heading_relative": True}, steps=2, lr=3e-4),
+    )
+
+
+@pytest.mark.slow
+def test_a_staged_recipe_is_its_stages_trained_by_hand_and_resumes(tiny_data, tmp_path):
+    """``train_staged`` gives the weights of the documented commands run one after the
+    other (a fine-tune per stage from the previous checkpoint), records the recipe in the
+    final checkpoint, resumes an interrupted stage, and refuses an existing run or an
+    override of an option the recipe sets, before training anything."""
+    from habitsim.cli.train_cmd import _finetune_config
+    from habitsim.models.errors import ConfigError
+    from habitsim.models.recipe import stage_configs, stage_folders, train_staged
+
+    text = _fake_text()
+    base = _tiny_config(steps=3)
+    quiet = {"progress": False, "log": lambda s: None}
+    res = train_staged(
+        tiny_data, tmp_path / "staged", base, _tiny_stages(), text_embeddings=text, **quiet
+    )
+    # the same by hand: the preset with the path, then two fine-tunes of the previous stage
+    a = train(
+        tiny_data,
+        tmp_path / "a",
+        base.replace(**{"model.path_condition": True}),
+        text_embeddings=text,
+        **quiet,
+    )
+    b_cfg = _finetune_config(str(a.out_dir), base).replace(
+        **{"model.path_heading": True, "train.steps": 2, "train.lr": 3e-4}
+    )
+    b = train(tiny_data, tmp_path / "b", b_cfg, init=a.out_dir, **quiet)
+    c_cfg = _finetune_config(str(b.out_dir), base).replace(
+        **{"model.heading_relative": True, "train.steps": 2, "train.lr": 3e-4}
+    )
+    c = train(tiny_data, tmp_path / "c", c_cfg, init=b.out_dir, **quiet)
+    ws = load_checkpoint(res.out_dir).model.state_dict()
+    wc = load_checkpoint(c.out_dir).model.state_dict()
+    assert ws.keys() == wc.keys() and all(torch.equal(ws[k], wc[k]) for k in ws)
+    final = load_checkpoint(res.out_dir).config.model
+    assert final.path_condition and final.path_heading and final.heading_relative
+    # the earlier stages are checkpoints of their own, the recipe is recorded
+    folders = stage_folders(res.out_dir, _tiny_stages())
+    assert folders[-1] == res.out_dir and all((f / "config.json").is_file() for f in folders)
+    doc = json.loads((res.out_dir / "config.json").read_text())
+    rec = doc["recipe"]
+    assert [st["steps"] for st in rec["stages"]] == [3, 2, 2] and res.steps == 7
+    assert [st["lr"] for st in rec["stages"]] == [base.train.lr, 3e-4, 3e-4]
+    assert (
+        rec["stages"][0]["checkpoint"] == "stages/1-path" and rec["stages"][-1]["checkpoint"] == "."
+    )
+    assert rec["wall_time_s"] == sum(st["wall_time_s"] for st in rec["stages"])
+    assert doc["init"]["checkpoint"] == str(folders[1])
+    # an existing run is refused before stage 1 trains again
+    before = (folders[0] / MODEL_FILE).stat().st_mtime_ns
+    with pytest.raises(CheckpointError, match="--resume"):
+        train_staged(tiny_data, res.out_dir, base, _tiny_stages(), text_embeddings=text, **quiet)
+    assert (folders[0] / MODEL_FILE).stat().st_mtime_ns == before
+    with pytest.raises(ConfigError, match="model.path_heading.*--single-run"):
+        stage_configs(base, _tiny_stages(), {"model.path_heading": False})
+    # interrupted in stage 1 after one step, resumed: the uninterrupted run's weights
+    r_out = tmp_path / "resumed"
+    first = stage_configs(base, _tiny_stages())[0]
+    train(
+        tiny_data,
+        stage_folders(r_out, _tiny_stages())[0],
+        first.replace(**{"train.steps": 1}),
+        text_embeddings=text,
+        **quiet,
+    )
+    r = train_staged(
+        tiny_data, r_out, base, _tiny_stages(), text_embeddings=text, resume=True, **quiet
+    )
+    wr = load_checkpoint(r.out_dir).model.state_dict()
+    for k in ws:
+        torch.testing.assert_close(wr[k], ws[k], atol=1e-6, rtol=1e-5)
+    # resuming a finished run trains nothing and keeps every weight
+    again = train_staged(
+        tiny_data, r_out, base, _tiny_stages(), text_embeddings=text, resume=True, **quiet
+    )
+    w2 = load_checkpoint(again.out_dir).model.state_dict()
+    assert all(torch.equal(w2[k], wr[k]) for k in wr)
+
+
+def test_the_large_preset_is_the_shipped_models_recipe():
+    """``--config large`` trains the shipped model's stages: the path from scratch on the
+    preset's schedule, then the heading and the heading-relative output, 3000 steps each at
+    lr 3e-4; ``--single-run`` switches every option on from the first step."""
+    from habitsim.models.recipe import RECIPES, single_run_config, stage_configs
+
+    large = preset("large")
+    cfgs = stage_configs(large, RECIPES["large"])
+    assert [c.train.steps for c in cfgs] == [12000, 3000, 3000]
+    assert [c.train.lr for c in cfgs] == [large.train.lr, 3e-4, 3e-4]
+    assert [
+        (c.model.path_condition, c.model.path_heading, c.model.heading_relative) for c in cfgs
+    ] == [
+        (True, False, False),
+        (True, True, False),
+        (True, True, True),
+    ]
+    assert cfgs[0].train == large.train and cfgs[1].train.warmup_steps == 100
+    one = single_run_config(large, RECIPES["large"])
+    assert one.model == cfgs[-1].model and one.train == large.train
+    assert stage_configs(large, RECIPES["large"], first_steps=50)[0].train.steps == 50

@@ -12,9 +12,7 @@ import json
 import time
 from pathlib import Path
 
-#: Default schedule of a fine-tune (``--init``): short, at a fifth of the training rate.
-FINETUNE_STEPS = 1000
-FINETUNE_LR = 2e-4
+from ..models.config import FINETUNE_LR, FINETUNE_STEPS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,8 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=(
             "Train the motion VQ-VAE with per-species habit flows and text embeddings on a "
             "data set (habitsim data synth, or data import-bvh --dir). Configs: default "
-            "≤ 20 min on 2 CPU cores, small ≤ 2 min, large ≤ 2.5 h (resume with --resume); "
-            "--init fine-tunes a trained model."
+            "≤ 20 min on 2 CPU cores, small ≤ 2 min, large ≤ 2.5 h in three stages that "
+            "train the shipped model (path, heading, heading-relative; the earlier stages "
+            "go to CKPT/stages/; resume with --resume); --init fine-tunes a trained model."
         ),
     )
     p.add_argument("--data", required=True, type=Path, metavar="DIR", help="data set folder")
@@ -81,6 +80,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="KEY=VALUE",
         help="override a config value, e.g. --set train.lr=5e-4 (JSON value; repeatable)",
     )
+    p.add_argument(
+        "--single-run",
+        action="store_true",
+        help="a staged preset (large): train its final model from scratch in one run, "
+        "every stage's model option on from the first step (ablations; "
+        "presets without stages train in one run anyway)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_train)
 
@@ -104,21 +110,12 @@ def _finetune_config(init: str, cfg):
     """The fine-tune's configuration: the checkpoint's model, ``cfg``'s schedule with
     :data:`FINETUNE_STEPS` steps at :data:`FINETUNE_LR` (``--steps`` / ``--set`` apply on
     top)."""
-    import dataclasses
-
     from ..models.checkpoint import read_checkpoint_config
-    from ..models.config import Config
+    from ..models.config import Config, finetune_schedule
     from ..models.train import resolve_init
 
     base, _ = read_checkpoint_config(resolve_init(init))
-    train = dataclasses.replace(
-        cfg.train,
-        steps=FINETUNE_STEPS,
-        lr=FINETUNE_LR,
-        lr_final=min(cfg.train.lr_final, FINETUNE_LR / 4),
-        warmup_steps=min(cfg.train.warmup_steps, FINETUNE_STEPS // 10),
-        val_every=min(cfg.train.val_every, 250),
-    )
+    train = finetune_schedule(cfg.train)
     return Config(name=f"finetune:{base.name}", model=base.model, train=train).validate()
 
 
@@ -126,13 +123,25 @@ def _train(ns: argparse.Namespace) -> int:
     from ..fileio import check_writable
     from ..models.checkpoint import MODEL_FILE
     from ..models.config import preset
+    from ..models.errors import ConfigError
     from ..models.evaluate import record_reference_error
+    from ..models.recipe import RECIPES, single_run_config
     from ..models.train import train
 
     cfg = preset(ns.config, ns.variant)
     changes = _parse_set(ns.set)
+    stages = RECIPES.get(ns.config)
     if ns.init is not None:
+        if ns.single_run:
+            raise ConfigError(
+                "--single-run trains a staged preset's model from scratch; it cannot be "
+                "combined with --init (a fine-tune of a trained model)"
+            )
         cfg = _finetune_config(ns.init, cfg)
+    elif stages is not None and ns.single_run:
+        cfg = single_run_config(cfg, stages)
+    elif stages is not None:
+        return _train_staged(ns, cfg, stages, changes)
     if ns.steps is not None:
         changes["train.steps"] = ns.steps
     if ns.seed is not None:
@@ -161,6 +170,53 @@ def _train(ns: argparse.Namespace) -> int:
         f"checkpoint {ns.out} ({cfg.name}/{cfg.model.variant}, {res.steps} steps, "
         f"model.safetensors {size:.1f} MB) in {wall:.0f} s"
     )
+    for k, v in res.metrics.items():
+        print(f"  {k:24s} {v}")
+    print(
+        f"  reference clips: reconstruction MPJPE {ref['mpjpe_mm']:.1f} mm "
+        f"({ref['pct_leg']:.2f} % of leg length; root-relative {ref['root_relative_mm']:.1f} mm)"
+    )
+    return 0
+
+
+def _train_staged(ns: argparse.Namespace, cfg, stages, changes: dict[str, object]) -> int:
+    """``--config large``: the preset's stages (:mod:`habitsim.models.recipe`)."""
+    from ..fileio import check_writable
+    from ..models.checkpoint import MODEL_FILE
+    from ..models.evaluate import record_reference_error
+    from ..models.recipe import stage_configs, stage_folders, train_staged
+
+    for key, value in (("train.seed", ns.seed), ("train.threads", ns.threads)):
+        if value is not None:
+            changes[key] = value
+    stage_configs(cfg, stages, changes, ns.steps)  # a bad override fails before any stage
+    for folder in stage_folders(ns.out, stages):
+        check_writable(Path(folder) / MODEL_FILE, "--out")
+    t0 = time.perf_counter()
+    res = train_staged(
+        ns.data,
+        ns.out,
+        cfg,
+        stages,
+        changes=changes,
+        first_steps=ns.steps,
+        resume=ns.resume,
+        overwrite=ns.overwrite,
+        progress=not ns.no_progress,
+    )
+    ref = record_reference_error(ns.out)
+    wall = time.perf_counter() - t0
+    size = (Path(ns.out) / MODEL_FILE).stat().st_size / 1e6
+    print(
+        f"checkpoint {ns.out} ({cfg.name}/{cfg.model.variant}, {len(stages)} stages, "
+        f"{res.steps} steps, model.safetensors {size:.1f} MB) in {wall:.0f} s"
+    )
+    for st in res.recipe["stages"]:
+        print(
+            f"  stage {st['name']:18s} {st['steps']:6d} steps at lr {st['lr']:g}  "
+            f"{st['wall_time_s']:6d} s  ({st['checkpoint']})"
+        )
+    print(f"  {'wall time of every stage':24s} {res.recipe['wall_time_s']} s")
     for k, v in res.metrics.items():
         print(f"  {k:24s} {v}")
     print(

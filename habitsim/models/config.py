@@ -182,8 +182,9 @@ class ModelConfig:
     velocity averaged over each code's frames (in Froude units, so a transfer gets the
     speed dynamic similarity gives the target), un-quantized, beside the codes. The root
     is then not integrated from quantized velocities and does not drift; the target
-    species' condition still decides how its body moves along the path. No preset sets
-    it (``--set model.path_condition=true``); the default (False) is also what a
+    species' condition still decides how its body moves along the path. The ``large``
+    preset switches it and the two options below on in its stages
+    (:data:`habitsim.models.recipe.RECIPES`); the default (False) is also what a
     checkpoint trained before the field existed reads.
 
     ``path_heading`` (needs ``path_condition``): the path is the source pelvis' heading,
@@ -485,7 +486,11 @@ def _large() -> Config:
     and the real-input augmentations (input noise, speed variants). The contact and
     stance terms keep the default's 0.05 each: with 0.2 and 0.5 the decoded stance toes
     rested more often, but transfers lost the target's habits (paired transfer error
-    about twice as large; see the shipped checkpoint's README for the figures)."""
+    about twice as large; see the shipped checkpoint's README for the figures).
+
+    ``habitsim train --config large`` trains this preset in the stages of
+    :data:`habitsim.models.recipe.RECIPES` (the path, then its heading, then the
+    heading-relative output); this function is their common base."""
     return Config(
         name="large",
         model=ModelConfig(net=NetConfig(width=192), quantizer=QuantizerConfig(levels=4)),
@@ -499,6 +504,26 @@ def _large() -> Config:
             val_every=1000,
             threads=2,
         ),
+    )
+
+
+#: Default schedule of a fine-tune (``--init``): short, at a fifth of the training rate.
+FINETUNE_STEPS = 1000
+FINETUNE_LR = 2e-4
+
+
+def finetune_schedule(t: TrainConfig) -> TrainConfig:
+    """A fine-tune's schedule made from a preset's: :data:`FINETUNE_STEPS` steps at
+    :data:`FINETUNE_LR`, the final rate no higher than a quarter of it, at most a tenth of
+    the steps of warm-up and a validation at least every 250 steps; every loss weight and
+    augmentation stays the preset's."""
+    return dataclasses.replace(
+        t,
+        steps=FINETUNE_STEPS,
+        lr=FINETUNE_LR,
+        lr_final=min(t.lr_final, FINETUNE_LR / 4),
+        warmup_steps=min(t.warmup_steps, FINETUNE_STEPS // 10),
+        val_every=min(t.val_every, 250),
     )
 
 
