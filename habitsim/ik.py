@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -177,15 +177,19 @@ class LegIKResult:
 
     def quaternions(self) -> np.ndarray:
         """(T, 4, 4) local quaternions of girdle, shoulder/hip, elbow/knee, wrist/hock."""
-        return np.stack(
-            [
-                rot_y(self.girdle_flex),
-                quat_mul(rot_x(self.abduction), rot_y(self.upper_flex)),
-                rot_y(self.lower_flex),
-                rot_y(self.foot_flex),
-            ],
-            axis=1,
+        return _chain_quaternions(
+            self.girdle_flex, self.abduction, self.upper_flex, self.lower_flex, self.foot_flex
         )
+
+
+def _chain_quaternions(
+    girdle: np.ndarray, abd: np.ndarray, upper: np.ndarray, lower: np.ndarray, foot: np.ndarray
+) -> np.ndarray:
+    """(S, 4, 4) local quaternions of a leg chain's four joints from its angles (S,)."""
+    return np.stack(
+        [rot_y(girdle), quat_mul(rot_x(abd), rot_y(upper)), rot_y(lower), rot_y(foot)],
+        axis=-2,
+    )
 
 
 def wrap_angle(a: np.ndarray) -> np.ndarray:
@@ -217,6 +221,17 @@ def _as_rotmats(r: np.ndarray, t: int) -> np.ndarray:
     if not np.all(np.isfinite(r)):
         raise IKError("parent rotation contains NaN or inf")
     return r
+
+
+def _as_leg_frames(x: np.ndarray, t: int, name: str) -> np.ndarray:
+    """``x`` as (T, 4) finite per-leg angles (a (4,) vector holds for every frame)."""
+    try:
+        a = np.broadcast_to(np.asarray(x, dtype=np.float64), (t, 4))
+    except ValueError:
+        raise IKError(f"{name} must have shape ({t}, 4), got {np.shape(x)}") from None
+    if not np.all(np.isfinite(a)):
+        raise IKError(f"{name} contains NaN or inf")
+    return a
 
 
 def _ry(a: np.ndarray) -> np.ndarray:
@@ -318,64 +333,93 @@ def leg_ik(
         "foot_inclination",
     )
 
+    sol = _solve_legs(
+        (geo.girdle, geo.upper, geo.lower, geo.foot, geo.bend),
+        root,
+        prot,
+        tgt,
+        gflex,
+        finc,
+        None if abduction_range is None else (min(abduction_range), max(abduction_range)),
+        None
+        if distal_band is None
+        else (distal_band, _as_frames(max_inclination_change, t, "max_inclination_change")),
+    )
+    return LegIKResult(**sol)
+
+
+def _solve_legs(
+    lengths: tuple,
+    root: np.ndarray,
+    prot: np.ndarray,
+    tgt: np.ndarray,
+    gflex: np.ndarray,
+    finc: np.ndarray,
+    abduction: tuple | None,
+    comply: tuple | None = None,
+) -> dict[str, np.ndarray]:
+    """The analytic solve of :func:`leg_ik` over any leading shape ``S`` (frames, or
+    frames × legs): ``lengths`` = (girdle, upper, lower, foot, bend) scalars or arrays
+    broadcast to ``S``, root / tgt (S, 3), prot (S, 3, 3), gflex / finc (S,),
+    ``abduction`` = (lo, hi) bounds broadcast to ``S`` or None, ``comply`` =
+    (distal band, max inclination change) or None. Returns :class:`LegIKResult`'s fields."""
+    girdle, upper, lower, foot, bend = (np.asarray(x, dtype=np.float64) for x in lengths)
+    shape = tgt.shape[:-1]
     g = prot @ _ry(gflex)  # girdle global rotation
-    shoulder = root + _mv(g, np.array([0.0, 0.0, -geo.girdle]))
+    down = np.zeros((*girdle.shape, 3))
+    down[..., 2] = -girdle
+    shoulder = root + _mv(g, down)
     d = _mtv(g, tgt - shoulder)  # target in the girdle frame
-    abd = np.arctan2(d[:, 1], -d[:, 2])
-    clamped = np.zeros(t, dtype=bool)
-    if abduction_range is not None:
+    abd = np.arctan2(d[..., 1], -d[..., 2])
+    clamped = np.zeros(shape, dtype=bool)
+    if abduction is not None:
         free = abd
-        abd = np.clip(abd, min(abduction_range), max(abduction_range))
+        abd = np.clip(abd, abduction[0], abduction[1])
         clamped = abd != free
     frame = g @ _rx(abd)  # leg-plane frame: the chain rotates about its +y
     p = _mtv(frame, tgt - shoulder)
     if np.any(clamped):
         # the target is off the leg plane: aim at the plane's point at the target's
         # height (the miss is horizontal, a foot on the ground stays on it)
-        f20, f22 = frame[:, 2, 0], frame[:, 2, 2]
+        f20, f22 = frame[..., 2, 0], frame[..., 2, 2]
         ok = clamped & (np.abs(f22) > 1e-3)
-        pz = (tgt[:, 2] - shoulder[:, 2] - f20 * p[:, 0]) / np.where(ok, f22, 1.0)
-        p[:, 2] = np.where(ok, pz, p[:, 2])
-    w = _mtv(frame, np.broadcast_to(np.array([0.0, 0.0, -1.0]), (t, 3)))
-    beta_down = np.arctan2(-w[:, 0], -w[:, 2])
+        pz = (tgt[..., 2] - shoulder[..., 2] - f20 * p[..., 0]) / np.where(ok, f22, 1.0)
+        p[..., 2] = np.where(ok, pz, p[..., 2])
+    w = _mtv(frame, np.broadcast_to(np.array([0.0, 0.0, -1.0]), (*shape, 3)))
+    beta_down = np.arctan2(-w[..., 0], -w[..., 2])
     b3 = beta_down - finc
-    if distal_band is not None:
-        b3 = _comply_foot(
-            p[:, [0, 2]],
-            b3,
-            geo.foot,
-            distal_band,
-            _as_frames(max_inclination_change, t, "max_inclination_change"),
-        )
+    if comply is not None:
+        b3 = _comply_foot(p[..., [0, 2]], b3, float(foot), comply[0], comply[1])
     foot_dir = np.stack([-np.sin(b3), -np.cos(b3)], -1)
-    wx = p[:, [0, 2]] - geo.foot * foot_dir  # demanded wrist/hock in plane coords (x, z)
+    wx = p[..., [0, 2]] - foot[..., None] * foot_dir  # demanded wrist/hock, plane (x, z)
     dist = np.linalg.norm(wx, axis=-1)
-    lo, hi = geo.min_reach, geo.max_reach
+    lo, hi = np.abs(upper - lower), upper + lower
     dc = np.clip(dist, lo, hi)
-    bw = np.arctan2(-wx[:, 0], -wx[:, 1])
-    den = np.maximum(2.0 * geo.upper * dc, 1e-12)
-    cos_a = np.clip((geo.upper**2 + dc**2 - geo.lower**2) / den, -1.0, 1.0)
+    bw = np.arctan2(-wx[..., 0], -wx[..., 1])
+    den = np.maximum(2.0 * upper * dc, 1e-12)
+    cos_a = np.clip((upper**2 + dc**2 - lower**2) / den, -1.0, 1.0)
     alpha = np.arccos(cos_a)
-    b1 = bw - geo.bend * alpha
-    knee = geo.upper * np.stack([-np.sin(b1), -np.cos(b1)], -1)
-    wc = dc[:, None] * np.stack([-np.sin(bw), -np.cos(bw)], -1)
+    b1 = bw - bend * alpha
+    knee = upper[..., None] * np.stack([-np.sin(b1), -np.cos(b1)], -1)
+    wc = dc[..., None] * np.stack([-np.sin(bw), -np.cos(bw)], -1)
     lower_vec = wc - knee
-    b2 = np.arctan2(-lower_vec[:, 0], -lower_vec[:, 1])
-    toe_plane = wc + geo.foot * foot_dir
-    toe = shoulder + _mv(frame, np.stack([toe_plane[:, 0], np.zeros(t), toe_plane[:, 1]], -1))
-    distal = shoulder + _mv(frame, np.stack([wx[:, 0], np.zeros(t), wx[:, 1]], -1))
-    return LegIKResult(
-        abduction=abd,
-        girdle_flex=gflex.copy(),
-        upper_flex=wrap_angle(b1),
-        lower_flex=wrap_angle(b2 - b1),
-        foot_flex=wrap_angle(b3 - b2),
-        toe=toe,
-        reach_error=np.linalg.norm(toe - tgt, axis=-1),
-        proximal=shoulder,
-        distal_target=distal,
-        reach_ratio=dist / hi,
-    )
+    b2 = np.arctan2(-lower_vec[..., 0], -lower_vec[..., 1])
+    toe_plane = wc + foot[..., None] * foot_dir
+    zero = np.zeros(shape)
+    toe = shoulder + _mv(frame, np.stack([toe_plane[..., 0], zero, toe_plane[..., 1]], -1))
+    distal = shoulder + _mv(frame, np.stack([wx[..., 0], zero, wx[..., 1]], -1))
+    return {
+        "abduction": abd,
+        "girdle_flex": gflex.copy(),
+        "upper_flex": wrap_angle(b1),
+        "lower_flex": wrap_angle(b2 - b1),
+        "foot_flex": wrap_angle(b3 - b2),
+        "toe": toe,
+        "reach_error": np.linalg.norm(toe - tgt, axis=-1),
+        "proximal": shoulder,
+        "distal_target": distal,
+        "reach_ratio": dist / hi,
+    }
 
 
 def _comply_foot(
@@ -389,7 +433,7 @@ def _comply_foot(
     """
     lo, hi = band
     r = np.linalg.norm(p, axis=-1)
-    theta = np.arctan2(-p[:, 0], -p[:, 1])
+    theta = np.arctan2(-p[..., 0], -p[..., 1])
     rel = wrap_angle(b3 - theta)
     side = np.where(rel >= 0.0, 1.0, -1.0)
     den = np.maximum(2.0 * foot * r, 1e-12)
@@ -514,16 +558,44 @@ class PoseIK:
     """Result of :func:`pose_from_targets`.
 
     Attributes:
-        rotations: (T, J, 4) local rotations with the legs solved.
         reach_error: (T, 4) toe error per leg [m] (LF, RF, LH, RH).
-        legs: the four :class:`LegIKResult`.
+        toes: (T, 4, 3) toe positions the solution reaches [m].
         frames: the trunk frames the legs were solved in.
+        rotations: (T, J, 4) local rotations with the legs solved (assembled on first
+            use: an iteration that only needs the toes does not pay for them).
+        legs: the four :class:`LegIKResult` (made on first use).
     """
 
-    rotations: np.ndarray
     reach_error: np.ndarray
-    legs: tuple[LegIKResult, ...]
+    toes: np.ndarray
     frames: AxialFrames
+    _input_rotations: np.ndarray = field(repr=False, compare=False)
+    _solution: dict[str, np.ndarray] = field(repr=False, compare=False)
+    _joints: tuple[tuple[str, ...], ...] = field(repr=False, compare=False)
+
+    @functools.cached_property
+    def rotations(self) -> np.ndarray:
+        sol = self._solution
+        q = _chain_quaternions(
+            sol["girdle_flex"],
+            sol["abduction"],
+            sol["upper_flex"],
+            sol["lower_flex"],
+            sol["foot_flex"],
+        )  # (T, 4 legs, 4 joints, 4)
+        rot = self._input_rotations  # pose_from_targets' own copy
+        for k, joints in enumerate(self._joints):
+            for n, joint in enumerate(joints[:4]):
+                rot[:, _J[joint]] = q[:, k, n]
+            rot[:, _J[joints[4]]] = np.array([1.0, 0.0, 0.0, 0.0])
+        return rot
+
+    @functools.cached_property
+    def legs(self) -> tuple[LegIKResult, ...]:
+        return tuple(
+            LegIKResult(**{name: v[:, k] for name, v in self._solution.items()})
+            for k in range(len(LEGS))
+        )
 
 
 def pose_from_targets(
@@ -556,32 +628,44 @@ def pose_from_targets(
     """
     sp = load_species(species)
     root = np.asarray(root_positions, dtype=np.float64)
-    rot = np.array(rotations, dtype=np.float64, copy=True)
+    rot = np.array(rotations, dtype=np.float64, copy=True)  # the legs are written into it
     tg = np.asarray(toe_targets, dtype=np.float64)
     t = root.shape[0]
     if tg.shape != (t, 4, 3):
         raise IKError(f"toe_targets must have shape ({t}, 4, 3), got {tg.shape}")
     if rot.shape != (t, len(JOINT_NAMES), 4):
         raise IKError(f"rotations must have shape ({t}, {len(JOINT_NAMES)}, 4), got {rot.shape}")
+    if not np.all(np.isfinite(tg)):
+        raise IKError("toe_targets contains NaN or inf")
     frames = axial_frames(sp, root, rot)
-    legs = []
-    for k, leg in enumerate(LEGS):
-        rng = _abduction_range(sp, leg) if limit_abduction else None
-        res = leg_ik(
-            sp,
-            leg,
-            frames.girdle_root[:, k],
-            frames.parent_rotation[:, k],
-            tg[:, k],
-            None if girdle_flex is None else girdle_flex[:, k],
-            None if foot_inclination is None else foot_inclination[:, k],
-            abduction_range=rng,
-        )
-        geo = leg_geometry(sp, leg)
-        q = res.quaternions()
-        for n, joint in enumerate(geo.joints[:4]):
-            rot[:, _J[joint]] = q[:, n]
-        rot[:, _J[geo.joints[4]]] = np.array([1.0, 0.0, 0.0, 0.0])
-        legs.append(res)
-    err = np.stack([r.reach_error for r in legs], axis=1)
-    return PoseIK(rotations=rot, reach_error=err, legs=tuple(legs), frames=frames)
+    geos = [leg_geometry(sp, leg) for leg in LEGS]
+    per_leg = {
+        n: np.array([getattr(g, n) for g in geos]) for n in ("girdle_flex0", "foot_inclination0")
+    }
+    gflex = per_leg["girdle_flex0"] if girdle_flex is None else girdle_flex
+    finc = per_leg["foot_inclination0"] if foot_inclination is None else foot_inclination
+    abd = None
+    if limit_abduction:
+        ranges = [_abduction_range(sp, leg) for leg in LEGS]
+        abd = (np.array([min(r) for r in ranges]), np.array([max(r) for r in ranges]))
+    # the four legs in one vectorised solve over (T, 4)
+    sol = _solve_legs(
+        tuple(
+            np.array([getattr(g, n) for g in geos])
+            for n in ("girdle", "upper", "lower", "foot", "bend")
+        ),
+        frames.girdle_root,
+        frames.parent_rotation,
+        tg,
+        _as_leg_frames(gflex, t, "girdle_flex"),
+        _as_leg_frames(finc, t, "foot_inclination"),
+        abd,
+    )
+    return PoseIK(
+        reach_error=sol["reach_error"],
+        toes=sol["toe"],
+        frames=frames,
+        _input_rotations=rot,
+        _solution=sol,
+        _joints=tuple(g.joints for g in geos),
+    )

@@ -466,7 +466,7 @@ def _solve_planted(
         # slide over the stance: move each stance run's foothold to where the leg does
         # put it (the median of the solved toes), blend the shift into the swings, solve
         # again.
-        solved = np.stack([lg.toe for lg in pose.legs], axis=1)
+        solved = pose.toes
         moved = targets.copy()
         moved[..., :2] = np.where(c[..., None], solved[..., :2], targets[..., :2])
         targets = _planted_targets(moved, c, free=free)
@@ -476,7 +476,7 @@ def _solve_planted(
     for _ in range(iterations):
         # how far each stance toe hangs above its foothold (a lateral miss of a leg at
         # its abduction limit is not helped by a lower pelvis)
-        toe_z = np.stack([lg.toe[:, 2] for lg in pose.legs], axis=1)
+        toe_z = pose.toes[..., 2]
         short = np.where(c, np.maximum(toe_z - targets[..., 2], 0.0), 0.0).max(axis=1)
         if short.max() <= 0.002 * leg:
             break
@@ -488,7 +488,7 @@ def _solve_planted(
             sp, root, rot, targets, girdle_flex, foot_inclination, limit_abduction=limit_abduction
         )
     for _ in range(4):  # a toe the IK could not hold on its target must not sink
-        toe_z = np.stack([lg.toe[:, 2] for lg in pose.legs], axis=1)
+        toe_z = pose.toes[..., 2]
         under = toe_z < -1e-6 * leg  # below round-off: an IK miss, lifted with a margin
         if not under.any():
             break
@@ -498,7 +498,7 @@ def _solve_planted(
             sp, root, rot, targets, girdle_flex, foot_inclination, limit_abduction=limit_abduction
         )
     out = Motion(motion.species, motion.fps, root, pose.rotations, c.copy(), dict(motion.metadata))
-    toes = np.stack([lg.toe[:, 2] for lg in pose.legs], axis=1)  # the IK's toes are the FK's
+    toes = pose.toes[..., 2]  # the IK's toes are the FK's
     stance_h = np.array(
         [np.median(toes[c[:, k], k]) if c[:, k].any() else np.nan for k in range(4)]
     )

@@ -139,6 +139,56 @@ def test_pose_from_targets_matches_full_skeleton_fk() -> None:
     Motion(species="dog", fps=30.0, root_positions=roots, rotations=sol.rotations)  # valid motion
 
 
+@pytest.mark.parametrize("limit", [False, True])
+def test_pose_from_targets_solves_every_leg_as_leg_ik_does(limit: bool) -> None:
+    """The four legs solved together are, value for value, :func:`leg_ik` of each leg on
+    its trunk frame, with per-leg girdle flexion and foot inclination, an abduction range,
+    and targets out of reach and tucked up; the rotations are each leg's quaternions, the
+    toes its solved toes, and the caller's rotations are not touched."""
+    from habitsim.ik import _abduction_range, axial_frames
+
+    sp = load_species("horse")
+    skel = get_skeleton(sp)
+    root, quats = skel.standing_pose()
+    t = 24
+    rng = np.random.default_rng(5)
+    roots = np.repeat(root[None], t, 0) + rng.normal(0.0, 0.02, (t, 3))
+    rots = np.repeat(quats[None], t, 0)
+    rots[:, 0] = rot_z(rng.uniform(-0.3, 0.3, t))
+    before = rots.copy()
+    toes = fk(skel, roots, rots)[:, skel.foot_indices] + rng.normal(0.0, 0.08, (t, 4, 3))
+    toes[3:6, 0, 2] += 0.9  # a fore paw tucked up to the shoulder: abduction runs out
+    toes[8:10, 3, 2] -= 1.5  # a hind toe far out of reach
+    gflex = rng.normal(0.0, 0.2, (t, 4))
+    incl = rng.normal(0.0, 0.2, (t, 4))
+    sol = pose_from_targets(sp, roots, rots, toes, gflex, incl, limit_abduction=limit)
+    np.testing.assert_array_equal(rots, before)
+    frames = axial_frames(sp, roots, rots)
+    for k, leg in enumerate(LEGS):
+        one = leg_ik(
+            sp,
+            leg,
+            frames.girdle_root[:, k],
+            frames.parent_rotation[:, k],
+            toes[:, k],
+            gflex[:, k],
+            incl[:, k],
+            abduction_range=_abduction_range(sp, leg) if limit else None,
+        )
+        for name in ("abduction", "upper_flex", "lower_flex", "foot_flex", "toe", "reach_error"):
+            np.testing.assert_array_equal(getattr(sol.legs[k], name), getattr(one, name))
+        np.testing.assert_array_equal(sol.toes[:, k], one.toe)
+        np.testing.assert_array_equal(sol.reach_error[:, k], one.reach_error)
+        joints = leg_geometry(sp, leg).joints
+        got = np.stack([sol.rotations[:, skel.index(j)] for j in joints[:4]], axis=1)
+        np.testing.assert_array_equal(got, one.quaternions())
+    assert sol.reach_error[8:10, 3].min() > 0.5  # honest about the unreachable toe
+    with pytest.raises(IKError, match="girdle_flex must have shape"):
+        pose_from_targets(sp, roots, rots, toes, gflex[:, :3])
+    with pytest.raises(IKError, match="foot_inclination contains NaN"):
+        pose_from_targets(sp, roots, rots, toes, gflex, np.full((t, 4), np.nan))
+
+
 @pytest.mark.parametrize(
     "kwargs",
     [
