@@ -649,3 +649,26 @@ def test_the_large_preset_is_the_shipped_models_recipe():
     one = single_run_config(large, RECIPES["large"])
     assert one.model == cfgs[-1].model and one.train == large.train
     assert stage_configs(large, RECIPES["large"], first_steps=50)[0].train.steps == 50
+
+
+@pytest.mark.slow
+def test_bench_train_plans_every_stage_of_the_large_preset(monkeypatch):
+    """``habitsim bench train --config large`` times the recipe's final model (the path
+    options on) and plans the steps of all three stages."""
+    import importlib
+
+    from habitsim.cli.bench_train import training_throughput
+
+    mod = importlib.import_module("habitsim.models.train")
+    seen = []
+    real = mod.build_untrained
+
+    def spy(cfg, *args, **kwargs):
+        seen.append(cfg.model)
+        return real(cfg, *args, **kwargs)
+
+    monkeypatch.setattr(mod, "build_untrained", spy)
+    tp = training_throughput("large", steps=1)
+    assert len(seen) == 1 and seen[0].heading_relative and seen[0].path_heading
+    assert tp["planned_steps"] == 18000.0
+    assert tp["planned_minutes"] == pytest.approx(18000 * tp["s_per_step"] / 60.0)

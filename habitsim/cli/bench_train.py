@@ -52,7 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def training_throughput(config: str = "default", steps: int = 10) -> dict[str, float]:
-    """Steps/s of fresh training on in-memory synthetic windows (after 2 warm-up steps)."""
+    """Steps/s of fresh training on in-memory synthetic windows (after 2 warm-up steps);
+    for a staged preset (:data:`habitsim.models.recipe.RECIPES`) of its final model, with
+    the steps of every stage planned."""
     import numpy as np
     import torch
 
@@ -60,10 +62,15 @@ def training_throughput(config: str = "default", steps: int = 10) -> dict[str, f
     from ..models.config import preset
     from ..models.data import ClipSet, WindowSampler, feature_stats
     from ..models.features import clip_arrays
+    from ..models.recipe import RECIPES, single_run_config, stage_configs
     from ..models.train import build_untrained, compute_losses
     from ..species import species_names, training_species
 
     cfg = preset(config)
+    planned = cfg.train.steps
+    if config in RECIPES:  # a staged preset: time its final model, plan every stage's steps
+        planned = sum(c.train.steps for c in stage_configs(cfg, RECIPES[config]))
+        cfg = single_run_config(cfg, RECIPES[config])
     clips, acts = [], []
     keys: list[str | None] = []
     for sp in training_species():
@@ -102,8 +109,8 @@ def training_throughput(config: str = "default", steps: int = 10) -> dict[str, f
         "steps_per_s": 1.0 / dt,
         "windows_per_s": cfg.train.batch_size / dt,
         "frames_per_s": cfg.train.batch_size * cfg.model.window / dt,
-        "planned_steps": float(cfg.train.steps),
-        "planned_minutes": cfg.train.steps * dt / 60.0,
+        "planned_steps": float(planned),
+        "planned_minutes": planned * dt / 60.0,
     }
 
 
