@@ -124,7 +124,6 @@ def _train(ns: argparse.Namespace) -> int:
     from ..models.checkpoint import MODEL_FILE
     from ..models.config import preset
     from ..models.errors import ConfigError
-    from ..models.evaluate import record_reference_error
     from ..models.recipe import RECIPES, single_run_config
     from ..models.train import train
 
@@ -163,14 +162,24 @@ def _train(ns: argparse.Namespace) -> int:
         rehearse=ns.rehearse,
         rehearse_share=ns.rehearse_share,
     )
-    ref = record_reference_error(ns.out)
+    return _report(ns.out, f"{cfg.name}/{cfg.model.variant}, {res.steps} steps", t0, res.metrics)
+
+
+def _report(
+    out: Path, what: str, t0: float, metrics: dict[str, float], lines: list[str] | None = None
+) -> int:
+    """Record the reference clips' reconstruction error in ``out`` and print the run's
+    summary (``lines``: extra ones after the first)."""
+    from ..models.checkpoint import MODEL_FILE
+    from ..models.evaluate import record_reference_error
+
+    ref = record_reference_error(out)
     wall = time.perf_counter() - t0
-    size = (Path(ns.out) / MODEL_FILE).stat().st_size / 1e6
-    print(
-        f"checkpoint {ns.out} ({cfg.name}/{cfg.model.variant}, {res.steps} steps, "
-        f"model.safetensors {size:.1f} MB) in {wall:.0f} s"
-    )
-    for k, v in res.metrics.items():
+    size = (Path(out) / MODEL_FILE).stat().st_size / 1e6
+    print(f"checkpoint {out} ({what}, model.safetensors {size:.1f} MB) in {wall:.0f} s")
+    for line in lines or []:
+        print(f"  {line}")
+    for k, v in metrics.items():
         print(f"  {k:24s} {v}")
     print(
         f"  reference clips: reconstruction MPJPE {ref['mpjpe_mm']:.1f} mm "
@@ -183,7 +192,6 @@ def _train_staged(ns: argparse.Namespace, cfg, stages, changes: dict[str, object
     """``--config large``: the preset's stages (:mod:`habitsim.models.recipe`)."""
     from ..fileio import check_writable
     from ..models.checkpoint import MODEL_FILE
-    from ..models.evaluate import record_reference_error
     from ..models.recipe import stage_configs, stage_folders, train_staged
 
     for key, value in (("train.seed", ns.seed), ("train.threads", ns.threads)):
@@ -204,23 +212,11 @@ def _train_staged(ns: argparse.Namespace, cfg, stages, changes: dict[str, object
         overwrite=ns.overwrite,
         progress=not ns.no_progress,
     )
-    ref = record_reference_error(ns.out)
-    wall = time.perf_counter() - t0
-    size = (Path(ns.out) / MODEL_FILE).stat().st_size / 1e6
-    print(
-        f"checkpoint {ns.out} ({cfg.name}/{cfg.model.variant}, {len(stages)} stages, "
-        f"{res.steps} steps, model.safetensors {size:.1f} MB) in {wall:.0f} s"
-    )
-    for st in res.recipe["stages"]:
-        print(
-            f"  stage {st['name']:18s} {st['steps']:6d} steps at lr {st['lr']:g}  "
-            f"{st['wall_time_s']:6d} s  ({st['checkpoint']})"
-        )
-    print(f"  {'wall time of every stage':24s} {res.recipe['wall_time_s']} s")
-    for k, v in res.metrics.items():
-        print(f"  {k:24s} {v}")
-    print(
-        f"  reference clips: reconstruction MPJPE {ref['mpjpe_mm']:.1f} mm "
-        f"({ref['pct_leg']:.2f} % of leg length; root-relative {ref['root_relative_mm']:.1f} mm)"
-    )
-    return 0
+    lines = [
+        f"stage {st['name']:18s} {st['steps']:6d} steps at lr {st['lr']:g}  "
+        f"{st['wall_time_s']:6d} s  ({st['checkpoint']})"
+        for st in res.recipe["stages"]
+    ]
+    lines.append(f"{'wall time of every stage':24s} {res.recipe['wall_time_s']} s")
+    what = f"{cfg.name}/{cfg.model.variant}, {len(stages)} stages, {res.steps} steps"
+    return _report(ns.out, what, t0, res.metrics, lines)
