@@ -554,6 +554,38 @@ def _abduction_range(sp: Species, leg: str) -> tuple[float, float]:
 
 
 @dataclass(frozen=True)
+class _LegsTable:
+    """A species' four legs (LF, RF, LH, RH) as (4,) arrays for :func:`_solve_legs`."""
+
+    lengths: tuple[np.ndarray, ...]  # girdle, upper, lower, foot, bend
+    girdle_flex0: np.ndarray
+    foot_inclination0: np.ndarray
+    abduction: tuple[np.ndarray, np.ndarray]  # (lo, hi) of :func:`_abduction_range`
+    joints: tuple[tuple[str, ...], ...]
+
+
+@functools.lru_cache(maxsize=64)
+def _legs_table(sp: Species) -> _LegsTable:
+    geos = [leg_geometry(sp, leg) for leg in LEGS]
+
+    def arr(values: list[float]) -> np.ndarray:
+        a = np.array(values, dtype=np.float64)
+        a.flags.writeable = False  # shared by every call
+        return a
+
+    ranges = [_abduction_range(sp, leg) for leg in LEGS]
+    return _LegsTable(
+        lengths=tuple(
+            arr([getattr(g, n) for g in geos]) for n in ("girdle", "upper", "lower", "foot", "bend")
+        ),
+        girdle_flex0=arr([g.girdle_flex0 for g in geos]),
+        foot_inclination0=arr([g.foot_inclination0 for g in geos]),
+        abduction=(arr([min(r) for r in ranges]), arr([max(r) for r in ranges])),
+        joints=tuple(g.joints for g in geos),
+    )
+
+
+@dataclass(frozen=True)
 class PoseIK:
     """Result of :func:`pose_from_targets`.
 
@@ -638,28 +670,18 @@ def pose_from_targets(
     if not np.all(np.isfinite(tg)):
         raise IKError("toe_targets contains NaN or inf")
     frames = axial_frames(sp, root, rot)
-    geos = [leg_geometry(sp, leg) for leg in LEGS]
-    per_leg = {
-        n: np.array([getattr(g, n) for g in geos]) for n in ("girdle_flex0", "foot_inclination0")
-    }
-    gflex = per_leg["girdle_flex0"] if girdle_flex is None else girdle_flex
-    finc = per_leg["foot_inclination0"] if foot_inclination is None else foot_inclination
-    abd = None
-    if limit_abduction:
-        ranges = [_abduction_range(sp, leg) for leg in LEGS]
-        abd = (np.array([min(r) for r in ranges]), np.array([max(r) for r in ranges]))
+    table = _legs_table(sp)
+    gflex = table.girdle_flex0 if girdle_flex is None else girdle_flex
+    finc = table.foot_inclination0 if foot_inclination is None else foot_inclination
     # the four legs in one vectorised solve over (T, 4)
     sol = _solve_legs(
-        tuple(
-            np.array([getattr(g, n) for g in geos])
-            for n in ("girdle", "upper", "lower", "foot", "bend")
-        ),
+        table.lengths,
         frames.girdle_root,
         frames.parent_rotation,
         tg,
         _as_leg_frames(gflex, t, "girdle_flex"),
         _as_leg_frames(finc, t, "foot_inclination"),
-        abd,
+        table.abduction if limit_abduction else None,
     )
     return PoseIK(
         reach_error=sol["reach_error"],
@@ -667,5 +689,5 @@ def pose_from_targets(
         frames=frames,
         _input_rotations=rot,
         _solution=sol,
-        _joints=tuple(g.joints for g in geos),
+        _joints=table.joints,
     )

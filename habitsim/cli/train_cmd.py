@@ -192,12 +192,11 @@ def _train_staged(ns: argparse.Namespace, cfg, stages, changes: dict[str, object
     """``--config large``: the preset's stages (:mod:`habitsim.models.recipe`)."""
     from ..fileio import check_writable
     from ..models.checkpoint import MODEL_FILE
-    from ..models.recipe import stage_configs, stage_folders, train_staged
+    from ..models.recipe import stage_folders, train_staged
 
     for key, value in (("train.seed", ns.seed), ("train.threads", ns.threads)):
         if value is not None:
             changes[key] = value
-    stage_configs(cfg, stages, changes, ns.steps)  # a bad override fails before any stage
     for folder in stage_folders(ns.out, stages):
         check_writable(Path(folder) / MODEL_FILE, "--out")
     t0 = time.perf_counter()
