@@ -29,6 +29,7 @@ Everything is vectorised over frames.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -282,9 +283,13 @@ class PlantReport:
         }
 
 
+@functools.lru_cache(maxsize=512)
 def _smoothstep(n: int) -> np.ndarray:
+    """(n,) smoothstep weights of a swing's n inner frames (read-only, shared)."""
     s = (np.arange(n) + 1.0) / (n + 1.0)
-    return s * s * (3.0 - 2.0 * s)
+    w = s * s * (3.0 - 2.0 * s)
+    w.flags.writeable = False
+    return w
 
 
 def _median0(x: np.ndarray) -> np.ndarray:
@@ -536,7 +541,9 @@ def leg_pose_angles(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
     return girdle, incl
 
 
-def stance_driven_root(motion: Motion, contacts: np.ndarray) -> tuple[Motion, float]:
+def stance_driven_root(
+    motion: Motion, contacts: np.ndarray, glob: np.ndarray | None = None
+) -> tuple[Motion, float]:
     """The motion with its pelvis' horizontal path moved by what its stance feet slide.
 
     On every frame step where at least one foot is in stance on both frames, the pelvis'
@@ -550,6 +557,8 @@ def stance_driven_root(motion: Motion, contacts: np.ndarray) -> tuple[Motion, fl
     Args:
         motion: the motion.
         contacts: (T, 4) bool stance labels.
+        glob: optional (T, J, 3) global joint positions of ``motion``, when already at
+            hand.
 
     Returns:
         ``(motion with the new root path, mean horizontal speed new / old)`` (1 for a
@@ -561,7 +570,12 @@ def stance_driven_root(motion: Motion, contacts: np.ndarray) -> tuple[Motion, fl
         raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
     if t < 2:
         return motion, 1.0
-    toes = motion.foot_positions()[..., :2]
+    if glob is not None and np.shape(glob) != (t, motion.skeleton.num_joints, 3):
+        raise InvalidMotionError(
+            f"glob must have shape ({t}, {motion.skeleton.num_joints}, 3), got {np.shape(glob)}"
+        )
+    g = motion.global_positions() if glob is None else glob
+    toes = g[:, motion.skeleton.foot_indices, :2]
     on = (c[1:] & c[:-1]).astype(np.float64)  # (T-1, 4)
     n = on.sum(axis=1, keepdims=True)
     slip = (np.diff(toes, axis=0) * on[..., None]).sum(axis=1) / np.maximum(n, 1.0)

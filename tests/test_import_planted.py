@@ -424,8 +424,14 @@ def test_stance_driven_root_measures_how_far_the_legs_carry_the_body():
     back, ratio = stance_driven_root(slide, m.contacts)
     assert ratio == pytest.approx(0.5, abs=0.03)
     np.testing.assert_array_equal(back.root_positions[:, 2], fast[:, 2])
+    # the global joint positions at hand give the same path, and must match the motion
+    held, ratio_g = stance_driven_root(slide, m.contacts, slide.global_positions())
+    np.testing.assert_array_equal(held.root_positions, back.root_positions)
+    assert ratio_g == ratio
     with pytest.raises(habitsim.errors.InvalidMotionError, match="contacts must have shape"):
         stance_driven_root(m, m.contacts[:-1])
+    with pytest.raises(habitsim.errors.InvalidMotionError, match="glob must have shape"):
+        stance_driven_root(m, m.contacts, m.global_positions()[:-1])
 
 
 def test_centred_footholds_hold_the_sweep_under_the_joint_and_reach_further():

@@ -375,3 +375,31 @@ def test_train_cli_staged_large_and_single_run(tmp_path, capsys, monkeypatch):
     bad = [*base, "--out", str(tmp_path / "bad"), "--set", "model.path_heading=false", *small]
     assert main(bad) == 2
     assert "--single-run" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+
+
+@needs_ckpt
+def test_transfer_reuses_the_seeded_prior_draw_kept_on_the_checkpoint():
+    """The habit latent a transfer draws is the flow prior's draw for its seed and
+    temperature, drawn once and kept on the loaded checkpoint."""
+    import importlib
+
+    import torch
+
+    tr = importlib.import_module("habitsim.models.transfer")
+    ck = tr.load_model()
+    ck.prior_draws.clear()
+    z0 = tr._prior_draw(ck, "cat", None, 1.0)
+    fresh = ck.model.sample_prior("cat", 1, torch.Generator().manual_seed(0), 1.0)
+    torch.testing.assert_close(z0, fresh, rtol=0, atol=0)
+    assert tr._prior_draw(ck, "cat", 0, 1.0) is z0  # seed None draws as seed 0
+    assert not torch.equal(tr._prior_draw(ck, "cat", 1, 1.0), z0)
+    assert not torch.equal(tr._prior_draw(ck, "cat", 0, 0.5), z0)
+    assert not torch.equal(tr._prior_draw(ck, "horse", 0, 1.0), z0)
+    assert len(ck.prior_draws) == 4
+    clip = generate("horse", "trot", seed=7, duration_s=2.0)
+    first = transfer(clip, to="cat", seed=3)
+    again = transfer(clip, to="cat", seed=3)
+    np.testing.assert_array_equal(first.rotations, again.rotations)
+    np.testing.assert_array_equal(first.root_positions, again.root_positions)
+    ck.prior_draws.clear()  # a fresh draw gives the same transfer
+    np.testing.assert_array_equal(transfer(clip, to="cat", seed=3).rotations, first.rotations)

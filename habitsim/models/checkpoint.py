@@ -67,12 +67,18 @@ class LoadedCheckpoint:
         config: its configuration.
         meta: the rest of ``config.json`` (species, text, fps, metrics, training).
         path: the folder.
+        prior_draws: habit latents already drawn from the flow prior, by (species, seed,
+            temperature) (:func:`habitsim.models.transfer.transfer` draws one per call;
+            the draw is deterministic, so a repeated transfer reuses it).
     """
 
     model: HabitVQVAE
     config: Config
     meta: dict[str, Any] = field(default_factory=dict)
     path: Path | None = None
+    prior_draws: dict[tuple[str, int, float], torch.Tensor] = field(
+        default_factory=dict, repr=False, compare=False
+    )
 
     @property
     def fps(self) -> float:

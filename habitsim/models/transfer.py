@@ -266,6 +266,26 @@ def _text_rows(ck: LoadedCheckpoint, species: str, n: int) -> torch.Tensor | Non
     return torch.from_numpy(np.repeat(g[None], n, axis=0))
 
 
+#: Most prior draws a loaded checkpoint keeps (:attr:`LoadedCheckpoint.prior_draws`).
+PRIOR_DRAWS_KEPT = 256
+
+
+def _prior_draw(
+    ck: LoadedCheckpoint, species: str, seed: int | None, temperature: float
+) -> torch.Tensor:
+    """One habit latent (1, z_dim) from ``species``' flow prior with the generator seeded
+    by ``seed`` (``None``: 0): the same draw every time, kept on the checkpoint."""
+    key = (species, 0 if seed is None else int(seed), float(temperature))
+    z = ck.prior_draws.get(key)
+    if z is None:
+        gen = torch.Generator().manual_seed(key[1])
+        z = ck.model.sample_prior(species, 1, gen, temperature)
+        if len(ck.prior_draws) >= PRIOR_DRAWS_KEPT:
+            ck.prior_draws.pop(next(iter(ck.prior_draws)))
+        ck.prior_draws[key] = z
+    return z
+
+
 @torch.no_grad()
 def _run_network(
     ck: LoadedCheckpoint,
@@ -294,8 +314,7 @@ def _run_network(
         if reconstruct:
             z = model.posterior(x, [habit_sp] * k)[0]
         else:
-            gen = torch.Generator().manual_seed(0 if seed is None else int(seed))
-            z = model.sample_prior(habit_sp, 1, gen, temperature).expand(k, -1)
+            z = _prior_draw(ck, habit_sp, seed, temperature).expand(k, -1)
     cond = model.condition([to] * k, z, _text_rows(ck, to, k) if model.cfg.use_g else None)
     y = model.decode(codes, cond, model.path(x)).numpy()
     world = [uncanonicalize(y[i], wins[i][2]) for i in range(k)]
@@ -663,7 +682,7 @@ def _plant(
         f"in swing, pelvis lowered {first['max_pelvis_drop_per_leg']:.2f}; limits "
         f"{PLANT_MAX_REACH_PER_LEG}, {PLANT_MAX_SWING_REACH_PER_LEG}, {PLANT_MAX_DROP_PER_LEG})"
     )
-    carried, ratio = stance_driven_root(out, contacts)
+    carried, ratio = stance_driven_root(out, contacts, glob)
     if ratio >= PLANT_MIN_SPEED_RATIO:
         # the carried body only translates: its joints move with its root
         shift = (carried.root_positions - out.root_positions)[:, None, :]
