@@ -541,6 +541,21 @@ def leg_pose_angles(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
     return girdle, incl
 
 
+def _global_positions(motion: Motion, glob: np.ndarray | None) -> np.ndarray:
+    """``motion``'s (T, J, 3) global joint positions: ``glob`` when given (checked against
+    the motion's shape), else one forward-kinematics pass.
+
+    Raises:
+        InvalidMotionError: a ``glob`` whose shape does not match the motion.
+    """
+    if glob is None:
+        return motion.global_positions()
+    want = (motion.num_frames, motion.skeleton.num_joints, 3)
+    if np.shape(glob) != want:
+        raise InvalidMotionError(f"glob must have shape {want}, got {np.shape(glob)}")
+    return glob
+
+
 def stance_driven_root(
     motion: Motion, contacts: np.ndarray, glob: np.ndarray | None = None
 ) -> tuple[Motion, float]:
@@ -570,11 +585,7 @@ def stance_driven_root(
         raise InvalidMotionError(f"contacts must have shape ({t}, 4), got {c.shape}")
     if t < 2:
         return motion, 1.0
-    if glob is not None and np.shape(glob) != (t, motion.skeleton.num_joints, 3):
-        raise InvalidMotionError(
-            f"glob must have shape ({t}, {motion.skeleton.num_joints}, 3), got {np.shape(glob)}"
-        )
-    g = motion.global_positions() if glob is None else glob
+    g = _global_positions(motion, glob)
     toes = g[:, motion.skeleton.foot_indices, :2]
     on = (c[1:] & c[:-1]).astype(np.float64)  # (T-1, 4)
     n = on.sum(axis=1, keepdims=True)
@@ -728,10 +739,8 @@ def plant_motion(
     if free is not None and np.shape(free) != (t, 4):
         raise InvalidMotionError(f"free must have shape ({t}, 4), got {np.shape(free)}")
     free = None if free is None else np.asarray(free, dtype=bool)
-    if glob is not None and np.shape(glob) != (t, motion.skeleton.num_joints, 3):
-        raise InvalidMotionError(
-            f"glob must have shape ({t}, {motion.skeleton.num_joints}, 3), got {np.shape(glob)}"
-        )
+    if glob is not None:
+        glob = _global_positions(motion, glob)
     targets = _own_targets(motion, c, centre, glob, free)
     if swing_floor is not None:
         fl = np.asarray(swing_floor, dtype=np.float64)

@@ -270,6 +270,7 @@ def _text_rows(ck: LoadedCheckpoint, species: str, n: int) -> torch.Tensor | Non
 PRIOR_DRAWS_KEPT = 256
 
 
+@torch.no_grad()
 def _prior_draw(
     ck: LoadedCheckpoint, species: str, seed: int | None, temperature: float
 ) -> torch.Tensor:
