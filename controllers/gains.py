@@ -44,7 +44,7 @@ from habitsim.mjutils import (
     find_feet,
     free_body,
     home_qpos,
-    resolve_points,
+    resolve_feet,
 )
 from habitsim.mjutils import (
     point_body as _point_body,
@@ -112,9 +112,10 @@ def effective_inertia(
 
 
 def _resolve_points(model: mujoco.MjModel, names: Sequence[str]) -> list[tuple[str, int]]:
-    """:func:`habitsim.mjutils.resolve_points`, an unknown name as a ControllerError."""
+    """Feet by name (:func:`habitsim.mjutils.resolve_feet`: a body name is its foot
+    sphere), an unknown name as a ControllerError."""
     try:
-        return resolve_points(model, names)
+        return resolve_feet(model, names)
     except ModelLookupError as e:
         raise ControllerError(str(e)) from e
 

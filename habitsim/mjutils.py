@@ -12,7 +12,7 @@ model's valid names.
   :func:`body_free_joint`, :func:`free_dofs`;
 * the home pose: :func:`home_qpos` (the keyframe named ``home``, else ``qpos0``);
 * named points (site, geom or body): :func:`resolve_points`, :func:`point_body`,
-  :func:`point_pos`;
+  :func:`point_pos`; feet named by a site, geom or body: :func:`resolve_feet`;
 * feet: :data:`HABITSIM_FEET` and the usual robot namings (:func:`known_feet`), the
   geoms touching the ground at home (:func:`find_feet`), the colliding geom of each foot
   (:func:`foot_geoms`), foot soles along a trajectory (:func:`foot_soles`), the lowest
@@ -43,6 +43,7 @@ __all__ = [
     "free_dofs",
     "home_qpos",
     "resolve_points",
+    "resolve_feet",
     "point_body",
     "point_pos",
     "known_feet",
@@ -161,6 +162,33 @@ def resolve_points(model: mujoco.MjModel, names: Sequence[str]) -> list[tuple[st
                 f"foot {n!r} is not a site, geom or body of the model; named sites: "
                 f"{', '.join(sites) or '(none)'}; named geoms: {', '.join(geoms) or '(none)'}"
             )
+    return out
+
+
+def resolve_feet(model: mujoco.MjModel, names: Sequence[str]) -> list[tuple[str, int]]:
+    """Foot names as :func:`resolve_points` does, except that a foot named by its body is
+    the body's foot sphere: its colliding sphere geom lowest at the home pose.
+
+    A foot body's origin is its joint (a robot's shank body starts at the knee; ANYmal's
+    feet are unnamed spheres on ``LF_SHANK`` …), so a body name taken literally would put
+    the foot point, the leg IK, the ground forces and the leg length at the knee. A body
+    without a colliding sphere keeps its origin.
+
+    Raises:
+        ModelLookupError: as :func:`resolve_points`.
+    """
+    out = resolve_points(model, names)
+    colliding = (model.geom_contype != 0) | (model.geom_conaffinity != 0)
+    sphere = model.geom_type == mujoco.mjtGeom.mjGEOM_SPHERE
+    d: mujoco.MjData | None = None
+    for k, (kind, i) in enumerate(out):
+        if kind != "body":
+            continue
+        cand = np.flatnonzero((model.geom_bodyid == i) & colliding & sphere)
+        if cand.size:
+            d = _home_data(model) if d is None else d
+            low = d.geom_xpos[cand, 2] - model.geom_size[cand, 0]
+            out[k] = ("geom", int(cand[int(np.argmin(low))]))
     return out
 
 
@@ -360,7 +388,7 @@ def leg_length(model: mujoco.MjModel, feet: Sequence[str] | None = None) -> floa
             + "; ".join(", ".join(n) for n in (HABITSIM_FEET, *ROBOT_FEET))
             + "); pass feet=[...] (site, geom or body names in the order LF, RF, LH, RH)"
         )
-    pts = resolve_points(model, names)
+    pts = resolve_feet(model, names)
     d = _home_data(model)
     z = [point_pos(d, k, i)[2] for k, i in pts]
     return float(max(d.xpos[trunk, 2] - np.mean(z), 1e-3))

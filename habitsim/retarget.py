@@ -61,6 +61,7 @@ __all__ = [
     "robot_legs",
     "load_robot",
     "leg_ik",
+    "leg_extension",
     "retarget",
     "trot",
     "stand",
@@ -90,13 +91,16 @@ class RobotLegs:
             habitsim motion).
         legs: the controllers' :class:`~habitsim.controllers.legs.LegSet` (foot points,
             the joints each leg owns).
-        home: (nq,) the standing pose (keyframe ``home``, else ``qpos0``).
+        home: (nq,) the standing pose (:func:`robot_legs`: keyframe ``home``, else
+            ``qpos0``, crouched when its legs are straight).
         height: trunk height over the ground when standing [m].
         nominal: (nf, 3) foot points in the trunk frame when standing [m].
         radius: (nf,) foot sphere radius [m] (the foot point is its centre).
         leg_length: L [m], the trunk origin's height over the foot points at home.
         qadr, dadr, lo, hi: per foot, the qpos / dof addresses of the leg's own joints
             and their ranges (±inf where unlimited).
+        home_source: where ``home`` comes from (``keyframe 'home'``, ``qpos0``, or
+            ``qpos0`` crouched).
     """
 
     model: mujoco.MjModel
@@ -111,6 +115,7 @@ class RobotLegs:
     dadr: tuple[np.ndarray, ...]
     lo: tuple[np.ndarray, ...]
     hi: tuple[np.ndarray, ...]
+    home_source: str = "keyframe 'home'"
 
     @property
     def trunk_qadr(self) -> int:
@@ -132,12 +137,32 @@ def load_robot(path: str | Path) -> mujoco.MjModel:
         raise RetargetError(f"robot model {str(p)!r} does not load: {e}") from e
 
 
+#: A pose whose legs all but reach their full length (:func:`leg_extension` above this
+#: on any leg) is straight-legged: ANYmal C's ``qpos0`` in
+#: MuJoCo Menagerie (no keyframe). Straight legs are a singular pose for the leg IK (no
+#: joint moves the foot vertically) and for the stance forces, so such a model stands
+#: on a crouched pose instead (:func:`robot_legs`).
+STRAIGHT_REACH = 0.97
+#: Trunk height of the crouched standing pose, share of the straight-legged height.
+CROUCH_HEIGHT = 0.85
+#: Knee bend [rad] that starts the crouch's leg IK off the straight-leg singularity.
+CROUCH_BEND = 0.5
+
+
 def robot_legs(model: mujoco.MjModel, feet: Sequence[str]) -> RobotLegs:
-    """The legs of ``model`` ending at ``feet`` (site, geom or body names).
+    """The legs of ``model`` ending at ``feet`` (site, geom or body names; a body is its
+    foot sphere, :func:`habitsim.mjutils.resolve_feet`).
+
+    The standing pose is the keyframe ``home``; without one ``qpos0``, crouched when its
+    legs are straight (:data:`STRAIGHT_REACH`): the trunk lowered to
+    :data:`CROUCH_HEIGHT` of its height with the feet kept where they stand, the legs
+    solved by :func:`leg_ik` from knees bent so that each foot moves forward (the knees
+    point backward, as on most legged robots). :attr:`RobotLegs.home_source` says which.
 
     Raises:
         RetargetError: no free joint, an unknown foot (the message lists the model's
-            sites, geoms and bodies), a foot without joints of its own.
+            sites, geoms and bodies), a foot without joints of its own, a straight-legged
+            ``qpos0`` the crouch cannot solve (add a ``home`` keyframe).
     """
     from .controllers import ControllerError
     from .controllers.legs import LegSet
@@ -163,7 +188,21 @@ def robot_legs(model: mujoco.MjModel, feet: Sequence[str]) -> RobotLegs:
         legs = LegSet(model, feet)
     except ControllerError as e:
         raise RetargetError(str(e)) from e
-    home = home_qpos(model)
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home") >= 0:
+        return _legs_at(model, feet, legs, home_qpos(model), "keyframe 'home'")
+    rl = _legs_at(model, feet, legs, model.qpos0.copy(), "qpos0")
+    if float(leg_extension(rl).max()) <= STRAIGHT_REACH:
+        return rl
+    crouched = _crouch(rl)
+    return _legs_at(
+        model, feet, legs, crouched, f"qpos0 crouched to {CROUCH_HEIGHT:.0%} of its height"
+    )
+
+
+def _legs_at(
+    model: mujoco.MjModel, feet: tuple[str, ...], legs: Any, home: np.ndarray, source: str
+) -> RobotLegs:
+    """The :class:`RobotLegs` standing on ``home``."""
     d = mujoco.MjData(model)
     d.qpos[:] = home
     mujoco.mj_kinematics(model, d)
@@ -196,7 +235,89 @@ def robot_legs(model: mujoco.MjModel, feet: Sequence[str]) -> RobotLegs:
         dadr=tuple(dadr),
         lo=tuple(lo),
         hi=tuple(hi),
+        home_source=source,
     )
+
+
+def _leg_chain(rl: RobotLegs, i: int) -> np.ndarray:
+    """Joint ids of foot i's own joints, from the trunk outward."""
+    m = rl.model
+    jid = rl.legs.jmap.joint_ids[rl.legs.own[i]]
+    depth = [rl.legs._depth(m, int(m.jnt_bodyid[j])) for j in jid]
+    return np.asarray(jid)[np.argsort(depth, kind="stable")]
+
+
+def _knee_joints(rl: RobotLegs, d: mujoco.MjData) -> list[tuple[int, int] | None]:
+    """Per foot (hip, knee): the first and the outermost own hinge turning about the
+    trunk's lateral axis at ``d``'s pose (None for a leg with fewer than two)."""
+    m = rl.model
+    rot = d.xmat[rl.legs.trunk].reshape(3, 3)
+    out: list[tuple[int, int] | None] = []
+    for i in range(len(rl.feet)):
+        lateral = [
+            int(j)
+            for j in _leg_chain(rl, i)
+            if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE
+            and abs(float(d.xaxis[j] @ rot[:, 1])) > 0.7
+        ]
+        out.append((lateral[0], lateral[-1]) if len(lateral) >= 2 else None)
+    return out
+
+
+def leg_extension(rl: RobotLegs, qpos: np.ndarray | None = None) -> np.ndarray:
+    """(nf,) how straight each leg is at ``qpos`` (default the standing pose): in the
+    trunk's sagittal plane, the hip-to-foot distance over the summed hip-to-knee and
+    knee-to-foot lengths (hip and knee: the first and the outermost own joint turning
+    about the trunk's lateral axis). 1 is a straight leg; 0 for a leg without a knee."""
+    m = rl.model
+    d = mujoco.MjData(m)
+    d.qpos[:] = rl.home if qpos is None else qpos
+    mujoco.mj_kinematics(m, d)
+    rot = d.xmat[rl.legs.trunk].reshape(3, 3)
+    pts = np.array(rl.legs.positions(d))
+    out = np.zeros(len(rl.feet))
+    for i, hk in enumerate(_knee_joints(rl, d)):
+        if hk is None:
+            continue
+        hip, knee, foot = ((p @ rot)[[0, 2]] for p in (d.xanchor[hk[0]], d.xanchor[hk[1]], pts[i]))
+        full = float(np.linalg.norm(knee - hip) + np.linalg.norm(foot - knee))
+        out[i] = float(np.linalg.norm(foot - hip)) / full if full > 0 else 0.0
+    return out
+
+
+def _crouch(rl: RobotLegs) -> np.ndarray:
+    """A standing pose off the straight-leg singularity (see :func:`robot_legs`)."""
+    m = rl.model
+    d = mujoco.MjData(m)
+    q = rl.home.copy()
+    d.qpos[:] = q
+    mujoco.mj_kinematics(m, d)
+    feet = np.array(rl.legs.positions(d))
+    rot = d.xmat[rl.legs.trunk].reshape(3, 3)
+    for i, hk in enumerate(_knee_joints(rl, d)):
+        if hk is None:
+            continue
+        adr = int(m.jnt_qposadr[hk[1]])
+        k = int(np.flatnonzero(rl.qadr[i] == adr)[0])
+        best, ahead = q[adr], -np.inf
+        for sign in (1.0, -1.0):
+            trial = q.copy()
+            trial[adr] = np.clip(q[adr] + sign * CROUCH_BEND, rl.lo[i][k], rl.hi[i][k])
+            d.qpos[:] = trial
+            mujoco.mj_kinematics(m, d)
+            x = float((rl.legs.positions(d)[i] - d.xpos[rl.legs.trunk]) @ rot[:, 0])
+            if x > ahead:
+                best, ahead = trial[adr], x
+        q[adr] = best
+    q[rl.trunk_qadr + 2] -= (1.0 - CROUCH_HEIGHT) * rl.height
+    q, res = leg_ik(rl, q, feet, iterations=300, data=d)
+    if float(res.max()) > 0.01 * rl.leg_length:
+        raise RetargetError(
+            f"the robot has no 'home' keyframe and its qpos0 stands on straight legs; "
+            f"crouching it left a foot {1000 * float(res.max()):.1f} mm from the ground "
+            'point: add a <key name="home" qpos="..."/> standing pose to the model'
+        )
+    return q
 
 
 def _point_names(model: mujoco.MjModel) -> list[str]:
@@ -505,6 +626,7 @@ def _fit_figures(
         "ik_residual_mean_m": float(res.mean()),
         "joints_at_limit_share": float(np.mean(at_limit)),
         "robot_leg_length_m": rl.leg_length,
+        "robot_home": rl.home_source,
     }
 
 

@@ -181,3 +181,76 @@ def test_cli_retarget_and_track(walk, tmp_path, capsys):
         == 2
     )
     assert "no floor" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ a robot unlike the Go1
+ANYMAL = Path(__file__).parent / "robots" / "anybotics_anymal_c" / "scene.xml"
+ANYMAL_FEET = ["LF_SHANK", "RF_SHANK", "LH_SHANK", "RH_SHANK"]
+
+
+@pytest.fixture(scope="module")
+def anymal() -> mujoco.MjModel:
+    return load_robot(ANYMAL)
+
+
+def test_feet_named_by_their_body_are_the_foot_spheres(anymal, go1):
+    """ANYmal's foot spheres have no name: the shank bodies name the feet, and the foot
+    point is the shank's sphere at the sole, not the shank's origin at the knee."""
+    from habitsim.mjutils import resolve_feet, resolve_points
+
+    pts = resolve_feet(anymal, ANYMAL_FEET)
+    for name, (kind, i) in zip(ANYMAL_FEET, pts, strict=True):
+        assert kind == "geom" and anymal.geom_type[i] == mujoco.mjtGeom.mjGEOM_SPHERE
+        assert anymal.body(int(anymal.geom_bodyid[i])).name == name
+    # a body without a colliding sphere keeps its origin; sites and geoms are unchanged
+    trunk = mujoco.mj_name2id(go1, mujoco.mjtObj.mjOBJ_BODY, "trunk")
+    assert resolve_feet(go1, ["trunk", "FL"]) == resolve_points(go1, ["trunk", "FL"])
+    assert resolve_feet(go1, ["trunk"])[0] == ("body", trunk)
+
+
+def test_a_robot_without_home_keyframe_stands_crouched(anymal, go1):
+    """qpos0 of ANYmal C stands on straight legs (a singular pose); the standing pose is
+    that stance crouched, feet where they were and on the ground, knees bent."""
+    from habitsim.retarget import CROUCH_HEIGHT, STRAIGHT_REACH, leg_extension
+
+    assert anymal.nkey == 0
+    rl = robot_legs(anymal, ANYMAL_FEET)
+    assert "crouched" in rl.home_source
+    assert np.all(leg_extension(rl, anymal.qpos0) > STRAIGHT_REACH)
+    assert np.all(leg_extension(rl) < STRAIGHT_REACH - 0.05)
+    d = mujoco.MjData(anymal)
+    for q in (anymal.qpos0, rl.home):
+        d.qpos[:] = q
+        mujoco.mj_kinematics(anymal, d)
+        if q is anymal.qpos0:
+            straight = np.array(rl.legs.positions(d)).copy()
+            h0 = float(d.xpos[rl.legs.trunk, 2])
+    bent = np.array(rl.legs.positions(d))
+    np.testing.assert_allclose(bent, straight, atol=1e-4)  # feet kept where they stood
+    assert float(d.xpos[rl.legs.trunk, 2]) < h0 - 0.5 * (1 - CROUCH_HEIGHT) * rl.height
+    # the Go1 keeps its own keyframe
+    assert robot_legs(go1, FEET).home_source == "keyframe 'home'"
+
+
+def test_straight_legs_that_cannot_bend_are_a_typed_error(tmp_path):
+    """A keyframe-less robot whose knees cannot bend cannot crouch: the error says to add
+    a home keyframe."""
+    xml = ANYMAL.with_name("anymal_c.xml").read_text()
+    knee = r'(name="(LF|RF|LH|RH)_KFE" axis="-?1 0 0") range="[^"]*"'
+    stiff = re.sub(knee, r'\1 range="-0.001 0.001"', xml)
+    assert stiff.count('range="-0.001 0.001"') == 4
+    (tmp_path / "anymal_c.xml").write_text(stiff)
+    (tmp_path / "scene.xml").write_text(ANYMAL.read_text())
+    with pytest.raises(RetargetError, match="no 'home' keyframe.*straight legs.*add a"):
+        robot_legs(load_robot(tmp_path / "scene.xml"), ANYMAL_FEET)
+
+
+@pytest.mark.slow
+def test_dog_walk_on_anymal_tracks_under_mpc(anymal, walk):
+    clip = retarget(walk, anymal, ANYMAL_FEET)
+    assert clip.metadata["ik_residual_max_m"] < 1e-4
+    assert "crouched" in clip.metadata["robot_home"]
+    res = track_clip(clip, anymal, controller="mpc")
+    assert not res.failed and res.survival == 1.0
+    assert res.assist["assist_force_mg"] == 0.0
+    assert res.metrics["contact_f1"] > 0.7

@@ -238,3 +238,15 @@ def test_track_on_a_robot_refuses_what_does_not_fit(go1):
         track(clip.trajectory(), model=go1, feet=FEET, contacts=clip.contacts[:, :3])
     with pytest.raises(SimulationError, match="pass the robot as model="):
         track(clip.trajectory(), species="dog", feet=FEET)
+
+
+def test_trot_example_measures_distance_along_the_trunks_forward_axis():
+    """ANYmal C's trunk frame faces −x at home: walking forward is walking along −x."""
+    from habitsim.examples.robot_trot import _forward_distance
+
+    q = np.zeros((2, 7))
+    q[:, 3:7] = [0.0, 0.0, 0.0, 1.0]  # yawed half a turn
+    q[1, 0] = -1.5
+    assert _forward_distance(q) == pytest.approx(1.5)
+    q[:, 3:7] = [1.0, 0.0, 0.0, 0.0]
+    assert _forward_distance(q) == pytest.approx(-1.5)

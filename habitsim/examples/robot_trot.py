@@ -24,9 +24,22 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import mujoco
+import numpy as np
+
 #: The vendored Go1 in a source checkout (tests/ is not installed with the package).
 GO1_SCENE = Path(__file__).resolve().parents[2] / "tests" / "robots" / "unitree_go1" / "scene.xml"
 GO1_FEET = ("FL", "FR", "RL", "RR")
+
+
+def _forward_distance(qpos: np.ndarray) -> float:
+    """Trunk displacement [m] along its horizontal forward axis (its x axis) at the
+    start: a robot whose trunk frame faces −x at home (ANYmal C) walks forward too."""
+    rot = np.zeros(9)
+    mujoco.mju_quat2Mat(rot, qpos[0, 3:7])
+    ahead = rot.reshape(3, 3)[:2, 0]
+    ahead = ahead / max(float(np.linalg.norm(ahead)), 1e-9)
+    return float((qpos[-1, :2] - qpos[0, :2]) @ ahead)
 
 
 def run(
@@ -60,7 +73,7 @@ def run(
                 "sim_mpjpe_mm": m["sim_mpjpe_mm"],
                 "root_drift_mm": m["root_drift_mm"],
                 "contact_f1": m["contact_f1"],
-                "distance_m": float(res.qpos[-1, 0] - res.qpos[0, 0]),
+                "distance_m": _forward_distance(res.qpos),
                 "mpc_median_ms": st.get("mpc_median_ms", float("nan")),
                 "realtime_factor": m["realtime_factor"],
             }
