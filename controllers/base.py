@@ -171,6 +171,25 @@ def ctrl_adr(model: mujoco.MjModel) -> np.ndarray:
     return np.arange(model.nu)
 
 
+def actuator_force_range(model: mujoco.MjModel, actuators: np.ndarray) -> np.ndarray:
+    """(n, 2) force range of each actuator in its own units (±inf where unlimited): its
+    ``forcerange`` when force-limited, intersected with its joint's ``actuatorfrcrange``
+    divided by |gear| (MuJoCo clamps the actuators' summed force on a joint there;
+    Menagerie's Spot limits its servos only that way)."""
+    a = np.asarray(actuators, dtype=int)
+    out = np.tile([-np.inf, np.inf], (len(a), 1))
+    lim = model.actuator_forcelimited[a].astype(bool)
+    out[lim] = model.actuator_forcerange[a[lim]]
+    on_joint = model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
+    for k in np.flatnonzero(on_joint):
+        j = int(model.actuator_trnid[a[k], 0])
+        gear = abs(float(model.actuator_gear[a[k], 0]))
+        if model.jnt_actfrclimited[j] and gear > 0:
+            lo, hi = model.jnt_actfrcrange[j] / gear
+            out[k] = [max(out[k, 0], lo), min(out[k, 1], hi)]
+    return out
+
+
 def actuated_joints(model: mujoco.MjModel, names: Sequence[str] | None = None) -> JointActuatorMap:
     """Map joints (by name; default: every hinge/slide joint with an actuator) to actuators.
 
@@ -202,7 +221,7 @@ def actuated_joints(model: mujoco.MjModel, names: Sequence[str] | None = None) -
     limited = model.actuator_ctrllimited[cadr].astype(bool)
     lo = np.where(limited, model.actuator_ctrlrange[cadr, 0], -np.inf)
     hi = np.where(limited, model.actuator_ctrlrange[cadr, 1], np.inf)
-    flimited = model.actuator_forcelimited[acts_a].astype(bool)
+    frange = actuator_force_range(model, acts_a)
     fixed = model.actuator_gaintype[acts_a] == mujoco.mjtGain.mjGAIN_FIXED
     return JointActuatorMap(
         names=tuple(names),
@@ -214,8 +233,8 @@ def actuated_joints(model: mujoco.MjModel, names: Sequence[str] | None = None) -
         ctrl_lo=lo,
         ctrl_hi=hi,
         gain=np.where(fixed, model.actuator_gainprm[acts_a, 0], 1.0),
-        force_lo=np.where(flimited, model.actuator_forcerange[acts_a, 0], -np.inf),
-        force_hi=np.where(flimited, model.actuator_forcerange[acts_a, 1], np.inf),
+        force_lo=frange[:, 0],
+        force_hi=frange[:, 1],
         biased=model.actuator_biastype[acts_a] != mujoco.mjtBias.mjBIAS_NONE,
         ctrl_ids=cadr,
     )

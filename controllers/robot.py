@@ -32,7 +32,7 @@ import numpy as np
 
 from habitsim import mjutils
 
-from .base import ControllerError, JointActuatorMap
+from .base import ControllerError, JointActuatorMap, actuator_force_range
 
 __all__ = ["ServoTorque", "torque_model", "foot_geoms", "is_position_servo"]
 
@@ -109,13 +109,15 @@ def torque_model(model: mujoco.MjModel) -> mujoco.MjModel:
     """A copy of ``model`` whose joint position servos are torque motors.
 
     Each position servo (:func:`is_position_servo`) becomes ``force = ctrl`` (fixed gain 1,
-    no bias, the same gear), its control range the servo's force range (so the motor is
-    exactly as strong as the servo was), force-limited the same way. Torque motors and
+    no bias, the same gear), its control range the servo's force range
+    (:func:`~habitsim.controllers.base.actuator_force_range`: the actuator's
+    ``forcerange`` and its joint's ``actuatorfrcrange``, so the motor is exactly as
+    strong as the servo was), force-limited the same way. Torque motors and
     every other part of the model are left as they are; the input is never modified.
 
     Raises:
-        ControllerError: a servo without a force range (its strength is unbounded, so no
-            torque limit can be given to the motor).
+        ControllerError: a servo without a force range, on the actuator or on its joint
+            (its strength is unbounded, so no torque limit can be given to the motor).
     """
     from .servo import _copy
 
@@ -129,7 +131,8 @@ def torque_model(model: mujoco.MjModel) -> mujoco.MjModel:
     for a in range(int(getattr(model, "nactuator", model.nu))):
         if not is_position_servo(model, a):
             continue
-        if not model.actuator_forcelimited[a]:
+        frange = actuator_force_range(model, np.array([a]))[0]
+        if not np.all(np.isfinite(frange)):
             weak.append(model.actuator(a).name or f"#{a}")
             continue
         out.actuator_gainprm[a, :] = 0.0
@@ -138,13 +141,13 @@ def torque_model(model: mujoco.MjModel) -> mujoco.MjModel:
         out.actuator_biasprm[a, :] = 0.0
         c = cadr[a]
         out.actuator_ctrllimited[c] = 1
-        out.actuator_ctrlrange[c] = model.actuator_forcerange[a]
+        out.actuator_ctrlrange[c] = frange
         if hasattr(out, "actuator_ctrlspec"):  # MuJoCo >= 4: the control is a force
             out.actuator_ctrlspec[a] = 0
     if weak:
         raise ControllerError(
             f"position servos without a force range cannot become torque motors: "
-            f"{', '.join(weak[:8])}; give them forcerange=…"
+            f"{', '.join(weak[:8])}; give them forcerange=… (or their joints actuatorfrcrange=…)"
         )
     for k in range(model.nkey):  # a keyframe's ctrl held servo targets: no torque
         out.key_ctrl[k, :] = 0.0

@@ -7,6 +7,7 @@ written, and ``habitsim.sim.track`` must simulate it with fall detection and met
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import mujoco
@@ -95,6 +96,31 @@ def test_torque_model_keeps_the_servos_strength(go1):
     assert np.allclose(tm.actuator_ctrlrange, go1.actuator_forcerange)
     assert not go1.actuator_biastype[0] == mujoco.mjtBias.mjBIAS_NONE  # input untouched
     assert np.all(tm.key_ctrl == 0.0)
+
+
+def test_torque_model_takes_the_joints_actuator_force_range(tmp_path):
+    """Menagerie's Spot limits its servos by the joints' actuatorfrcrange, not by the
+    actuators' forcerange: the torque motors get that strength; with neither, no motor
+    can be made and the error names both ways."""
+    xml = (GO1 / "go1.xml").read_text()
+    no_force = re.sub(r' forcerange="[^"]*"', "", xml)
+    joint_limited = no_force.replace(
+        '<joint axis="0 1 0" damping="2"',
+        '<joint axis="0 1 0" actuatorfrcrange="-30 30" damping="2"',
+    ).replace(
+        '<joint axis="1 0 0" damping="1"',
+        '<joint axis="1 0 0" actuatorfrcrange="-20 20" damping="1"',
+    )
+    (tmp_path / "go1.xml").write_text(joint_limited)
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "go1.xml"))
+    assert not model.actuator_forcelimited.any() and model.jnt_actfrclimited[1:].all()
+    tm = torque_model(model)
+    hi = tm.actuator_ctrlrange[:, 1]
+    assert np.allclose(hi, [20, 30, 30] * 4)
+    assert np.allclose(actuated_joints(model).force_hi, hi)
+    (tmp_path / "go1.xml").write_text(no_force)
+    with pytest.raises(ControllerError, match="forcerange=.*actuatorfrcrange="):
+        torque_model(mujoco.MjModel.from_xml_path(str(tmp_path / "go1.xml")))
 
 
 def test_unknown_feet_are_typed_errors_listing_the_names(go1):
