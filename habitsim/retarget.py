@@ -149,20 +149,23 @@ CROUCH_HEIGHT = 0.85
 CROUCH_BEND = 0.5
 
 
-def robot_legs(model: mujoco.MjModel, feet: Sequence[str]) -> RobotLegs:
+def robot_legs(model: mujoco.MjModel, feet: Sequence[str], home: str = "home") -> RobotLegs:
     """The legs of ``model`` ending at ``feet`` (site, geom or body names; a body is its
     foot sphere, :func:`habitsim.mjutils.resolve_feet`).
 
-    The standing pose is the keyframe ``home``; without one ``qpos0``, crouched when its
-    legs are straight (:data:`STRAIGHT_REACH`): the trunk lowered to
+    The standing pose is the keyframe named ``home`` (default ``"home"``; Menagerie's
+    ``anymal_c_mjx.xml`` calls it ``"standing"``); without a keyframe ``"home"``, ``qpos0``,
+    crouched when its legs are straight (:data:`STRAIGHT_REACH`): the trunk lowered to
     :data:`CROUCH_HEIGHT` of its height with the feet kept where they stand, the legs
     solved by :func:`leg_ik` from knees bent so that each foot moves forward (the knees
     point backward, as on most legged robots). :attr:`RobotLegs.home_source` says which.
 
     Raises:
         RetargetError: no free joint, an unknown foot (the message lists the model's
-            sites, geoms and bodies), a foot without joints of its own, a straight-legged
-            ``qpos0`` the crouch cannot solve (add a ``home`` keyframe).
+            sites, geoms and bodies), a foot without joints of its own, a keyframe name
+            ``home`` other than ``"home"`` that the model does not have (the message lists
+            its keyframes), a straight-legged ``qpos0`` the crouch cannot solve (add a
+            ``home`` keyframe).
     """
     from .controllers import ControllerError
     from .controllers.legs import LegSet
@@ -188,8 +191,13 @@ def robot_legs(model: mujoco.MjModel, feet: Sequence[str]) -> RobotLegs:
         legs = LegSet(model, feet)
     except ControllerError as e:
         raise RetargetError(str(e)) from e
-    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home") >= 0:
-        return _legs_at(model, feet, legs, home_qpos(model), "keyframe 'home'")
+    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, str(home)) >= 0:
+        return _legs_at(model, feet, legs, home_qpos(model, str(home)), f"keyframe {home!r}")
+    if home != "home":
+        keys = [model.key(k).name or f"#{k}" for k in range(model.nkey)]
+        raise RetargetError(
+            f"the robot has no keyframe {home!r}; its keyframes: {', '.join(keys) or '(none)'}"
+        )
     rl = _legs_at(model, feet, legs, model.qpos0.copy(), "qpos0")
     if float(leg_extension(rl).max()) <= STRAIGHT_REACH:
         return rl
@@ -514,7 +522,10 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
 
 
 def retarget(
-    motion: Motion, robot: mujoco.MjModel | RobotLegs, feet: Sequence[str] | None = None
+    motion: Motion,
+    robot: mujoco.MjModel | RobotLegs,
+    feet: Sequence[str] | None = None,
+    home: str = "home",
 ) -> RobotClip:
     """Map a habitsim motion onto a legged robot (see the module docstring).
 
@@ -523,6 +534,7 @@ def retarget(
         robot: the robot model (or its :class:`RobotLegs`).
         feet: the robot's four foot names in the order LF, RF, LH, RH (e.g.
             ``["FL", "FR", "RL", "RR"]``); not needed with a :class:`RobotLegs`.
+        home: the keyframe the robot stands on (:func:`robot_legs`).
 
     Returns:
         The :class:`RobotClip` at the motion's frame rate; ``metadata`` holds the scale,
@@ -533,7 +545,7 @@ def retarget(
     """
     from .controllers.plan import matrix_from_rpy, rpy_from_matrix
 
-    rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet))
+    rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet), home)
     if len(rl.feet) != 4:
         raise RetargetError(
             f"a habitsim motion has 4 feet (LF, RF, LH, RH); got "

@@ -254,3 +254,35 @@ def test_dog_walk_on_anymal_tracks_under_mpc(anymal, walk):
     assert not res.failed and res.survival == 1.0
     assert res.assist["assist_force_mg"] == 0.0
     assert res.metrics["contact_f1"] > 0.7
+
+
+def test_a_named_keyframe_is_the_standing_pose(walk, tmp_path, capsys):
+    """Menagerie's anymal_c_mjx.xml stands on a keyframe named "standing": --home names
+    it; a name the robot does not have is an error listing its keyframes."""
+    standing = (
+        "0 0 0.56 1 0 0 0 0 0.5236 -0.7854 0 0.5236 -0.7854 0 -0.5236 0.7854 0 -0.5236 0.7854"
+    )
+    xml = ANYMAL.with_name("anymal_c.xml").read_text()
+    xml = xml.replace(
+        "</mujoco>", f'  <keyframe><key name="standing" qpos="{standing}"/></keyframe>\n</mujoco>'
+    )
+    (tmp_path / "anymal_c.xml").write_text(xml)
+    (tmp_path / "scene.xml").write_text(ANYMAL.read_text())
+    robot = load_robot(tmp_path / "scene.xml")
+    rl = robot_legs(robot, ANYMAL_FEET, home="standing")
+    assert rl.home_source == "keyframe 'standing'"
+    np.testing.assert_allclose(rl.home, robot.key_qpos[0])
+    assert "crouched" in robot_legs(robot, ANYMAL_FEET).home_source  # no keyframe "home"
+    with pytest.raises(RetargetError, match="no keyframe 'stand'; its keyframes: standing"):
+        robot_legs(robot, ANYMAL_FEET, home="stand")
+    walk.save(tmp_path / "walk.npz")
+    out = tmp_path / "q.npz"
+    argv = ["retarget", str(tmp_path / "walk.npz"), "--robot", str(tmp_path / "scene.xml")]
+    argv += ["--feet", ",".join(ANYMAL_FEET), "--out", str(out), "--home", "standing", "--json"]
+    assert main(argv) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["robot_home"] == "keyframe 'standing'"
+    assert summary["ik_residual_max_m"] < 1e-4
+    bad = [*argv[:-4], str(tmp_path / "bad.npz"), "--home", "stand"]
+    assert main(bad) == 2 and not (tmp_path / "bad.npz").exists()
+    assert "no keyframe 'stand'" in capsys.readouterr().err

@@ -43,6 +43,15 @@ def register(sub: argparse._SubParsersAction) -> None:
             "the robot's foot sites, geoms or bodies in the order LF, RF, LH, RH (e.g. FL,FR,RL,RR)"
         ),
     )
+    p.add_argument(
+        "--home",
+        default="home",
+        metavar="KEY",
+        help=(
+            "keyframe the robot stands on (default home; without a keyframe home, qpos0, "
+            "crouched when its legs are straight)"
+        ),
+    )
     p.add_argument("--out", type=Path, required=True, metavar="Q.npz", help="robot clip to write")
     p.add_argument("--track", action="store_true", help="track the result in MuJoCo")
     p.add_argument(
@@ -96,7 +105,7 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         from ..render import check_video_writer
 
         check_video_writer(ns.video)  # fail before the work
-    clip = retarget(motion, robot, ns.feet)
+    clip = retarget(motion, robot, ns.feet, home=ns.home)
     clip.save(ns.out)
     summary: dict = {
         "out": str(ns.out),
