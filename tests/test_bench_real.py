@@ -223,3 +223,31 @@ def test_bad_input(folder: Path, tmp_path: Path, capsys) -> None:
     assert main([*base, "--data", str(folder), "--perturb", "-1"]) == 2
     assert "--perturb must be a finite rate > 0" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_windows_per_clip_all_plans_every_whole_window(tmp_path: Path, capsys) -> None:
+    """A 9.5 s clip in 2 s windows from where it moves: `all` plans every whole window,
+    a count at most that many; anything else is a usage error naming what is valid."""
+    from habitsim.cli import build_parser
+    from habitsim.cli.bench_real import plan, window_starts
+    from habitsim.motion import resample_motion
+
+    d = tmp_path / "clips"
+    d.mkdir()
+    write_bvh(generate("dog", "walk", seed=3, duration_s=9.5), d / "walk.bvh")
+    argv = ["bench", "real", "--data", str(d), "--seconds", "2", "--targets", "cat"]
+    argv += ["--methods", "direct"]
+    parser = build_parser()
+    motion = resample_motion(_read_source(d / "walk.bvh", "dog"), 30)
+    every = window_starts(motion, 60, motion.num_frames)
+    assert len(every) >= 4
+    tasks, _ = plan(parser.parse_args([*argv, "--windows-per-clip", "all"]))
+    assert [round(t.start_s * 30) for t in tasks] == every
+    tasks, _ = plan(parser.parse_args([*argv, "--windows-per-clip", "2"]))
+    assert [round(t.start_s * 30) for t in tasks] == every[:2]
+    with pytest.raises(SystemExit) as usage:
+        main([*argv, "--windows-per-clip", "most"])
+    assert usage.value.code == 2
+    assert "valid: a count >= 1 or 'all'" in capsys.readouterr().err
+    assert main([*argv, "--windows-per-clip", "0"]) == 2
+    assert "must be >= 1 or 'all'" in capsys.readouterr().err

@@ -5,8 +5,8 @@ another format plugs in) is imported onto ``--species`` (default dog) with
 :func:`habitsim.bvh_mapping.import_bvh`, resampled to ``--fps`` (default 30, the rate
 the shipped model and the refinement are built for) and cut into windows of
 ``--seconds`` (default 4): consecutive windows from the first frame where the pelvis
-moves, at most ``--windows-per-clip`` (default 1) per clip; a clip shorter than one
-window is skipped with a note. Each window × target (default cat, horse, camel, tiger,
+moves, at most ``--windows-per-clip`` (default 1; ``all``: every whole window) per
+clip; a clip shorter than one window is skipped with a note. Each window × target (default cat, horse, camel, tiger,
 elephant) × method (default habit, direct) runs through
 :func:`habitsim.pipeline.run_clip` (transfer → refine stage A → unassisted ``mpc``
 tracking, with the refinement check), in an executor of the evaluation
@@ -665,10 +665,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--windows-per-clip",
-        type=int,
+        type=_windows_per_clip,
         default=1,
         metavar="N",
-        help="consecutive windows per clip, from where the animal moves (default 1)",
+        help=(
+            "consecutive windows per clip, from where the animal moves (default 1; all: "
+            "every whole window)"
+        ),
     )
     p.add_argument(
         "--fps",
@@ -724,6 +727,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_bench_real)
 
 
+def _windows_per_clip(text: str) -> int | str:
+    """``--windows-per-clip``: a count, or ``all``."""
+    if text.strip().lower() == "all":
+        return "all"
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"invalid --windows-per-clip {text!r}; valid: a count >= 1 or 'all'"
+        ) from None
+
+
 def _split(text: str | Sequence[str]) -> list[str]:
     return split_names(text)
 
@@ -743,8 +758,11 @@ def plan(ns: argparse.Namespace) -> tuple[list[WindowTask], list[str]]:
 
     if not (math.isfinite(ns.seconds) and ns.seconds > 0):
         raise BenchRealError(f"--seconds must be > 0, got {ns.seconds}")
-    if ns.windows_per_clip < 1:
-        raise BenchRealError(f"--windows-per-clip must be >= 1, got {ns.windows_per_clip}")
+    every = ns.windows_per_clip == "all"
+    if not every and not (isinstance(ns.windows_per_clip, int) and ns.windows_per_clip >= 1):
+        raise BenchRealError(
+            f"--windows-per-clip must be >= 1 or 'all', got {ns.windows_per_clip!r}"
+        )
     if not (math.isfinite(ns.fps) and ns.fps >= 0):
         raise BenchRealError(f"--fps must be >= 0, got {ns.fps}")
     repeats = int(getattr(ns, "repeats", 1))
@@ -779,7 +797,7 @@ def plan(ns: argparse.Namespace) -> tuple[list[WindowTask], list[str]]:
         if ns.fps > 0:
             m = resample_motion(m, ns.fps)
         frames = int(round(ns.seconds * m.fps))
-        starts = window_starts(m, frames, ns.windows_per_clip)
+        starts = window_starts(m, frames, m.num_frames if every else ns.windows_per_clip)
         if not starts:
             notes.append(
                 f"{f.name}: skipped, {m.num_frames} frames ({m.duration:.2f} s) is "
