@@ -6,8 +6,8 @@ another format plugs in) is imported onto ``--species`` (default dog) with
 the shipped model and the refinement are built for) and cut into windows of
 ``--seconds`` (default 4): consecutive windows from the first frame where the pelvis
 moves, at most ``--windows-per-clip`` (default 1; ``all``: every whole window) per
-clip; a clip shorter than one window is skipped with a note. Each window × target (default cat, horse, camel, tiger,
-elephant) × method (default habit, direct) runs through
+clip; a clip shorter than one window is skipped with a note. Each window × target
+(default cat, horse, camel, tiger, elephant) × method (default habit, direct) runs through
 :func:`habitsim.pipeline.run_clip` (transfer → refine stage A → unassisted ``mpc``
 tracking, with the refinement check), in an executor of the evaluation
 (:mod:`habitsim.evaluation.executors`, ``--workers`` processes).
