@@ -286,3 +286,27 @@ def test_a_named_keyframe_is_the_standing_pose(walk, tmp_path, capsys):
     bad = [*argv[:-4], str(tmp_path / "bad.npz"), "--home", "stand"]
     assert main(bad) == 2 and not (tmp_path / "bad.npz").exists()
     assert "no keyframe 'stand'" in capsys.readouterr().err
+
+
+def test_cli_retargets_motion_capture_imported_with_from(walk, tmp_path, capsys):
+    """A .bvh source is imported onto --from's skeleton first (stance and planting as
+    `habitsim data import-bvh`); without --from, or with another suffix, nothing runs."""
+    from habitsim.bvh import write_bvh
+
+    bvh = write_bvh(walk, tmp_path / "walk.bvh")
+    out = tmp_path / "q.npz"
+    base = ["retarget", str(bvh), "--robot", str(GO1), "--feet", ",".join(FEET)]
+    assert main([*base, "--from", "dog", "--out", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    clip = load_robot_clip(out)
+    assert len(clip.qpos) == walk.num_frames and summary["ik_residual_max_m"] < 1e-4
+    # the import found the walk's own footfalls: the clip's labels are the walk's
+    agree = (clip.contacts == walk.contacts).mean()
+    assert agree > 0.95
+    assert main([*base, "--out", str(tmp_path / "no.npz")]) == 2
+    assert "a .bvh source needs --from SPECIES" in capsys.readouterr().err
+    other = tmp_path / "walk.fbx"
+    other.write_text("x")
+    assert main(["retarget", str(other), *base[2:], "--out", str(tmp_path / "no.npz")]) == 2
+    assert "(.bvh, .glb, .gltf)" in capsys.readouterr().err
+    assert not (tmp_path / "no.npz").exists()

@@ -19,7 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "retarget",
         help="map a habitsim motion onto a legged robot MJCF (and track it with mpc)",
         description=(
-            "Map a habitsim motion (.npz: a synthetic gait, a transfer, an imported BVH) onto "
+            "Map a habitsim motion (.npz: a synthetic gait, a transfer, an imported BVH; or a "
+            ".bvh/.glb/.gltf imported first with --from SPECIES) onto "
             "a robot with a free joint and four named feet: foot paths and trunk path scaled "
             "by the ratio of leg lengths, trunk orientation kept, leg IK on the robot's joints "
             "(damped least squares on MuJoCo Jacobians, joint ranges respected). Writes the "
@@ -27,7 +28,21 @@ def register(sub: argparse._SubParsersAction) -> None:
             "--track then simulates it (default controller mpc; no assistance)."
         ),
     )
-    p.add_argument("source", type=Path, metavar="SRC", help="habitsim motion (.npz)")
+    p.add_argument(
+        "source",
+        type=Path,
+        metavar="SRC",
+        help="habitsim motion (.npz), or motion capture (.bvh, .glb, .gltf) with --from",
+    )
+    p.add_argument(
+        "--from",
+        dest="from_species",
+        metavar="SPECIES",
+        help=(
+            "skeleton a .bvh/.glb/.gltf source is imported onto first (its stance found on "
+            "its own feet, feet planted; `habitsim data import-bvh` does the same alone)"
+        ),
+    )
     p.add_argument(
         "--robot",
         type=Path,
@@ -83,10 +98,16 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     from ..motion import load_motion
     from ..retarget import RetargetError, drawable, load_robot, retarget, track_clip
 
-    if ns.source.suffix.lower() != ".npz":
+    suffix = ns.source.suffix.lower()
+    if suffix not in (".npz", ".bvh", ".glb", ".gltf"):
         raise RetargetError(
-            f"SRC must be a habitsim motion (.npz), got {str(ns.source)!r} "
-            "(import a .bvh with `habitsim data import-bvh` first)"
+            f"SRC must be a habitsim motion (.npz) or motion capture (.bvh, .glb, .gltf), "
+            f"got {str(ns.source)!r}"
+        )
+    if suffix != ".npz" and ns.from_species is None:
+        raise RetargetError(
+            f"a {suffix} source needs --from SPECIES (the skeleton to import it onto, "
+            "e.g. --from dog)"
         )
     if not ns.feet:
         raise RetargetError(
@@ -94,8 +115,16 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         )
     if (ns.report or ns.video) and not ns.track:
         raise RetargetError("--report and --video describe the tracked run: add --track")
-    motion = load_motion(ns.source)
     robot = load_robot(ns.robot)
+    if suffix == ".npz":
+        motion = load_motion(ns.source)
+    else:
+        from ..bvh_mapping import import_bvh
+        from ..species import load_species
+
+        motion, mapping = import_bvh(ns.source, load_species(ns.from_species))
+        if not ns.json:
+            print(mapping)
     if ns.track and not any(robot.geom_bodyid == 0):
         raise RetargetError(
             f"{str(ns.robot)!r} has no floor (no geom on the world body): "
