@@ -276,3 +276,5 @@ def test_trot_example_measures_distance_along_the_trunks_forward_axis():
     assert _forward_distance(q) == pytest.approx(1.5)
     q[:, 3:7] = [1.0, 0.0, 0.0, 0.0]
     assert _forward_distance(q) == pytest.approx(-1.5)
+    shifted = np.hstack([np.zeros((2, 2)), q])  # the free joint after two other joints
+    assert _forward_distance(shifted, 2) == pytest.approx(-1.5)

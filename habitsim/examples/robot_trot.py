@@ -32,14 +32,15 @@ GO1_SCENE = Path(__file__).resolve().parents[2] / "tests" / "robots" / "unitree_
 GO1_FEET = ("FL", "FR", "RL", "RR")
 
 
-def _forward_distance(qpos: np.ndarray) -> float:
+def _forward_distance(qpos: np.ndarray, adr: int = 0) -> float:
     """Trunk displacement [m] along its horizontal forward axis (its x axis) at the
-    start: a robot whose trunk frame faces −x at home (ANYmal C) walks forward too."""
+    start: a robot whose trunk frame faces −x at home (ANYmal C) walks forward too.
+    ``adr``: the free joint's qpos address."""
     rot = np.zeros(9)
-    mujoco.mju_quat2Mat(rot, qpos[0, 3:7])
+    mujoco.mju_quat2Mat(rot, qpos[0, adr + 3 : adr + 7])
     ahead = rot.reshape(3, 3)[:2, 0]
     ahead = ahead / max(float(np.linalg.norm(ahead)), 1e-9)
-    return float((qpos[-1, :2] - qpos[0, :2]) @ ahead)
+    return float((qpos[-1, adr : adr + 2] - qpos[0, adr : adr + 2]) @ ahead)
 
 
 def run(
@@ -52,6 +53,7 @@ def run(
 ) -> list[dict[str, Any]]:
     """Stand, trot in place and trot forward at ``speed`` for ``duration_s`` each under
     ``mpc``; one row of figures per case (``video``: a folder for an MP4 per case)."""
+    from habitsim.mjutils import free_joint
     from habitsim.retarget import drawable, load_robot, stand, track_clip, trot
 
     model = load_robot(robot)
@@ -73,7 +75,9 @@ def run(
                 "sim_mpjpe_mm": m["sim_mpjpe_mm"],
                 "root_drift_mm": m["root_drift_mm"],
                 "contact_f1": m["contact_f1"],
-                "distance_m": _forward_distance(res.qpos),
+                "distance_m": _forward_distance(
+                    res.qpos, int(model.jnt_qposadr[free_joint(model)])
+                ),
                 "mpc_median_ms": st.get("mpc_median_ms", float("nan")),
                 "realtime_factor": m["realtime_factor"],
             }
