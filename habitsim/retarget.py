@@ -248,11 +248,9 @@ def _legs_at(
 
 
 def _leg_chain(rl: RobotLegs, i: int) -> np.ndarray:
-    """Joint ids of foot i's own joints, from the trunk outward."""
-    m = rl.model
-    jid = rl.legs.jmap.joint_ids[rl.legs.own[i]]
-    depth = [rl.legs._depth(m, int(m.jnt_bodyid[j])) for j in jid]
-    return np.asarray(jid)[np.argsort(depth, kind="stable")]
+    """Joint ids of foot i's own joints, from the trunk outward (MuJoCo numbers bodies,
+    and their joints, depth first: along one chain the ids grow outward)."""
+    return np.sort(np.asarray(rl.legs.jmap.joint_ids[rl.legs.own[i]]))
 
 
 def _knee_joints(rl: RobotLegs, d: mujoco.MjData) -> list[tuple[int, int] | None]:
