@@ -39,6 +39,12 @@ Definitions (keys of :meth:`GaitStats.to_dict`; docs/metrics.md names where it h
   frames with ≥ 3 contacts (NaN if there are none).
 
 Undefined numbers are ``float('nan')`` in the dataclass and ``None`` in ``to_dict()``.
+
+:func:`peak_froude` is the fastest stretch of a clip, for clips that change gait (a walk
+that breaks into a gallop): the largest v² / (g·h) of the horizontal root speed averaged
+over any ``span_s`` (default :data:`PEAK_SPAN_S`) of the clip, the path length over that
+span divided by its duration. Its regimes follow BIOMECH.md (Alexander & Jayes 1983):
+walk below about 0.5, trot or amble up to :data:`GALLOP_FROUDE`, gallop above.
 """
 
 from __future__ import annotations
@@ -57,10 +63,25 @@ from .species import FEET
 if TYPE_CHECKING:  # pragma: no cover
     from .motion import Motion
 
-__all__ = ["GRAVITY", "GaitStats", "gait_statistics", "stability_margins", "circular_mean"]
+__all__ = [
+    "GRAVITY",
+    "GALLOP_FROUDE",
+    "PEAK_SPAN_S",
+    "GaitStats",
+    "gait_statistics",
+    "peak_froude",
+    "stability_margins",
+    "circular_mean",
+]
 
 #: Standard gravity [m/s²].
 GRAVITY = 9.81
+#: Froude number of the trot → gallop transition (Alexander & Jayes 1983: animals of very
+#: different size change to a gallop or canter near Fr 2–3, often quoted 2.5).
+GALLOP_FROUDE = 2.5
+#: Span [s] :func:`peak_froude` averages the speed over: about one gallop stride of a
+#: medium dog (≈ 4.5·M^-0.14 Hz, Heglund et al. 1974: 2.9 Hz at 25 kg), and two of a cat.
+PEAK_SPAN_S = 0.5
 _LH = FEET.index("LH")
 
 
@@ -309,3 +330,26 @@ def gait_statistics(motion: Motion, contacts: np.ndarray | None = None) -> GaitS
         hip_height_m=h,
         leg_length_m=leg,
     )
+
+
+def peak_froude(motion: Motion, span_s: float = PEAK_SPAN_S) -> float:
+    """The largest Froude number v² / (g·h) of ``motion`` over any ``span_s`` of it.
+
+    v is the horizontal path length of the root over the span divided by the span's
+    duration (a turn counts its path, the trunk's sway within one stride mostly cancels),
+    h the species' standing hip height. A clip shorter than the span is one span. 0 for a
+    one-frame clip.
+
+    Raises:
+        InvalidMotionError: ``span_s`` not positive.
+    """
+    if not (math.isfinite(span_s) and span_s > 0):
+        raise InvalidMotionError(f"span_s must be a positive number of seconds, got {span_s}")
+    root = np.asarray(motion.root_positions, dtype=float)
+    if len(root) < 2:
+        return 0.0
+    step = np.linalg.norm(np.diff(root[:, :2], axis=0), axis=1)
+    w = min(max(1, int(round(span_s * motion.fps))), len(step))
+    path = np.convolve(step, np.ones(w), mode="valid")  # path length over each span
+    speed = float(path.max()) * motion.fps / w
+    return speed * speed / (GRAVITY * motion.species_info.hip_height)

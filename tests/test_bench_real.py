@@ -10,14 +10,17 @@ import pytest
 from habitsim.bvh import write_bvh
 from habitsim.cli import main
 from habitsim.cli.bench_real import (
+    LEGEND,
     BenchRealError,
     _read_source,
     evaluate_targets,
     exit_code,
+    format_row,
     format_summary,
     source_files,
     survival_runs,
 )
+from habitsim.gait_stats import GALLOP_FROUDE, PEAK_SPAN_S
 from habitsim.gaits import generate
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
@@ -82,8 +85,11 @@ def test_bench_real_rows_and_json(folder: Path, tmp_path: Path, capsys) -> None:
         "time_track_s",
         "reference_residual_mg",
         "reference_torque_saturation",
+        "source_froude_peak",
+        "source_flight_share",
     ):
         assert isinstance(row[k], float), k
+    assert row["source_froude_peak"] > 0.0 and 0.0 <= row["source_flight_share"] <= 1.0
     assert 0.0 <= row["reference_torque_saturation"] <= 1.0
     assert row["refine_check"] in ("kept", "reverted", "fallback")
     assert row["walking_stance"] is None  # direct keeps the source's labels
@@ -197,6 +203,34 @@ def test_summary_shows_survival_per_target() -> None:
     assert lines[head + 2].split() == ["horse", "1.00", "/", "-"]
     untracked = [_row("habit", None, target="cat")]
     assert "per target" not in format_summary(untracked, evaluate_targets(untracked, seconds=4))
+
+
+def test_summary_splits_survival_by_gait_regime() -> None:
+    """Windows whose source peaks above the gallop Froude number are counted apart."""
+    rows = [
+        _row("habit", 1.0, source_froude_peak=0.4, survival_runs=[1.0, 1.0]),
+        _row("habit", 0.3, source_froude_peak=4.5, survival_runs=[0.3, 1.0]),
+        _row("habit", 0.2, source_froude_peak=GALLOP_FROUDE + 0.1),
+        _row("direct", 1.0, source_froude_peak=GALLOP_FROUDE),  # at the boundary: not a gallop
+        _row("direct", 1.0, source_froude_peak=None),  # unknown: left out
+    ]
+    lines = format_summary(rows, evaluate_targets(rows, seconds=4)).splitlines()
+    head = next(i for i, x in enumerate(lines) if "per gait regime" in x)
+    assert lines[head + 1].split(";") == [
+        "    habit    Fr ≤ 2.5: 1 window(s), whole runs 2/2, mean survival 1.00",
+        " Fr > 2.5: 2 window(s), whole runs 1/3, mean survival 0.50",
+    ]
+    assert lines[head + 2].split(";") == [
+        "    direct   Fr ≤ 2.5: 1 window(s), whole runs 1/1, mean survival 1.00",
+        " Fr > 2.5: 0 window(s), whole runs 0/0, mean survival -",
+    ]
+    assert f"Fr {GALLOP_FROUDE:g}" in lines[head] and f"{PEAK_SPAN_S:g} s" in lines[head]
+    assert f"over {PEAK_SPAN_S:g} s (above {GALLOP_FROUDE:g} a gallop)" in LEGEND
+    assert "  Fr 4.5  " in format_row(
+        {**rows[1], "clip": "a.bvh", "start_s": 0.0, "target": "cat", "reference_residual_mg": 0.1}
+    )
+    untracked = [_row("habit", None, source_froude_peak=1.0)]
+    assert "regime" not in format_summary(untracked, evaluate_targets(untracked, seconds=4))
 
 
 def test_bad_input(folder: Path, tmp_path: Path, capsys) -> None:

@@ -10,11 +10,13 @@ import numpy as np
 import pytest
 
 from habitsim import get_skeleton, load_species
+from habitsim.errors import InvalidMotionError
 from habitsim.gait_stats import (
     GRAVITY,
     GaitStats,
     circular_mean,
     gait_statistics,
+    peak_froude,
     stability_margins,
 )
 from habitsim.motion import Motion
@@ -245,3 +247,29 @@ def test_gait_statistics_is_fast() -> None:
     gait_statistics(m, c)
     gait_statistics(m)
     assert time.perf_counter() - t0 < 0.1
+
+
+def test_peak_froude_is_the_fastest_span() -> None:
+    """Constant speed: v²/(g·h); a walk that breaks into a run for one second reads the
+    run's speed, not the clip's mean; a turn counts its path, not its chord."""
+    h = SP.hip_height
+    assert peak_froude(moving(60, 30.0, 2.0)) == pytest.approx(4.0 / (GRAVITY * h), rel=1e-9)
+    walk, run = moving(90, 30.0, 0.5), moving(30, 30.0, 4.0)
+    root = np.concatenate(
+        [
+            walk.root_positions,
+            run.root_positions[1:] - run.root_positions[0] + walk.root_positions[-1],
+        ]
+    )
+    mixed = Motion("dog", 30.0, root, np.repeat(walk.rotations[:1], len(root), 0))
+    assert peak_froude(mixed) == pytest.approx(16.0 / (GRAVITY * h), rel=1e-9)
+    assert gait_statistics(mixed).froude < 0.5 * peak_froude(mixed)
+    # a circle of radius 0.5 m at 2 m/s: half a second covers 1 m of path
+    t = np.arange(61) / 30.0
+    circ = moving(61, 30.0, 0.0)
+    circ.root_positions[:, 0] += 0.5 * np.cos(4.0 * t)
+    circ.root_positions[:, 1] += 0.5 * np.sin(4.0 * t)
+    assert peak_froude(circ) == pytest.approx(4.0 / (GRAVITY * h), rel=2e-3)
+    assert peak_froude(moving(1, 30.0, 1.0)) == 0.0
+    with pytest.raises(InvalidMotionError, match="span_s"):
+        peak_froude(mixed, span_s=0.0)

@@ -244,6 +244,7 @@ def run_window(task: WindowTask) -> list[dict[str, Any]]:
     message in ``note``; the benchmark goes on.
     """
     from ..evaluation.methods import MethodUnavailable
+    from ..gait_stats import peak_froude
     from ..pipeline import run_clip, stance_toe_height, track_reference
 
     src = task.motion
@@ -259,6 +260,10 @@ def run_window(task: WindowTask) -> list[dict[str, Any]]:
         "import_contact_f1_mean": None if f1 is None else float(np.mean(f1)),
         "source_labels": src.contacts is not None,
         "stance_toe_height_import": _num(stance_toe_height(src, src.contacts)),
+        "source_froude_peak": peak_froude(src),
+        "source_flight_share": None
+        if src.contacts is None
+        else float((~np.asarray(src.contacts, bool).any(axis=1)).mean()),
     }
     rows = []
     for method in task.methods:
@@ -497,6 +502,7 @@ LEGEND = (
     "b→a: before → after refinement (skate, pen: mm; jerk: m/s³); check: the refinement "
     "check (kept, reverted, fallback); surv: share of the window tracked before a fall; "
     "MPJPE/L: sim MPJPE per hind-leg length; t: wall time of transfer / refine / track [s]; "
+    "Fr: the source window's peak Froude number over 0.5 s (above 2.5 a gallop); "
     "resid: residual root force [m·g] the tracked reference needs beyond what its stance "
     "feet can push, docs/metrics.md's root_residual_mg; whole k/K runs: with --repeats, "
     "the runs of the window tracked whole, and their mean survival)"
@@ -512,6 +518,8 @@ def format_row(r: dict[str, Any]) -> str:
     toe = r.get("stance_toe_height_import")
     runs = survival_runs(r)
     tail = ""
+    if r.get("source_froude_peak") is not None:
+        tail += f"  Fr {r['source_froude_peak']:.1f}"
     if r.get("reference_residual_mg") is not None:
         tail += f"  resid {r['reference_residual_mg']:.2f}"
     if len(runs) > 1:
@@ -548,6 +556,37 @@ def _per_target_survival(rows: Sequence[dict[str, Any]]) -> list[str]:
     for tgt in dict.fromkeys(t for t, _ in runs):
         cells = [f"{np.mean(runs[tgt, m]):.2f}" if (tgt, m) in runs else "-" for m in methods]
         lines.append(f"    {tgt:10s} {' / '.join(cells)}")
+    return lines
+
+
+def _per_regime_survival(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """Survival of each method split by the gait regime of the source window: its peak
+    Froude number (:func:`habitsim.gait_stats.peak_froude`) at or below
+    :data:`~habitsim.gait_stats.GALLOP_FROUDE` (walks, trots, ambles) or above it
+    (gallops). Nothing without tracking or without the Froude numbers."""
+    from ..gait_stats import GALLOP_FROUDE, PEAK_SPAN_S
+
+    runs: dict[tuple[str, bool], list[list[float]]] = {}
+    for r in rows:
+        fr = _num(r.get("source_froude_peak"))
+        if r.get("status") == "ok" and survival_runs(r) and fr is not None:
+            runs.setdefault((r["method"], fr > GALLOP_FROUDE), []).append(survival_runs(r))
+    if not runs:
+        return []
+    lines = [
+        f"  survival per gait regime of the source window (peak Froude number over "
+        f"{PEAK_SPAN_S:g} s; trot → gallop near Fr {GALLOP_FROUDE:g}):"
+    ]
+    for m in dict.fromkeys(m for m, _ in runs):
+        cells = []
+        for fast, label in ((False, f"Fr ≤ {GALLOP_FROUDE:g}"), (True, f"Fr > {GALLOP_FROUDE:g}")):
+            win = runs.get((m, fast), [])
+            flat = [x for w in win for x in w]
+            cells.append(
+                f"{label}: {len(win)} window(s), whole runs {sum(x >= 1.0 for x in flat)}/"
+                f"{len(flat)}, mean survival {_f(float(np.mean(flat)) if flat else None)}"
+            )
+        lines.append(f"    {m:8s} " + "; ".join(cells))
     return lines
 
 
@@ -607,6 +646,7 @@ def format_summary(rows: Sequence[dict[str, Any]], targets: Sequence[dict[str, A
             f"clip), total {_f(_median(ok, 'time_total_s'))}"
         )
     lines += _per_target_survival(rows)
+    lines += _per_regime_survival(rows)
     reverted = [r for r in rows if r.get("refine_check") == "reverted"]
     for r in reverted:
         lines.append(
