@@ -11,6 +11,15 @@ The wrench goes to ``data.qfrc_applied`` on the six free-joint dofs only:
 ``[F (world frame, at the free body's origin) ; τ (free body's local frame)]``, the
 generalised-force convention of MuJoCo's free joint. It stays there (zero-order hold)
 until the next call; :meth:`RootAssist.reset` and :meth:`RootAssist.remove` clear it.
+
+Held explicitly over a step, the PD's damping adds to the stance-force feedback of the
+``balance`` and ``mpc`` controllers on the same trunk error, and the sum passes the
+explicit stability limit: on a cat's real walk the assistance then flipped sign every
+2 ms step (about ±3.5 m·g and ±35 N·m) and read a mean 4.95 m·g where 0.25 m·g was
+needed. :meth:`RootAssist.damped_model` moves the damping into the model's free-joint
+``dof_damping``, which MuJoCo's Euler, implicit and implicitfast integrators integrate
+implicitly (unconditionally stable); :func:`habitsim.sim.track` does so for every run
+with assistance. The record still holds the whole PD wrench, damping included.
 """
 
 from __future__ import annotations
@@ -37,7 +46,9 @@ class RootAssist:
         body: name of the free-joint body (default: the model's first free joint).
 
     Attributes:
-        last_wrench: (6,) the generalised force written at the last call.
+        last_wrench: (6,) the assist's generalised force at the last call (the whole PD
+            wrench; with :meth:`damped_model` its damping part acts through the model).
+        implicit_damping: the damping is the model's (:meth:`damped_model`), not written.
     """
 
     name = "root_assist"
@@ -68,6 +79,7 @@ class RootAssist:
             kd_t, kd_r = 2 * np.sqrt(kp_t * self.mass), 2 * np.sqrt(kp_r * inertia)
         self.kp_t, self.kp_r, self.kd_t, self.kd_r = kp_t, kp_r, kd_t, kd_r
         self.last_wrench = np.zeros(6)
+        self.implicit_damping = False
         self._reset_record()
 
     @staticmethod
@@ -99,6 +111,40 @@ class RootAssist:
         data.qfrc_applied[self._da : self._da + 6] = 0.0
         self.last_wrench = np.zeros(6)
 
+    def damped_model(self, model: mujoco.MjModel) -> mujoco.MjModel:
+        """A copy of ``model`` whose free-joint dofs carry this assist's damping.
+
+        ``dof_damping`` of the three translational dofs gets ``kd`` (translational) added,
+        that of the three rotational dofs ``kd`` (rotational): the same ``−kd·q̇`` as the
+        PD's damping term (MuJoCo's free joint has its linear velocity in the world frame
+        and its angular velocity in the body frame, as the PD uses them), but integrated
+        implicitly. From then on :meth:`apply` writes only the stiffness and the
+        ``kd·q̇_ref`` feed-forward; simulate with the returned model. ``model`` itself is
+        not changed.
+
+        Raises:
+            ControllerError: the model integrates with RK4, which treats damping
+                explicitly (nothing would be gained).
+        """
+        import copy
+
+        if model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4:
+            raise ControllerError(
+                "RootAssist.damped_model needs the Euler, implicit or implicitfast "
+                "integrator (RK4 integrates damping explicitly)"
+            )
+        out = copy.copy(model)
+        da = self._da
+        out.dof_damping[da : da + 3] += self.kd_t
+        out.dof_damping[da + 3 : da + 6] += self.kd_r
+        self.implicit_damping = True
+        return out
+
+    def _damping(self, data: mujoco.MjData) -> np.ndarray:
+        """(6,) the PD's damping term ``−kd·q̇`` on the free joint at this state."""
+        v = data.qvel[self._da : self._da + 6]
+        return np.concatenate([-self.kd_t * v[:3], -self.kd_r * v[3:]])
+
     def wrench(self, data: mujoco.MjData, ref: Reference) -> np.ndarray:
         """(6,) the assist's generalised force on the free joint for this state."""
         qa, da = self._qa, self._da
@@ -117,13 +163,16 @@ class RootAssist:
         return np.concatenate([force, torque])
 
     def apply(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:
-        """Write the wrench to ``data.qfrc_applied`` (free dofs only) and record it."""
+        """Write the wrench to ``data.qfrc_applied`` (free dofs only; without its damping
+        term after :meth:`damped_model`) and record the whole wrench."""
         if self._t_last is not None:  # the previous wrench acted from _t_last until now
             dt = max(float(data.time) - self._t_last, 0.0)
             self._impulse += float(np.linalg.norm(self.last_wrench[:3])) * dt
             self._angular_impulse += float(np.linalg.norm(self.last_wrench[3:])) * dt
         w = self.wrench(data, ref)
-        data.qfrc_applied[self._da : self._da + 6] = w
+        # with implicit damping the model applies −kd·q̇ (at the end-of-step velocity)
+        written = w - self._damping(data) if self.implicit_damping else w
+        data.qfrc_applied[self._da : self._da + 6] = written
         self.last_wrench = w
         f, t = float(np.linalg.norm(w[:3])), float(np.linalg.norm(w[3:]))
         self._calls += 1

@@ -494,6 +494,35 @@ def test_root_assist_holds_unactuated_body_and_reports_it() -> None:
     assert abs(data.qpos[2] - 1.0) < 0.02  # held (sag g/ω² ≈ 1 cm)
 
 
+def test_root_assist_damping_moves_into_the_model() -> None:
+    """damped_model: a copy whose free dofs carry kd; apply then writes the PD without its
+    damping term, records the whole PD, and a falling box is held as before."""
+    xml = """<mujoco><option timestep="0.002" integrator="implicitfast"/><worldbody>
+      <body name="box" pos="0 0 1"><freejoint/><geom type="box" size=".1 .1 .1" mass="3"/>
+      </body></worldbody></mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    assist = RootAssist(model, kp=(300.0, 2.0), kd=(60.0, 0.5))
+    damped = assist.damped_model(model)
+    np.testing.assert_array_equal(model.dof_damping, 0.0)  # the given model is unchanged
+    np.testing.assert_allclose(damped.dof_damping, [60.0] * 3 + [0.5] * 3)
+    data = mujoco.MjData(damped)
+    data.qvel[:] = [0.1, -0.2, 0.3, 0.4, -0.5, 0.6]
+    ref = Reference(0.0, damped.qpos0.copy(), np.zeros(6), np.zeros(6))
+    w = assist.apply(damped, data, ref)
+    np.testing.assert_allclose(w[:3], -60.0 * data.qvel[:3])  # at the reference pose
+    np.testing.assert_allclose(w[3:], -0.5 * data.qvel[3:])
+    np.testing.assert_allclose(data.qfrc_applied[:6], 0.0, atol=1e-12)  # the model damps
+    data = mujoco.MjData(damped)
+    for _ in range(1000):  # 2 s
+        assist.apply(damped, data, ref)
+        mujoco.mj_step(damped, data)
+    assert assist.report(data)["assist_force_mg"] == pytest.approx(1.0, rel=0.05)
+    assert data.qpos[2] == pytest.approx(1.0 - 3 * 9.81 / 300.0, abs=1e-3)  # sag m·g/kp
+    rk4 = mujoco.MjModel.from_xml_string(xml.replace("implicitfast", "RK4"))
+    with pytest.raises(ControllerError, match="RK4"):
+        RootAssist(rk4).damped_model(rk4)
+
+
 def test_root_assist_in_a_controller_is_measured(robot) -> None:
     kp = stiffness_rule(robot)
     assist = RootAssist(robot)

@@ -126,9 +126,14 @@ def track(
     sim_model = _sim_model(controller, clip, model)
     dv0 = _velocity_noise(sim_model, init_noise, seed)
     asst = _make_assist(assist, sim_model)
+    if asst is not None and hasattr(asst, "damped_model"):
+        # the assist's damping integrated implicitly (controllers.assist: held explicitly
+        # it chattered against the balance and mpc controllers' own trunk feedback)
+        if sim_model.opt.integrator != mujoco.mjtIntegrator.mjINT_RK4:
+            sim_model = asst.damped_model(sim_model)
     if control_hz is None and controller == "mpc" and asst is None:
-        # (a root assist is an explicit wrench held over a control period: its gains are
-        # set for one simulation step, so assisted runs keep the full rate)
+        # (a root assist's stiffness is an explicit wrench held over a control period:
+        # its gains are set for one simulation step, so assisted runs keep the full rate)
         control_hz = MPC_CONTROL_HZ
     every = _control_every(sim_model, control_hz)
     fast = controller == "servo" and asst is None and every == 1
