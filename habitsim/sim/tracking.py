@@ -82,7 +82,8 @@ def track(
         model: the model (default: the species' shipped model). Named servo controllers
             configure servos on it unless it has them already.
         control_hz: control rate [Hz] (default: every simulation step; for ``"mpc"`` by
-            name without assistance :data:`MPC_CONTROL_HZ`).
+            name :data:`MPC_CONTROL_HZ`, also with a root assist whose damping the model
+            integrates, :meth:`~habitsim.controllers.assist.RootAssist.damped_model`).
         settle_s: seconds to hold the first frame (from rest) before the clip starts.
         stop_on_fall: stop at the first fall (else simulate to the end; metrics still
             use the survived part only).
@@ -126,14 +127,17 @@ def track(
     sim_model = _sim_model(controller, clip, model)
     dv0 = _velocity_noise(sim_model, init_noise, seed)
     asst = _make_assist(assist, sim_model)
+    implicit = False
     if asst is not None and hasattr(asst, "damped_model"):
         # the assist's damping integrated implicitly (controllers.assist: held explicitly
         # it chattered against the balance and mpc controllers' own trunk feedback)
         if sim_model.opt.integrator != mujoco.mjtIntegrator.mjINT_RK4:
             sim_model = asst.damped_model(sim_model)
-    if control_hz is None and controller == "mpc" and asst is None:
-        # (a root assist's stiffness is an explicit wrench held over a control period:
-        # its gains are set for one simulation step, so assisted runs keep the full rate)
+            implicit = True
+    if control_hz is None and controller == "mpc" and (asst is None or implicit):
+        # an assist whose damping is explicit keeps the full rate: held over a control
+        # period of two steps it diverged; its stiffness alone is far inside the limit
+        # (ω·dt = 0.13 at 5 Hz and 250 Hz)
         control_hz = MPC_CONTROL_HZ
     every = _control_every(sim_model, control_hz)
     fast = controller == "servo" and asst is None and every == 1
