@@ -17,9 +17,11 @@ Held explicitly over a step, the PD's damping adds to the stance-force feedback 
 explicit stability limit: on a cat's real walk the assistance then flipped sign every
 2 ms step (about ±3.5 m·g and ±35 N·m) and read a mean 4.95 m·g where 0.25 m·g was
 needed. :meth:`RootAssist.damped_model` moves the damping into the model's free-joint
-``dof_damping``, which MuJoCo's Euler, implicit and implicitfast integrators integrate
-implicitly (unconditionally stable); :func:`habitsim.sim.track` does so for every run
-with assistance. The record still holds the whole PD wrench, damping included.
+``dof_damping``, which MuJoCo's implicit and implicitfast integrators, and Euler unless
+the model disables its ``eulerdamp`` flag, integrate implicitly (unconditionally
+stable; with ``eulerdamp`` off the damping is still evaluated at every step, not held
+over a control period); :func:`habitsim.sim.track` does so for every run with
+assistance. The record still holds the whole PD wrench, damping included.
 """
 
 from __future__ import annotations
@@ -118,7 +120,8 @@ class RootAssist:
         that of the three rotational dofs ``kd`` (rotational): the same ``−kd·q̇`` as the
         PD's damping term (MuJoCo's free joint has its linear velocity in the world frame
         and its angular velocity in the body frame, as the PD uses them), but integrated
-        implicitly. From then on :meth:`apply` writes only the stiffness and the
+        implicitly (by Euler only with its ``eulerdamp`` flag on, MuJoCo's default). From
+        then on :meth:`apply` writes only the stiffness and the
         ``kd·q̇_ref`` feed-forward; simulate with the returned model. ``model`` itself is
         not changed.
 
