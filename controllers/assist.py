@@ -49,8 +49,8 @@ class RootAssist:
 
     Attributes:
         last_wrench: (6,) the assist's generalised force at the last call (the whole PD
-            wrench; with :meth:`damped_model` its damping part acts through the model).
-        implicit_damping: the damping is the model's (:meth:`damped_model`), not written.
+            wrench; on the model :meth:`damped_model` returned, its damping part acts
+            through the model).
     """
 
     name = "root_assist"
@@ -81,7 +81,7 @@ class RootAssist:
             kd_t, kd_r = 2 * np.sqrt(kp_t * self.mass), 2 * np.sqrt(kp_r * inertia)
         self.kp_t, self.kp_r, self.kd_t, self.kd_r = kp_t, kp_r, kd_t, kd_r
         self.last_wrench = np.zeros(6)
-        self.implicit_damping = False
+        self._damped: mujoco.MjModel | None = None  # the model damped_model returned
         self._reset_record()
 
     @staticmethod
@@ -120,10 +120,10 @@ class RootAssist:
         that of the three rotational dofs ``kd`` (rotational): the same ``−kd·q̇`` as the
         PD's damping term (MuJoCo's free joint has its linear velocity in the world frame
         and its angular velocity in the body frame, as the PD uses them), but integrated
-        implicitly (by Euler only with its ``eulerdamp`` flag on, MuJoCo's default). From
-        then on :meth:`apply` writes only the stiffness and the
-        ``kd·q̇_ref`` feed-forward; simulate with the returned model. ``model`` itself is
-        not changed.
+        implicitly (by Euler only with its ``eulerdamp`` flag on, MuJoCo's default).
+        :meth:`apply` on the returned model writes only the stiffness and the
+        ``kd·q̇_ref`` feed-forward (on any other model, the whole wrench as before).
+        ``model`` itself is not changed.
 
         Raises:
             ControllerError: the model integrates with RK4, which treats damping
@@ -140,7 +140,7 @@ class RootAssist:
         da = self._da
         out.dof_damping[da : da + 3] += self.kd_t
         out.dof_damping[da + 3 : da + 6] += self.kd_r
-        self.implicit_damping = True
+        self._damped = out
         return out
 
     def _damping(self, data: mujoco.MjData) -> np.ndarray:
@@ -167,14 +167,14 @@ class RootAssist:
 
     def apply(self, model: mujoco.MjModel, data: mujoco.MjData, ref: Reference) -> np.ndarray:
         """Write the wrench to ``data.qfrc_applied`` (free dofs only; without its damping
-        term after :meth:`damped_model`) and record the whole wrench."""
+        term on the model :meth:`damped_model` returned) and record the whole wrench."""
         if self._t_last is not None:  # the previous wrench acted from _t_last until now
             dt = max(float(data.time) - self._t_last, 0.0)
             self._impulse += float(np.linalg.norm(self.last_wrench[:3])) * dt
             self._angular_impulse += float(np.linalg.norm(self.last_wrench[3:])) * dt
         w = self.wrench(data, ref)
         # with implicit damping the model applies −kd·q̇ (at the end-of-step velocity)
-        written = w - self._damping(data) if self.implicit_damping else w
+        written = w - self._damping(data) if model is self._damped else w
         data.qfrc_applied[self._da : self._da + 6] = written
         self.last_wrench = w
         f, t = float(np.linalg.norm(w[:3])), float(np.linalg.norm(w[3:]))

@@ -512,6 +512,10 @@ def test_root_assist_damping_moves_into_the_model() -> None:
     np.testing.assert_allclose(w[:3], -60.0 * data.qvel[:3])  # at the reference pose
     np.testing.assert_allclose(w[3:], -0.5 * data.qvel[3:])
     np.testing.assert_allclose(data.qfrc_applied[:6], 0.0, atol=1e-12)  # the model damps
+    plain = mujoco.MjData(model)  # on the undamped model the whole wrench is written
+    plain.qvel[:] = data.qvel
+    np.testing.assert_allclose(assist.apply(model, plain, ref), w)
+    np.testing.assert_allclose(plain.qfrc_applied[:6], w)
     data = mujoco.MjData(damped)
     for _ in range(1000):  # 2 s
         assist.apply(damped, data, ref)
