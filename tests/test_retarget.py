@@ -1,4 +1,5 @@
-"""Animal motion on a robot: ``habitsim.retarget`` and ``habitsim retarget`` on the Go1."""
+"""Animal motion on a robot: ``habitsim.retarget`` and ``habitsim retarget`` on the Go1, ANYmal C
+and the Go2."""
 
 from __future__ import annotations
 
@@ -310,3 +311,39 @@ def test_cli_retargets_motion_capture_imported_with_from(walk, tmp_path, capsys)
     assert main(["retarget", str(other), *base[2:], "--out", str(tmp_path / "no.npz")]) == 2
     assert "(.bvh, .glb, .gltf)" in capsys.readouterr().err
     assert not (tmp_path / "no.npz").exists()
+
+
+GO2 = Path(__file__).parent / "robots" / "unitree_go2" / "scene.xml"
+
+
+@pytest.fixture(scope="module")
+def go2() -> mujoco.MjModel:
+    return load_robot(GO2)
+
+
+def test_vendored_go2_is_menagerie_with_torque_motors(go2):
+    assert "Unitree Robotics" in (GO2.parent / "LICENSE").read_text()
+    assert go2.nmesh == 0 and not any(go2.geom_type == mujoco.mjtGeom.mjGEOM_MESH)
+    assert go2.nu == 12 and go2.nkey == 1 and go2.key(0).name == "home"
+    assert abs(mujoco.mj_getTotalmass(go2) - 15.21) < 0.05  # menagerie's inertials
+    # torque motors (no bias, unit gain), unlike the Go1's and ANYmal's position servos
+    assert np.all(go2.actuator_biastype == mujoco.mjtBias.mjBIAS_NONE)
+    assert np.all(go2.actuator_gainprm[:, 0] == 1.0)
+    limit = {go2.actuator(a).name: go2.actuator_ctrlrange[a, 1] for a in range(go2.nu)}
+    assert limit["FL_calf"] == pytest.approx(45.43) and limit["FL_thigh"] == pytest.approx(23.7)
+    for f in FEET:  # the feet are geoms only (no sites of those names)
+        assert go2.geom(f).type[0] == mujoco.mjtGeom.mjGEOM_SPHERE
+        assert mujoco.mj_name2id(go2, mujoco.mjtObj.mjOBJ_SITE, f) == -1
+
+
+@pytest.mark.slow
+def test_dog_trot_on_go2_tracks_under_mpc(go2):
+    """A robot that ships torque motors and geom-only feet: a 3 s dog trot (flight
+    phases included) retargeted onto it runs whole under ``mpc``, unassisted."""
+    trot = generate("dog", "trot", seed=7, duration_s=3.0)
+    clip = retarget(trot, go2, FEET)
+    assert clip.metadata["ik_residual_max_m"] < 1e-4
+    res = track_clip(clip, go2, controller="mpc")
+    assert not res.failed and res.survival == 1.0
+    assert res.assist["assist_force_mg"] == 0.0
+    assert res.metrics["sim_mpjpe_mm"] < 60.0 and res.metrics["contact_f1"] > 0.7
