@@ -90,6 +90,9 @@ __all__ = [
 #: Upper bound of the trunk PD natural frequencies [rad/s]: above ~12 rad/s the trunk
 #: loop excites the redundant legs of small species (rabbit, cat, fox) and they fold.
 OMEGA_CAP = 10.0
+#: A joint torque at or above this share of its limit counts as at the limit
+#: (``torque_at_limit_share`` in the controller's stats).
+AT_LIMIT_SHARE = 0.99
 
 
 def centroidal_inertia(
@@ -303,7 +306,11 @@ class BalanceController(BaseController):
     Attributes:
         stats: timing and failures; ``stats.to_dict()`` adds ``stance_qp_median_ms``,
             ``qp_failures``, ``early_touchdowns``, ``lost_contacts``,
-            ``torque_clipped_share``.
+            ``torque_clipped_share`` (ticks whose wanted torque was beyond a joint's
+            limit and cut to it) and ``torque_at_limit_share`` (ticks with a joint's
+            torque sent at ≥ :data:`AT_LIMIT_SHARE` of its limit: the stance QP keeps its
+            own torques inside the limits, so a leg working at its limit shows here, not
+            in the clipped share).
         last_forces (nf, 3) ground forces; last_wrench (6,) wanted; last_achieved (6,)
         achieved by the forces; last_modes (nf,) leg modes; last_torque (n,) joint
         torques sent.
@@ -400,6 +407,7 @@ class BalanceController(BaseController):
         self._inertia_inv = np.eye(3)
         self._ticks = 0
         self._clipped = 0
+        self._at_limit = 0
         # per-tick caches (see _control / _other_torques)
         self._dof = jm.dof_adr
         self._qadr = jm.qpos_adr
@@ -497,6 +505,7 @@ class BalanceController(BaseController):
         self._proj = None
         self._ticks = 0
         self._clipped = 0
+        self._at_limit = 0
         self._refresh_inertia(model, data)
 
     def _refresh_inertia(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
@@ -738,6 +747,8 @@ class BalanceController(BaseController):
         clipped = np.minimum(np.maximum(tau, self._neg_limit), self._limit)
         if (clipped != tau).any():
             self._clipped += 1
+        if (np.abs(clipped) >= AT_LIMIT_SHARE * self._limit).any():
+            self._at_limit += 1
         u = np.array(data.ctrl)
         u[self._ctrl_idx] = np.minimum(np.maximum(clipped / self._tpc, jm.ctrl_lo), jm.ctrl_hi)
         self.last_torque = u[self._ctrl_idx] * self._tpc
@@ -756,3 +767,4 @@ class BalanceController(BaseController):
         ex["early_touchdowns"] = self.tracker.events["early_touchdown"]
         ex["lost_contacts"] = self.tracker.events["lost_contact"]
         ex["torque_clipped_share"] = self._clipped / max(self._ticks, 1)
+        ex["torque_at_limit_share"] = self._at_limit / max(self._ticks, 1)

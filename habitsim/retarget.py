@@ -43,7 +43,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -98,7 +98,9 @@ class RobotLegs:
         radius: (nf,) foot sphere radius [m] (the foot point is its centre).
         leg_length: L [m], the trunk origin's height over the foot points at home.
         qadr, dadr, lo, hi: per foot, the qpos / dof addresses of the leg's own joints
-            and their ranges (±inf where unlimited).
+            and the leg IK's bounds: the joint ranges, narrowed to half a turn about the
+            standing angle (:data:`HINGE_SPAN`) and, for the knee, to the side it bends
+            to when standing (±inf for an unlimited slide joint).
         home_source: where ``home`` comes from (``keyframe 'home'``, ``qpos0``, or
             ``qpos0`` crouched).
     """
@@ -147,6 +149,13 @@ STRAIGHT_REACH = 0.97
 CROUCH_HEIGHT = 0.85
 #: Knee bend [rad] that starts the crouch's leg IK off the straight-leg singularity.
 CROUCH_BEND = 0.5
+#: The leg IK keeps every hinge of a leg within half a turn [rad] of its standing angle
+#: (inside the joint's own range): robots that leave their leg joints unlimited
+#: (Menagerie's ANYmal B) or give them ±3π (ANYmal C) otherwise let a foot target out
+#: of reach spin a joint by whole turns (ANYmal B's dog trot: 47.7 rad in one frame).
+HINGE_SPAN = math.pi
+#: Largest change of one joint in one damped-least-squares step of the leg IK [rad].
+MAX_IK_STEP = 0.3
 
 
 def robot_legs(model: mujoco.MjModel, feet: Sequence[str], home: str = "home") -> RobotLegs:
@@ -230,7 +239,7 @@ def _legs_at(
         dadr.append(jm.dof_adr[own].copy())
         lo.append(np.where(lim, model.jnt_range[jid, 0], -np.inf))
         hi.append(np.where(lim, model.jnt_range[jid, 1], np.inf))
-    return RobotLegs(
+    rl = RobotLegs(
         model=model,
         feet=feet,
         legs=legs,
@@ -245,6 +254,63 @@ def _legs_at(
         hi=tuple(hi),
         home_source=source,
     )
+    return _bounded(rl)
+
+
+def _bounded(rl: RobotLegs) -> RobotLegs:
+    """``rl`` with the leg IK's bounds: every hinge within :data:`HINGE_SPAN` of its
+    standing angle, and each knee (the outermost own hinge about the trunk's lateral
+    axis) on the side it bends to when standing, up to the straight leg, so that a foot
+    target out of reach straightens the leg instead of folding the knee the other way
+    (not for a leg standing straight, :data:`STRAIGHT_REACH`: the crouch bends it first).
+    """
+    m = rl.model
+    d = mujoco.MjData(m)
+    d.qpos[:] = rl.home
+    mujoco.mj_kinematics(m, d)
+    knees = _knee_joints(rl, d)
+    straight = leg_extension(rl) > STRAIGHT_REACH
+    hinge = mujoco.mjtJoint.mjJNT_HINGE
+    lo, hi = [], []
+    for i in range(len(rl.feet)):
+        jid = rl.legs.jmap.joint_ids[rl.legs.own[i]]
+        h = rl.home[rl.qadr[i]]
+        turn = m.jnt_type[jid] == hinge
+        a = np.where(turn, np.maximum(rl.lo[i], h - HINGE_SPAN), rl.lo[i])
+        b = np.where(turn, np.minimum(rl.hi[i], h + HINGE_SPAN), rl.hi[i])
+        hk = knees[i]
+        if hk is not None and not straight[i]:
+            k = int(np.flatnonzero(jid == hk[1])[0])
+            flat = _straight_angle(rl, i, int(rl.qadr[i][k]), float(a[k]), float(b[k]))
+            if h[k] > flat:
+                a[k] = max(a[k], flat)
+            else:
+                b[k] = min(b[k], flat)
+        lo.append(a)
+        hi.append(b)
+    return replace(rl, lo=tuple(lo), hi=tuple(hi))
+
+
+def _straight_angle(rl: RobotLegs, i: int, adr: int, lo: float, hi: float) -> float:
+    """The angle of the knee at qpos address ``adr`` in [lo, hi] (finite) that makes leg
+    i straightest (:func:`leg_extension`, the rest of the standing pose kept): a 5° scan,
+    then 0.25° about its best."""
+    d = mujoco.MjData(rl.model)
+    d.qpos[:] = rl.home
+    mujoco.mj_kinematics(rl.model, d)
+    knees = _knee_joints(rl, d)
+
+    def best(grid: np.ndarray) -> float:
+        ext = np.empty(len(grid))
+        for n, v in enumerate(grid):
+            d.qpos[adr] = v
+            mujoco.mj_kinematics(rl.model, d)
+            ext[n] = _extensions(rl, d, knees)[i]
+        return float(grid[int(np.argmax(ext))])
+
+    coarse = best(np.linspace(lo, hi, max(2, int(math.ceil((hi - lo) / math.radians(5.0))) + 1)))
+    step = math.radians(5.0)
+    return best(np.clip(np.arange(coarse - step, coarse + step, math.radians(0.25)), lo, hi))
 
 
 def _leg_chain(rl: RobotLegs, i: int) -> np.ndarray:
@@ -279,10 +345,15 @@ def leg_extension(rl: RobotLegs, qpos: np.ndarray | None = None) -> np.ndarray:
     d = mujoco.MjData(m)
     d.qpos[:] = rl.home if qpos is None else qpos
     mujoco.mj_kinematics(m, d)
+    return _extensions(rl, d, _knee_joints(rl, d))
+
+
+def _extensions(rl: RobotLegs, d: mujoco.MjData, knees: list) -> np.ndarray:
+    """:func:`leg_extension` at ``d``'s pose (kinematics done) for (hip, knee) ``knees``."""
     rot = d.xmat[rl.legs.trunk].reshape(3, 3)
     pts = np.array(rl.legs.positions(d))
     out = np.zeros(len(rl.feet))
-    for i, hk in enumerate(_knee_joints(rl, d)):
+    for i, hk in enumerate(knees):
         if hk is None:
             continue
         hip, knee, foot = ((p @ rot)[[0, 2]] for p in (d.xanchor[hk[0]], d.xanchor[hk[1]], pts[i]))
@@ -356,7 +427,8 @@ def leg_ik(
 
     Damped least squares per leg on the leg's own joints,
     ``Δq = Jᵀ (J Jᵀ + λ² I)⁻¹ (p* − p)`` with ``J`` the foot point's translational
-    Jacobian (``mujoco.mj_jac``), each step clipped into the joint ranges, until every
+    Jacobian (``mujoco.mj_jac``), each step scaled to at most :data:`MAX_IK_STEP` per
+    joint and clipped into the leg's bounds (:attr:`RobotLegs.lo` / ``hi``), until every
     foot is within ``tolerance`` [m] or after ``iterations`` steps.
 
     Args:
@@ -388,6 +460,9 @@ def leg_ik(
             mujoco.mj_jac(m, d, jac, None, pts[i], int(b))
             j = jac[:, robot.dadr[i]]
             step = j.T @ np.linalg.solve(j @ j.T + lam2 * eye, err[i])
+            big = float(np.abs(step).max(initial=0.0))
+            if big > MAX_IK_STEP:  # near a singularity DLS steps grow as |err|/λ
+                step *= MAX_IK_STEP / big
             qa = robot.qadr[i]
             q[qa] = np.clip(q[qa] + step, robot.lo[i], robot.hi[i])
     d.qpos[:] = q

@@ -15,7 +15,11 @@ import pytest
 from habitsim.cli import main
 from habitsim.gaits import generate
 from habitsim.retarget import (
+    HINGE_SPAN,
     RetargetError,
+    _knee_joints,
+    leg_extension,
+    leg_ik,
     load_robot,
     load_robot_clip,
     retarget,
@@ -347,3 +351,62 @@ def test_dog_trot_on_go2_tracks_under_mpc(go2):
     assert not res.failed and res.survival == 1.0
     assert res.assist["assist_force_mg"] == 0.0
     assert res.metrics["sim_mpjpe_mm"] < 60.0 and res.metrics["contact_f1"] > 0.7
+
+
+def _unlimited_anymal(tmp_path) -> mujoco.MjModel:
+    """ANYmal C with every joint range removed (as Menagerie's ANYmal B ships its legs)."""
+    (tmp_path / "scene.xml").write_text(ANYMAL.read_text())
+    xml = ANYMAL.with_name("anymal_c.xml").read_text()
+    (tmp_path / "anymal_c.xml").write_text(re.sub(r' range="[^"]*"', "", xml))
+    return load_robot(tmp_path / "scene.xml")
+
+
+def test_leg_ik_bounds_keep_knees_bent_their_own_way(anymal, tmp_path):
+    """Joints without ranges (or ±3π, ANYmal C's hip and knee flexion) get the IK's own
+    bounds: half a turn about standing, and each knee on the side it bends to when
+    standing, up to the straight leg."""
+    free = _unlimited_anymal(tmp_path)
+    assert not free.jnt_limited.any()
+    for model in (anymal, free):
+        rl = robot_legs(model, ANYMAL_FEET)
+        d = mujoco.MjData(model)
+        d.qpos[:] = rl.home
+        mujoco.mj_kinematics(model, d)
+        for i, (_, knee) in enumerate(_knee_joints(rl, d)):
+            lo, hi, home = rl.lo[i], rl.hi[i], rl.home[rl.qadr[i]]
+            assert np.all(np.isfinite(lo)) and np.all(hi - lo <= 2 * HINGE_SPAN + 1e-9)
+            assert np.all((lo <= home) & (home <= hi))
+            k = int(np.flatnonzero(rl.qadr[i] == model.jnt_qposadr[knee])[0])
+            # one bound of the knee is its straight angle: the leg is straightest there
+            ends = [lo[k], hi[k]]
+            ext = [leg_extension(rl, _with(rl.home, model.jnt_qposadr[knee], v))[i] for v in ends]
+            assert max(ext) > 0.995, (i, ext)
+        # a foot target two leg lengths below the hip: the leg straightens, nothing spins
+        q = rl.home.copy()
+        targets = np.array(rl.legs.positions(d)) - [0.0, 0.0, 2.0 * rl.leg_length]
+        q2, res = leg_ik(rl, q, targets, iterations=200)
+        assert np.all(res > 0.5 * rl.leg_length)  # out of reach, reported
+        for i in range(len(ANYMAL_FEET)):
+            v = q2[rl.qadr[i]]
+            assert np.all((rl.lo[i] - 1e-9 <= v) & (v <= rl.hi[i] + 1e-9))
+        assert np.all(leg_extension(rl, q2) > 0.98)
+
+
+def _with(q, adr, v):
+    out = q.copy()
+    out[adr] = v
+    return out
+
+
+@pytest.mark.slow
+def test_dog_trot_on_unlimited_legs_stays_continuous(anymal, tmp_path):
+    """A 3 s dog trot asks ANYmal C's legs for more reach than they have: the retarget
+    straightens them (IK residual reported) instead of folding a knee backward (before
+    the bounds: a joint 2.6 rad from standing, and on ANYmal B 47.7 rad in one frame)."""
+    trot = generate("dog", "trot", seed=7, duration_s=3.0)
+    for model in (anymal, _unlimited_anymal(tmp_path)):
+        clip = retarget(trot, model, ANYMAL_FEET)
+        rl = robot_legs(model, ANYMAL_FEET)
+        legs = np.concatenate(rl.qadr)
+        assert np.abs(np.diff(clip.qpos[:, legs], axis=0)).max() < 0.8
+        assert np.abs(clip.qpos[:, legs] - rl.home[legs]).max() < 0.5 * np.pi

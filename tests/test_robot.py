@@ -278,3 +278,27 @@ def test_trot_example_measures_distance_along_the_trunks_forward_axis():
     assert _forward_distance(q) == pytest.approx(-1.5)
     shifted = np.hstack([np.zeros((2, 2)), q])  # the free joint after two other joints
     assert _forward_distance(shifted, 2) == pytest.approx(-1.5)
+
+
+def test_balance_reports_legs_working_at_their_torque_limit(go1):
+    """The stance QP keeps its torques inside the limits, so a robot too weak for its
+    weight shows in ``torque_at_limit_share``, not in ``torque_clipped_share``: the Go1
+    standing 1 s on its own motors needs them a few percent of the ticks at most, and
+    with every motor cut to 12 % of its strength (the knee 4.3 N·m, standing needs
+    5.1) most of the ticks."""
+    shares = []
+    for scale in (1.0, 0.12):
+        model = torque_model(go1)
+        model.actuator_ctrlrange[:] *= scale
+        ctl = make_controller("balance", model, feet=FEET)
+        d = _home(model)
+        ctl.reset(model, d)
+        z = np.zeros(model.nv)
+        ref = Reference(0.0, d.qpos.copy(), z, z, np.ones(4, bool))
+        for _ in range(int(1.0 / model.opt.timestep)):
+            d.ctrl[:] = ctl.control(model, d, ref)
+            mujoco.mj_step(model, d)
+        st = ctl.stats.to_dict()
+        assert 0.0 <= st["torque_clipped_share"] <= 1.0
+        shares.append(st["torque_at_limit_share"])
+    assert shares[0] < 0.05 and shares[1] > 0.5
