@@ -18,6 +18,7 @@ from habitsim.retarget import (
     HINGE_SPAN,
     RetargetError,
     _knee_joints,
+    find_robot_feet,
     leg_extension,
     leg_ik,
     load_robot,
@@ -122,8 +123,6 @@ def test_bad_input_is_typed(go1, walk, tmp_path):
         retarget(walk, go1, ["FL_foot", "FR", "RL", "RR"])
     with pytest.raises(RetargetError, match="4 feet"):
         retarget(walk, go1, ["FL", "FR", "RL"])
-    with pytest.raises(RetargetError, match="name the robot's feet"):
-        retarget(walk, go1)
     fixed = tmp_path / "fixed.xml"
     xml = GO1.with_name("go1.xml").read_text().replace("<freejoint/>", "")
     fixed.write_text(re.sub(r"<keyframe>.*</keyframe>", "", xml, flags=re.S))
@@ -410,3 +409,52 @@ def test_dog_trot_on_unlimited_legs_stays_continuous(anymal, tmp_path):
         legs = np.concatenate(rl.qadr)
         assert np.abs(np.diff(clip.qpos[:, legs], axis=0)).max() < 0.8
         assert np.abs(clip.qpos[:, legs] - rl.home[legs]).max() < 0.5 * np.pi
+
+
+def _anonymous_go1(tmp_path, qpos: str | None = None) -> mujoco.MjModel:
+    """The Go1 with its foot geoms and sites unnamed (as Menagerie's A1 ships its feet),
+    optionally standing on another home pose."""
+    xml = GO1.with_name("go1.xml").read_text()
+    xml = re.sub(r'<geom name="(FL|FR|RL|RR)" class="foot"/>', '<geom class="foot"/>', xml)
+    xml = re.sub(r'\s*<site name="(FL|FR|RL|RR)"[^>]*/>', "", xml)
+    if qpos is not None:
+        xml = re.sub(r'(<key name="home" qpos=")[^"]*"', rf'\g<1>{qpos}"', xml)
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    (tmp_path / "go1.xml").write_text(xml)
+    (tmp_path / "scene.xml").write_text(GO1.read_text())
+    return load_robot(tmp_path / "scene.xml")
+
+
+def test_feet_are_found_when_nobody_names_them(go1, go2, anymal, tmp_path):
+    """By the usual names first, else the four legs standing on the ground, ordered LF,
+    RF, LH, RH from where they stand; an unnamed foot sphere is named by its body."""
+    assert find_robot_feet(go1) == tuple(FEET) == find_robot_feet(go2)
+    assert find_robot_feet(anymal) == tuple(ANYMAL_FEET)
+    anon = _anonymous_go1(tmp_path / "a")
+    feet = find_robot_feet(anon)
+    assert feet == ("FL_calf", "FR_calf", "RL_calf", "RR_calf")
+    # the bodies resolve to the same foot spheres as the Go1's named geoms
+    a, b = robot_legs(anon, feet), robot_legs(go1, FEET)
+    assert np.allclose(a.nominal, b.nominal) and a.leg_length == pytest.approx(b.leg_length)
+    # one knee folded up at the standing pose: three legs on the ground, a typed error
+    lifted = "0 0 0.27 1 0 0 0 0 0.9 -1.8 0 0.9 -2.7 0 0.9 -1.8 0 0.9 -1.8"
+    with pytest.raises(RetargetError, match=r"3 leg\(s\) stand on the ground.*--feet"):
+        find_robot_feet(_anonymous_go1(tmp_path / "b", lifted))
+
+
+def test_cli_finds_the_feet_without_feet(walk, tmp_path, capsys):
+    npz = walk.save(tmp_path / "walk.npz")
+    _anonymous_go1(tmp_path / "r")
+    out = tmp_path / "q.npz"
+    assert (
+        main(
+            ["retarget", str(npz), "--robot", str(tmp_path / "r" / "scene.xml"), "--out", str(out)]
+        )
+        == 0
+    )
+    assert "feet (found, LF, RF, LH, RH): FL_calf, FR_calf, RL_calf, RR_calf" in (
+        capsys.readouterr().out
+    )
+    clip = load_robot_clip(out)
+    assert clip.feet == ("FL_calf", "FR_calf", "RL_calf", "RR_calf")
+    assert clip.metadata["feet_found"] is True and clip.metadata["ik_residual_max_m"] < 1e-4

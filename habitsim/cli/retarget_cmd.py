@@ -55,7 +55,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--feet",
         metavar="FOOT",
         help=(
-            "the robot's foot sites, geoms or bodies in the order LF, RF, LH, RH (e.g. FL,FR,RL,RR)"
+            "the robot's foot sites, geoms or bodies in the order LF, RF, LH, RH (e.g. "
+            "FL,FR,RL,RR; default: the usual names, else the four legs standing on the "
+            "ground at the standing pose, printed)"
         ),
     )
     p.add_argument(
@@ -96,7 +98,14 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
 
     from ..fileio import atomic_write_text, json_safe
     from ..motion import load_motion
-    from ..retarget import RetargetError, drawable, load_robot, retarget, track_clip
+    from ..retarget import (
+        RetargetError,
+        drawable,
+        find_robot_feet,
+        load_robot,
+        retarget,
+        track_clip,
+    )
 
     suffix = ns.source.suffix.lower()
     if suffix not in (".npz", ".bvh", ".glb", ".gltf"):
@@ -108,10 +117,6 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         raise RetargetError(
             f"a {suffix} source needs --from SPECIES (the skeleton to import it onto, "
             "e.g. --from dog)"
-        )
-    if not ns.feet:
-        raise RetargetError(
-            "--feet names the robot's feet in the order LF, RF, LH, RH, e.g. --feet FL,FR,RL,RR"
         )
     if (ns.report or ns.video) and not ns.track:
         raise RetargetError("--report and --video describe the tracked run: add --track")
@@ -134,7 +139,13 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         from ..render import check_video_writer
 
         check_video_writer(ns.video)  # fail before the work
-    clip = retarget(motion, robot, ns.feet, home=ns.home)
+    feet = ns.feet or None
+    if feet is None:
+        feet = find_robot_feet(robot, ns.home)
+        if not ns.json:
+            print(f"feet (found, LF, RF, LH, RH): {', '.join(feet)}")
+    clip = retarget(motion, robot, feet, home=ns.home)
+    clip.metadata["feet_found"] = not ns.feet
     clip.save(ns.out)
     summary: dict = {
         "out": str(ns.out),
