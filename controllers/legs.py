@@ -24,6 +24,7 @@ from habitsim.mjutils import (
     known_feet,
     leg_length,
     point_pos,
+    standing_feet,
 )
 
 from .base import ControllerError, JointActuatorMap, actuated_joints
@@ -34,19 +35,24 @@ __all__ = ["HABITSIM_FEET", "default_feet", "model_leg_length", "LegSet"]
 
 def default_feet(model: mujoco.MjModel) -> tuple[str, ...]:
     """The model's feet in the order LF, RF, LH, RH, found by the usual names
-    (:func:`habitsim.mjutils.known_feet`).
+    (:func:`habitsim.mjutils.known_feet`), else as the four legs standing on the ground
+    at the home pose (:func:`habitsim.mjutils.standing_feet`).
 
     Raises:
         ControllerError: no known naming matches (pass ``feet=`` explicitly).
     """
     names = known_feet(model)
-    if names is None:
+    if names is not None:
+        return names
+    try:
+        return standing_feet(model)
+    except ModelLookupError as e:
         raise ControllerError(
             "cannot find the feet of the model by name (tried "
             + "; ".join(", ".join(n) for n in (HABITSIM_FEET, *ROBOT_FEET))
-            + "); pass feet=[...] (site, geom or body names in the order LF, RF, LH, RH)"
-        )
-    return names
+            + f") nor as the legs standing at home ({e}); pass feet=[...] (site, geom or "
+            "body names in the order LF, RF, LH, RH)"
+        ) from e
 
 
 def model_leg_length(model: mujoco.MjModel, feet: Sequence[str] | None = None) -> float:

@@ -48,6 +48,7 @@ __all__ = [
     "point_pos",
     "known_feet",
     "find_feet",
+    "standing_feet",
     "foot_geoms",
     "foot_soles",
     "lowest_z",
@@ -253,6 +254,83 @@ def find_feet(
                 if name not in feet:
                     feet.append(name)
     return feet
+
+
+#: Legs whose lowest point stands within this share of the trunk's height above the
+#: lowest one count as standing on the ground (:func:`standing_feet`).
+FOOT_HEIGHT_SHARE = 0.05
+
+
+def standing_feet(model: mujoco.MjModel, qpos: np.ndarray | None = None) -> tuple[str, ...]:
+    """A quadruped's four feet in the order LF, RF, LH, RH, found by geometry at ``qpos``
+    (default :func:`home_qpos`).
+
+    The colliding geoms below each body hanging from the trunk (the free-joint body) are
+    one leg; a leg whose lowest geom (:func:`lowest_z`) stands within
+    :data:`FOOT_HEIGHT_SHARE` of the trunk's height above the lowest leg's is a foot.
+    There must be exactly four, ordered by where they stand in the trunk's frame (the
+    two furthest ahead are fore; left is +y). A foot is named by its geom, or, for an
+    unnamed sphere (Menagerie's A1 and ANYmal), by its body, which :func:`resolve_feet`
+    turns back into that body's lowest sphere.
+
+    Raises:
+        ModelLookupError: no free joint, not four legs on the ground, or a foot that is
+            an unnamed geom other than a sphere (the message says what was found).
+    """
+    trunk = free_body(model)
+    if trunk < 0:
+        raise ModelLookupError("cannot find the feet: the model has no free joint (no trunk)")
+    d = _home_data(model, qpos)
+    colliding = np.flatnonzero((model.geom_contype != 0) | (model.geom_conaffinity != 0))
+    # the body directly under the trunk each body hangs from (-1: not below the trunk)
+    root = np.full(model.nbody, -1)
+    for b in range(1, model.nbody):  # MuJoCo numbers parents before their children
+        p = int(model.body_parentid[b])
+        root[b] = b if p == trunk else root[p]
+    legs: dict[int, tuple[float, int]] = {}
+    for g in colliding.tolist():
+        leg = int(root[model.geom_bodyid[g]])
+        if leg < 0:
+            continue
+        z = float(lowest_z(model, np.array([g]), d.geom_xpos[g][None], d.geom_xmat[g][None])[0])
+        if leg not in legs or z < legs[leg][0]:
+            legs[leg] = (z, g)
+    ground = min((z for z, _ in legs.values()), default=0.0)
+    height = float(d.xpos[trunk, 2]) - ground
+    standing = [g for z, g in legs.values() if z <= ground + FOOT_HEIGHT_SHARE * height]
+    if len(standing) != 4:
+        found = ", ".join(_geom_label(model, g) for g in standing) or "none"
+        raise ModelLookupError(
+            f"cannot find the feet: {len(standing)} leg(s) stand on the ground at the "
+            f"standing pose ({found}), a quadruped needs 4"
+        )
+    rot = d.xmat[trunk].reshape(3, 3)
+    local = (d.geom_xpos[standing] - d.xpos[trunk]) @ rot
+    fore = set(np.argsort(-local[:, 0])[:2].tolist())
+    order: list[int] = []
+    for want_fore in (True, False):
+        pair = [k for k in range(4) if (k in fore) == want_fore]
+        order += sorted(pair, key=lambda k: -local[k, 1])  # left (+y) first
+    out = []
+    for k in order:
+        g = int(standing[k])
+        body = int(model.geom_bodyid[g])
+        if model.geom(g).name:
+            out.append(model.geom(g).name)
+        elif model.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE and model.body(body).name:
+            out.append(model.body(body).name)
+        else:
+            kind = mujoco.mjtGeom(model.geom_type[g]).name.removeprefix("mjGEOM_").lower()
+            raise ModelLookupError(
+                f"cannot name the foot {_geom_label(model, g)}: an unnamed {kind}"
+            )
+    return tuple(out)
+
+
+def _geom_label(model: mujoco.MjModel, g: int) -> str:
+    name = model.geom(g).name
+    b = int(model.geom_bodyid[g])
+    return repr(name) if name else f"geom #{g} of body {model.body(b).name or f'#{b}'!r}"
 
 
 def lowest_z(

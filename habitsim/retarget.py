@@ -707,93 +707,27 @@ def _need_feet(
     return find_robot_feet(model, home)
 
 
-#: Legs whose lowest point stands within this share of the trunk's height above the
-#: lowest one count as standing on the ground (:func:`find_robot_feet`).
-FOOT_HEIGHT_SHARE = 0.05
-
-
 def find_robot_feet(model: mujoco.MjModel, home: str = "home") -> tuple[str, ...]:
-    """The robot's four feet in the order LF, RF, LH, RH when nobody names them.
-
-    The usual names first (:func:`habitsim.mjutils.known_feet`: ``FL``, ``FL_foot``,
-    ``LF_FOOT`` …); else by geometry at the standing pose (keyframe ``home``, else
-    ``qpos0``): the colliding geoms below each body hanging from the trunk are one leg,
-    and a leg whose lowest geom stands within :data:`FOOT_HEIGHT_SHARE` of the trunk's
-    height above the lowest leg's is a foot; there must be exactly four, ordered by where
-    they stand in the trunk's frame (fore: ahead of the middle; left: +y). A foot is
-    named by its geom, or, for an unnamed sphere (Menagerie's A1 and ANYmal), by its
-    body (:func:`habitsim.mjutils.resolve_feet` takes that body's lowest sphere).
+    """The robot's four feet in the order LF, RF, LH, RH when nobody names them: the
+    usual names (:func:`habitsim.mjutils.known_feet`: ``FL``, ``FL_foot``, ``LF_FOOT``
+    …), else the four legs standing on the ground at the standing pose (keyframe
+    ``home``, else ``qpos0``; :func:`habitsim.mjutils.standing_feet`).
 
     Raises:
-        RetargetError: no free joint, or not four legs standing on the ground, or a
-            foot that is an unnamed geom other than a sphere (the message says what was
-            found; name the feet then).
+        RetargetError: not four legs standing on the ground, or a foot that is an
+            unnamed geom other than a sphere (the message says what was found).
     """
-    from .mjutils import known_feet, lowest_z
+    from .mjutils import ModelLookupError, known_feet, standing_feet
 
     names = known_feet(model)
     if names is not None:
         return tuple(names)
-    trunk = free_body(model)
-    if trunk < 0:
-        raise RetargetError("the robot has no free joint, so it has no trunk to find legs under")
-    d = mujoco.MjData(model)
-    d.qpos[:] = home_qpos(model, home)
-    mujoco.mj_kinematics(model, d)
-    colliding = np.flatnonzero((model.geom_contype != 0) | (model.geom_conaffinity != 0))
-    # the body directly under the trunk that each geom hangs from (-1: not in a leg)
-    root = np.full(model.nbody, -1)
-    for b in range(1, model.nbody):  # parents come before children
-        p = int(model.body_parentid[b])
-        root[b] = b if p == trunk else root[p]
-    legs: dict[int, tuple[float, int]] = {}
-    for g in colliding.tolist():
-        leg = int(root[model.geom_bodyid[g]])
-        if leg < 0:
-            continue
-        z = float(lowest_z(model, np.array([g]), d.geom_xpos[g][None], d.geom_xmat[g][None])[0])
-        if leg not in legs or z < legs[leg][0]:
-            legs[leg] = (z, int(g))
-    height = float(d.xpos[trunk, 2]) - min((z for z, _ in legs.values()), default=0.0)
-    ground = min((z for z, _ in legs.values()), default=0.0)
-    standing = [g for z, g in legs.values() if z <= ground + FOOT_HEIGHT_SHARE * height]
-    if len(standing) != 4:
-        found = ", ".join(_geom_label(model, g) for g in standing) or "none"
+    try:
+        return standing_feet(model, home_qpos(model, home))
+    except ModelLookupError as e:
         raise RetargetError(
-            f"cannot find the robot's feet: {len(standing)} leg(s) stand on the ground at the "
-            f"standing pose ({found}), a quadruped needs 4; name them "
-            "(feet=[...], --feet FL,FR,RL,RR) in the order LF, RF, LH, RH"
-        )
-    rot = d.xmat[trunk].reshape(3, 3)
-    local = (d.geom_xpos[standing] - d.xpos[trunk]) @ rot
-    fore = set(np.argsort(-local[:, 0])[:2].tolist())
-    order = []
-    for want_fore in (True, False):
-        pair = [k for k in range(4) if (k in fore) == want_fore]
-        order += sorted(pair, key=lambda k: -local[k, 1])  # left (+y) first
-    out = []
-    for k in order:
-        g = int(standing[k])
-        if model.geom(g).name:
-            out.append(model.geom(g).name)
-        elif (
-            model.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE
-            and model.body(int(model.geom_bodyid[g])).name
-        ):
-            out.append(model.body(int(model.geom_bodyid[g])).name)
-        else:
-            raise RetargetError(
-                f"the robot's foot {_geom_label(model, g)} is an unnamed "
-                f"{mujoco.mjtGeom(model.geom_type[g]).name.removeprefix('mjGEOM_').lower()}; "
-                "name the feet (feet=[...], --feet ...) in the order LF, RF, LH, RH"
-            )
-    return tuple(out)
-
-
-def _geom_label(model: mujoco.MjModel, g: int) -> str:
-    name = model.geom(g).name
-    body = model.body(int(model.geom_bodyid[g])).name or f"#{int(model.geom_bodyid[g])}"
-    return repr(name) if name else f"geom #{g} of body {body!r}"
+            f"{e}; name them (feet=[...], --feet FL,FR,RL,RR) in the order LF, RF, LH, RH"
+        ) from e
 
 
 def _fit_figures(

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from habitsim.cli import main
+from habitsim.controllers import ControllerError, make_controller
 from habitsim.gaits import generate
 from habitsim.retarget import (
     HINGE_SPAN,
@@ -436,10 +437,15 @@ def test_feet_are_found_when_nobody_names_them(go1, go2, anymal, tmp_path):
     # the bodies resolve to the same foot spheres as the Go1's named geoms
     a, b = robot_legs(anon, feet), robot_legs(go1, FEET)
     assert np.allclose(a.nominal, b.nominal) and a.leg_length == pytest.approx(b.leg_length)
+    # the controllers find them the same way when no feet are given
+    assert make_controller("balance", anon).legs.feet == feet
     # one knee folded up at the standing pose: three legs on the ground, a typed error
     lifted = "0 0 0.27 1 0 0 0 0 0.9 -1.8 0 0.9 -2.7 0 0.9 -1.8 0 0.9 -1.8"
+    three = _anonymous_go1(tmp_path / "b", lifted)
     with pytest.raises(RetargetError, match=r"3 leg\(s\) stand on the ground.*--feet"):
-        find_robot_feet(_anonymous_go1(tmp_path / "b", lifted))
+        find_robot_feet(three)
+    with pytest.raises(ControllerError, match=r"3 leg\(s\) stand.*pass feet="):
+        make_controller("balance", three)
 
 
 def test_cli_finds_the_feet_without_feet(walk, tmp_path, capsys):
