@@ -782,7 +782,7 @@ def trot(
         RetargetError: not four feet, non-positive durations or rates, duty outside
             (0.5, 1).
     """
-    rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet))
+    rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet, robot))
     if len(rl.feet) != 4:
         raise RetargetError(
             f"a trot needs 4 feet in the order LF, RF, LH, RH; got {', '.join(rl.feet)}"
@@ -876,7 +876,7 @@ def stand(
     Raises:
         RetargetError: see :func:`robot_legs`; non-positive duration or rate.
     """
-    rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet))
+    rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet, robot))
     for name, v in (("duration_s", duration_s), ("fps", fps)):
         if not (math.isfinite(v) and v > 0):
             raise RetargetError(f"{name} must be > 0, got {v}")

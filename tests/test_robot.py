@@ -207,6 +207,10 @@ def test_robot_trot_example(capsys):
     assert all(r["mpc_median_ms"] < 20.0 for r in rows)
     assert main(["--duration", "0.5", "--feet", "FL,FR,RL,toe"]) == 2
     assert "unknown foot name(s) 'toe'" in capsys.readouterr().err
+    # without --feet: ANYmal C's unnamed foot spheres are found from its shank bodies
+    anymal = GO1.parent / "anybotics_anymal_c" / "scene.xml"
+    assert main(["--robot", str(anymal), "--duration", "0.5"]) == 0
+    assert "trot in place" in capsys.readouterr().out
 
 
 def test_menagerie_unitree_foot_names_are_found_by_default(go1):

@@ -3,7 +3,7 @@
 Runs the README's "Using the controllers on your own robot" end to end on MuJoCo
 Menagerie's Unitree Go1 (vendored with collision primitives only under
 ``tests/robots/unitree_go1`` of a source checkout), or on any four-legged MJCF with a free
-joint given with ``--robot`` and ``--feet``::
+joint given with ``--robot`` (and ``--feet``, when its feet are not found)::
 
     python -m habitsim.examples.robot_trot                       # 10 s each, the Go1
     python -m habitsim.examples.robot_trot --speed 0.8 --video out/
@@ -45,18 +45,21 @@ def _forward_distance(qpos: np.ndarray, adr: int = 0) -> float:
 
 def run(
     robot: str | Path = GO1_SCENE,
-    feet: tuple[str, ...] = GO1_FEET,
+    feet: tuple[str, ...] | None = GO1_FEET,
     *,
     duration_s: float = 10.0,
     speed: float = 0.5,
     video: str | Path | None = None,
 ) -> list[dict[str, Any]]:
     """Stand, trot in place and trot forward at ``speed`` for ``duration_s`` each under
-    ``mpc``; one row of figures per case (``video``: a folder for an MP4 per case)."""
+    ``mpc``; one row of figures per case (``video``: a folder for an MP4 per case;
+    ``feet=None``: found, :func:`habitsim.retarget.find_robot_feet`)."""
     from habitsim.mjutils import free_joint
-    from habitsim.retarget import drawable, load_robot, stand, track_clip, trot
+    from habitsim.retarget import drawable, find_robot_feet, load_robot, stand, track_clip, trot
 
     model = load_robot(robot)
+    if feet is None:
+        feet = find_robot_feet(model)
     cases = (
         ("stand", stand(model, feet, duration_s=duration_s)),
         ("trot in place", trot(model, feet, speed=0.0, duration_s=duration_s)),
@@ -130,8 +133,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument(
         "--feet",
-        default=",".join(GO1_FEET),
-        help="foot names in the order LF,RF,LH,RH (default FL,FR,RL,RR)",
+        default=None,
+        help=(
+            "foot names in the order LF,RF,LH,RH (default: the usual names, else the four "
+            "legs standing on the ground at home)"
+        ),
     )
     p.add_argument("--duration", type=float, default=10.0, help="seconds per case (default 10)")
     p.add_argument("--speed", type=float, default=0.5, help="forward trot speed [m/s] (0.5)")
@@ -142,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rows = run(
             ns.robot,
-            tuple(f for f in ns.feet.split(",") if f),
+            None if ns.feet is None else tuple(f for f in ns.feet.split(",") if f),
             duration_s=ns.duration,
             speed=ns.speed,
             video=ns.video,
