@@ -282,7 +282,7 @@ def _bounded(rl: RobotLegs) -> RobotLegs:
         hk = knees[i]
         if hk is not None and not straight[i]:
             k = int(np.flatnonzero(jid == hk[1])[0])
-            flat = _straight_angle(rl, i, int(rl.qadr[i][k]), float(a[k]), float(b[k]))
+            flat = _straight_angle(rl, knees, i, int(rl.qadr[i][k]), float(a[k]), float(b[k]))
             if h[k] > flat:
                 a[k] = max(a[k], flat)
             else:
@@ -292,14 +292,12 @@ def _bounded(rl: RobotLegs) -> RobotLegs:
     return replace(rl, lo=tuple(lo), hi=tuple(hi))
 
 
-def _straight_angle(rl: RobotLegs, i: int, adr: int, lo: float, hi: float) -> float:
+def _straight_angle(rl: RobotLegs, knees: list, i: int, adr: int, lo: float, hi: float) -> float:
     """The angle of the knee at qpos address ``adr`` in [lo, hi] (finite) that makes leg
-    i straightest (:func:`leg_extension`, the rest of the standing pose kept): a 5° scan,
-    then 0.25° about its best."""
+    i straightest (:func:`leg_extension`, the rest of the standing pose kept; ``knees``:
+    :func:`_knee_joints` at it): a 5° scan, then 0.25° about its best."""
     d = mujoco.MjData(rl.model)
     d.qpos[:] = rl.home
-    mujoco.mj_kinematics(rl.model, d)
-    knees = _knee_joints(rl, d)
 
     def best(grid: np.ndarray) -> float:
         ext = np.empty(len(grid))

@@ -101,7 +101,6 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     from ..retarget import (
         RetargetError,
         drawable,
-        find_robot_feet,
         load_robot,
         retarget,
         track_clip,
@@ -139,13 +138,9 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         from ..render import check_video_writer
 
         check_video_writer(ns.video)  # fail before the work
-    feet = ns.feet or None
-    if feet is None:
-        feet = find_robot_feet(robot, ns.home)
-        if not ns.json:
-            print(f"feet (found, LF, RF, LH, RH): {', '.join(feet)}")
-    clip = retarget(motion, robot, feet, home=ns.home)
-    clip.metadata["feet_found"] = not ns.feet
+    clip = retarget(motion, robot, ns.feet or None, home=ns.home)
+    if clip.metadata["feet_found"] and not ns.json:
+        print(f"feet (found, LF, RF, LH, RH): {', '.join(clip.feet)}")
     clip.save(ns.out)
     summary: dict = {
         "out": str(ns.out),
