@@ -63,6 +63,7 @@ __all__ = [
     "plant_legs",
     "plant_motion",
     "stance_reach_shortfall",
+    "carriage_drop",
     "stance_run_shortfall",
     "stance_sweep_limit",
     "stance_driven_root",
@@ -113,6 +114,16 @@ CENTRE_TRAVEL_PER_LEG = 0.2
 #: backward walk it is (test-split action accuracy 0.744 → 0.749 with the default-config model,
 #: 0.822 → 0.849 with the shipped ``large`` one).
 DROP_SMOOTH_S = 0.3
+
+
+def carriage_drop(short: np.ndarray, fps: float) -> np.ndarray:
+    """(T,) how far to lower a body whose stance feet fall ``short`` (T,) [m] of their
+    footholds: the shortfall's running maximum over twice :data:`DROP_SMOOTH_S`, smoothed
+    by a Gaussian of that σ, and never less than the shortfall itself (a lower carriage,
+    not a dip at every stance)."""
+    sigma = max(1.0, DROP_SMOOTH_S * fps)
+    need = gaussian_filter1d(maximum_filter1d(short, size=int(2 * sigma) | 1), sigma)
+    return np.maximum(need, short)
 
 
 @dataclass(frozen=True)
@@ -462,7 +473,6 @@ def _solve_planted(
     rot = motion.rotations
     leg = sp.leg_length
     drop = np.zeros(t)
-    sigma = max(1.0, DROP_SMOOTH_S * motion.fps)
     pose = pose_from_targets(
         sp, root, rot, targets, girdle_flex, foot_inclination, limit_abduction=limit_abduction
     )
@@ -485,8 +495,7 @@ def _solve_planted(
         short = np.where(c, np.maximum(toe_z - targets[..., 2], 0.0), 0.0).max(axis=1)
         if short.max() <= 0.002 * leg:
             break
-        need = gaussian_filter1d(maximum_filter1d(short, size=int(2 * sigma) | 1), sigma)
-        drop += np.maximum(need, short)
+        drop += carriage_drop(short, motion.fps)
         root = motion.root_positions.copy()
         root[:, 2] -= drop
         pose = pose_from_targets(

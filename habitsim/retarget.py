@@ -53,6 +53,7 @@ import numpy as np
 from .errors import HabitsimError
 from .mjutils import foot_soles, free_body, home_qpos
 from .motion import Motion
+from .planting import carriage_drop
 
 __all__ = [
     "RetargetError",
@@ -157,6 +158,9 @@ CROUCH_BEND = 0.5
 HINGE_SPAN = math.pi
 #: Largest change of one joint in one damped-least-squares step of the leg IK [rad].
 MAX_IK_STEP = 0.3
+#: Passes of lowering the trunk where a stance leg would be straighter than
+#: :data:`STRAIGHT_REACH` or its foot short of the ground (:func:`retarget`).
+LOWER_PASSES = 4
 
 
 def robot_legs(model: mujoco.MjModel, feet: Sequence[str], home: str = "home") -> RobotLegs:
@@ -668,6 +672,15 @@ def retarget(
             target[a:b, i, 2] = 0.0
     target[:, :, 2] += rl.radius[None, :]  # foot point = sphere centre
     qpos, res = _solve_frames(rl, trunk, quat, target)
+    drop = np.zeros(t)
+    for _ in range(LOWER_PASSES):
+        short = _stance_shortfall(rl, qpos, target, contacts)
+        if float(short.max()) <= 0.002 * rl.leg_length:
+            break
+        drop += carriage_drop(short, float(motion.fps))
+        lowered = trunk.copy()
+        lowered[:, 2] -= drop
+        qpos, res = _solve_frames(rl, lowered, quat, target)
     return RobotClip(
         qpos=qpos,
         fps=float(motion.fps),
@@ -683,9 +696,41 @@ def retarget(
                 "scale": k_scale,
                 "frames": t,
                 "feet_found": feet is None and not isinstance(robot, RobotLegs),
+                "trunk_lowered_max_m": float(drop.max()),
             },
         ),
     )
+
+
+def _stance_shortfall(
+    rl: RobotLegs, qpos: np.ndarray, target: np.ndarray, contacts: np.ndarray
+) -> np.ndarray:
+    """(T,) per frame, the most a stance foot falls short [m]: how far it hangs above its
+    target, or how much its leg is straighter than :data:`STRAIGHT_REACH` (extension
+    beyond it times the leg's hip-to-knee plus knee-to-foot length)."""
+    m = rl.model
+    d = mujoco.MjData(m)
+    d.qpos[:] = rl.home
+    mujoco.mj_kinematics(m, d)
+    knees = _knee_joints(rl, d)
+    full = np.zeros(len(rl.feet))
+    for i, hk in enumerate(knees):
+        if hk is not None:
+            full[i] = float(
+                np.linalg.norm(d.xanchor[hk[1]] - d.xanchor[hk[0]])
+                + np.linalg.norm(np.array(rl.legs.positions(d))[i] - d.xanchor[hk[1]])
+            )
+    out = np.zeros(len(qpos))
+    for k, q in enumerate(qpos):
+        if not contacts[k].any():
+            continue
+        d.qpos[:] = q
+        mujoco.mj_kinematics(m, d)
+        hang = np.array(rl.legs.positions(d))[:, 2] - target[k, :, 2]
+        stretch = (_extensions(rl, d, knees) - STRAIGHT_REACH) * full
+        short = np.maximum(np.maximum(hang, 0.0), np.maximum(stretch, 0.0))
+        out[k] = float(short[contacts[k]].max())
+    return out
 
 
 def _yaw_matrix(yaw: float) -> np.ndarray:

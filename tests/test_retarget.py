@@ -17,6 +17,7 @@ from habitsim.controllers import ControllerError, make_controller
 from habitsim.gaits import generate
 from habitsim.retarget import (
     HINGE_SPAN,
+    STRAIGHT_REACH,
     RetargetError,
     _knee_joints,
     find_robot_feet,
@@ -464,3 +465,19 @@ def test_cli_finds_the_feet_without_feet(walk, tmp_path, capsys):
     clip = load_robot_clip(out)
     assert clip.feet == ("FL_calf", "FR_calf", "RL_calf", "RR_calf")
     assert clip.metadata["feet_found"] is True and clip.metadata["ik_residual_max_m"] < 1e-4
+
+
+@pytest.mark.slow
+def test_trunk_is_lowered_where_stance_legs_would_be_straight(anymal, go1, walk):
+    """The dog trot's stance legs, scaled to ANYmal C, would stand straighter than
+    STRAIGHT_REACH (singular for the IK and the stance forces): the trunk is lowered
+    there, smoothly, until every stance leg is bent at least that much; the Go1's walk
+    needs no lowering."""
+    trot = generate("dog", "trot", seed=7, duration_s=3.0)
+    clip = retarget(trot, anymal, ANYMAL_FEET)
+    rl = robot_legs(anymal, ANYMAL_FEET)
+    assert clip.metadata["trunk_lowered_max_m"] > 0.002 * rl.leg_length
+    for k in np.flatnonzero(clip.contacts.any(axis=1)):
+        ext = leg_extension(rl, clip.qpos[k])[clip.contacts[k]]
+        assert ext.max() <= STRAIGHT_REACH + 0.002, (k, ext)
+    assert retarget(walk, go1, FEET).metadata["trunk_lowered_max_m"] == 0.0
