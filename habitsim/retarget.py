@@ -270,11 +270,8 @@ def _bounded(rl: RobotLegs) -> RobotLegs:
     (not for a leg standing straight, :data:`STRAIGHT_REACH`: the crouch bends it first).
     """
     m = rl.model
-    d = mujoco.MjData(m)
-    d.qpos[:] = rl.home
-    mujoco.mj_kinematics(m, d)
-    knees = _knee_joints(rl, d)
-    straight = leg_extension(rl) > STRAIGHT_REACH
+    d, knees = _at_home(rl)
+    straight = _extensions(rl, d, knees) > STRAIGHT_REACH
     hinge = mujoco.mjtJoint.mjJNT_HINGE
     lo, hi = [], []
     for i in range(len(rl.feet)):
@@ -294,6 +291,15 @@ def _bounded(rl: RobotLegs) -> RobotLegs:
         lo.append(a)
         hi.append(b)
     return replace(rl, lo=tuple(lo), hi=tuple(hi))
+
+
+def _at_home(rl: RobotLegs) -> tuple[mujoco.MjData, list]:
+    """Data at the standing pose (kinematics done) and its (hip, knee) joints per foot
+    (:func:`_knee_joints`)."""
+    d = mujoco.MjData(rl.model)
+    d.qpos[:] = rl.home
+    mujoco.mj_kinematics(rl.model, d)
+    return d, _knee_joints(rl, d)
 
 
 def _straight_angle(rl: RobotLegs, knees: list, i: int, adr: int, lo: float, hi: float) -> float:
@@ -709,10 +715,7 @@ def _stance_shortfall(
     target, or how much its leg is straighter than :data:`STRAIGHT_REACH` (extension
     beyond it times the leg's hip-to-knee plus knee-to-foot length)."""
     m = rl.model
-    d = mujoco.MjData(m)
-    d.qpos[:] = rl.home
-    mujoco.mj_kinematics(m, d)
-    knees = _knee_joints(rl, d)
+    d, knees = _at_home(rl)
     full = np.zeros(len(rl.feet))
     for i, hk in enumerate(knees):
         if hk is not None:
