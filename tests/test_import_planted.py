@@ -48,10 +48,24 @@ for _s, _S in (("l", "L"), ("r", "R")):
         }
     )
 CM = 100.0
+#: The same rig with its legs named by leg codes and numbers only, as robot rigs name them.
+CODED = {
+    **{k: v for k, v in RENAME.items() if k[1:3] not in ("f_", "h_")},
+    **{
+        f"{s}{g}_{seg}": f"{g.upper()}{s.upper()}_{k}"
+        for s in "lr"
+        for g, segs in (
+            ("f", ("scapula", "shoulder", "elbow", "wrist", "toe")),
+            ("h", ("ilium", "hip", "knee", "hock", "toe")),
+        )
+        for k, seg in enumerate(segs)
+    },
+}
 
 
-def _foreign_rig(motion, CM: float = CM) -> BVHData:  # noqa: N803 - the unit factor
+def _foreign_rig(motion, CM: float = CM, rename=RENAME) -> BVHData:  # noqa: N803 - unit factor
     """The motion as a foreign rig: other names, 6 channels, cm, z up, helpers."""
+    RENAME = rename  # noqa: N806 - the names of this rig
     h = parse_bvh(bvh_text(motion))
     starts = h.channel_start
     f = h.num_frames
@@ -94,7 +108,7 @@ def _foreign_rig(motion, CM: float = CM) -> BVHData:  # noqa: N803 - the unit fa
                 prev = f"L_TailHelper0{k}"
             add(prev + "_End", prev, [-15.0 * u, 0.0, 0.0])
         if name.endswith("f_shoulder"):
-            side = RENAME[name][0]
+            side = name[0].upper()
             add(f"{side}_Armor01", RENAME[name], [0.0, 5.0 * u, 5.0 * u], np.zeros((f, 6)))
             add(f"{side}_Armor01_End", f"{side}_Armor01", [0.0, 5.0 * u, 0.0])
 
@@ -176,6 +190,20 @@ def test_foreign_rig_maps_legs_not_helpers(rig):
     assert not any(v and ("Helper" in v or "Nub" in v or "Armor" in v) for v in j.values())
     assert set(mapping.confidence) == {"lf", "rf", "lh", "rh"}
     assert min(mapping.confidence.values()) >= 0.67 and mapping.warnings == []
+
+
+def test_leg_codes_and_numbers_map_like_names(walk, rig):
+    """``FL_1`` / ``HR_3`` names (side and girdle in a code, the bone only a number) map
+    onto the same joints as the named rig: the codes give side and girdle, and the short
+    first bone of a chain makes its first joint the girdle's."""
+    _, named = import_bvh(rig, "dog")
+    _, coded = import_bvh(_foreign_rig(walk, rename=CODED), "dog")
+    back = {v: k for k, v in CODED.items()}
+    assert {k: back.get(v, v) for k, v in coded.joints.items() if v} == {
+        k: {v: k2 for k2, v in RENAME.items()}.get(v, v) for k, v in named.joints.items() if v
+    }
+    assert coded.joints["lf_scapula"] == "FL_0" and coded.joints["rh_toe"] == "HR_4"
+    assert min(coded.confidence.values()) >= 0.67
 
 
 def test_source_stance_matches_the_known_footfalls(walk, rig):
