@@ -510,18 +510,44 @@ def _sided_limbs(t: _Tree) -> list[_Limb]:
     return out
 
 
+#: Two unnamed chains hanging from one joint are a left/right pair when each bone along
+#: them matches its mirror's length within this share of the chain's length
+#: (:func:`_unsided_limbs`): mirrored legs do, a tail and a sided tail helper do not.
+MIRROR_BONE_TOLERANCE = 0.05
+
+
+def _mirrored(t: _Tree, a: list[int], b: list[int]) -> bool:
+    """True if chains a and b are left/right mirrors: as many joints, the same bone
+    lengths (the first bone, from their common parent, included)."""
+    if len(a) != len(b):
+        return False
+    la, lb = t.blen[a], t.blen[b]
+    scale = max(float(la.sum()), float(lb.sum()))
+    return scale > 0 and bool(np.all(np.abs(la - lb) <= MIRROR_BONE_TOLERANCE * scale))
+
+
 def _unsided_limbs(t: _Tree) -> list[tuple[_Limb, _Limb]]:
-    """Pairs of symmetric pure chains hanging from one joint (for unnamed skeletons)."""
+    """The two longest pairs of mirrored chains hanging from one joint, for skeletons
+    whose names carry no side.
+
+    A chain is a child's :meth:`_Tree.leg_path` (helpers named as such skipped); side
+    branches off it (an unnamed armour plate or a second toe) do not disqualify it. Two
+    chains pair when they mirror each other bone by bone (:func:`_mirrored`), so a
+    spine, a neck or a tail, which has no mirror, never becomes a leg, and neither does a
+    sided helper chain beside a tail.
+    """
     pairs: list[tuple[float, _Limb, _Limb]] = []
     for p in range(t.n):
         cands = []
         for c in t.kids[p]:
             core = t.cues[c][1]
-            if t.bvh.is_end_site[c] or t.helper[c] or not t.is_pure(c) or t.height[c] < 2:
+            if t.bvh.is_end_site[c] or t.helper[c] or t.height[c] < 2:
                 continue
             if any(w in core for w in ("tail", "neck", "head", "spine", "chest") + _NOT_LIMB):
                 continue
             chain = t.leg_path(c)
+            if len(chain) < 3:
+                continue
             cands.append(_Limb(c, chain, None, sum(_fore_vote(t.cues[k][1]) for k in chain)))
         used: set[int] = set()
         for a in range(len(cands)):
@@ -529,13 +555,10 @@ def _unsided_limbs(t: _Tree) -> list[tuple[_Limb, _Limb]]:
                 if a in used or b in used:
                     continue
                 la, lb = cands[a], cands[b]
-                if len(la.chain) != len(lb.chain):
-                    continue
-                na, nb = t.chain_length(la.chain), t.chain_length(lb.chain)
-                if min(na, nb) <= 0.8 * max(na, nb):
+                if not _mirrored(t, la.chain, lb.chain):
                     continue
                 used |= {a, b}
-                pairs.append((na + nb, la, lb))
+                pairs.append((t.chain_length(la.chain) + t.chain_length(lb.chain), la, lb))
     pairs.sort(key=lambda x: -x[0])
     return [(a, b) for _, a, b in pairs[:2]]
 

@@ -9,6 +9,7 @@ the ground, a footstep tracker).
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -63,8 +64,11 @@ CODED = {
 }
 
 
-def _foreign_rig(motion, CM: float = CM, rename=RENAME) -> BVHData:  # noqa: N803 - unit factor
-    """The motion as a foreign rig: other names, 6 channels, cm, z up, helpers."""
+def _foreign_rig(  # noqa: N803 - the unit factor
+    motion, CM: float = CM, rename=RENAME, anonymous: bool = False
+) -> BVHData:
+    """The motion as a foreign rig: other names, 6 channels, cm, z up, helpers
+    (``anonymous``: every joint, helpers included, named ``J000`` … in file order)."""
     RENAME = rename  # noqa: N806 - the names of this rig
     h = parse_bvh(bvh_text(motion))
     starts = h.channel_start
@@ -138,6 +142,12 @@ def _foreign_rig(motion, CM: float = CM, rename=RENAME) -> BVHData:  # noqa: N80
 
     emit(kids[None][0], 0)
     data = np.concatenate(columns, axis=1)
+    if anonymous:
+        count = iter(range(len(lines)))
+        lines = [
+            re.sub(r"^(\s*(?:ROOT|JOINT)) .*$", lambda m: f"{m.group(1)} J{next(count):03d}", ln)
+            for ln in lines
+        ]
     lines += ["MOTION", f"Frames: {f}", f"Frame Time: {1.0 / motion.fps:.8f}"]
     lines += [" ".join(f"{v:.6f}" for v in row) for row in data]
     return parse_bvh("\n".join(lines) + "\n", source="foreign_rig.bvh")
@@ -204,6 +214,26 @@ def test_leg_codes_and_numbers_map_like_names(walk, rig):
     }
     assert coded.joints["lf_scapula"] == "FL_0" and coded.joints["rh_toe"] == "HR_4"
     assert min(coded.confidence.values()) >= 0.67
+
+
+def test_anonymous_rig_finds_legs_by_mirrored_chains(walk, rig):
+    """Every joint named ``J000`` …: the legs are the chains that mirror each other bone by
+    bone, although unnamed armour plates branch off them, and the sided tail helper (a
+    chain longer than a leg, beside the hind legs, with no mirror) is not one."""
+    anon = _foreign_rig(walk, anonymous=True)
+    _, named = import_bvh(rig, "dog")
+    _, mapping = import_bvh(anon, "dog")
+    by_index = dict(zip(rig.names, anon.names, strict=True))
+    for leg, segs in (
+        ("lf", ("scapula", "shoulder", "elbow", "wrist")),
+        ("rh", ("hip", "knee", "hock")),
+    ):
+        for seg in segs:
+            k = f"{leg}_{seg}"
+            assert mapping.joints[k] == by_index[named.joints[k]], k
+    tail = {by_index[n] for n in rig.names if "TailHelper" in n}
+    assert not tail & set(mapping.joints.values())
+    assert any("geometry" in n for n in mapping.notes)
 
 
 def test_source_stance_matches_the_known_footfalls(walk, rig):
