@@ -434,6 +434,21 @@ def test_cli_inspect_and_import_with_warning(rig, tmp_path, capsys):
     assert back.contacts is not None and back.metadata["import"]["warnings"]
 
 
+def test_cli_inspect_takes_units_and_up(walk, tmp_path, capsys):
+    """An inches file is read as centimetres unless told (nothing in a file tells them
+    apart); inspect-bvh takes ``--units`` / ``--up`` as import-bvh does and sizes the rig
+    as the import would."""
+    p = tmp_path / "inch.bvh"
+    p.write_text(_foreign_rig(walk, CM=100.0 / 2.54).to_text())
+    assert main(["data", "inspect-bvh", str(p), "--units", "in", "--up", "z"]) == 0
+    told = capsys.readouterr().out
+    assert "units in (x0.0254 to m), up +z" in told
+    _, mapping = import_bvh(p, "dog", units="in")
+    assert f"root scale {mapping.root_scale:.4g}" in told
+    assert main(["data", "inspect-bvh", str(p)]) == 0
+    assert "units cm" in capsys.readouterr().out
+
+
 def test_plant_motion_plants_own_feet_and_lifts_swing():
     from habitsim.motion import Motion
     from habitsim.planting import leg_pose_angles, plant_motion

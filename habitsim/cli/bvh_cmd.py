@@ -79,18 +79,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             '"extends": "auto" it overrides only the joints it names (see inspect-bvh)'
         ),
     )
-    p.add_argument(
-        "--units",
-        choices=("cm", "m", "mm", "in"),
-        default=None,
-        help="length unit of the file (default: detect)",
-    )
-    p.add_argument(
-        "--up",
-        choices=("y", "z", "-y", "-z", "x", "-x"),
-        default=None,
-        help="up axis of the file (default: detect)",
-    )
+    _frame_options(p)
     _gltf_options(p)
     p.add_argument(
         "--no-plant",
@@ -126,6 +115,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         dest="joint_map",
         help="a joint-map file to check instead of the automatic mapping",
     )
+    _frame_options(i)
     _gltf_options(i)
     i.set_defaults(func=_inspect)
 
@@ -141,6 +131,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--out", required=True, type=Path, help="output .bvh file")
     e.add_argument("--order", default="ZXY", help="rotation channel order (default ZXY)")
     e.set_defaults(func=_export)
+
+
+def _frame_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--units",
+        choices=("cm", "m", "mm", "in"),
+        default=None,
+        help="length unit of the file (default: detect; inches are never detected)",
+    )
+    p.add_argument(
+        "--up",
+        choices=("y", "z", "-y", "-z", "x", "-x"),
+        default=None,
+        help="up axis of the file (default: detect)",
+    )
 
 
 def _gltf_options(p: argparse.ArgumentParser) -> None:
@@ -174,7 +179,7 @@ def _inspect(ns: argparse.Namespace) -> int:
     src = read_source(ns.file, animation=_animation(ns.animation), fps=ns.fps)
     print(f"{ns.file.name}: {src.num_joints} joints, {src.num_frames} frames at {src.fps:g} fps")
     try:
-        motion, mapping = import_bvh(src, sp, joint_map=ns.joint_map)
+        motion, mapping = import_bvh(src, sp, joint_map=ns.joint_map, units=ns.units, up=ns.up)
     except Exception:
         print(describe_hierarchy(src))
         raise
