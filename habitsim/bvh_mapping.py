@@ -586,6 +586,43 @@ def _proportion_misfit(t: _Tree, real: list[int], u: int, fore: bool) -> float:
     return float(np.abs(seg / seg.sum() - np.array(LEG_PROPORTIONS[fore])).sum())
 
 
+#: Name parts that say a joint is a bone of the foot (a chain's last joint so named is
+#: its toe whatever its length; see :func:`_digits_trimmed`).
+_FOOT_WORDS = (
+    "toe",
+    "finger",
+    "digit",
+    "phalan",
+    "claw",
+    "hoof",
+    "nail",
+    "paw",
+    "foot",
+    "hand",
+    "ankle",
+    "wrist",
+    "hock",
+    "fetlock",
+    "pastern",
+)
+
+
+def _digits_trimmed(t: _Tree, real: list[int]) -> list[int]:
+    """A leg chain's real joints without a last joint that is a helper's tip: one whose
+    name does not name a foot bone (:data:`_FOOT_WORDS`; ``J018``, ``FL_5``) and whose
+    bone is longer than the bone before it. Digits shorten toward their tip, so such a
+    joint is a marker past the toe (a biped nub 23 cm beyond a 6 cm paw, once its name
+    is gone), not a toe. At least five joints stay."""
+    real = list(real)
+    while (
+        len(real) > 5
+        and not any(w in t.cues[real[-1]][1] for w in _FOOT_WORDS)
+        and t.blen[real[-1]] > t.blen[real[-2]]
+    ):
+        real.pop()
+    return real
+
+
 def _leg_roles(t: _Tree, chain: list[int], fore: bool) -> list[int | None]:
     """Source joints for (girdle, upper, lower, foot, toe) along a leg chain."""
     cores = [t.cues[c][1] for c in chain]
@@ -605,9 +642,9 @@ def _leg_roles(t: _Tree, chain: list[int], fore: bool) -> list[int | None]:
             ) or c.startswith("hip")
 
         girdle_words = ("pelvis", "ilium", "hipbone")
+    real = _digits_trimmed(t, [c for c in chain if not t.bvh.is_end_site[c]])
     u = next((k for k in range(min(3, len(chain))) if upper(cores[k])), None)
     if u is None:
-        real = [c for c in chain if not t.bvh.is_end_site[c]]
         if any(w in cores[0] for w in girdle_words) and len(chain) >= 5:
             u = 1
         elif len(real) >= 5:
@@ -626,7 +663,6 @@ def _leg_roles(t: _Tree, chain: list[int], fore: bool) -> list[int | None]:
     # The toe is the chain's last real joint (joints between the foot and it, such as a
     # biped's ankle-to-toe segment, are spanned by the foot bone); an End Site is the toe
     # only when no real joint follows the foot.
-    real = [c for c in chain if not t.bvh.is_end_site[c]]
     if len(real) > u + 3:
         roles.append(real[-1])
     else:
@@ -1367,11 +1403,12 @@ def retarget(
     motion = Motion(sp.name, bvh.fps, root, q, metadata=meta)
     if stance is None:
         return motion
-    st, foot_idx, anchor_idx, limb_len = stance
+    st, foot_idx, anchor_idx, limb_len, points = stance
     report: dict[str, Any] = {
         "contacts": {
             "method": "source foot path",
             "foot_joints": [bvh.names[i] for i in foot_idx],
+            "foot_points": [[bvh.names[i] for i in pts] for pts in points],
             "floors_m": [round(float(f - st.ground), 5) for f in st.floors],
             "source_leg_length_m": round(st.leg_length, 5),
             "duty": [round(float(d), 4) for d in st.duty],
@@ -1436,24 +1473,30 @@ def _limb_confidence(
             )
 
 
-def _foot_points(t: _Tree, top: int) -> list[int]:
+def _foot_points(t: _Tree, top: int, toe: int) -> list[int]:
     """The foot's joints: ``top`` (wrist / hock) and every real joint below it.
 
     Rig helpers are skipped, and so is a point that sinks far below the foot's others
-    (an unnamed helper pointing into the ground).
+    (an unnamed helper pointing into the ground). Below the mapped ``toe`` only its End
+    Site tips count: a joint there is a marker the mapping left out (an unnamed nub,
+    :func:`_digits_trimmed`).
     """
     out, todo = [], [top]
     while todo:
         j = todo.pop()
         out.append(j)
-        todo += [c for c in t.kids[j] if not t.helper[c]]
+        kids = [c for c in t.kids[j] if not t.helper[c]]
+        if j == toe:
+            kids = [c for c in kids if t.bvh.is_end_site[c]]
+        todo += kids
     return out
 
 
 def _source_stance(
     bvh: BVHData, t: _Tree, j2s: Mapping[str, str], src: np.ndarray, mapping: JointMapping
-) -> tuple[SourceStance, list[int], list[int], np.ndarray] | None:
-    """Stance labels of the source's own feet, its toe joints, anchors and limb lengths.
+) -> tuple[SourceStance, list[int], list[int], np.ndarray, list[list[int]]] | None:
+    """Stance labels of the source's own feet, its toe joints, anchors, limb lengths and
+    the joints each foot's stance was found on.
 
     None (with a note) when a leg lacks a mapped foot or shoulder / hip joint.
     """
@@ -1472,7 +1515,7 @@ def _source_stance(
         foot_idx.append(f)
         anchor_idx.append(a)
         lengths.append(t.path_length(a, f) * (mapping.frame.scale if mapping.frame else 1.0))
-        points.append(_foot_points(t, bvh.index(top)))
+        points.append(_foot_points(t, bvh.index(top), f))
     # A point that sinks far below the feet's typical lowest point is an unnamed helper.
     z5 = [np.percentile(src[:, pts, 2], 5, axis=0) for pts in points]
     ref = float(np.median([z.min() for z in z5]))
@@ -1486,7 +1529,7 @@ def _source_stance(
         mapping.notes.append("a source leg has zero length: feet not planted")
         return None
     st = label_source_stance([src[:, pts] for pts in points], bvh.fps, float(limb_len[2:].mean()))
-    return st, foot_idx, anchor_idx, limb_len
+    return st, foot_idx, anchor_idx, limb_len, points
 
 
 # ---------------------------------------------------------------------- entry point

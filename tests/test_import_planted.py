@@ -65,10 +65,11 @@ CODED = {
 
 
 def _foreign_rig(  # noqa: N803 - the unit factor
-    motion, CM: float = CM, rename=RENAME, anonymous: bool = False
+    motion, CM: float = CM, rename=RENAME, anonymous: bool = False, nub=(0.05, 0.0, -0.25)
 ) -> BVHData:
     """The motion as a foreign rig: other names, 6 channels, cm, z up, helpers
-    (``anonymous``: every joint, helpers included, named ``J000`` … in file order)."""
+    (``anonymous``: every joint, helpers included, named ``J000`` … in file order;
+    ``nub``: where the toe nub points from the toe [m])."""
     RENAME = rename  # noqa: N806 - the names of this rig
     h = parse_bvh(bvh_text(motion))
     starts = h.channel_start
@@ -89,7 +90,7 @@ def _foreign_rig(  # noqa: N803 - the unit factor
                 add(
                     RENAME[parent] + "_Nub",
                     RENAME[parent],
-                    [0.05 * CM, 0.0, -0.25 * CM],
+                    np.asarray(nub) * CM,
                     np.zeros((f, 6)),
                 )
             else:
@@ -219,21 +220,41 @@ def test_leg_codes_and_numbers_map_like_names(walk, rig):
 def test_anonymous_rig_finds_legs_by_mirrored_chains(walk, rig):
     """Every joint named ``J000`` …: the legs are the chains that mirror each other bone by
     bone, although unnamed armour plates branch off them, and the sided tail helper (a
-    chain longer than a leg, beside the hind legs, with no mirror) is not one."""
+    chain longer than a leg, beside the hind legs, with no mirror) is not one. The toe
+    nub pointing into the ground, a bone longer than the toe's own, is neither the toe
+    nor a foot point, so the stance is the named rig's."""
     anon = _foreign_rig(walk, anonymous=True)
-    _, named = import_bvh(rig, "dog")
-    _, mapping = import_bvh(anon, "dog")
+    named_motion, named = import_bvh(rig, "dog")
+    motion, mapping = import_bvh(anon, "dog")
     by_index = dict(zip(rig.names, anon.names, strict=True))
-    for leg, segs in (
-        ("lf", ("scapula", "shoulder", "elbow", "wrist")),
-        ("rh", ("hip", "knee", "hock")),
-    ):
+    for leg in ("lf", "rf", "lh", "rh"):
+        segs = (
+            ("scapula", "shoulder", "elbow", "wrist", "toe")
+            if leg[1] == "f"
+            else (
+                "hip",
+                "knee",
+                "hock",
+                "toe",
+            )
+        )
         for seg in segs:
             k = f"{leg}_{seg}"
             assert mapping.joints[k] == by_index[named.joints[k]], k
     tail = {by_index[n] for n in rig.names if "TailHelper" in n}
     assert not tail & set(mapping.joints.values())
     assert any("geometry" in n for n in mapping.notes)
+    assert named_motion.contacts is not None and motion.contacts is not None
+    assert min(contact_f1(motion.contacts, named_motion.contacts)) >= 0.95
+    # a nub pointing ahead (as a 3ds Max biped's finger nub does) is no foot point either
+    ahead = _foreign_rig(walk, anonymous=True, nub=(0.25, 0.0, 0.0))
+    motion, mapping = import_bvh(ahead, "dog")
+    assert mapping.joints["lf_toe"] == by_index[named.joints["lf_toe"]]
+    nubs = {by_index[n] for n in rig.names if n.endswith("_Nub")}
+    points = motion.metadata["import"]["contacts"]["foot_points"]
+    assert len(points) == 4 and all(p and not nubs & set(p) for p in points)
+    assert motion.contacts is not None
+    assert min(contact_f1(motion.contacts, named_motion.contacts)) >= 0.95
 
 
 def test_source_stance_matches_the_known_footfalls(walk, rig):
