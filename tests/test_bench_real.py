@@ -256,6 +256,13 @@ def test_bad_input(folder: Path, tmp_path: Path, capsys) -> None:
     assert "--repeats 0; valid: 1 to" in capsys.readouterr().err
     assert main([*base, "--data", str(folder), "--perturb", "-1"]) == 2
     assert "--perturb must be a finite rate > 0" in capsys.readouterr().err
+    bad_map = tmp_path / "map.json"
+    bad_map.write_text('{"map": {"lh_hip": "A"}, "colour": 1}')
+    assert main([*base, "--data", str(folder), "--map", str(bad_map)]) == 2
+    assert "unknown keys ['colour']" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        main([*base, "--data", str(folder), "--units", "furlong"])
+    assert e.value.code == 2
     assert not out.exists()
 
 

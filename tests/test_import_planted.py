@@ -470,6 +470,22 @@ def test_cli_inspect_takes_units_and_up(walk, tmp_path, capsys):
     assert "units cm" in capsys.readouterr().out
 
 
+def test_bench_real_import_options_reach_the_importer(rig, tmp_path):
+    """``bench real --map / --units / --up`` are the importer's, for every clip."""
+    from habitsim.cli.bench_real import _read_source
+
+    clip = tmp_path / "rig.bvh"
+    clip.write_text(rig.to_text())
+    found = _read_source(clip, "dog").metadata["mapping"]
+    assert (found["units"], found["up"]) == ("cm", "+z")
+    told = _read_source(clip, "dog", units="in", up="z").metadata["mapping"]
+    assert told["units"] == "in"
+    m = tmp_path / "map.json"
+    m.write_text(json.dumps({"extends": "auto", "map": {"tail3": None}}))
+    assert _read_source(clip, "dog", joint_map=m).metadata["mapping"]["joints"].get("tail3") is None
+    assert found["joints"]["tail3"] is not None
+
+
 def test_plant_motion_plants_own_feet_and_lifts_swing():
     from habitsim.motion import Motion
     from habitsim.planting import leg_pose_angles, plant_motion

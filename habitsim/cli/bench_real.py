@@ -109,25 +109,33 @@ def _planted(motion: Any) -> str:
 # ---------------------------------------------------------------------------- sources
 
 
-def _import(path: Path, species: str) -> Motion:
+def _import(
+    path: Path,
+    species: str,
+    joint_map: Path | None = None,
+    units: str | None = None,
+    up: str | None = None,
+) -> Motion:
     from ..bvh_mapping import import_bvh
 
-    motion, _ = import_bvh(path, species)
+    motion, _ = import_bvh(path, species, joint_map=joint_map, units=units, up=up)
     return motion
 
 
-#: Readers of source clips by file suffix: ``reader(path, species) -> Motion`` on the
-#: species' skeleton, with stance labels and ``metadata["import"]`` when the importer
-#: finds them. A glTF/GLB file gives its first animation.
-SOURCE_READERS: dict[str, Callable[[Path, str], Motion]] = {
+#: Readers of source clips by file suffix: ``reader(path, species, joint_map=, units=,
+#: up=) -> Motion`` on the species' skeleton, with stance labels and
+#: ``metadata["import"]`` when the importer finds them (the options as ``import-bvh``
+#: takes them, None for its defaults). A glTF/GLB file gives its first animation.
+SOURCE_READERS: dict[str, Callable[..., Motion]] = {
     ".bvh": _import,
     ".glb": _import,
     ".gltf": _import,
 }
 
 
-def _read_source(path: str | Path, species: str) -> Motion:
-    """Read one source clip onto ``species``' skeleton, by its suffix.
+def _read_source(path: str | Path, species: str, **options: Any) -> Motion:
+    """Read one source clip onto ``species``' skeleton, by its suffix (``options``: the
+    reader's ``joint_map``, ``units``, ``up``).
 
     Raises:
         BenchRealError: a suffix no reader handles (lists the handled ones).
@@ -140,7 +148,7 @@ def _read_source(path: str | Path, species: str) -> Motion:
             f"{p}: no reader for {p.suffix or 'files without a suffix'!r}; "
             f"readable: {', '.join(sorted(SOURCE_READERS))}"
         )
-    return reader(p, species)
+    return reader(p, species, **options)
 
 
 def source_files(folder: str | Path) -> list[Path]:
@@ -701,6 +709,26 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="skeleton the clips are imported onto (default dog)",
     )
     p.add_argument(
+        "--map",
+        type=Path,
+        default=None,
+        dest="joint_map",
+        metavar="FILE",
+        help="joint-map file for every clip, as import-bvh --map takes it",
+    )
+    p.add_argument(
+        "--units",
+        choices=("cm", "m", "mm", "in"),
+        default=None,
+        help="length unit of every clip (default: detect; inches are never detected)",
+    )
+    p.add_argument(
+        "--up",
+        choices=("y", "z", "-y", "-z", "x", "-x"),
+        default=None,
+        help="up axis of every clip (default: detect)",
+    )
+    p.add_argument(
         "--seconds", type=float, default=4.0, metavar="S", help="window length [s] (default 4)"
     )
     p.add_argument(
@@ -826,11 +854,16 @@ def plan(ns: argparse.Namespace) -> tuple[list[WindowTask], list[str]]:
         get_method(method)  # UnknownMethodError listing the registered ones
     mode = refine_mode(ns.refine)
     files = source_files(ns.data)
+    options = {"joint_map": ns.joint_map, "units": ns.units, "up": ns.up}
+    if ns.joint_map is not None:
+        from ..bvh_mapping import load_joint_map
+
+        load_joint_map(ns.joint_map)  # a bad map file fails here, not once per clip
     notes: list[str] = []
     windows: list[tuple[str, float, Any]] = []
     for f in files:
         try:
-            m = _read_source(f, species)
+            m = _read_source(f, species, **options)
         except HabitsimError as e:
             notes.append(f"{f.name}: skipped, import failed: {e}")
             continue
