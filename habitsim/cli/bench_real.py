@@ -64,7 +64,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import HabitsimError
-from .conventions import add_list_option, format_legend, split_names
+from .conventions import add_frame_options, add_list_option, format_legend, split_names
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..motion import Motion
@@ -716,18 +716,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="FILE",
         help="joint-map file for every clip, as import-bvh --map takes it",
     )
-    p.add_argument(
-        "--units",
-        choices=("cm", "m", "mm", "in"),
-        default=None,
-        help="length unit of every clip (default: detect; inches are never detected)",
-    )
-    p.add_argument(
-        "--up",
-        choices=("y", "z", "-y", "-z", "x", "-x"),
-        default=None,
-        help="up axis of every clip (default: detect)",
-    )
+    add_frame_options(p, "every clip")
     p.add_argument(
         "--seconds", type=float, default=4.0, metavar="S", help="window length [s] (default 4)"
     )

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from ..errors import MotionFileError
 from ..fileio import check_writable
+from .conventions import add_frame_options
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -79,7 +80,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             '"extends": "auto" it overrides only the joints it names (see inspect-bvh)'
         ),
     )
-    _frame_options(p)
+    add_frame_options(p)
     _gltf_options(p)
     p.add_argument(
         "--no-plant",
@@ -115,7 +116,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         dest="joint_map",
         help="a joint-map file to check instead of the automatic mapping",
     )
-    _frame_options(i)
+    add_frame_options(i)
     _gltf_options(i)
     i.set_defaults(func=_inspect)
 
@@ -131,21 +132,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--out", required=True, type=Path, help="output .bvh file")
     e.add_argument("--order", default="ZXY", help="rotation channel order (default ZXY)")
     e.set_defaults(func=_export)
-
-
-def _frame_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--units",
-        choices=("cm", "m", "mm", "in"),
-        default=None,
-        help="length unit of the file (default: detect; inches are never detected)",
-    )
-    p.add_argument(
-        "--up",
-        choices=("y", "z", "-y", "-z", "x", "-x"),
-        default=None,
-        help="up axis of the file (default: detect)",
-    )
 
 
 def _gltf_options(p: argparse.ArgumentParser) -> None:

@@ -5,6 +5,8 @@
   comma-separated, space-separated or both: ``--species cat,dog``, ``--species cat dog``
   and ``--species cat,dog horse`` all give ``["cat", "dog"(, "horse")]``. The parsed value
   is a list of str (or the option's default when it is not given).
+* **Source frames.** A command that imports motion capture takes ``--units`` and
+  ``--up`` as the importer does (:func:`add_frame_options`).
 * **Tables.** A printed table is followed by a legend of its columns
   (:func:`format_legend`).
 * **Targets.** Every benchmark prints its targets with the verdict ``met`` or
@@ -26,6 +28,7 @@ __all__ = [
     "CHECK_HELP",
     "ListAction",
     "add_list_option",
+    "add_frame_options",
     "split_names",
     "add_check_option",
     "check_exit",
@@ -93,6 +96,27 @@ class ListAction(argparse.Action):
             except ValueError as e:
                 parser.error(f"{option_string}: {e}")
         setattr(namespace, self.dest, names)
+
+
+#: ``--units`` choices: the length units a source file may be told to be in.
+UNIT_CHOICES = ("cm", "m", "mm", "in")
+#: ``--up`` choices: a source file's up axis.
+UP_CHOICES = ("y", "z", "-y", "-z", "x", "-x")
+
+
+def add_frame_options(p: argparse.ArgumentParser, of: str = "the file") -> None:
+    """``--units`` and ``--up`` of a motion-capture source (None: detect), as
+    :func:`habitsim.bvh_mapping.import_bvh` takes them (``of``: what they describe, for
+    the help)."""
+    p.add_argument(
+        "--units",
+        choices=UNIT_CHOICES,
+        default=None,
+        help=f"length unit of {of} (default: detect; inches are never detected)",
+    )
+    p.add_argument(
+        "--up", choices=UP_CHOICES, default=None, help=f"up axis of {of} (default: detect)"
+    )
 
 
 def add_list_option(
