@@ -70,7 +70,6 @@ def _foreign_rig(  # noqa: N803 - the unit factor
     """The motion as a foreign rig: other names, 6 channels, cm, z up, helpers
     (``anonymous``: every joint, helpers included, named ``J000`` … in file order;
     ``nub``: where the toe nub points from the toe [m])."""
-    RENAME = rename  # noqa: N806 - the names of this rig
     h = parse_bvh(bvh_text(motion))
     starts = h.channel_start
     f = h.num_frames
@@ -88,13 +87,13 @@ def _foreign_rig(  # noqa: N803 - the unit factor
             parent = h.names[h.parents[j]]
             if parent.endswith("_toe"):  # a toe nub pointing into the ground instead
                 add(
-                    RENAME[parent] + "_Nub",
-                    RENAME[parent],
+                    rename[parent] + "_Nub",
+                    rename[parent],
                     np.asarray(nub) * CM,
                     np.zeros((f, 6)),
                 )
             else:
-                add(RENAME[parent] + "_End", RENAME[parent], h.offsets[j] * CM)
+                add(rename[parent] + "_End", rename[parent], h.offsets[j] * CM)
             continue
         ch = h.channels[j]
         vals = np.zeros((f, 6))
@@ -103,8 +102,8 @@ def _foreign_rig(  # noqa: N803 - the unit factor
             vals[:, k] = h.frames[:, cols[c]] * CM if c in cols else h.offsets[j, k] * CM
         for k, c in enumerate(("Zrotation", "Xrotation", "Yrotation")):
             vals[:, 3 + k] = h.frames[:, cols[c]]
-        parent = "Rig_Root" if h.parents[j] < 0 else RENAME[h.names[h.parents[j]]]
-        add(RENAME[name], parent, h.offsets[j] * CM, vals)
+        parent = "Rig_Root" if h.parents[j] < 0 else rename[h.names[h.parents[j]]]
+        add(rename[name], parent, h.offsets[j] * CM, vals)
         u = CM / 100.0  # helper sizes below are in cm
         if name == "pelvis":  # a sided helper chain longer than a leg
             prev = "Hips_jnt"
@@ -114,7 +113,7 @@ def _foreign_rig(  # noqa: N803 - the unit factor
             add(prev + "_End", prev, [-15.0 * u, 0.0, 0.0])
         if name.endswith("f_shoulder"):
             side = name[0].upper()
-            add(f"{side}_Armor01", RENAME[name], [0.0, 5.0 * u, 5.0 * u], np.zeros((f, 6)))
+            add(f"{side}_Armor01", rename[name], [0.0, 5.0 * u, 5.0 * u], np.zeros((f, 6)))
             add(f"{side}_Armor01_End", f"{side}_Armor01", [0.0, 5.0 * u, 0.0])
 
     kids: dict[str | None, list[dict]] = {}
