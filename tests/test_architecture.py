@@ -169,6 +169,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.body",
             "habitsim.ik",
             "habitsim.planting",
+            "habitsim.stance",
             "habitsim.gait_stats",
             "habitsim.gaits",
             "habitsim.bvh",
