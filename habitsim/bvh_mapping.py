@@ -46,7 +46,10 @@ import numpy as np
 from .bvh import BVHData, read_bvh
 from .errors import SkeletonMappingError
 from .motion import Motion
-from .planting import (
+from .rotations import matrix_to_quat, quat_fix_continuity, quat_identity, quat_to_matrix
+from .skeleton import JOINT_NAMES, PARENTS, get_skeleton
+from .species import Species, load_species
+from .stance.planting import (
     FOOT_ANCHORS,
     SourceStance,
     contact_f1,
@@ -54,9 +57,6 @@ from .planting import (
     plant_legs,
     smooth_path,
 )
-from .rotations import matrix_to_quat, quat_fix_continuity, quat_identity, quat_to_matrix
-from .skeleton import JOINT_NAMES, PARENTS, get_skeleton
-from .species import Species, load_species
 
 __all__ = [
     "UNIT_SCALES",
@@ -1289,7 +1289,7 @@ def retarget(
         bvh: the source file.
         mapping: the joint mapping with its ``frame`` set; ``root_scale`` is filled in.
         species: the target species.
-        plant: solve the legs onto the source's footholds (:mod:`habitsim.planting`); when
+        plant: solve the legs onto the source's footholds (:mod:`habitsim.stance.planting`); when
             False the legs keep the bone directions of the source.
 
     Returns:

@@ -53,7 +53,7 @@ import numpy as np
 from .errors import HabitsimError
 from .mjutils import foot_soles, free_body, home_qpos
 from .motion import Motion
-from .planting import carriage_drop
+from .stance.planting import carriage_drop
 
 __all__ = [
     "RetargetError",

@@ -40,6 +40,7 @@ __all__ = [
     "rot_y",
     "rot_x",
     "rot_z",
+    "heading_yaw",
 ]
 
 
@@ -247,3 +248,12 @@ def rot_y(angle: np.ndarray | float) -> np.ndarray:
 def rot_z(angle: np.ndarray | float) -> np.ndarray:
     """Quaternion of a rotation about +z by ``angle`` [rad]."""
     return _rot_axis(angle, 2)
+
+
+def heading_yaw(pelvis_quats: np.ndarray) -> np.ndarray:
+    """Heading ψ [rad] of the pelvis' forward (+x) axis projected on the ground, (…)."""
+    q = np.asarray(pelvis_quats, dtype=np.float64)
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    fx = 1.0 - 2.0 * (y * y + z * z)
+    fy = 2.0 * (x * y + w * z)
+    return np.arctan2(fy, fx)

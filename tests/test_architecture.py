@@ -168,7 +168,6 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.hinges",
             "habitsim.body",
             "habitsim.ik",
-            "habitsim.planting",
             "habitsim.stance",
             "habitsim.gait_stats",
             "habitsim.gaits",

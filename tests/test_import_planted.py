@@ -19,7 +19,7 @@ from habitsim.bvh import BVHData, bvh_text, parse_bvh
 from habitsim.bvh_mapping import import_bvh, is_helper_name, load_joint_map, read_source
 from habitsim.cli import main
 from habitsim.errors import SkeletonMappingError
-from habitsim.planting import contact_f1, label_source_stance
+from habitsim.stance.planting import contact_f1, label_source_stance
 
 RENAME = {
     "pelvis": "Hips_jnt",
@@ -396,7 +396,7 @@ def test_label_source_stance_of_a_fast_gait_whose_paws_roll(monkeypatch):
     # forward at 1 m/s (a quarter of the body's speed, far above the 0.18 m/s rest speed
     # of a 0.6 m leg), in swing it lifts 8 cm and catches up. Each stance is found by the
     # speed relative to the body; by the absolute rest speed alone, none is.
-    import habitsim.planting as planting
+    import habitsim.stance.planting as planting
 
     fps, leg, t, v = 120.0, 0.6, 480, 4.0
     tt = np.arange(t) / fps
@@ -487,7 +487,7 @@ def test_bench_real_import_options_reach_the_importer(rig, tmp_path):
 
 def test_plant_motion_plants_own_feet_and_lifts_swing():
     from habitsim.motion import Motion
-    from habitsim.planting import leg_pose_angles, plant_motion
+    from habitsim.stance.planting import leg_pose_angles, plant_motion
 
     m = habitsim.generate("cat", "trot", seed=1, duration_s=2.0)
     leg = m.species_info.leg_length
@@ -517,7 +517,7 @@ def test_plant_motion_plants_own_feet_and_lifts_swing():
 
 def test_stance_driven_root_measures_how_far_the_legs_carry_the_body():
     from habitsim.motion import Motion
-    from habitsim.planting import stance_driven_root
+    from habitsim.stance.planting import stance_driven_root
 
     m = habitsim.generate("dog", "walk", seed=2, duration_s=2.0)  # no flight phase
     assert m.contacts.any(axis=1).all()
@@ -546,8 +546,8 @@ def test_stance_driven_root_measures_how_far_the_legs_carry_the_body():
 def test_centred_footholds_hold_the_sweep_under_the_joint_and_reach_further():
     from habitsim.contacts import contact_segments
     from habitsim.motion import Motion
-    from habitsim.planting import FOOT_ANCHORS, plant_motion, stance_reach_shortfall
     from habitsim.skeleton import JOINT_NAMES
+    from habitsim.stance.planting import FOOT_ANCHORS, plant_motion, stance_reach_shortfall
 
     m = habitsim.generate("dog", "walk", seed=2, duration_s=2.0)
     leg = m.species_info.leg_length
@@ -596,7 +596,7 @@ def test_centred_footholds_hold_the_sweep_under_the_joint_and_reach_further():
 def test_free_stance_runs_keep_their_own_toe_path_and_the_reach_test_skips_them():
     from habitsim.contacts import contact_segments
     from habitsim.motion import Motion
-    from habitsim.planting import plant_motion, stance_run_shortfall
+    from habitsim.stance.planting import plant_motion, stance_run_shortfall
 
     m = habitsim.generate("dog", "walk", seed=2, duration_s=2.0)
     leg = m.species_info.leg_length
@@ -647,7 +647,7 @@ def test_free_stance_runs_keep_their_own_toe_path_and_the_reach_test_skips_them(
 
 def test_pelvis_lowering_is_a_slow_carriage_not_a_dip_per_stance():
     from habitsim.motion import Motion
-    from habitsim.planting import DROP_SMOOTH_S, plant_motion
+    from habitsim.stance.planting import DROP_SMOOTH_S, plant_motion
 
     m = habitsim.generate("dog", "walk", seed=2, duration_s=3.0)
     leg = m.species_info.leg_length

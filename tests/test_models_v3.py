@@ -26,9 +26,9 @@ from habitsim.models.features import (
 )
 from habitsim.models.quantizer import EMAQuantizer, residual_quantize
 from habitsim.models.train import _contact_loss, _stance_loss
-from habitsim.models.transfer import MAX_DUTY_GAP, MIN_SOURCE_AGREEMENT, transfer_contacts
 from habitsim.motion import Motion
 from habitsim.species import load_species
+from habitsim.stance.schedule import MAX_DUTY_GAP, MIN_SOURCE_AGREEMENT, transfer_contacts
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 

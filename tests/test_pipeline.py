@@ -4,7 +4,6 @@ cache."""
 
 from __future__ import annotations
 
-import importlib
 from types import SimpleNamespace
 
 import numpy as np
@@ -20,19 +19,22 @@ from habitsim.contacts import (
 from habitsim.errors import InvalidMotionError
 from habitsim.gaits import generate
 from habitsim.models import transfer
-from habitsim.models.transfer import (
+from habitsim.motion import resample_motion
+from habitsim.pipeline import PipelineError, refine_mode, run_clip, stance_toe_height
+from habitsim.stance import bounds as bounds_mod
+from habitsim.stance import ladder as ladder_mod
+from habitsim.stance import level as level_mod
+from habitsim.stance.ladder import PLANT_MAX_REACH_PER_LEG
+from habitsim.stance.ladder import reaches as _reaches
+from habitsim.stance.planting import contact_f1
+from habitsim.stance.schedule import (
     MAX_DUTY_GAP,
     MIN_SOURCE_AGREEMENT,
-    PLANT_MAX_REACH_PER_LEG,
     WALK_MIN_DUTY,
     WALK_MIN_FEET,
-    _reaches,
     transfer_contacts,
     walking_stance,
 )
-from habitsim.motion import resample_motion
-from habitsim.pipeline import PipelineError, refine_mode, run_clip, stance_toe_height
-from habitsim.planting import contact_f1
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -194,9 +196,8 @@ def test_planting_out_of_reach_keeps_the_decoded_feet_and_says_why(trot, monkeyp
     # the horse's trot at the cat's Froude speed and the horse's cadence: strides of
     # more leg lengths than the cat's legs sweep; without restepping and partial planting
     # nothing holds the feet
-    transfer_module = importlib.import_module("habitsim.models.transfer")
-    monkeypatch.setattr(transfer_module, "_restep", lambda *_: None)
-    monkeypatch.setattr(transfer_module, "_plant_partly", lambda *a, **k: None)
+    monkeypatch.setattr(ladder_mod, "restep", lambda *_: None)
+    monkeypatch.setattr(ladder_mod, "plant_partly", lambda *a, **k: None)
     out = transfer(trot, to="cat", method="habit", seed=0)
     raw = transfer(trot, to="cat", method="habit", seed=0, plant=False)
     report = out.metadata["transfer"]["planted"]
@@ -217,12 +218,9 @@ def test_planting_falls_back_to_footholds_centred_under_the_joints(trot, monkeyp
     c = out.contacts
     assert _resting(out, c) >= 0.95 > _resting(raw, c)
     # with the median footholds alone the decoded root path is not planted
-    transfer_module = importlib.import_module("habitsim.models.transfer")
-    monkeypatch.setattr(transfer_module, "FOOTHOLD_RULES", (False,))
-    monkeypatch.setattr(
-        transfer_module, "_plant_partly", lambda *a, **k: None
-    )  # no partial planting
-    monkeypatch.setattr(transfer_module, "_restep", lambda *_: None)  # nor restepping
+    monkeypatch.setattr(ladder_mod, "FOOTHOLD_RULES", (False,))
+    monkeypatch.setattr(ladder_mod, "plant_partly", lambda *a, **k: None)  # no partial planting
+    monkeypatch.setattr(ladder_mod, "restep", lambda *_: None)  # nor restepping
     median = transfer(trot, to="tiger", method="habit", seed=0).metadata["transfer"]["planted"]
     assert median["footholds"] == "median"
     assert not (median["kept"] and median["root"] == "decoded")
@@ -266,15 +264,14 @@ def test_partial_planting_holds_the_faster_steps_when_restepping_misses(walk, mo
     # the runs the legs reach on the faster labels, not on the decoder's slower ones
     from habitsim.contacts import stride_period
 
-    transfer_module = importlib.import_module("habitsim.models.transfer")
-    real_restep = transfer_module._restep
+    real_restep = ladder_mod.restep
 
     def missing(*a, **k):
         got = real_restep(*a, **k)
         assert got is not None
         return got[0], {**got[1], "max_reach_error_per_leg": 1.0}
 
-    monkeypatch.setattr(transfer_module, "_restep", missing)
+    monkeypatch.setattr(ladder_mod, "restep", missing)
     raw = transfer(walk, to="cat", method="habit", seed=0, plant=False)
     out = transfer(walk, to="cat", method="habit", seed=0)
     report = out.metadata["transfer"]["planted"]
@@ -285,7 +282,7 @@ def test_partial_planting_holds_the_faster_steps_when_restepping_misses(walk, mo
         stride_period(raw.contacts) / rate, rel=0.15
     )
     assert _resting(out, out.contacts) >= 0.9
-    monkeypatch.setattr(transfer_module, "PARTLY_ON_RESTEP", False)
+    monkeypatch.setattr(ladder_mod, "PARTLY_ON_RESTEP", False)
     slow = transfer(walk, to="cat", method="habit", seed=0)
     assert stride_period(slow.contacts) == pytest.approx(stride_period(raw.contacts), rel=0.15)
 
@@ -295,10 +292,9 @@ def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot, 
     # held for a whole stance run is out of reach with the decoded root path
     # the module (habitsim.models.transfer is also the name of its function)
     # (with the median footholds alone: the centred ones reach with the decoded root)
-    transfer_module = importlib.import_module("habitsim.models.transfer")
 
-    monkeypatch.setattr(transfer_module, "FOOTHOLD_RULES", (False,))
-    monkeypatch.setattr(transfer_module, "PLANT_MIN_SPEED_RATIO", 0.2)
+    monkeypatch.setattr(ladder_mod, "FOOTHOLD_RULES", (False,))
+    monkeypatch.setattr(ladder_mod, "PLANT_MIN_SPEED_RATIO", 0.2)
     out = transfer(trot, to="tiger", method="habit", seed=0)
     raw = transfer(trot, to="tiger", method="habit", seed=0, plant=False)
     report = out.metadata["transfer"]["planted"]
@@ -315,11 +311,9 @@ def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot, 
     assert travel(out) / travel(raw) == pytest.approx(report["speed_ratio"], abs=2e-3)
     assert 0.2 <= report["speed_ratio"] < 0.99
     # a body its legs carry too little is not moved: the decoded feet are kept
-    monkeypatch.setattr(transfer_module, "PLANT_MIN_SPEED_RATIO", 0.99)
-    monkeypatch.setattr(
-        transfer_module, "_plant_partly", lambda *a, **k: None
-    )  # no partial planting
-    monkeypatch.setattr(transfer_module, "_restep", lambda *_: None)  # nor restepping
+    monkeypatch.setattr(ladder_mod, "PLANT_MIN_SPEED_RATIO", 0.99)
+    monkeypatch.setattr(ladder_mod, "plant_partly", lambda *a, **k: None)  # no partial planting
+    monkeypatch.setattr(ladder_mod, "restep", lambda *_: None)  # nor restepping
     slow = transfer(trot, to="tiger", method="habit", seed=0)
     report = slow.metadata["transfer"]["planted"]
     assert not report["kept"] and "carry the body only" in report["reason"]
@@ -428,7 +422,6 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
     from habitsim.contacts import contact_segments
     from habitsim.motion import Motion
 
-    mod = importlib.import_module("habitsim.models.transfer")
     c = walk.contacts
     leg = walk.species_info.leg_length
     t = len(c)
@@ -438,10 +431,10 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
     root = walk.root_positions.copy()
     root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
     fast = Motion("dog", walk.fps, root, walk.rotations, c)
-    moved, rep = mod._plant_partly(fast, c)
+    moved, rep = ladder_mod.plant_partly(fast, c)
     assert rep["free_runs"][0] >= 1 and 0 < rep["free_share"] <= 0.5
     assert rep["max_reach_error_per_leg"] <= PLANT_MAX_REACH_PER_LEG
-    assert rep["max_pelvis_drop_per_leg"] <= mod.PLANT_MAX_DROP_PER_LEG
+    assert rep["max_pelvis_drop_per_leg"] <= ladder_mod.PLANT_MAX_DROP_PER_LEG
     toes = moved.foot_positions()
     early = 0
     for k, runs in enumerate(contact_segments(c)):
@@ -454,7 +447,7 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
     # the whole clip that fast: most runs are free, the ones the legs reach still held
     step = np.diff(walk.root_positions[:, :2], axis=0) * 3.0
     root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
-    moved, rep = mod._plant_partly(Motion("dog", walk.fps, root, walk.rotations, c), c)
+    moved, rep = ladder_mod.plant_partly(Motion("dog", walk.fps, root, walk.rotations, c), c)
     loose, runs = rep["free_runs"]
     assert rep["free_share"] > 0.5 and 0 < runs - loose
     toes = moved.foot_positions()
@@ -466,7 +459,7 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
     assert still >= runs - loose
     # six times as fast: no run can be held
     root[1:, :2] = root[0, :2] + np.cumsum(2.0 * step, axis=0)
-    assert mod._plant_partly(Motion("dog", walk.fps, root, walk.rotations, c), c) is None
+    assert ladder_mod.plant_partly(Motion("dog", walk.fps, root, walk.rotations, c), c) is None
 
 
 def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) -> None:
@@ -475,18 +468,17 @@ def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) ->
     from habitsim.contacts import contact_segments
     from habitsim.motion import Motion
 
-    mod = importlib.import_module("habitsim.models.transfer")
     c = walk.contacts
     step = np.diff(walk.root_positions[:, :2], axis=0) * 3.0
     root = walk.root_positions.copy()
     root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
     fast = Motion("dog", walk.fps, root, walk.rotations, c)
-    labels, rep = mod._trim_to_reach(fast, c)
+    labels, rep = ladder_mod.trim_to_reach(fast, c)
     assert rep is not None and rep["runs"] >= 3
     assert not (labels & ~c).any()  # only stance frames are taken off
     assert rep["frames"] == int((c & ~labels).sum()) > 0
     t = len(c)
-    shortest = max(2, round(mod.TRIM_MIN_RUN_S * walk.fps))
+    shortest = max(2, round(ladder_mod.TRIM_MIN_RUN_S * walk.fps))
     for k, segs in enumerate(contact_segments(c)):
         for a, b in segs:
             kept = np.flatnonzero(labels[a:b, k])
@@ -499,16 +491,16 @@ def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) ->
     # only the runs asked for
     first = np.zeros_like(c)
     first[: len(c) // 4] = True
-    part, _ = mod._trim_to_reach(fast, c, only=first)
+    part, _ = ladder_mod.trim_to_reach(fast, c, only=first)
     assert np.array_equal(part[len(c) // 2 :], c[len(c) // 2 :]) and (part != c).any()
     # the partial planting holds more of the stance on the trimmed labels, and with
     # ``trim`` it trims the runs it would leave free and steps on the new labels
-    _, loose = mod._plant_partly(fast, c)
-    _, tight = mod._plant_partly(fast, labels)
+    _, loose = ladder_mod.plant_partly(fast, c)
+    _, tight = ladder_mod.plant_partly(fast, labels)
     held = (1.0 - tight["free_share"]) * labels.sum()
     assert held > (1.0 - loose["free_share"]) * c.sum()
     assert tight["free_share"] < loose["free_share"]
-    moved, rep = mod._plant_partly(fast, c, trim=True)
+    moved, rep = ladder_mod.plant_partly(fast, c, trim=True)
     assert rep["trimmed"]["frames"] > 0 and rep["free_share"] < loose["free_share"]
     assert not (moved.contacts & ~c).any() and (moved.contacts != c).any()
     leg = walk.species_info.leg_length
@@ -525,11 +517,10 @@ def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) ->
 def test_decoded_speed_is_bounded_by_the_source_speed_at_equal_froude(walk) -> None:
     from habitsim.motion import Motion
 
-    mod = importlib.import_module("habitsim.models.transfer")
     cat = generate("cat", like=walk)
     assert cat.num_frames == walk.num_frames
     # a cat walking where the source dog walks at the same Froude number: unchanged
-    same, info = mod._bound_speed(cat, walk)
+    same, info = bounds_mod.bound_speed(cat, walk)
     assert info is None and same is cat
     # ... where the dog stands still: the cat's body does not travel either
     t = walk.num_frames
@@ -539,7 +530,7 @@ def test_decoded_speed_is_bounded_by_the_source_speed_at_equal_froude(walk) -> N
         np.repeat(walk.root_positions[:1], t, axis=0),
         np.repeat(walk.rotations[:1], t, axis=0),
     )
-    stood, info = mod._bound_speed(cat, still)
+    stood, info = bounds_mod.bound_speed(cat, still)
     assert info is not None and info["frames"] >= t - 2
     travel = np.linalg.norm(np.diff(stood.root_positions[:, :2], axis=0), axis=1).sum()
     assert travel <= 1e-6
@@ -550,21 +541,20 @@ def test_decoded_speed_is_bounded_by_the_source_speed_at_equal_froude(walk) -> N
     root = walk.root_positions.copy()
     root[:, :2] = root[0, :2] + 3.0 * 1.5 * (root[:, :2] - root[0, :2])
     quick = Motion("dog", walk.fps, root, walk.rotations)
-    sped, info = mod._bound_speed(cat, quick)
+    sped, info = bounds_mod.bound_speed(cat, quick)
     assert info is not None
     v0 = np.linalg.norm(np.diff(cat.root_positions[:, :2], axis=0), axis=1).sum()
     v1 = np.linalg.norm(np.diff(sped.root_positions[:, :2], axis=0), axis=1).sum()
-    assert v1 / v0 == pytest.approx(3.0 * 1.5 / mod.SPEED_BAND, rel=0.1)
+    assert v1 / v0 == pytest.approx(3.0 * 1.5 / bounds_mod.SPEED_BAND, rel=0.1)
 
 
 def test_decoded_height_excursions_are_bounded_by_the_source(walk) -> None:
     from habitsim.motion import Motion
 
-    mod = importlib.import_module("habitsim.models.transfer")
     cat = generate("cat", like=walk)
     leg = cat.species_info.leg_length
     # the same gait's bob: unchanged
-    same, info = mod._bound_height(cat, walk)
+    same, info = bounds_mod.bound_height(cat, walk)
     assert info is None and same is cat
     # a body that sinks by a fifth of its leg over the clip while the dog walks level:
     # the sinking is cut to the band around the dog's own bob
@@ -572,18 +562,18 @@ def test_decoded_height_excursions_are_bounded_by_the_source(walk) -> None:
     root = cat.root_positions.copy()
     root[:, 2] -= np.linspace(0.0, 0.2 * leg, t)
     sinking = Motion("cat", cat.fps, root, cat.rotations)
-    level, info = mod._bound_height(sinking, walk)
+    level, info = bounds_mod.bound_height(sinking, walk)
     assert info is not None and info["range_per_leg"][0] > 0.15
     dev = walk.root_positions[:, 2] - np.median(walk.root_positions[:, 2])
     src = np.abs(dev).max() / walk.species_info.leg_length
-    allowed = max(mod.HEIGHT_BAND * src, mod.HEIGHT_FLOOR_PER_LEG)
+    allowed = max(bounds_mod.HEIGHT_BAND * src, bounds_mod.HEIGHT_FLOOR_PER_LEG)
     z = level.root_positions[:, 2]
     assert np.abs(z - np.median(root[:, 2])).max() <= 1.2 * allowed * leg  # smoothed envelope
     np.testing.assert_allclose(level.root_positions[:, :2], root[:, :2])
     # a source that jumps keeps the target's jump
     jump = generate("dog", "jump", seed=0)
     leap = generate("cat", like=jump)
-    _, info = mod._bound_height(leap, jump)
+    _, info = bounds_mod.bound_height(leap, jump)
     assert info is None or info["range_per_leg"][1] >= 0.95 * info["range_per_leg"][0]
 
 
@@ -592,7 +582,6 @@ def test_a_wagging_decoded_heading_is_slowed_to_the_bound(walk) -> None:
     from habitsim.motion import Motion
     from habitsim.rotations import quat_from_axis_angle, quat_mul
 
-    mod = importlib.import_module("habitsim.models.transfer")
     cat = generate("cat", like=walk)
     t = cat.num_frames
     axis = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (t, 3))
@@ -609,29 +598,29 @@ def test_a_wagging_decoded_heading_is_slowed_to_the_bound(walk) -> None:
         return np.abs(np.gradient(dev)) * m.fps
 
     # the same heading, or a slow drift of 20° over the clip: left as decoded
-    same, info = mod._bound_heading(cat, walk)
+    same, info = bounds_mod.bound_heading(cat, walk)
     assert info is None and same is cat
     drift = turned(np.linspace(0.0, np.radians(20.0), t))
-    assert mod._bound_heading(drift, walk)[1] is None
+    assert bounds_mod.bound_heading(drift, walk)[1] is None
     # the body wagged by ±60° at 4 Hz about the pelvis (a decoder off its data):
     # the wag is low-passed away, the root path and every other joint kept
     sec = np.arange(t) / cat.fps
     wag = turned(np.radians(60.0) * np.sin(2.0 * np.pi * 4.0 * sec))
-    assert rate(wag).max() > 5.0 * mod.HEADING_MAX_RATE
-    calm, info = mod._bound_heading(wag, walk)
-    assert info is not None and info["max_rate"][0] > 5.0 * mod.HEADING_MAX_RATE
+    assert rate(wag).max() > 5.0 * bounds_mod.HEADING_MAX_RATE
+    calm, info = bounds_mod.bound_heading(wag, walk)
+    assert info is not None and info["max_rate"][0] > 5.0 * bounds_mod.HEADING_MAX_RATE
     inner = rate(calm)[t // 4 : -t // 4]  # away from the ends the filter pads
-    assert inner.max() < mod.HEADING_MAX_RATE
+    assert inner.max() < bounds_mod.HEADING_MAX_RATE
     np.testing.assert_array_equal(calm.root_positions, wag.root_positions)
     np.testing.assert_allclose(calm.rotations[:, 1:], wag.rotations[:, 1:], atol=1e-12)
     # a steady turn away to 90° over the clip (a target turning at its own rate): kept
     away = turned(np.linspace(0.0, np.radians(90.0), t))
-    assert mod._bound_heading(away, walk)[1] is None
+    assert bounds_mod.bound_heading(away, walk)[1] is None
     # a swing out to 80° and back within a second, under the rate bound: cut to the band
     # about the departure's slow trend
     swing = np.radians(80.0) * np.exp(-0.5 * ((sec - sec.mean()) / 0.3) ** 2)
-    assert rate(turned(swing)).max() < mod.HEADING_MAX_RATE
-    held, info = mod._bound_heading(turned(swing), walk)
+    assert rate(turned(swing)).max() < bounds_mod.HEADING_MAX_RATE
+    held, info = bounds_mod.bound_heading(turned(swing), walk)
     assert info is not None and info["max_departure_deg"][0] > 79.0
     dev = np.unwrap(heading_yaw(held.rotations[:, 0])) - np.unwrap(heading_yaw(cat.rotations[:, 0]))
     # the 1 s trend of a 0.3 s swing rises by about a quarter of it: 45° + ~24°
@@ -643,11 +632,10 @@ def test_a_sloping_decoded_trunk_is_levelled_about_the_pelvis(walk) -> None:
     from habitsim.motion import Motion
     from habitsim.rotations import quat_from_axis_angle, quat_mul
 
-    mod = importlib.import_module("habitsim.models.transfer")
     gir = generate("giraffe", like=walk)
     c = gir.contacts
     # its own walk stands level: left as it is
-    same, info = mod._level_trunk(gir, c)
+    same, info = level_mod.level_trunk(gir, c)
     assert info is None and same is gir
     # the trunk tipped nose-down by 8° about the pelvis: the fore toes go under the ground
     # by 6 % of a leg more than the hind ones; pitched back to within the tolerance (a
@@ -657,28 +645,27 @@ def test_a_sloping_decoded_trunk_is_levelled_about_the_pelvis(walk) -> None:
     rot = gir.rotations.copy()
     rot[:, 0] = quat_mul(quat_from_axis_angle(left, np.full(len(yaw), np.radians(8.0))), rot[:, 0])
     sloped = Motion("giraffe", gir.fps, gir.root_positions, rot, c)
-    level, info = mod._level_trunk(sloped, c)
+    level, info = level_mod.level_trunk(sloped, c)
     assert info is not None and info["fore_minus_hind_per_leg"] < -0.05
     assert -8.0 < info["pitch_deg"] < -4.0
-    assert mod._level_trunk(level, c)[1] is None
+    assert level_mod.level_trunk(level, c)[1] is None
     np.testing.assert_allclose(level.rotations[:, 1:], sloped.rotations[:, 1:], atol=1e-12)
     np.testing.assert_array_equal(level.root_positions, sloped.root_positions)
     # tipped the other way: pitched the other way
     rot[:, 0] = quat_mul(
         quat_from_axis_angle(left, np.full(len(yaw), np.radians(-8.0))), gir.rotations[:, 0]
     )
-    _, info = mod._level_trunk(Motion("giraffe", gir.fps, gir.root_positions, rot, c), c)
+    _, info = level_mod.level_trunk(Motion("giraffe", gir.fps, gir.root_positions, rot, c), c)
     assert info is not None and 4.0 < info["pitch_deg"] < 8.0
     # no frame with both girdles in stance: nothing to compare
     fore = np.zeros_like(c)
     fore[:, :2] = True
-    assert mod._level_trunk(sloped, fore)[1] is None
+    assert level_mod.level_trunk(sloped, fore)[1] is None
 
 
 def test_plant_summary_keeps_swing_misses_at_the_clip_ends_apart() -> None:
-    from habitsim.planting import PlantReport
+    from habitsim.stance.planting import PlantReport
 
-    mod = importlib.import_module("habitsim.models.transfer")
     c = np.zeros((6, 4), dtype=bool)
     c[:3] = True
     c[5, 1] = True  # foot RF steps again: its frames 3-4 are an inner swing
@@ -686,21 +673,23 @@ def test_plant_summary_keeps_swing_misses_at_the_clip_ends_apart() -> None:
     err[1, 2] = 0.02  # a stance toe 2 cm off
     err[5, 0] = 0.30  # LF's swing after its last stance: left behind at the clip's end
     rep = PlantReport(err, np.zeros(6), np.zeros(4), 0.0)
-    d = mod._summary(rep, c, leg=1.0)
+    d = ladder_mod.plant_summary(rep, c, leg=1.0)
     assert d["max_reach_error_per_leg"] == pytest.approx(0.02)
     assert d["max_edge_reach_error_per_leg"] == pytest.approx(0.30)
     assert _reaches(d)  # an edge swing does not decide whether a planting is kept
     inner = err.copy()
     inner[3, 1] = 0.30  # ... an inner swing does
-    d = mod._summary(PlantReport(inner, np.zeros(6), np.zeros(4), 0.0), c, leg=1.0)
+    d = ladder_mod.plant_summary(PlantReport(inner, np.zeros(6), np.zeros(4), 0.0), c, leg=1.0)
     assert d["max_swing_reach_error_per_leg"] == pytest.approx(0.30) and not _reaches(d)
-    inner[3, 1] = 0.5 * (mod.PLANT_MAX_REACH_PER_LEG + mod.PLANT_MAX_SWING_REACH_PER_LEG)
-    d = mod._summary(PlantReport(inner, np.zeros(6), np.zeros(4), 0.0), c, leg=1.0)
+    inner[3, 1] = 0.5 * (
+        ladder_mod.PLANT_MAX_REACH_PER_LEG + ladder_mod.PLANT_MAX_SWING_REACH_PER_LEG
+    )
+    d = ladder_mod.plant_summary(PlantReport(inner, np.zeros(6), np.zeros(4), 0.0), c, leg=1.0)
     assert _reaches(d)  # a swing may miss by more than a stance foot
     # a free stance run is not judged either
     free = np.zeros_like(c)
     free[:3, 2] = True
-    d = mod._summary(rep, c, leg=1.0, free=free)
+    d = ladder_mod.plant_summary(rep, c, leg=1.0, free=free)
     assert d["max_reach_error_per_leg"] == 0.0
 
 

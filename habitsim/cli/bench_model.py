@@ -21,7 +21,7 @@ the learning core:
   for the transfer as :func:`habitsim.models.transfer.transfer` returns it (feet planted
   on its labels by leg IK) and for the decoder's own kinematics (``plant=False``), with
   how far the decoder's stance legs carry its body (the travel left when the stance toes
-  are held still, :func:`habitsim.planting.stance_driven_root`, over the decoded travel:
+  are held still, :func:`habitsim.stance.planting.stance_driven_root`, over the decoded travel:
   1 for legs that push the body, near 0 for feet that slide along with it).
 * **What the frozen evaluator sees** (:mod:`habitsim.evaluation.evaluator`, the
   classifier behind ``habitsim eval``'s habit and action accuracy): the share of
@@ -143,8 +143,8 @@ def transfer_quality(
     from ..gait_stats import gait_statistics
     from ..gaits import action_gait
     from ..models.transfer import transfer
-    from ..planting import stance_driven_root
     from ..species import load_species
+    from ..stance.planting import stance_driven_root
 
     phase, in_band, rest, stance = [], [], 0, 0
     methods: dict[str, int] = {}

@@ -35,7 +35,7 @@ import numpy as np
 import torch
 
 from ..motion import Motion
-from ..rotations import quat_fix_continuity, quat_mul
+from ..rotations import heading_yaw, quat_fix_continuity, quat_mul
 from ..skeleton import JOINT_NAMES, get_skeleton
 from ..species import load_species
 from .kinematics import batched_fk
@@ -78,15 +78,6 @@ FEAT_DIM = C_INDEX + C_DIM
 def velocity_scale(species: str) -> float:
     """√(g·h) [m/s] of a species (h = standing hip height): the unit of ``v_t``."""
     return math.sqrt(GRAVITY * load_species(species).hip_height)
-
-
-def heading_yaw(pelvis_quats: np.ndarray) -> np.ndarray:
-    """Heading ψ [rad] of the pelvis' forward (+x) axis projected on the ground, (…)."""
-    q = np.asarray(pelvis_quats, dtype=np.float64)
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    fx = 1.0 - 2.0 * (y * y + z * z)
-    fy = 2.0 * (x * y + w * z)
-    return np.arctan2(fy, fx)
 
 
 def _yaw_quat(yaw: np.ndarray | float) -> np.ndarray:

@@ -68,7 +68,6 @@ import numpy as np
 from ..contacts import CONTACT_HEIGHT_PER_LEG as _CONTACT_HEIGHT_PER_LEG
 from ..errors import InvalidMotionError
 from ..motion import Motion
-from ..planting import plant_motion
 from ..qpos import (
     QposTrajectory,
     motion_to_qpos,
@@ -77,6 +76,7 @@ from ..qpos import (
     species_model,
 )
 from ..rotations import quat_mul, quat_normalize
+from ..stance.planting import plant_motion
 from .errors import RefineConvergenceError, RefineError, RefineInputError
 from .problem import (
     FEET,
@@ -832,7 +832,7 @@ def _preplant(
     motion: Motion, contacts: np.ndarray | None, opts: RefineOptions
 ) -> tuple[Motion, np.ndarray, dict[str, Any]]:
     """The input with its feet planted on its (cleaned) labels and lifted to the swing
-    clearance by leg IK (:func:`habitsim.planting.plant_motion`), the labels, and the
+    clearance by leg IK (:func:`habitsim.stance.planting.plant_motion`), the labels, and the
     label fields of :class:`_Prepared` (source, input labels, cleaning). The optimisation
     then starts from, and tracks, a motion whose feet already rest where they are
     labelled to and clear the ground where they move."""

@@ -42,17 +42,17 @@ from scipy.ndimage import (
 )
 from scipy.signal import savgol_filter
 
-from .contacts import (
+from ..contacts import (
     CONTACT_HEIGHT_PER_LEG,
     CONTACT_SPEED_PER_LEG,
     contact_segments,
     contacts_from_feet,
 )
-from .errors import InvalidMotionError
-from .ik import axial_frames, foot_inclination, pose_from_targets
-from .motion import Motion
-from .skeleton import ABDUCTION_SIGN, JOINT_NAMES, get_skeleton
-from .species import Species, load_species
+from ..errors import InvalidMotionError
+from ..ik import axial_frames, foot_inclination, pose_from_targets
+from ..motion import Motion
+from ..skeleton import ABDUCTION_SIGN, JOINT_NAMES, get_skeleton
+from ..species import Species, load_species
 
 __all__ = [
     "FOOT_ANCHORS",
@@ -527,7 +527,7 @@ def leg_pose_angles(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
     the motion (feet LF, RF, LH, RH), so re-solving a leg for a moved toe keeps the
     motion's own girdle and foot carriage.
     """
-    from .hinges import hinge_angles
+    from ..hinges import hinge_angles
 
     h = hinge_angles(motion)
     frames = axial_frames(motion.species, motion.root_positions, motion.rotations)
@@ -628,7 +628,7 @@ def _own_targets(
 
 def _stretched(species: str) -> np.ndarray:
     """(4,) shoulder / hip → toe length of each stretched leg (LF, RF, LH, RH) [m]."""
-    from .ik import leg_geometry
+    from ..ik import leg_geometry
 
     geo = [leg_geometry(species, leg) for leg in ("LF", "RF", "LH", "RH")]
     return np.array([g.upper + g.lower + g.foot for g in geo])
