@@ -391,13 +391,11 @@ def test_label_source_stance_follows_a_floor_that_steps_down():
         assert not st.contacts[(sw > 0.2) & (sw < 0.8), k].any()  # swings stay swings
 
 
-def test_label_source_stance_of_a_fast_gait_whose_paws_roll(monkeypatch):
+def test_label_source_stance_of_a_fast_gait_whose_paws_roll():
     # A run at 4 m/s (stride 0.4 s, duty 0.3): on the ground the paw's lowest point rolls
     # forward at 1 m/s (a quarter of the body's speed, far above the 0.18 m/s rest speed
     # of a 0.6 m leg), in swing it lifts 8 cm and catches up. Each stance is found by the
     # speed relative to the body; by the absolute rest speed alone, none is.
-    import habitsim.stance.planting as planting
-
     fps, leg, t, v = 120.0, 0.6, 480, 4.0
     tt = np.arange(t) / fps
     feet = []
@@ -417,8 +415,7 @@ def test_label_source_stance_of_a_fast_gait_whose_paws_roll(monkeypatch):
         assert st.contacts[stance_all[k], k].mean() >= 0.8, k
         mid = ~stance_all[k] & (np.abs(((tt / 0.4 + (0.0, 0.1, 0.5, 0.6)[k]) % 1.0) - 0.65) < 0.2)
         assert not st.contacts[mid, k].any()
-    monkeypatch.setattr(planting, "STANCE_SPEED_PER_BODY", 0.0)
-    assert label_source_stance(feet, fps, leg).contacts.mean() < 0.05
+    assert label_source_stance(feet, fps, leg, speed_per_body=0.0).contacts.mean() < 0.05
 
 
 def test_cli_inspect_and_import_with_warning(rig, tmp_path, capsys):

@@ -28,7 +28,8 @@ from habitsim.models.quantizer import EMAQuantizer, residual_quantize
 from habitsim.models.train import _contact_loss, _stance_loss
 from habitsim.motion import Motion
 from habitsim.species import load_species
-from habitsim.stance.schedule import MAX_DUTY_GAP, MIN_SOURCE_AGREEMENT, transfer_contacts
+from habitsim.stance.policy import ConformPolicy
+from habitsim.stance.schedule import transfer_contacts
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -133,7 +134,7 @@ def test_transfer_labels_come_from_the_decoded_contacts_checked_against_the_sour
     bad = src.contacts.copy()
     bad[:, 2] = ~bad[:, 2]
     labels, info = transfer_contacts(out, src, bad)
-    assert info["source_f1"][2] < MIN_SOURCE_AGREEMENT <= min(info["source_f1"][:2])
+    assert info["source_f1"][2] < ConformPolicy().min_source_agreement <= min(info["source_f1"][:2])
     assert info["feet_from_source"] == ["LH"]
     np.testing.assert_array_equal(labels, src.contacts)
     # a decoded foot that stands far longer than the source's (a high F1 all the same)
@@ -141,7 +142,7 @@ def test_transfer_labels_come_from_the_decoded_contacts_checked_against_the_sour
     long = src.contacts.copy()
     long[:, 0] |= np.roll(long[:, 0], 4) | np.roll(long[:, 0], 8)
     labels, info = transfer_contacts(out, src, long)
-    assert info["duty"][0] - info["source_duty"][0] > MAX_DUTY_GAP
+    assert info["duty"][0] - info["source_duty"][0] > ConformPolicy().max_duty_gap
     assert info["feet_from_source"] == ["LF"]
     np.testing.assert_array_equal(labels, src.contacts)
     # without decoded contacts (direct) the source's schedule is used as such

@@ -4,6 +4,8 @@ cache."""
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -21,22 +23,28 @@ from habitsim.gaits import generate
 from habitsim.models import transfer
 from habitsim.motion import resample_motion
 from habitsim.pipeline import PipelineError, refine_mode, run_clip, stance_toe_height
-from habitsim.stance import bounds as bounds_mod
-from habitsim.stance import ladder as ladder_mod
-from habitsim.stance import level as level_mod
-from habitsim.stance.ladder import PLANT_MAX_REACH_PER_LEG
-from habitsim.stance.ladder import reaches as _reaches
+from habitsim.stance.bounds import bound_heading, bound_height, bound_speed
+from habitsim.stance.ladder import plant_partly, trim_to_reach
+from habitsim.stance.level import level_trunk
 from habitsim.stance.planting import contact_f1
-from habitsim.stance.schedule import (
-    MAX_DUTY_GAP,
-    MIN_SOURCE_AGREEMENT,
-    WALK_MIN_DUTY,
-    WALK_MIN_FEET,
-    transfer_contacts,
-    walking_stance,
-)
+from habitsim.stance.policy import ConformPolicy
+from habitsim.stance.schedule import transfer_contacts, walking_stance
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
+
+#: The default knobs of conforming a decoded motion.
+POLICY = ConformPolicy()
+#: The planting ladder without its last rungs: no restepping, no partial planting.
+NO_FALLBACKS = ConformPolicy(restep_min_period=math.inf, partial_passes=0)
+
+
+def _reaches(report: dict) -> bool:
+    """A planting report of ``metadata["transfer"]["planted"]`` within the default limits."""
+    return (
+        report["max_reach_error_per_leg"] <= POLICY.plant_max_reach_per_leg
+        and report.get("max_swing_reach_error_per_leg", 0.0) <= POLICY.plant_max_swing_reach_per_leg
+        and report["max_pelvis_drop_per_leg"] <= POLICY.plant_max_drop_per_leg
+    )
 
 
 @pytest.fixture(scope="module")
@@ -113,11 +121,11 @@ def test_walking_stance_only_where_the_target_walks() -> None:
     """A cat at a walking Froude number gets no aerial phase; a trot, a faster clip and a
     jump keep their labels."""
     slow = generate("cat", "walk", seed=1, duration_s=3.0, froude=0.3, duty_factor=0.35)
-    assert slow.contacts is not None and slow.contacts.mean(0).max() < WALK_MIN_DUTY
+    assert slow.contacts is not None and slow.contacts.mean(0).max() < POLICY.walk_min_duty
     labels, info = walking_stance(slow, slow.contacts, slow)
     assert info is not None and info["froude"] <= info["walk_froude_max"] == 0.45
-    assert labels.mean(0).min() >= WALK_MIN_DUTY
-    assert (labels.sum(axis=1) >= WALK_MIN_FEET).all()  # never fewer than two feet down
+    assert labels.mean(0).min() >= POLICY.walk_min_duty
+    assert (labels.sum(axis=1) >= POLICY.walk_min_feet).all()  # never fewer than two feet down
     assert (labels | ~slow.contacts).all()  # stance only grows
     assert info["duty_after"] == pytest.approx(labels.mean(0).round(3).tolist())
     # the same footfalls with no action known: decided by the Froude number alone
@@ -154,8 +162,10 @@ def test_transfer_keeps_the_source_footfalls(trot) -> None:
         if foot in how.get("feet_from_source", []):
             np.testing.assert_array_equal(out.contacts[:, k], src[:, k])
         else:  # kept: it agreed with the source's footfalls and stands as long
-            assert f1 >= MIN_SOURCE_AGREEMENT and how["source_f1"][k] == pytest.approx(f1, abs=1e-3)
-            assert abs(out.contacts[:, k].mean() - src[:, k].mean()) <= MAX_DUTY_GAP
+            assert f1 >= POLICY.min_source_agreement and how["source_f1"][k] == pytest.approx(
+                f1, abs=1e-3
+            )
+            assert abs(out.contacts[:, k].mean() - src[:, k].mean()) <= POLICY.max_duty_gap
 
 
 def _resting(m, labels) -> float:
@@ -171,7 +181,7 @@ def test_habit_transfer_plants_its_feet_on_its_labels(trot) -> None:
     assert raw.metadata["transfer"]["planted"] is False
     report = planted.metadata["transfer"]["planted"]
     assert report["kept"] and len(report["stance_toe_height_per_leg"]) == 4
-    assert report["max_reach_error_per_leg"] <= PLANT_MAX_REACH_PER_LEG
+    assert report["max_reach_error_per_leg"] <= POLICY.plant_max_reach_per_leg
     c = planted.contacts
     assert _resting(planted, c) >= 0.95 > _resting(raw, c)
     z = planted.foot_positions()[..., 2][c] / planted.species_info.leg_length
@@ -192,21 +202,19 @@ def test_habit_transfer_plants_its_feet_on_its_labels(trot) -> None:
     np.testing.assert_allclose(planted.root_positions[:, :2], raw.root_positions[:, :2], atol=1e-9)
 
 
-def test_planting_out_of_reach_keeps_the_decoded_feet_and_says_why(trot, monkeypatch) -> None:
+def test_planting_out_of_reach_keeps_the_decoded_feet_and_says_why(trot) -> None:
     # the horse's trot at the cat's Froude speed and the horse's cadence: strides of
     # more leg lengths than the cat's legs sweep; without restepping and partial planting
     # nothing holds the feet
-    monkeypatch.setattr(ladder_mod, "restep", lambda *_: None)
-    monkeypatch.setattr(ladder_mod, "plant_partly", lambda *a, **k: None)
-    out = transfer(trot, to="cat", method="habit", seed=0)
+    out = transfer(trot, to="cat", method="habit", seed=0, policy=NO_FALLBACKS)
     raw = transfer(trot, to="cat", method="habit", seed=0, plant=False)
     report = out.metadata["transfer"]["planted"]
     assert not report["kept"] and "do not reach" in report["reason"]
-    assert report["max_reach_error_per_leg"] > PLANT_MAX_REACH_PER_LEG
+    assert report["max_reach_error_per_leg"] > POLICY.plant_max_reach_per_leg
     np.testing.assert_array_equal(out.rotations, raw.rotations)
 
 
-def test_planting_falls_back_to_footholds_centred_under_the_joints(trot, monkeypatch) -> None:
+def test_planting_falls_back_to_footholds_centred_under_the_joints(trot) -> None:
     # the horse's trot sent to the tiger: the decoded stance feet slide, and the median of
     # a sliding toe path lies too far ahead of or behind the shoulder / hip at one end of
     # a run; the foothold half-way along the joint's travel is in reach
@@ -218,10 +226,9 @@ def test_planting_falls_back_to_footholds_centred_under_the_joints(trot, monkeyp
     c = out.contacts
     assert _resting(out, c) >= 0.95 > _resting(raw, c)
     # with the median footholds alone the decoded root path is not planted
-    monkeypatch.setattr(ladder_mod, "FOOTHOLD_RULES", (False,))
-    monkeypatch.setattr(ladder_mod, "plant_partly", lambda *a, **k: None)  # no partial planting
-    monkeypatch.setattr(ladder_mod, "restep", lambda *_: None)  # nor restepping
-    median = transfer(trot, to="tiger", method="habit", seed=0).metadata["transfer"]["planted"]
+    median_only = replace(NO_FALLBACKS, foothold_rules=(False,))
+    median = transfer(trot, to="tiger", method="habit", seed=0, policy=median_only)
+    median = median.metadata["transfer"]["planted"]
     assert median["footholds"] == "median"
     assert not (median["kept"] and median["root"] == "decoded")
 
@@ -258,44 +265,41 @@ def test_planting_steps_faster_when_the_body_outruns_the_decoded_stride(walk) ->
     )
 
 
-def test_partial_planting_holds_the_faster_steps_when_restepping_misses(walk, monkeypatch):
-    # the dog walk sent to the cat steps faster (see above); when the faster steps still
-    # miss a foothold (here: the restep's report made to miss), the partial planting holds
-    # the runs the legs reach on the faster labels, not on the decoder's slower ones
+def test_partial_planting_holds_the_faster_steps_when_restepping_misses() -> None:
+    # the example dog walk (motion capture) sent to the giraffe: the decoder's stride is
+    # too slow for its body and even the faster steps leave the pelvis too low; the
+    # partial planting then holds the runs the legs reach on the faster labels, which
+    # hold far more of the stance than the decoder's slower ones
+    from importlib import resources
+
+    from habitsim.bvh_mapping import import_bvh
     from habitsim.contacts import stride_period
 
-    real_restep = ladder_mod.restep
-
-    def missing(*a, **k):
-        got = real_restep(*a, **k)
-        assert got is not None
-        return got[0], {**got[1], "max_reach_error_per_leg": 1.0}
-
-    monkeypatch.setattr(ladder_mod, "restep", missing)
-    raw = transfer(walk, to="cat", method="habit", seed=0, plant=False)
-    out = transfer(walk, to="cat", method="habit", seed=0)
+    walk = import_bvh(resources.files("habitsim.examples") / "dog_walk.bvh", "dog")[0]
+    raw = transfer(walk, to="giraffe", method="habit", seed=0, plant=False)
+    out = transfer(walk, to="giraffe", method="habit", seed=0)
     report = out.metadata["transfer"]["planted"]
     assert report["kept"] and "free_runs" in report and "on the faster steps" in report["reason"]
+    assert report["restep"]["max_pelvis_drop_per_leg"] > POLICY.plant_max_drop_per_leg
     rate = report["restep"]["rate"]
     assert rate > 1.2
     assert stride_period(out.contacts) == pytest.approx(
         stride_period(raw.contacts) / rate, rel=0.15
     )
-    assert _resting(out, out.contacts) >= 0.9
-    monkeypatch.setattr(ladder_mod, "PARTLY_ON_RESTEP", False)
-    slow = transfer(walk, to="cat", method="habit", seed=0)
+    slower = ConformPolicy(partly_on_restep=False)
+    slow = transfer(walk, to="giraffe", method="habit", seed=0, policy=slower)
     assert stride_period(slow.contacts) == pytest.approx(stride_period(raw.contacts), rel=0.15)
+    free = slow.metadata["transfer"]["planted"]["free_share"]
+    assert report["free_share"] < 0.5 < free
+    assert _resting(out, out.contacts) > _resting(slow, slow.contacts) + 0.3
 
 
-def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot, monkeypatch):
+def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot):
     # the horse's trot sent to the tiger: the decoded stance feet slide, so a foothold
     # held for a whole stance run is out of reach with the decoded root path
-    # the module (habitsim.models.transfer is also the name of its function)
     # (with the median footholds alone: the centred ones reach with the decoded root)
-
-    monkeypatch.setattr(ladder_mod, "FOOTHOLD_RULES", (False,))
-    monkeypatch.setattr(ladder_mod, "PLANT_MIN_SPEED_RATIO", 0.2)
-    out = transfer(trot, to="tiger", method="habit", seed=0)
+    carry = ConformPolicy(foothold_rules=(False,), plant_min_speed_ratio=0.2)
+    out = transfer(trot, to="tiger", method="habit", seed=0, policy=carry)
     raw = transfer(trot, to="tiger", method="habit", seed=0, plant=False)
     report = out.metadata["transfer"]["planted"]
     assert report["kept"] and report["root"] == "carried", report
@@ -311,10 +315,8 @@ def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot, 
     assert travel(out) / travel(raw) == pytest.approx(report["speed_ratio"], abs=2e-3)
     assert 0.2 <= report["speed_ratio"] < 0.99
     # a body its legs carry too little is not moved: the decoded feet are kept
-    monkeypatch.setattr(ladder_mod, "PLANT_MIN_SPEED_RATIO", 0.99)
-    monkeypatch.setattr(ladder_mod, "plant_partly", lambda *a, **k: None)  # no partial planting
-    monkeypatch.setattr(ladder_mod, "restep", lambda *_: None)  # nor restepping
-    slow = transfer(trot, to="tiger", method="habit", seed=0)
+    stiff = replace(NO_FALLBACKS, foothold_rules=(False,), plant_min_speed_ratio=0.99)
+    slow = transfer(trot, to="tiger", method="habit", seed=0, policy=stiff)
     report = slow.metadata["transfer"]["planted"]
     assert not report["kept"] and "carry the body only" in report["reason"]
     np.testing.assert_array_equal(slow.root_positions, raw.root_positions)
@@ -431,10 +433,11 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
     root = walk.root_positions.copy()
     root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
     fast = Motion("dog", walk.fps, root, walk.rotations, c)
-    moved, rep = ladder_mod.plant_partly(fast, c)
-    assert rep["free_runs"][0] >= 1 and 0 < rep["free_share"] <= 0.5
-    assert rep["max_reach_error_per_leg"] <= PLANT_MAX_REACH_PER_LEG
-    assert rep["max_pelvis_drop_per_leg"] <= ladder_mod.PLANT_MAX_DROP_PER_LEG
+    moved, rep = plant_partly(fast, c)
+    assert rep.free_runs is not None and rep.free_share is not None
+    assert rep.free_runs[0] >= 1 and 0 < rep.free_share <= 0.5
+    assert rep.max_reach_error_per_leg <= POLICY.plant_max_reach_per_leg
+    assert rep.max_pelvis_drop_per_leg <= POLICY.plant_max_drop_per_leg
     toes = moved.foot_positions()
     early = 0
     for k, runs in enumerate(contact_segments(c)):
@@ -447,9 +450,10 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
     # the whole clip that fast: most runs are free, the ones the legs reach still held
     step = np.diff(walk.root_positions[:, :2], axis=0) * 3.0
     root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
-    moved, rep = ladder_mod.plant_partly(Motion("dog", walk.fps, root, walk.rotations, c), c)
-    loose, runs = rep["free_runs"]
-    assert rep["free_share"] > 0.5 and 0 < runs - loose
+    moved, rep = plant_partly(Motion("dog", walk.fps, root, walk.rotations, c), c)
+    assert rep.free_runs is not None and rep.free_share is not None
+    loose, runs = rep.free_runs
+    assert rep.free_share > 0.5 and 0 < runs - loose
     toes = moved.foot_positions()
     still = sum(
         np.ptp(toes[a:b, k, :2], axis=0).max() <= 0.01 * leg
@@ -459,7 +463,7 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
     assert still >= runs - loose
     # six times as fast: no run can be held
     root[1:, :2] = root[0, :2] + np.cumsum(2.0 * step, axis=0)
-    assert ladder_mod.plant_partly(Motion("dog", walk.fps, root, walk.rotations, c), c) is None
+    assert plant_partly(Motion("dog", walk.fps, root, walk.rotations, c), c) is None
 
 
 def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) -> None:
@@ -473,12 +477,12 @@ def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) ->
     root = walk.root_positions.copy()
     root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
     fast = Motion("dog", walk.fps, root, walk.rotations, c)
-    labels, rep = ladder_mod.trim_to_reach(fast, c)
-    assert rep is not None and rep["runs"] >= 3
+    labels, rep = trim_to_reach(fast, c)
+    assert rep is not None and rep.runs >= 3
     assert not (labels & ~c).any()  # only stance frames are taken off
-    assert rep["frames"] == int((c & ~labels).sum()) > 0
+    assert rep.frames == int((c & ~labels).sum()) > 0
     t = len(c)
-    shortest = max(2, round(ladder_mod.TRIM_MIN_RUN_S * walk.fps))
+    shortest = max(2, round(POLICY.trim_min_run_s * walk.fps))
     for k, segs in enumerate(contact_segments(c)):
         for a, b in segs:
             kept = np.flatnonzero(labels[a:b, k])
@@ -491,17 +495,19 @@ def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) ->
     # only the runs asked for
     first = np.zeros_like(c)
     first[: len(c) // 4] = True
-    part, _ = ladder_mod.trim_to_reach(fast, c, only=first)
+    part, _ = trim_to_reach(fast, c, only=first)
     assert np.array_equal(part[len(c) // 2 :], c[len(c) // 2 :]) and (part != c).any()
     # the partial planting holds more of the stance on the trimmed labels, and with
     # ``trim`` it trims the runs it would leave free and steps on the new labels
-    _, loose = ladder_mod.plant_partly(fast, c)
-    _, tight = ladder_mod.plant_partly(fast, labels)
-    held = (1.0 - tight["free_share"]) * labels.sum()
-    assert held > (1.0 - loose["free_share"]) * c.sum()
-    assert tight["free_share"] < loose["free_share"]
-    moved, rep = ladder_mod.plant_partly(fast, c, trim=True)
-    assert rep["trimmed"]["frames"] > 0 and rep["free_share"] < loose["free_share"]
+    _, loose = plant_partly(fast, c)
+    _, tight = plant_partly(fast, labels)
+    assert loose.free_frames is not None and tight.free_frames is not None
+    assert loose.free_share is not None and tight.free_share is not None
+    assert labels.sum() - tight.free_frames > c.sum() - loose.free_frames
+    assert tight.free_share < loose.free_share
+    moved, rep = plant_partly(fast, c, trim=True)
+    assert rep.trimmed is not None and rep.free_share is not None
+    assert rep.trimmed.frames > 0 and rep.free_share < loose.free_share
     assert not (moved.contacts & ~c).any() and (moved.contacts != c).any()
     leg = walk.species_info.leg_length
     toes = moved.foot_positions()
@@ -511,7 +517,8 @@ def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) ->
         for a, b in segs
         if np.ptp(toes[a:b, k, :2], axis=0).max() <= 0.01 * leg
     ]
-    assert len(held_runs) > loose["free_runs"][1] - loose["free_runs"][0]
+    assert loose.free_runs is not None
+    assert len(held_runs) > loose.free_runs[1] - loose.free_runs[0]
 
 
 def test_decoded_speed_is_bounded_by_the_source_speed_at_equal_froude(walk) -> None:
@@ -520,7 +527,7 @@ def test_decoded_speed_is_bounded_by_the_source_speed_at_equal_froude(walk) -> N
     cat = generate("cat", like=walk)
     assert cat.num_frames == walk.num_frames
     # a cat walking where the source dog walks at the same Froude number: unchanged
-    same, info = bounds_mod.bound_speed(cat, walk)
+    same, info = bound_speed(cat, walk)
     assert info is None and same is cat
     # ... where the dog stands still: the cat's body does not travel either
     t = walk.num_frames
@@ -530,7 +537,7 @@ def test_decoded_speed_is_bounded_by_the_source_speed_at_equal_froude(walk) -> N
         np.repeat(walk.root_positions[:1], t, axis=0),
         np.repeat(walk.rotations[:1], t, axis=0),
     )
-    stood, info = bounds_mod.bound_speed(cat, still)
+    stood, info = bound_speed(cat, still)
     assert info is not None and info["frames"] >= t - 2
     travel = np.linalg.norm(np.diff(stood.root_positions[:, :2], axis=0), axis=1).sum()
     assert travel <= 1e-6
@@ -541,11 +548,11 @@ def test_decoded_speed_is_bounded_by_the_source_speed_at_equal_froude(walk) -> N
     root = walk.root_positions.copy()
     root[:, :2] = root[0, :2] + 3.0 * 1.5 * (root[:, :2] - root[0, :2])
     quick = Motion("dog", walk.fps, root, walk.rotations)
-    sped, info = bounds_mod.bound_speed(cat, quick)
+    sped, info = bound_speed(cat, quick)
     assert info is not None
     v0 = np.linalg.norm(np.diff(cat.root_positions[:, :2], axis=0), axis=1).sum()
     v1 = np.linalg.norm(np.diff(sped.root_positions[:, :2], axis=0), axis=1).sum()
-    assert v1 / v0 == pytest.approx(3.0 * 1.5 / bounds_mod.SPEED_BAND, rel=0.1)
+    assert v1 / v0 == pytest.approx(3.0 * 1.5 / POLICY.speed_band, rel=0.1)
 
 
 def test_decoded_height_excursions_are_bounded_by_the_source(walk) -> None:
@@ -554,7 +561,7 @@ def test_decoded_height_excursions_are_bounded_by_the_source(walk) -> None:
     cat = generate("cat", like=walk)
     leg = cat.species_info.leg_length
     # the same gait's bob: unchanged
-    same, info = bounds_mod.bound_height(cat, walk)
+    same, info = bound_height(cat, walk)
     assert info is None and same is cat
     # a body that sinks by a fifth of its leg over the clip while the dog walks level:
     # the sinking is cut to the band around the dog's own bob
@@ -562,18 +569,18 @@ def test_decoded_height_excursions_are_bounded_by_the_source(walk) -> None:
     root = cat.root_positions.copy()
     root[:, 2] -= np.linspace(0.0, 0.2 * leg, t)
     sinking = Motion("cat", cat.fps, root, cat.rotations)
-    level, info = bounds_mod.bound_height(sinking, walk)
+    level, info = bound_height(sinking, walk)
     assert info is not None and info["range_per_leg"][0] > 0.15
     dev = walk.root_positions[:, 2] - np.median(walk.root_positions[:, 2])
     src = np.abs(dev).max() / walk.species_info.leg_length
-    allowed = max(bounds_mod.HEIGHT_BAND * src, bounds_mod.HEIGHT_FLOOR_PER_LEG)
+    allowed = max(POLICY.height_band * src, POLICY.height_floor_per_leg)
     z = level.root_positions[:, 2]
     assert np.abs(z - np.median(root[:, 2])).max() <= 1.2 * allowed * leg  # smoothed envelope
     np.testing.assert_allclose(level.root_positions[:, :2], root[:, :2])
     # a source that jumps keeps the target's jump
     jump = generate("dog", "jump", seed=0)
     leap = generate("cat", like=jump)
-    _, info = bounds_mod.bound_height(leap, jump)
+    _, info = bound_height(leap, jump)
     assert info is None or info["range_per_leg"][1] >= 0.95 * info["range_per_leg"][0]
 
 
@@ -598,29 +605,29 @@ def test_a_wagging_decoded_heading_is_slowed_to_the_bound(walk) -> None:
         return np.abs(np.gradient(dev)) * m.fps
 
     # the same heading, or a slow drift of 20° over the clip: left as decoded
-    same, info = bounds_mod.bound_heading(cat, walk)
+    same, info = bound_heading(cat, walk)
     assert info is None and same is cat
     drift = turned(np.linspace(0.0, np.radians(20.0), t))
-    assert bounds_mod.bound_heading(drift, walk)[1] is None
+    assert bound_heading(drift, walk)[1] is None
     # the body wagged by ±60° at 4 Hz about the pelvis (a decoder off its data):
     # the wag is low-passed away, the root path and every other joint kept
     sec = np.arange(t) / cat.fps
     wag = turned(np.radians(60.0) * np.sin(2.0 * np.pi * 4.0 * sec))
-    assert rate(wag).max() > 5.0 * bounds_mod.HEADING_MAX_RATE
-    calm, info = bounds_mod.bound_heading(wag, walk)
-    assert info is not None and info["max_rate"][0] > 5.0 * bounds_mod.HEADING_MAX_RATE
+    assert rate(wag).max() > 5.0 * POLICY.heading_max_rate
+    calm, info = bound_heading(wag, walk)
+    assert info is not None and info["max_rate"][0] > 5.0 * POLICY.heading_max_rate
     inner = rate(calm)[t // 4 : -t // 4]  # away from the ends the filter pads
-    assert inner.max() < bounds_mod.HEADING_MAX_RATE
+    assert inner.max() < POLICY.heading_max_rate
     np.testing.assert_array_equal(calm.root_positions, wag.root_positions)
     np.testing.assert_allclose(calm.rotations[:, 1:], wag.rotations[:, 1:], atol=1e-12)
     # a steady turn away to 90° over the clip (a target turning at its own rate): kept
     away = turned(np.linspace(0.0, np.radians(90.0), t))
-    assert bounds_mod.bound_heading(away, walk)[1] is None
+    assert bound_heading(away, walk)[1] is None
     # a swing out to 80° and back within a second, under the rate bound: cut to the band
     # about the departure's slow trend
     swing = np.radians(80.0) * np.exp(-0.5 * ((sec - sec.mean()) / 0.3) ** 2)
-    assert rate(turned(swing)).max() < bounds_mod.HEADING_MAX_RATE
-    held, info = bounds_mod.bound_heading(turned(swing), walk)
+    assert rate(turned(swing)).max() < POLICY.heading_max_rate
+    held, info = bound_heading(turned(swing), walk)
     assert info is not None and info["max_departure_deg"][0] > 79.0
     dev = np.unwrap(heading_yaw(held.rotations[:, 0])) - np.unwrap(heading_yaw(cat.rotations[:, 0]))
     # the 1 s trend of a 0.3 s swing rises by about a quarter of it: 45° + ~24°
@@ -635,7 +642,7 @@ def test_a_sloping_decoded_trunk_is_levelled_about_the_pelvis(walk) -> None:
     gir = generate("giraffe", like=walk)
     c = gir.contacts
     # its own walk stands level: left as it is
-    same, info = level_mod.level_trunk(gir, c)
+    same, info = level_trunk(gir, c)
     assert info is None and same is gir
     # the trunk tipped nose-down by 8° about the pelvis: the fore toes go under the ground
     # by 6 % of a leg more than the hind ones; pitched back to within the tolerance (a
@@ -645,26 +652,27 @@ def test_a_sloping_decoded_trunk_is_levelled_about_the_pelvis(walk) -> None:
     rot = gir.rotations.copy()
     rot[:, 0] = quat_mul(quat_from_axis_angle(left, np.full(len(yaw), np.radians(8.0))), rot[:, 0])
     sloped = Motion("giraffe", gir.fps, gir.root_positions, rot, c)
-    level, info = level_mod.level_trunk(sloped, c)
+    level, info = level_trunk(sloped, c)
     assert info is not None and info["fore_minus_hind_per_leg"] < -0.05
     assert -8.0 < info["pitch_deg"] < -4.0
-    assert level_mod.level_trunk(level, c)[1] is None
+    assert level_trunk(level, c)[1] is None
     np.testing.assert_allclose(level.rotations[:, 1:], sloped.rotations[:, 1:], atol=1e-12)
     np.testing.assert_array_equal(level.root_positions, sloped.root_positions)
     # tipped the other way: pitched the other way
     rot[:, 0] = quat_mul(
         quat_from_axis_angle(left, np.full(len(yaw), np.radians(-8.0))), gir.rotations[:, 0]
     )
-    _, info = level_mod.level_trunk(Motion("giraffe", gir.fps, gir.root_positions, rot, c), c)
+    _, info = level_trunk(Motion("giraffe", gir.fps, gir.root_positions, rot, c), c)
     assert info is not None and 4.0 < info["pitch_deg"] < 8.0
     # no frame with both girdles in stance: nothing to compare
     fore = np.zeros_like(c)
     fore[:, :2] = True
-    assert level_mod.level_trunk(sloped, fore)[1] is None
+    assert level_trunk(sloped, fore)[1] is None
 
 
-def test_plant_summary_keeps_swing_misses_at_the_clip_ends_apart() -> None:
+def test_planting_judgement_keeps_swing_misses_at_the_clip_ends_apart() -> None:
     from habitsim.stance.planting import PlantReport
+    from habitsim.stance.report import Planting
 
     c = np.zeros((6, 4), dtype=bool)
     c[:3] = True
@@ -673,24 +681,23 @@ def test_plant_summary_keeps_swing_misses_at_the_clip_ends_apart() -> None:
     err[1, 2] = 0.02  # a stance toe 2 cm off
     err[5, 0] = 0.30  # LF's swing after its last stance: left behind at the clip's end
     rep = PlantReport(err, np.zeros(6), np.zeros(4), 0.0)
-    d = ladder_mod.plant_summary(rep, c, leg=1.0)
-    assert d["max_reach_error_per_leg"] == pytest.approx(0.02)
-    assert d["max_edge_reach_error_per_leg"] == pytest.approx(0.30)
-    assert _reaches(d)  # an edge swing does not decide whether a planting is kept
+    p = Planting.judged(rep, c, 1.0, "median")
+    assert p.max_reach_error_per_leg == pytest.approx(0.02)
+    assert p.max_edge_reach_error_per_leg == pytest.approx(0.30)
+    assert p.reaches(POLICY)  # an edge swing does not decide whether a planting is kept
+    assert _reaches(p.to_dict()) and p.to_dict()["max_edge_reach_error_per_leg"] == 0.3
     inner = err.copy()
     inner[3, 1] = 0.30  # ... an inner swing does
-    d = ladder_mod.plant_summary(PlantReport(inner, np.zeros(6), np.zeros(4), 0.0), c, leg=1.0)
-    assert d["max_swing_reach_error_per_leg"] == pytest.approx(0.30) and not _reaches(d)
-    inner[3, 1] = 0.5 * (
-        ladder_mod.PLANT_MAX_REACH_PER_LEG + ladder_mod.PLANT_MAX_SWING_REACH_PER_LEG
-    )
-    d = ladder_mod.plant_summary(PlantReport(inner, np.zeros(6), np.zeros(4), 0.0), c, leg=1.0)
-    assert _reaches(d)  # a swing may miss by more than a stance foot
+    p = Planting.judged(PlantReport(inner, np.zeros(6), np.zeros(4), 0.0), c, 1.0, "median")
+    assert p.max_swing_reach_error_per_leg == pytest.approx(0.30) and not p.reaches(POLICY)
+    inner[3, 1] = 0.5 * (POLICY.plant_max_reach_per_leg + POLICY.plant_max_swing_reach_per_leg)
+    p = Planting.judged(PlantReport(inner, np.zeros(6), np.zeros(4), 0.0), c, 1.0, "median")
+    assert p.reaches(POLICY)  # a swing may miss by more than a stance foot
+    assert not p.reaches(replace(POLICY, plant_max_swing_reach_per_leg=0.05))
     # a free stance run is not judged either
     free = np.zeros_like(c)
     free[:3, 2] = True
-    d = ladder_mod.plant_summary(rep, c, leg=1.0, free=free)
-    assert d["max_reach_error_per_leg"] == 0.0
+    assert Planting.judged(rep, c, 1.0, "median", free).max_reach_error_per_leg == 0.0
 
 
 def test_a_transfer_keeps_the_sources_frame_count_through_the_models_rate(walk) -> None:

@@ -21,7 +21,10 @@ Long motions are cut into windows of the model's length overlapping by a quarter
 window is encoded in its own heading frame, decoded with the target's condition, turned
 back, and the windows are cross-faded. One z_c is drawn per call (``seed``) and used for
 every window so that the habit stays the same along the clip. A motion at another frame
-rate is resampled to the model's and back.
+rate is resampled to the model's and back. The decoded motion is then conformed to its
+source by the torch-free half (:func:`habitsim.stance.conform.conform`: bounds, stance
+labels, levelling, planting), tuned by a :class:`~habitsim.stance.policy.ConformPolicy`
+(``policy=``).
 
 For a target species without a habit encoder (held out from training), z_c is drawn from
 the prior of the nearest training species in text-embedding space (paper eq. 11,
@@ -48,6 +51,7 @@ from ..errors import InvalidMotionError
 from ..motion import Motion, resample_motion
 from ..species import load_species
 from ..stance.conform import conform
+from ..stance.policy import ConformPolicy
 from ..stance.schedule import transfer_contacts, walking_stance
 from .checkpoint import CONFIG_FILE, LoadedCheckpoint, load_checkpoint
 from .config import VARIANTS
@@ -116,7 +120,8 @@ def register_method(
     """Add a transfer method to :data:`METHODS` (plug-in point for evaluation).
 
     :func:`transfer` calls ``fn(motion, to, seed=…, checkpoint=…, temperature=…,
-    plant=…)``; a method takes ``**kwargs`` for the options it has no use for.
+    plant=…)`` (and ``policy=…`` when one is given); a method takes ``**kwargs`` for the
+    options it has no use for.
 
     Raises:
         ValueError: the name is taken (unless ``overwrite``).
@@ -339,7 +344,9 @@ def _run_network(
 # ---------------------------------------------------------------------------- methods
 
 
-def direct_transfer(motion: Motion, to: str, **_: Any) -> Motion:
+def direct_transfer(
+    motion: Motion, to: str, *, policy: ConformPolicy | None = None, **_: Any
+) -> Motion:
     """The ``direct`` baseline: the source's local rotations on the target skeleton, the
     root path scaled by the hip-height ratio h_target / h_source; stance labels by
     :func:`transfer_contacts` (the source's, frame for frame, when it has them)."""
@@ -353,7 +360,7 @@ def direct_transfer(motion: Motion, to: str, **_: Any) -> Motion:
     }
     meta = {k: v for k, v in motion.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
     out = Motion(tgt, motion.fps, motion.root_positions * ratio, motion.rotations.copy())
-    contacts, how = transfer_contacts(out, motion)
+    contacts, how = transfer_contacts(out, motion, policy=policy)
     meta["transfer"] = {**info, "contacts": how}
     return Motion(out.species, out.fps, out.root_positions, out.rotations, contacts, meta)
 
@@ -367,6 +374,7 @@ def _network_method(variant: str) -> Callable[..., Motion]:
         checkpoint: str | Path | None = None,
         temperature: float = 1.0,
         plant: bool = True,
+        policy: ConformPolicy | None = None,
         **_: Any,
     ) -> Motion:
         ck = load_model(checkpoint, variant)
@@ -379,7 +387,7 @@ def _network_method(variant: str) -> Callable[..., Motion]:
             ck, motion, load_species(to).name, seed=seed, temperature=temperature
         )
         info = {"method": variant, "from": motion.species, "to": out.species, "seed": seed, **info}
-        return conform(out, motion, info, plant=plant)
+        return conform(out, motion, info, plant, policy)[0]
 
     run.__name__ = f"transfer_{variant}"
     return run
@@ -409,6 +417,7 @@ def transfer(
     checkpoint: str | Path | None = None,
     temperature: float = 1.0,
     plant: bool = True,
+    policy: ConformPolicy | None = None,
 ) -> Motion:
     """Transfer a motion onto another species, keeping the target's habits.
 
@@ -424,6 +433,9 @@ def transfer(
         plant: the network methods plant the decoded feet on the output's stance labels
             by leg IK (``False``: the decoder's raw kinematics; ``direct`` keeps the
             source's planted feet either way).
+        policy: the knobs and switches of conforming the decoded motion to its source
+            (stance labels, bounds, levelling, planting; None: the defaults of
+            :class:`~habitsim.stance.policy.ConformPolicy`).
 
     Returns:
         A :class:`~habitsim.motion.Motion` on ``to``'s skeleton at the source's frame
@@ -453,8 +465,15 @@ def transfer(
                 motion.contacts,
                 dict(motion.metadata),
             )
+    options: dict[str, Any] = {} if policy is None else {"policy": policy}
     return METHODS[method].fn(
-        motion, tgt, seed=seed, checkpoint=checkpoint, temperature=temperature, plant=plant
+        motion,
+        tgt,
+        seed=seed,
+        checkpoint=checkpoint,
+        temperature=temperature,
+        plant=plant,
+        **options,
     )
 
 

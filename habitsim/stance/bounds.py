@@ -12,20 +12,15 @@ from typing import Any
 import numpy as np
 
 from ..motion import Motion
+from .policy import ConformPolicy, resolve_policy
 
 __all__ = ["bound_speed", "bound_height", "bound_heading"]
 
 
-#: The decoded body's horizontal speed is kept within this factor of the source's speed
-#: at the same Froude number (:func:`bound_speed`) ...
-SPEED_BAND = 1.5
-#: ... both speeds smoothed with a Gaussian of this standard deviation [s] (about half a
-#: stride of a walk), so the band bounds the pace, not the bob within a stride.
-SPEED_SMOOTH_S = 0.25
-
-
-def bound_speed(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] | None]:
-    """The decoded motion with its horizontal root speed within :data:`SPEED_BAND` of the
+def bound_speed(
+    out: Motion, source: Motion, policy: ConformPolicy | None = None
+) -> tuple[Motion, dict[str, Any] | None]:
+    """The decoded motion with its horizontal root speed within ``policy.speed_band`` of the
     source's, and what was changed (``None``: nothing).
 
     The decoder reads a window of about two seconds; a source that stands and then walks
@@ -34,22 +29,24 @@ def bound_speed(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] | N
     while it stands) cannot carry a body that travels. Dynamic similarity gives the speed
     the target would have at the source's gait (equal Froude numbers v²/(g·L): v_target
     = v_source·√(L_target / L_source), L the leg length); each frame's decoded velocity
-    is scaled so its smoothed speed lies within a factor :data:`SPEED_BAND` of that
+    is scaled so its smoothed speed lies within a factor ``policy.speed_band`` of that
     (below for a standing source, a zero speed). The direction of travel, the height and
     every joint stay the decoder's.
     """
     from scipy.ndimage import gaussian_filter1d
 
+    policy = resolve_policy(policy)
+
     t = out.num_frames
     if t < 3 or source.num_frames != t:
         return out, None
-    sigma = max(1.0, SPEED_SMOOTH_S * out.fps)
+    sigma = max(1.0, policy.speed_smooth_s * out.fps)
     step = np.diff(out.root_positions[:, :2], axis=0)
     src_step = np.diff(source.root_positions[:, :2], axis=0) * (out.fps / source.fps)
     ratio = float(np.sqrt(out.species_info.leg_length / source.species_info.leg_length))
     v_dec = gaussian_filter1d(np.linalg.norm(step, axis=1), sigma, mode="nearest")
     v_eq = gaussian_filter1d(np.linalg.norm(src_step, axis=1), sigma, mode="nearest") * ratio
-    bounded = np.clip(v_dec, v_eq / SPEED_BAND, v_eq * SPEED_BAND)
+    bounded = np.clip(v_dec, v_eq / policy.speed_band, v_eq * policy.speed_band)
     scale = np.where(v_dec > 1e-9, bounded / np.maximum(v_dec, 1e-9), 1.0)
     changed = np.abs(scale - 1.0) > 1e-3
     if not changed.any():
@@ -67,28 +64,23 @@ def bound_speed(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] | N
     }
 
 
-#: The decoded root height's deviation from its median is kept within this factor of the
-#: source's (both in leg lengths, :func:`bound_height`) ...
-HEIGHT_BAND = 1.5
-#: ... or within this share of leg length, whichever is larger (the decoder's own bob).
-HEIGHT_FLOOR_PER_LEG = 0.01
-#: Half-width [s] of the window the deviations' envelopes are taken over.
-HEIGHT_WINDOW_S = 0.5
-
-
-def bound_height(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] | None]:
-    """The decoded motion with its root height's excursions within :data:`HEIGHT_BAND`
+def bound_height(
+    out: Motion, source: Motion, policy: ConformPolicy | None = None
+) -> tuple[Motion, dict[str, Any] | None]:
+    """The decoded motion with its root height's excursions within ``policy.height_band``
     of the source's, and what was changed (``None``: nothing).
 
     A decoded root height drifts over a clip (one window decodes lower than the next):
     a standing source whose pelvis moves by a few millimetres can come out as a target
     that rises from a crouch, which reads as the start of a jump. Each frame's deviation
     from the clip's median height, in leg lengths, is scaled down where its envelope
-    (the largest deviation within :data:`HEIGHT_WINDOW_S`) exceeds the source's envelope
-    times :data:`HEIGHT_BAND` (at least :data:`HEIGHT_FLOOR_PER_LEG`). A gait's bob, a
+    (the largest deviation within ``policy.height_window_s``) exceeds the source's envelope
+    times ``policy.height_band`` (at least ``policy.height_floor_per_leg``). A gait's bob, a
     sit or a jump keep their size: the source has it too.
     """
     from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+
+    policy = resolve_policy(policy)
 
     t = out.num_frames
     if t < 3 or source.num_frames != t:
@@ -99,13 +91,16 @@ def bound_height(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] | 
     dev = (z - mid) / leg
     src_z = source.root_positions[:, 2]
     src_dev = (src_z - float(np.median(src_z))) / src_leg
-    size = 2 * max(1, int(round(HEIGHT_WINDOW_S * out.fps))) + 1
-    sigma = max(1.0, 0.5 * HEIGHT_WINDOW_S * out.fps)
+    size = 2 * max(1, int(round(policy.height_window_s * out.fps))) + 1
+    sigma = max(1.0, 0.5 * policy.height_window_s * out.fps)
 
     def envelope(x: np.ndarray) -> np.ndarray:
         return gaussian_filter1d(maximum_filter1d(np.abs(x), size, mode="nearest"), sigma)
 
-    env, allowed = envelope(dev), np.maximum(HEIGHT_BAND * envelope(src_dev), HEIGHT_FLOOR_PER_LEG)
+    env, allowed = (
+        envelope(dev),
+        np.maximum(policy.height_band * envelope(src_dev), policy.height_floor_per_leg),
+    )
     scale = np.minimum(1.0, allowed / np.maximum(env, 1e-12))
     changed = scale < 1.0 - 1e-3
     if not changed.any():
@@ -119,28 +114,18 @@ def bound_height(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] | 
     }
 
 
-#: The decoded heading may turn away from the source's at most this fast [rad/s] (the
-#: rate of the difference of the two pelvis headings, :func:`bound_heading`) ...
-HEADING_MAX_RATE = 3.0
-#: ... beyond, the difference is low-passed by a Gaussian of this standard deviation [s] ...
-HEADING_SMOOTH_S = 0.25
-#: ... and it never swings further than this angle [rad] (45°) from its own slow trend,
-#: the departure low-passed by :data:`HEADING_TREND_S` (a target that turns at its own
-#: rate departs steadily from the source's heading through a turn; that is kept).
-HEADING_BAND = np.pi / 4
-HEADING_TREND_S = 1.0
-
-
-def bound_heading(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] | None]:
+def bound_heading(
+    out: Motion, source: Motion, policy: ConformPolicy | None = None
+) -> tuple[Motion, dict[str, Any] | None]:
     """The decoded motion with its heading's departures from the source's slowed to
-    :data:`HEADING_MAX_RATE` and held within :data:`HEADING_BAND`, and what was changed
+    ``policy.heading_max_rate`` and held within ``policy.heading_band``, and what was changed
     (``None``: nothing).
 
     A transfer keeps the source's action, turns included: where the decoded pelvis
     heading swings away from the source's faster than any trunk turns (a decoder off
     its training data can wag the whole body by ±90° a few times a second, or spin it
     round, on a backward walk), the heading difference is replaced by its low-pass
-    (:data:`HEADING_SMOOTH_S`), blended in where the swing exceeds the bound, and its
+    (``policy.heading_smooth_s``), blended in where the swing exceeds the bound, and its
     swing about its own slow trend is clipped to the band. The body turns about the
     pelvis; the root path is kept. A decoded heading that departs slowly (a habitual
     drift, or a turn at the target's own rate) stays as decoded.
@@ -149,22 +134,24 @@ def bound_heading(out: Motion, source: Motion) -> tuple[Motion, dict[str, Any] |
 
     from ..rotations import heading_yaw, quat_from_axis_angle, quat_mul
 
+    policy = resolve_policy(policy)
+
     t = out.num_frames
     if t < 3 or source.num_frames != t:
         return out, None
-    sigma = max(1.0, HEADING_SMOOTH_S * out.fps)
+    sigma = max(1.0, policy.heading_smooth_s * out.fps)
     # against the source's heading low-passed alike (a mocap pelvis jitters in yaw)
     src = gaussian_filter1d(np.unwrap(heading_yaw(source.rotations[:, 0])), sigma, mode="nearest")
     dev = np.unwrap(heading_yaw(out.rotations[:, 0])) - src
     rate = np.abs(np.gradient(dev)) * out.fps
     new = dev
-    if rate.max() > HEADING_MAX_RATE:
+    if rate.max() > policy.heading_max_rate:
         size = 2 * int(round(sigma)) + 1
         env = gaussian_filter1d(maximum_filter1d(rate, size, mode="nearest"), sigma)
-        w = np.clip(env / HEADING_MAX_RATE - 1.0, 0.0, 1.0)
+        w = np.clip(env / policy.heading_max_rate - 1.0, 0.0, 1.0)
         new = dev + w * (gaussian_filter1d(dev, sigma, mode="nearest") - dev)
-    trend = gaussian_filter1d(dev, max(1.0, HEADING_TREND_S * out.fps), mode="nearest")
-    new = trend + np.clip(new - trend, -HEADING_BAND, HEADING_BAND)
+    trend = gaussian_filter1d(dev, max(1.0, policy.heading_trend_s * out.fps), mode="nearest")
+    new = trend + np.clip(new - trend, -policy.heading_band, policy.heading_band)
     turn = new - dev
     changed = np.abs(turn) > 1e-6
     if not changed.any():

@@ -7,22 +7,16 @@ from typing import Any
 import numpy as np
 
 from ..motion import Motion
+from .policy import ConformPolicy, resolve_policy
 
 __all__ = ["level_trunk"]
 
 
-#: Pitch the decoded trunk so the fore and hind stance feet stand alike above the ground
-#: (:func:`level_trunk`) before the planting ...
-LEVEL_TRUNK = True
-#: ... where their heights differ by more than this share of leg length (the part beyond
-#: it is levelled: a training species' decoded trunk is left as it is) ...
-LEVEL_TOLERANCE_PER_LEG = 0.02
-#: ... by at most this pitch [rad].
-LEVEL_MAX_PITCH = 0.5
-
-
 def level_trunk(
-    out: Motion, contacts: np.ndarray, glob: np.ndarray | None = None
+    out: Motion,
+    contacts: np.ndarray,
+    glob: np.ndarray | None = None,
+    policy: ConformPolicy | None = None,
 ) -> tuple[Motion, dict[str, Any] | None]:
     """The decoded motion pitched about its pelvis so that its fore and hind stance toes
     stand alike above the ground, and what was changed (``None``: nothing).
@@ -37,13 +31,15 @@ def level_trunk(
     both girdles have a foot in stance, the median height difference ``dz`` of their
     stance toes and the median fore-to-hind stance distance ``d`` along the heading give
     one pitch for the whole clip, asin((|dz| − tol)·sign(dz) / d) with tol =
-    :data:`LEVEL_TOLERANCE_PER_LEG` × L (none within it; at most
-    :data:`LEVEL_MAX_PITCH`); the body turns by it about its pelvis and the legs keep
+    ``policy.level_tolerance_per_leg`` × L (none within it; at most
+    ``policy.level_max_pitch``); the body turns by it about its pelvis and the legs keep
     their decoded angles. The planting then brings both pairs of feet down together
     (its slow pelvis carriage) instead of folding one pair. ``glob``: the motion's global
     joint positions, if already at hand.
     """
     from ..rotations import heading_yaw, quat_from_axis_angle, quat_mul
+
+    policy = resolve_policy(policy)
 
     c = np.asarray(contacts, dtype=bool)
     both = c[:, :2].any(axis=1) & c[:, 2:].any(axis=1)
@@ -64,11 +60,15 @@ def level_trunk(
         return out, None  # the feet are not where a quadruped's are: leave the pose
     dz = float(np.median((fore[:, 2] - hind[:, 2])[both]))
     leg = out.species_info.leg_length
-    excess = float(np.sign(dz)) * max(abs(dz) - LEVEL_TOLERANCE_PER_LEG * leg, 0.0)
+    excess = float(np.sign(dz)) * max(abs(dz) - policy.level_tolerance_per_leg * leg, 0.0)
     if excess == 0.0:
         return out, None
     pitch = float(
-        np.clip(np.arcsin(np.clip(excess / span, -1.0, 1.0)), -LEVEL_MAX_PITCH, LEVEL_MAX_PITCH)
+        np.clip(
+            np.arcsin(np.clip(excess / span, -1.0, 1.0)),
+            -policy.level_max_pitch,
+            policy.level_max_pitch,
+        )
     )
     left = np.stack([-np.sin(yaw), np.cos(yaw), np.zeros_like(yaw)], axis=-1)
     rot = np.array(out.rotations, dtype=np.float64, copy=True)

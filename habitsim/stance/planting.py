@@ -164,7 +164,10 @@ def smooth_path(x: np.ndarray, fps: float) -> np.ndarray:
 
 
 def label_source_stance(
-    points: Sequence[np.ndarray], fps: float, leg_length: float
+    points: Sequence[np.ndarray],
+    fps: float,
+    leg_length: float,
+    speed_per_body: float = STANCE_SPEED_PER_BODY,
 ) -> SourceStance:
     """Stance labels of a source's feet from their own paths (see the module docstring).
 
@@ -176,6 +179,9 @@ def label_source_stance(
             is measured where it touches the ground.
         fps: frame rate [Hz].
         leg_length: the source's own hind-leg length [m] (thresholds scale with it).
+        speed_per_body: a foot point slower than this share of the body's speed counts
+            as at rest (above the absolute rest speed; 0 switches it off), default
+            :data:`STANCE_SPEED_PER_BODY`.
 
     Returns:
         The :class:`SourceStance`.
@@ -234,7 +240,7 @@ def label_source_stance(
     # that is the running integral of the lowest point's velocity.
     path = np.zeros((t, 4, 3))
     vel = lowest[..., :2]
-    if STANCE_SPEED_PER_BODY > 0 and t >= 2:
+    if speed_per_body > 0 and t >= 2:
         # A planted paw of a fast gait rolls over its toes: its points move at a fraction
         # of the body's speed, above the absolute rest speed. The body's speed is the mean
         # of the four feet's velocities over about a stride.
@@ -242,7 +248,7 @@ def label_source_stance(
         body = np.linalg.norm(
             uniform_filter1d(vel.mean(axis=1), size_b, axis=0, mode="nearest"), axis=-1
         )
-        limit = np.maximum(CONTACT_SPEED_PER_LEG * leg_length, STANCE_SPEED_PER_BODY * body)
+        limit = np.maximum(CONTACT_SPEED_PER_LEG * leg_length, speed_per_body * body)
         vel = vel * (CONTACT_SPEED_PER_LEG * leg_length / limit)[:, None, None]
     if t >= 2:
         path[1:, :, :2] = np.cumsum(0.5 * (vel[1:] + vel[:-1]), axis=0) / fps

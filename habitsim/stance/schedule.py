@@ -15,15 +15,9 @@ import numpy as np
 from ..errors import HabitsimError
 from ..motion import Motion
 from ..species import FEET, load_species
+from .policy import ConformPolicy, resolve_policy
 
-__all__ = [
-    "MIN_SOURCE_AGREEMENT",
-    "MAX_DUTY_GAP",
-    "WALK_MIN_DUTY",
-    "WALK_MIN_FEET",
-    "transfer_contacts",
-    "walking_stance",
-]
+__all__ = ["transfer_contacts", "walking_stance"]
 
 
 def _gait_duty(target: str, source: Motion) -> tuple[str, float] | None:
@@ -48,23 +42,11 @@ def _gait_duty(target: str, source: Motion) -> tuple[str, float] | None:
     return None
 
 
-#: A decoded foot whose stance labels match the source's footfall schedule with an F1
-#: below this takes the source's schedule instead (the action's footfalls survive).
-#: The F1 alone lets a foot that is labelled in stance almost all the time through
-#: (stance share 0.9 against the source's 0.4 still scores 0.6), hence also
-#: :data:`MAX_DUTY_GAP`. Measured with the feature version 3 model: median decoded F1
-#: 0.83 on synthetic test transfers, 0.70 on transfers of real dog clips.
-MIN_SOURCE_AGREEMENT = 0.8
-
-#: ... and a decoded foot whose stance share differs from the source's by more than this
-#: takes the source's schedule too. On a real trot sent to the tiger the decoded feet
-#: stood 82–91 % of the time against the source's 38–42 %; planted, that clip fell after
-#: 0.3 s, with the source's schedule it was tracked to the end.
-MAX_DUTY_GAP = 0.1
-
-
 def transfer_contacts(
-    out: Motion, source: Motion, decoded: np.ndarray | None = None
+    out: Motion,
+    source: Motion,
+    decoded: np.ndarray | None = None,
+    policy: ConformPolicy | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Foot-contact labels of a transferred motion, and how they were found.
 
@@ -75,8 +57,9 @@ def transfer_contacts(
        source carries stance labels they are checked against its footfall schedule
        (carried over in normalised time, :func:`habitsim.contacts.warp_contacts`): the
        per-foot F1 and stance shares go into the report, and a foot that agrees less
-       than :data:`MIN_SOURCE_AGREEMENT` or whose stance share is more than
-       :data:`MAX_DUTY_GAP` from the source's takes the source's schedule.
+       than ``policy.min_source_agreement`` or whose stance share is more
+       than ``policy.max_duty_gap`` from the source's takes the source's
+       schedule (``policy``: the default :class:`ConformPolicy` when None).
     2. ``source``: no decoded contacts (``direct``), and the source carries stance labels
        (a synthetic clip's planned stance, an import's labels found on the source
        skeleton): the transferred motion keeps the source's footfall schedule.
@@ -95,6 +78,7 @@ def transfer_contacts(
     from ..contacts import contacts_by_duty, contacts_from_feet, drop_short_runs, warp_contacts
     from .planting import contact_f1
 
+    policy = resolve_policy(policy)
     src = None
     if source.contacts is not None:
         src = drop_short_runs(warp_contacts(np.asarray(source.contacts, bool), out.num_frames), 2)
@@ -107,7 +91,9 @@ def transfer_contacts(
             info["source_f1"] = [round(float(v), 3) for v in f1]
             info["duty"] = [round(float(v), 3) for v in duty]
             info["source_duty"] = [round(float(v), 3) for v in duty_src]
-            low = (f1 < MIN_SOURCE_AGREEMENT) | (np.abs(duty - duty_src) > MAX_DUTY_GAP)
+            low = (f1 < policy.min_source_agreement) | (
+                np.abs(duty - duty_src) > policy.max_duty_gap
+            )
             if low.any():
                 labels[:, low] = src[:, low]
                 info["feet_from_source"] = [n for n, lo in zip(FEET, low, strict=True) if lo]
@@ -143,34 +129,16 @@ def transfer_contacts(
     return labels, info
 
 
-#: A gait whose duty factor is below one half has an aerial phase (BIOMECH.md, footfall
-#: table); a target species that walks at the transfer's speed has none, so a transfer
-#: below the top of the target's walking Froude band has every foot in stance at least
-#: this share of the clip (:func:`walking_stance`). Measured with ``habitsim bench real``:
-#: a real Labrador's fast lateral-sequence walk (duty factor 0.31–0.50, Froude 0.28–0.54)
-#: sent to the cat kept its single-foot frames, which need a residual root force of
-#: 0.28 m·g against 0.09 with two feet down (README, "Real motion").
-WALK_MIN_DUTY = 0.5
-#: ... and at least this many feet down on every frame (:func:`habitsim.contacts.
-#: fill_support`; 0 switches it off): a duty factor of one half with the uneven footfall
-#: spacing of a real walk, or a clip that speeds up at its end, still left single-foot
-#: supports (a cat transfer of a Labrador walk that speeds up stood on one foot for the
-#: last 0.3 s and fell there). With it the habit references of ``habitsim bench real``
-#: need a median residual root force of 0.078 m·g instead of 0.108 (the cat's three
-#: walking windows 0.07–0.08 instead of 0.10–0.12).
-WALK_MIN_FEET = 2
-
-
 def walking_stance(
-    out: Motion, contacts: np.ndarray, source: Motion
+    out: Motion, contacts: np.ndarray, source: Motion, policy: ConformPolicy | None = None
 ) -> tuple[np.ndarray, dict[str, Any] | None]:
     """The stance labels of a transfer to a species that walks at the transfer's speed.
 
     When the transferred motion moves at a Froude number within the target's walking
     band (at most the top of ``gaits.walk.froude`` in its species file), every foot
-    standing less than :data:`WALK_MIN_DUTY` of the clip has its stance runs lengthened
+    standing less than ``policy.walk_min_duty`` of the clip has its stance runs lengthened
     at both ends (:func:`habitsim.contacts.lengthen_stance`), then every frame with
-    fewer than :data:`WALK_MIN_FEET` feet down takes the stance run nearest in time
+    fewer than ``policy.walk_min_feet`` feet down takes the stance run nearest in time
     (:func:`habitsim.contacts.fill_support`): the source's footfall phases stay, the
     aerial phases and single-foot supports of a faster source go. Kept
     as they are: labels of a gait that is not cyclic (a foot with fewer than two
@@ -187,12 +155,13 @@ def walking_stance(
     from ..gaits import action_gait
     from ..gaits.actions import ACTIONS
 
+    policy = resolve_policy(policy)
     walk = load_species(out.species).gaits.get("walk")
     c = np.asarray(contacts, dtype=bool)
     if walk is None or c.ndim != 2:
         return c, None
     duty = c.mean(axis=0)
-    if duty.min() >= WALK_MIN_DUTY:
+    if duty.min() >= policy.walk_min_duty:
         return c, None
     action = source.metadata.get("action")
     if action in ACTIONS:
@@ -206,9 +175,9 @@ def walking_stance(
     froude = gait_statistics(out, c).froude
     if not froude <= walk.froude[1]:
         return c, None
-    longer = lengthen_stance(c, WALK_MIN_DUTY)
-    if WALK_MIN_FEET:
-        longer = fill_support(longer, WALK_MIN_FEET)
+    longer = lengthen_stance(c, policy.walk_min_duty)
+    if policy.walk_min_feet:
+        longer = fill_support(longer, policy.walk_min_feet)
     return longer, {
         "froude": round(float(froude), 3),
         "walk_froude_max": float(walk.froude[1]),

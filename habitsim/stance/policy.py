@@ -1,0 +1,198 @@
+"""The knobs and switches of conforming a decoded motion, as one options object.
+
+:class:`ConformPolicy` holds every tuning value of the transfer's torch-free half: the
+footfall schedule (:mod:`habitsim.stance.schedule`), the bounds to the source
+(:mod:`habitsim.stance.bounds`), the trunk levelling (:mod:`habitsim.stance.level`) and
+the planting ladder (:mod:`habitsim.stance.ladder`). Pass one to
+:func:`habitsim.transfer` (``policy=``) or :func:`habitsim.stance.conform.conform`; left
+out, the defaults apply. Change a knob with :func:`dataclasses.replace`. Why each default
+is what it is: ``docs/transfer.md``, "Why the defaults".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from ..errors import HabitsimError
+
+__all__ = ["ConformPolicy", "ConformPolicyError", "resolve_policy"]
+
+
+class ConformPolicyError(HabitsimError, ValueError):
+    """A :class:`ConformPolicy` field outside its valid range."""
+
+
+@dataclass(frozen=True)
+class ConformPolicy:
+    """Knobs and switches of conforming a decoded motion.
+
+    In the order of the steps: the footfall schedule
+    (:func:`~habitsim.stance.schedule.transfer_contacts`,
+    :func:`~habitsim.stance.schedule.walking_stance`), the bounds to the source
+    (:mod:`habitsim.stance.bounds`), the trunk levelling
+    (:func:`~habitsim.stance.level.level_trunk`) and the planting ladder
+    (:func:`~habitsim.stance.ladder.plant_decoded`). Lengths are shares of the target's
+    leg length.
+
+    Attributes:
+        min_source_agreement: a decoded foot whose stance labels match the source's
+            footfall schedule with a per-foot F1 below this takes the source's schedule
+            [0–1].
+        max_duty_gap: ... as does a decoded foot whose stance share differs from the
+            source's by more than this [share of the clip, 0–1].
+        walk_min_duty: in a transfer at a Froude number the target walks at, every foot
+            stands at least this share of the clip [0–1].
+        walk_min_feet: ... and at least this many feet are down on every frame (0
+            switches the fill off) [feet, 0–4].
+        speed_band: the decoded horizontal speed stays within this factor of the
+            source's speed at the same Froude number [≥ 1].
+        speed_smooth_s: standard deviation of the Gaussian both speeds are smoothed
+            with [s].
+        height_band: the decoded root height's deviation from its median stays within
+            this factor of the source's [≥ 1] ...
+        height_floor_per_leg: ... or within this share of leg length, whichever is
+            larger.
+        height_window_s: half-width of the window the deviations' envelopes are taken
+            over [s].
+        heading_max_rate: fastest the decoded heading may turn away from the source's
+            [rad/s].
+        heading_smooth_s: standard deviation of the Gaussian a faster departure is
+            low-passed by [s].
+        heading_band: largest swing of the departure about its own slow trend [rad].
+        heading_trend_s: standard deviation of the Gaussian that gives that slow trend
+            [s].
+        level_trunk: switch: pitch the decoded trunk so that its fore and hind stance
+            toes stand alike above the ground before planting.
+        level_tolerance_per_leg: height difference of fore and hind stance toes left as
+            it is (the part beyond it is levelled) [share of leg length].
+        level_max_pitch: largest pitch applied [rad].
+        plant_max_reach_per_leg: a planting is kept only when every held stance toe is
+            within this distance of its foothold [share of leg length] ...
+        plant_max_swing_reach_per_leg: ... every swing toe between two stance runs
+            within this distance of its path [share of leg length] ...
+        plant_max_drop_per_leg: ... and the pelvis lowered by at most this much to reach
+            them [share of leg length].
+        plant_min_speed_ratio: the body is carried only as far as its stance legs carry
+            it when that keeps at least this share of its decoded speed [0–1].
+        foothold_rules: the foothold rules tried in order, ``False`` for the median of
+            the run's decoded toe path, ``True`` for the foothold centred under the
+            shoulder's / hip's sweep (at least one).
+        swing_lift: switch: lift every planted swing to the species' habitual swing
+            height (a half-sine over the swing).
+        restep_reach_share: restepping: a leg stretched to this share of its length sets
+            the longest stance sweep [0–1] ...
+        restep_min_period: ... and no stride gets shorter than this [frames]
+            (``math.inf`` switches restepping off).
+        partly_on_restep: switch: where the faster steps still miss, the partial
+            planting holds the runs the legs reach on the faster steps (off: on the
+            decoded ones).
+        partial_passes: the partial planting settles the runs it leaves free in at most
+            this many IK passes (0 switches partial planting off).
+        trim_to_reach: switch: shorten the stance runs the partial planting leaves free
+            to the legs' reach and plant again.
+        trim_min_run_s: a trimmed stance run keeps at least this long [s] (and 2 frames).
+        trim_margin_per_leg: a trimmed run's centred foothold must lie within the
+            stretched leg with the pelvis this much higher than it is [share of leg
+            length].
+    """
+
+    # footfall schedule
+    min_source_agreement: float = 0.8
+    max_duty_gap: float = 0.1
+    walk_min_duty: float = 0.5
+    walk_min_feet: int = 2
+    # bounds to the source
+    speed_band: float = 1.5
+    speed_smooth_s: float = 0.25
+    height_band: float = 1.5
+    height_floor_per_leg: float = 0.01
+    height_window_s: float = 0.5
+    heading_max_rate: float = 3.0
+    heading_smooth_s: float = 0.25
+    heading_band: float = math.pi / 4
+    heading_trend_s: float = 1.0
+    # trunk levelling
+    level_trunk: bool = True
+    level_tolerance_per_leg: float = 0.02
+    level_max_pitch: float = 0.5
+    # planting ladder
+    plant_max_reach_per_leg: float = 0.05
+    plant_max_swing_reach_per_leg: float = 0.1
+    plant_max_drop_per_leg: float = 0.1
+    plant_min_speed_ratio: float = 0.7
+    foothold_rules: tuple[bool, ...] = (False, True)
+    swing_lift: bool = True
+    restep_reach_share: float = 0.92
+    restep_min_period: float = 4.0
+    partly_on_restep: bool = True
+    partial_passes: int = 4
+    trim_to_reach: bool = True
+    trim_min_run_s: float = 0.1
+    trim_margin_per_leg: float = 0.1
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, float) and math.isnan(v):
+                raise ConformPolicyError(f"{f.name} must be a number, got {v!r}")
+        shares = (
+            "min_source_agreement",
+            "max_duty_gap",
+            "walk_min_duty",
+            "plant_min_speed_ratio",
+            "restep_reach_share",
+        )
+        for name in shares:
+            v = getattr(self, name)
+            if not 0.0 <= v <= 1.0:
+                raise ConformPolicyError(f"{name} must be in [0, 1], got {v!r}")
+        for name in ("speed_band", "height_band"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 1.0):
+                raise ConformPolicyError(f"{name} must be a finite factor ≥ 1, got {v!r}")
+        positive = (
+            "speed_smooth_s",
+            "height_window_s",
+            "heading_max_rate",
+            "heading_smooth_s",
+            "heading_band",
+            "heading_trend_s",
+            "restep_min_period",
+        )
+        for name in positive:
+            v = getattr(self, name)
+            if not v > 0.0:
+                raise ConformPolicyError(f"{name} must be > 0, got {v!r}")
+        non_negative = (
+            "height_floor_per_leg",
+            "level_tolerance_per_leg",
+            "level_max_pitch",
+            "plant_max_reach_per_leg",
+            "plant_max_swing_reach_per_leg",
+            "plant_max_drop_per_leg",
+            "trim_min_run_s",
+            "trim_margin_per_leg",
+        )
+        for name in non_negative:
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ConformPolicyError(f"{name} must be finite and ≥ 0, got {v!r}")
+        if not 0 <= self.walk_min_feet <= 4:
+            raise ConformPolicyError(f"walk_min_feet must be in 0..4, got {self.walk_min_feet}")
+        if self.partial_passes < 0:
+            raise ConformPolicyError(f"partial_passes must be ≥ 0, got {self.partial_passes}")
+        rules = self.foothold_rules
+        if not (isinstance(rules, tuple) and rules and all(isinstance(r, bool) for r in rules)):
+            raise ConformPolicyError(
+                f"foothold_rules must be a non-empty tuple of bools (False: median, True: "
+                f"centred), got {rules!r}"
+            )
+
+
+_DEFAULT = ConformPolicy()
+
+
+def resolve_policy(policy: ConformPolicy | None) -> ConformPolicy:
+    """``policy``, or the default :class:`ConformPolicy` when it is None."""
+    return _DEFAULT if policy is None else policy
