@@ -121,6 +121,52 @@ def test_one_controller_registry() -> None:
     assert track_cmd is not None
 
 
+def test_one_method_registry() -> None:
+    """One transfer-method registry: the API, the pipeline, the evaluation and the
+    command line take every method name from :data:`habitsim.transfer_methods.METHODS`,
+    and nothing else defines a ``register_method``."""
+    import habitsim.evaluation.methods as E
+    import habitsim.transfer_methods as T
+    from habitsim.cli import build_parser
+    from habitsim.models.config import VARIANTS
+
+    assert E.METHODS is T.METHODS and E.register_method is T.register_method
+    assert E.get_method("direct") is T.METHODS["direct"]
+    assert E.run_method is T.run_method  # the pipeline's _transfer runs it
+    assert "habitsim.transfer_methods" in import_graph()["habitsim.pipeline"]
+    assert [n for n, m in T.METHODS.items() if m.learned] == list(VARIANTS)
+    transfer_help = next(
+        a.choices["transfer"]
+        for a in build_parser()._actions
+        if hasattr(a, "choices") and a.choices
+    ).description
+    assert all(f"{name}:" in transfer_help for name in T.METHODS)
+    defined = []
+    for path in _python_files():
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef) and node.name == "register_method":
+                defined.append(str(path.relative_to(ROOT)))
+            if isinstance(node, ast.Assign | ast.AnnAssign):
+                targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                if any(isinstance(t, ast.Name) and t.id == "register_method" for t in targets):
+                    defined.append(str(path.relative_to(ROOT)))
+    assert defined == ["habitsim/transfer_methods.py"], defined
+
+
+def test_lazy_methods_name_modules_of_the_learning_layer() -> None:
+    """A lazily loaded method names a module that exists; the learned ones live in the
+    learning layer (loaded on first call, so the core never imports torch)."""
+    from habitsim.transfer_methods import METHODS, LazyFunction
+
+    modules = _project_modules()
+    learning = [i for i, (name, _) in enumerate(LAYERS) if name == "learning"][0]
+    for m in METHODS.values():
+        if isinstance(m.fn, LazyFunction):
+            assert m.fn.module in modules, m
+            assert layer_of(m.fn.module) == learning, m
+
+
 def test_command_selections_come_from_the_registry() -> None:
     """Benchmarks and commands that offer a subset of the controllers offer registry names."""
     from habitsim.cli import bench_balance, bench_refine, retarget_cmd
@@ -172,6 +218,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.stance",
             "habitsim.gait_stats",
             "habitsim.gaits",
+            "habitsim.transfer_methods",
             "habitsim.bvh",
             "habitsim.gltf",
             "habitsim.bvh_mapping",
