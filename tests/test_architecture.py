@@ -117,6 +117,7 @@ def test_one_controller_registry() -> None:
 
     assert S.CONTROLLERS is C.CONTROLLERS is C.CONTROLLER_NAMES
     assert set(C.CONTROLLERS) == set(C.REGISTRY)
+    assert all(callable(spec.build) for spec in C.REGISTRY.values())  # make_controller calls it
     assert {"servo", "pd", "balance", "mpc"} <= set(C.CONTROLLERS)
     assert track_cmd is not None
 
