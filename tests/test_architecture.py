@@ -205,6 +205,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
         "core",
         (
             "habitsim.errors",
+            "habitsim.physics_constants",
             "habitsim.fileio",
             "habitsim.rotations",
             "habitsim.skeleton",
