@@ -247,7 +247,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ),
     ("learning", ("habitsim.models",)),
     ("benchmark", ("habitsim.pipeline", "habitsim.evaluation")),
-    ("apps", ("habitsim.cli", "habitsim.__main__", "habitsim.fuzz", "habitsim.examples")),
+    ("apps", ("habitsim.cli", "habitsim.__main__", "habitsim.examples")),
 )
 #: The package itself (``habitsim/__init__.py``): the facade above every layer, which any
 #: submodule's import runs first anyway; importing it is not an upward import.
