@@ -55,10 +55,10 @@ lint: $(BIN)/ruff $(BIN)/mypy $(STAMP)
 	$(BIN)/ruff format --check $(LINTED)
 	$(BIN)/python .ci/typecheck.py
 
-# A long fuzzing campaign over the readers and the command line (counts by outcome; the
-# same campaign as `habitsim fuzz --n N`).
+# A long fuzzing campaign over the readers and the command line, counts by outcome
+# (tests/fuzzing, a developer tool: `python -m fuzzing` from tests/). FUZZ_N inputs.
 fuzz: $(STAMP)
-	$(BIN)/python -m habitsim.fuzz --n $(or $(FUZZ_N),10000)
+	cd tests && ../$(BIN)/python -m fuzzing --n $(or $(FUZZ_N),10000) --check
 
 clean:
 	rm -rf $(VENV) $(DEMO_OUT)

@@ -31,12 +31,15 @@ ROOTS = {
     "controllers": "habitsim.controllers",
     "evaluation": "habitsim.evaluation",
 }
+#: Developer tools kept with the tests (not installed), checked under the name they are
+#: imported by from ``tests/``.
+TOOLS = {"tests/fuzzing": "fuzzing"}
 
 
 def sources() -> list[BuildSource]:
-    """Every ``.py`` file under :data:`ROOTS`, with its installed module name."""
+    """Every ``.py`` file under :data:`ROOTS` and :data:`TOOLS`, with its module name."""
     out = []
-    for folder, package in ROOTS.items():
+    for folder, package in {**ROOTS, **TOOLS}.items():
         root = REPO / folder
         for path in sorted(root.rglob("*.py")):
             rel = path.relative_to(root).with_suffix("")

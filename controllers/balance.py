@@ -70,6 +70,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from habitsim.physics_constants import GRAVITY
+
 from .base import BaseController, ControllerError, ControllerStats, Reference
 from .contact_state import STANCE, SWING, ContactTracker
 from .gains import critical_damping, max_stable_gains, stiffness_rule
@@ -156,7 +158,7 @@ class BalanceConfig:
 
     mass: float
     leg_length: float
-    gravity: float = 9.81
+    gravity: float = GRAVITY
     trunk_omega: float = 0.0
     rot_omega: float = 0.0
     damping_ratio: float = 1.0
@@ -181,7 +183,7 @@ class BalanceConfig:
 
     @classmethod
     def scaled(
-        cls, mass: float, leg_length: float, gravity: float = 9.81, **overrides: Any
+        cls, mass: float, leg_length: float, gravity: float = GRAVITY, **overrides: Any
     ) -> BalanceConfig:
         """The defaults for a body of ``mass`` [kg] and ``leg_length`` [m].
 
@@ -357,7 +359,7 @@ class BalanceController(BaseController):
         if config is None:
             length = model_leg_length(model, legs.feet) if leg_length is None else float(leg_length)
             config = BalanceConfig.scaled(
-                legs.mass, length, gnorm if gnorm > 0 else 9.81, **options
+                legs.mass, length, gnorm if gnorm > 0 else GRAVITY, **options
             )
         elif options:
             config = replace(config, **options)

@@ -3,7 +3,8 @@
 :data:`CONTROLLERS` is the one list of controller names in habitsim: the tracking runner
 (:func:`habitsim.sim.track`), the command line (``--controller`` choices) and the
 evaluation all take it from here. Each name has a :class:`ControllerSpec` in
-:data:`REGISTRY` (which actuators it drives, whether it plans with the whole clip):
+:data:`REGISTRY` (which actuators it drives, whether it plans with the whole clip, and
+the constructor :func:`make_controller` calls):
 
 * ``"servo"`` — :class:`~habitsim.controllers.ServoController`: in-engine position
   servos (``ctrl`` = target angle; the model must have servos, see
@@ -29,9 +30,10 @@ hind-leg length when ``species`` is given, else the model's trunk height over th
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Any, Literal, Protocol, cast
 
 import mujoco
 import numpy as np
@@ -40,7 +42,11 @@ from habitsim.errors import unknown_choice
 
 from .base import Controller, ControllerError, PDController, actuated_joints
 
+if TYPE_CHECKING:
+    from .balance import BalanceController
+
 __all__ = [
+    "ControllerConstructor",
     "CONTROLLERS",
     "CONTROLLER_NAMES",
     "REGISTRY",
@@ -51,9 +57,24 @@ __all__ = [
 ]
 
 
+class ControllerConstructor(Protocol):
+    """``build(model, species, feet, options) -> Controller``: a registry entry's
+    constructor. ``options`` are :func:`make_controller`'s ``**options`` (the constructor
+    takes what it knows and raises :class:`ControllerError` on the rest); the reference
+    clip of a planned controller is set afterwards (``set_plan``)."""
+
+    def __call__(
+        self,
+        model: mujoco.MjModel,
+        species: Any,
+        feet: Sequence[str] | None,
+        options: dict[str, Any],
+    ) -> Controller: ...
+
+
 @dataclass(frozen=True)
 class ControllerSpec:
-    """What a controller name needs of the model and the clip.
+    """A controller name, what it needs of the model and the clip, and its constructor.
 
     Attributes:
         name: the name (``--controller`` on the command line).
@@ -63,38 +84,145 @@ class ControllerSpec:
             same strength, :func:`~habitsim.controllers.robot.torque_model`).
         planned: the controller plans with the whole clip (``set_plan``).
         summary: one line for help texts.
+        build: the constructor (:class:`ControllerConstructor`) :func:`make_controller`
+            calls.
     """
 
     name: str
     actuators: Literal["servo", "torque"]
     planned: bool
     summary: str
+    build: ControllerConstructor
+
+
+#: Foot geoms of habitsim's species models (LF, RF, LH, RH): the trunk stabiliser's default.
+_SPECIES_FEET = ("lf_foot", "rf_foot", "lh_foot", "rh_foot")
+
+
+def _leg_length(species: Any) -> float | None:
+    if species is None:
+        return None
+    from habitsim.species import load_species
+
+    return float(load_species(species).leg_length)
+
+
+def _servo(
+    name: str,
+    model: mujoco.MjModel,
+    species: Any,
+    feet: Sequence[str] | None,
+    options: dict[str, Any],
+) -> Controller:
+    """``servo``, optionally ``+id`` (inverse-dynamics feed-forward) and ``+stance`` (the
+    trunk stabiliser on ``feet``, default habitsim's foot geoms); ``species`` unused."""
+    if options:
+        raise ControllerError(f"unknown {name} option(s): {', '.join(sorted(options))}")
+    from .feedforward import InverseDynamicsFeedforward
+    from .servo import ServoController
+
+    ff = InverseDynamicsFeedforward(model) if "+id" in name else None
+    servo = ServoController(model, feedforward=ff)
+    if not name.endswith("+stance"):
+        return servo
+    from .stance import StabilizedController, TrunkStabilizer
+
+    stab = TrunkStabilizer(model, _SPECIES_FEET if feet is None else feet)
+    return StabilizedController(servo, stab)
+
+
+def _pd(
+    model: mujoco.MjModel,
+    species: Any,
+    feet: Sequence[str] | None,
+    options: dict[str, Any],
+) -> Controller:
+    """``pd``: gains ``kp`` and ``kd`` given, or both by :func:`default_pd`; ``species``
+    and ``feet`` unused."""
+    kp, kd = options.pop("kp", None), options.pop("kd", None)
+    joints, dt = options.pop("joints", None), options.pop("dt", None)
+    if options:
+        raise ControllerError(
+            f"unknown pd option(s): {', '.join(sorted(options))}; valid: kp, kd, joints, dt"
+        )
+    if kp is None and kd is None:
+        return default_pd(model, joints, dt)
+    if kp is None or kd is None:
+        raise ControllerError("pass both kp and kd (or neither for the default rule)")
+    return PDController(model, kp, kd, joints)
+
+
+def _balance(
+    model: mujoco.MjModel,
+    species: Any,
+    feet: Sequence[str] | None,
+    options: dict[str, Any],
+) -> Controller:
+    """``balance``, scaled by the species' leg length unless ``leg_length`` is given."""
+    from .balance import BalanceController
+
+    leg = _leg_length(species)
+    if leg is not None:
+        options.setdefault("leg_length", leg)
+    return BalanceController(model, feet, **options)
+
+
+def _mpc(
+    model: mujoco.MjModel,
+    species: Any,
+    feet: Sequence[str] | None,
+    options: dict[str, Any],
+) -> Controller:
+    """``mpc``, scaled by the species' leg length unless ``leg_length`` is given."""
+    from .mpc import MPCController
+
+    leg = _leg_length(species)
+    if leg is not None:
+        options.setdefault("leg_length", leg)
+    return MPCController(model, feet, **options)
 
 
 #: Every controller name, in the order help texts and tables list them.
 REGISTRY: Mapping[str, ControllerSpec] = {
     s.name: s
     for s in (
-        ControllerSpec("servo", "servo", False, "in-engine position servos"),
-        ControllerSpec("pd", "torque", False, "explicit PD torques on the motors"),
-        ControllerSpec("servo+stance", "servo", False, "servos + stance-leg trunk stabiliser"),
-        ControllerSpec("servo+id", "servo", False, "servos + inverse-dynamics feed-forward"),
+        ControllerSpec(
+            "servo",
+            "servo",
+            False,
+            "in-engine position servos",
+            functools.partial(_servo, "servo"),
+        ),
+        ControllerSpec("pd", "torque", False, "explicit PD torques on the motors", _pd),
+        ControllerSpec(
+            "servo+stance",
+            "servo",
+            False,
+            "servos + stance-leg trunk stabiliser",
+            functools.partial(_servo, "servo+stance"),
+        ),
+        ControllerSpec(
+            "servo+id",
+            "servo",
+            False,
+            "servos + inverse-dynamics feed-forward",
+            functools.partial(_servo, "servo+id"),
+        ),
         ControllerSpec(
             "servo+id+stance",
             "servo",
             False,
             "servos + inverse-dynamics feed-forward + trunk stabiliser",
+            functools.partial(_servo, "servo+id+stance"),
         ),
-        ControllerSpec("balance", "torque", True, "stance-force QP + swing legs"),
-        ControllerSpec("mpc", "torque", True, "convex MPC feeding the stance-force QP"),
+        ControllerSpec("balance", "torque", True, "stance-force QP + swing legs", _balance),
+        ControllerSpec("mpc", "torque", True, "convex MPC feeding the stance-force QP", _mpc),
     )
 }
 #: The controller names accepted by :func:`make_controller` and :func:`habitsim.sim.track`.
 CONTROLLERS: tuple[str, ...] = tuple(REGISTRY)
 #: Same tuple as :data:`CONTROLLERS` (the older name).
 CONTROLLER_NAMES = CONTROLLERS
-#: Foot geoms of habitsim's species models (LF, RF, LH, RH): the trunk stabiliser's default.
-_SPECIES_FEET = ("lf_foot", "rf_foot", "lh_foot", "rh_foot")
 
 
 def controller_spec(name: str) -> ControllerSpec:
@@ -122,14 +250,6 @@ def default_pd(
     kp = np.minimum(stiffness_rule(model, names, mode="torque"), kp_max)
     kd = np.minimum(critical_damping(model, kp, names), kd_max)
     return PDController(model, kp, kd, names)
-
-
-def _leg_length(species) -> float | None:
-    if species is None:
-        return None
-    from habitsim.species import load_species
-
-    return float(load_species(species).leg_length)
 
 
 def make_controller(
@@ -171,53 +291,9 @@ def make_controller(
         UnknownSpeciesError: unknown species.
     """
     spec = controller_spec(name)
-    if spec.actuators == "servo":
-        return _servo_controller(name, model, feet, options)
-    if name == "pd":
-        kp, kd = options.pop("kp", None), options.pop("kd", None)
-        joints, dt = options.pop("joints", None), options.pop("dt", None)
-        if options:
-            raise ControllerError(
-                f"unknown pd option(s): {', '.join(sorted(options))}; valid: kp, kd, joints, dt"
-            )
-        if kp is None and kd is None:
-            return default_pd(model, joints, dt)
-        if kp is None or kd is None:
-            raise ControllerError("pass both kp and kd (or neither for the default rule)")
-        return PDController(model, kp, kd, joints)
-    leg = _leg_length(species)
-    if leg is not None:
-        options.setdefault("leg_length", leg)
-    if name == "balance":
-        from .balance import BalanceController
-
-        ctl: BalanceController = BalanceController(model, feet, **options)
-    else:
-        from .mpc import MPCController
-
-        ctl = MPCController(model, feet, **options)
-    if qpos is not None:
+    ctl = spec.build(model, species, feet, options)
+    if spec.planned and qpos is not None:
         if fps is None:
             raise ControllerError("a reference qpos needs fps")
-        ctl.set_plan(qpos, fps, contacts)
+        cast("BalanceController", ctl).set_plan(qpos, fps, contacts)  # balance, mpc
     return ctl
-
-
-def _servo_controller(
-    name: str, model: mujoco.MjModel, feet: Sequence[str] | None, options: dict
-) -> Controller:
-    """``servo``, optionally ``+id`` (inverse-dynamics feed-forward) and ``+stance`` (the
-    trunk stabiliser on ``feet``, default habitsim's foot geoms)."""
-    if options:
-        raise ControllerError(f"unknown {name} option(s): {', '.join(sorted(options))}")
-    from .feedforward import InverseDynamicsFeedforward
-    from .servo import ServoController
-
-    ff = InverseDynamicsFeedforward(model) if "+id" in name else None
-    servo = ServoController(model, feedforward=ff)
-    if not name.endswith("+stance"):
-        return servo
-    from .stance import StabilizedController, TrunkStabilizer
-
-    stab = TrunkStabilizer(model, _SPECIES_FEET if feet is None else feet)
-    return StabilizedController(servo, stab)

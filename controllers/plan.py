@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from habitsim.physics_constants import CONTACT_HEIGHT_PER_LEG
+
 from .base import ControllerError
 from .legs import LegSet, model_leg_length
 
@@ -368,7 +370,7 @@ def plan_from_qpos(
     if contacts is None:
         leg = model_leg_length(model, legs.feet) if leg_length is None else float(leg_length)
         low = feet_pos[:, :, 2] - legs.radius[None, :]
-        cont = low < low.min() + 0.02 * leg
+        cont = low < low.min() + CONTACT_HEIGHT_PER_LEG * leg
     else:
         cont = np.asarray(contacts, dtype=bool)
         if cont.shape != (t, nf):

@@ -7,8 +7,9 @@ layer down, in :mod:`habitsim.metrics`. Modules:
   ``intra_fid``, ``downstream_fid``, ``diversity``, ``one_nna``) and ``mpjpe_mm``.
 * :mod:`habitsim.evaluation.evaluator` — the frozen evaluator network (features and
   species / action heads): :func:`load_evaluator`, :func:`train_evaluator`.
-* :mod:`habitsim.evaluation.methods` — the transfer-method registry (``direct``,
-  ``ground_truth``, the learned methods of :mod:`habitsim.models`).
+* :mod:`habitsim.evaluation.methods` — the benchmark's names for the one transfer-method
+  registry, :mod:`habitsim.transfer_methods` (``direct``, ``ground_truth``, the learned
+  methods of :mod:`habitsim.models`).
 * :mod:`habitsim.evaluation.runner` — the benchmark runner (``habitsim eval``):
   :class:`EvalConfig`, :func:`run_benchmark`; its pieces :mod:`~.config`,
   :mod:`~.planning`, :mod:`~.pairs`, :mod:`~.tables`, :mod:`~.summary`.

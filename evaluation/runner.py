@@ -28,7 +28,7 @@ the refinement as it is) and measures:
    with ``fallback``: a failed solve keeps the input and says so in ``refine_status``).
    Stance phases are the transfer's labels (``direct``: the source's; ``ground_truth``:
    the planned stance; the learned methods:
-   :func:`habitsim.models.transfer.transfer_contacts`), found by the transfer stage
+   :func:`habitsim.stance.schedule.transfer_contacts`), found by the transfer stage
    when a method sets none;
 4. kinematic (:mod:`~habitsim.metrics.kinematic`) and dynamic
    (:mod:`~habitsim.metrics.dynamic`) plausibility of the reference that is tracked

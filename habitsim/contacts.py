@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 
 from .errors import InvalidMotionError
+from .physics_constants import CONTACT_HEIGHT_PER_LEG, GRAVITY
 
 if TYPE_CHECKING:  # pragma: no cover
     from .species import Species
@@ -69,8 +70,6 @@ class FootTrack(Protocol):
     def foot_positions(self) -> np.ndarray: ...
 
 
-#: Toe height threshold as a fraction of the hind-leg length (docs/metrics.md: 2 %).
-CONTACT_HEIGHT_PER_LEG = 0.02
 #: Horizontal toe speed threshold in hind-leg lengths per second.
 CONTACT_SPEED_PER_LEG = 0.3
 #: Factor on both thresholds for the loose (staying-in-contact) condition.
@@ -190,7 +189,7 @@ def contacts_by_duty(
     d = np.broadcast_to(np.asarray(duty, dtype=np.float64), (feet.shape[1],))
     if np.any(~np.isfinite(d)) or np.any(d <= 0.0) or np.any(d >= 1.0):
         raise InvalidMotionError(f"duty factors must lie in (0, 1), got {d.tolist()}")
-    score = _toe_speed(feet, fps) / np.sqrt(9.81 * leg_length) + feet[..., 2] / leg_length
+    score = _toe_speed(feet, fps) / np.sqrt(GRAVITY * leg_length) + feet[..., 2] / leg_length
     thr = np.array([np.quantile(score[:, f], d[f]) for f in range(feet.shape[1])])
     c = score <= thr[None, :]
     if c.shape[0] >= 5:  # 5-frame majority vote per foot (a binary median), edges repeated

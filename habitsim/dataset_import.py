@@ -46,6 +46,7 @@ from .dataset.clips import _measure
 from .errors import DatasetError, HabitsimError, OutputPathError, brief, brief_path
 from .fileio import atomic_write_text, make_dirs, output_transaction
 from .motion import Motion, resample_motion
+from .physics_constants import GRAVITY
 from .species import load_species
 
 __all__ = ["IMPORT_KIND", "SOURCE_SUFFIXES", "ImportBuild", "import_folder", "read_labels"]
@@ -56,7 +57,6 @@ IMPORT_KIND = IMPORTED_KIND
 SOURCE_SUFFIXES = (".bvh", ".glb", ".gltf")
 #: Most files one import takes (a guard against pointing it at a whole disk).
 MAX_FILES = 10_000
-_GRAVITY = 9.81
 _STEM = re.compile(r"[^a-z0-9_]+")
 
 
@@ -174,10 +174,10 @@ def _entry(m: Motion, rel: str, split: str, held_out: bool, action: str, i: int)
         pair_key=f"import:{Path(rel).stem}",
         seed=0,
         speed_mps=speed,
-        froude=speed * speed / (_GRAVITY * sp.hip_height),
+        froude=speed * speed / (GRAVITY * sp.hip_height),
         duty_factor=duty,
         turn_rate=turn,
-        turn_rate_nd=turn * math.sqrt(sp.hip_height / _GRAVITY),
+        turn_rate_nd=turn * math.sqrt(sp.hip_height / GRAVITY),
         duration_s=float(dur),
         frames=int(m.num_frames),
         fps=float(m.fps),

@@ -69,10 +69,15 @@ class SimulationError(HabitsimError, ValueError):
 
 class UnknownMethodError(HabitsimError, KeyError, ValueError):
     """A transfer method name that is not registered (the message lists the valid ones);
-    raised by :func:`habitsim.models.transfer` and the benchmark's method registry."""
+    raised by the method registry, :data:`habitsim.transfer_methods.METHODS`."""
 
     def __str__(self) -> str:  # KeyError would quote the whole message
         return str(self.args[0]) if self.args else ""
+
+
+class MethodUnavailable(HabitsimError):
+    """A registered transfer method that cannot serve this (motion, target) pair: no
+    paired ground truth, no trained checkpoint of its variant; the reason is the message."""
 
 
 class OutputPathError(HabitsimError, OSError):

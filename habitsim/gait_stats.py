@@ -10,7 +10,8 @@ Definitions (keys of :meth:`GaitStats.to_dict`; docs/metrics.md names where it h
   the trunk's sway). Without a stride period (standing, fewer than two touchdowns) or a
   clip shorter than one stride: the net displacement from the first to the last frame
   over (T − 1) / fps. 0 for a one-frame clip.
-* ``froude``: v² / (g·h), g = 9.81 m/s², h = the species' standing hip height.
+* ``froude``: v² / (g·h), g = :data:`~habitsim.physics_constants.GRAVITY` (9.81 m/s²),
+  h = the species' standing hip height.
 * ``duty_factor_per_foot``: the share of frames in contact, counted over the foot's
   complete strides (from its first to its last touchdown, exclusive) when it has at
   least two touchdowns, else over the whole clip. ``duty_factor`` is the mean over feet.
@@ -58,6 +59,7 @@ import numpy as np
 from .body import center_of_mass
 from .contacts import detect_contacts, foot_stride_periods, touchdown_frames
 from .errors import InvalidMotionError
+from .physics_constants import GRAVITY
 from .species import FEET
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -74,8 +76,6 @@ __all__ = [
     "circular_mean",
 ]
 
-#: Standard gravity [m/s²].
-GRAVITY = 9.81
 #: Froude number of the trot → gallop transition (Alexander & Jayes 1983: animals of very
 #: different size change to a gallop or canter near Fr 2–3, often quoted 2.5).
 GALLOP_FROUDE = 2.5

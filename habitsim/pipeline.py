@@ -8,7 +8,7 @@ its stance labels and how they were found, the wall time and the stage's metrics
 
 Stance labels travel, they are never found twice:
 
-* **transfer** labels its output (:func:`habitsim.models.transfer.transfer_contacts`:
+* **transfer** labels its output (:func:`habitsim.stance.schedule.transfer_contacts`:
   the source's footfalls when the source has labels, else detected on resting feet, else
   the duty-factor guess; a method that returns labels of its own keeps them);
 * **refine** plants exactly those labels (``refine(..., contacts=...)``) and returns them;
@@ -239,14 +239,14 @@ def _contacts_method(out: Motion, had_labels: bool) -> str:
 
 
 def _transfer(source: Motion, target: str, method: str, seed: int) -> Stage:
-    from .evaluation.methods import run_method
+    from .transfer_methods import run_method
 
     t0 = time.perf_counter()
     out = run_method(method, source, target, seed=seed)
     contacts = None if out.contacts is None else np.asarray(out.contacts, dtype=bool)
     how = _contacts_method(out, contacts is not None)
     if contacts is None:  # the method gave no labels: the transfer stage finds them, once
-        from .models.transfer import transfer_contacts
+        from .stance.schedule import transfer_contacts
 
         contacts, info = transfer_contacts(out, source)
         how = str(info["method"])
@@ -366,8 +366,9 @@ def run_clip(
     Args:
         source: the source motion (its ``contacts`` are the source's stance labels).
         target: target species.
-        method: transfer method (:func:`habitsim.evaluation.methods.method_names`:
-            ``habit``, ``direct``, ``ground_truth``, …).
+        method: transfer method, a name of the registry
+            :data:`habitsim.transfer_methods.METHODS` (``habit``, ``direct``,
+            ``ground_truth``, …).
         refine: ``none``, ``A`` (kinematic) or ``B`` (dynamics); ``kinematic`` and
             ``dynamics`` are accepted too. A failed solve keeps its input (fallback) and
             says so in ``refined.status``.
@@ -387,7 +388,7 @@ def run_clip(
     Raises:
         PipelineError: bad options. UnknownSpeciesError: unknown target.
         UnknownMethodError / MethodUnavailable: the method is unknown / cannot serve the
-        pair (from :mod:`habitsim.evaluation.methods`). RefineInputError: a motion the
+        pair (from :mod:`habitsim.transfer_methods`). RefineInputError: a motion the
         refinement cannot take. Tracking failures are results (``tracked.status``).
     """
     from .qpos import species_model

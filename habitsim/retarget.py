@@ -53,6 +53,7 @@ import numpy as np
 from .errors import HabitsimError
 from .mjutils import foot_soles, free_body, home_qpos
 from .motion import Motion
+from .physics_constants import GRAVITY
 from .stance.planting import carriage_drop
 
 __all__ = [
@@ -833,7 +834,7 @@ def trot(
         raise RetargetError(
             f"a trot needs 4 feet in the order LF, RF, LH, RH; got {', '.join(rl.feet)}"
         )
-    g = float(np.linalg.norm(rl.model.opt.gravity)) or 9.81
+    g = float(np.linalg.norm(rl.model.opt.gravity)) or GRAVITY
     period = 2.4 * math.sqrt(rl.leg_length / g) if period_s is None else float(period_s)
     height = 0.25 * rl.leg_length if step_height is None else float(step_height)
     for name, v in (("duration_s", duration_s), ("fps", fps), ("period_s", period)):

@@ -49,6 +49,7 @@ import trimesh
 
 from habitsim.body import bone_girth_keys
 from habitsim.errors import HabitsimError
+from habitsim.physics_constants import GRAVITY
 from habitsim.skeleton import ABDUCTION_SIGN, FOOT_JOINTS, JOINT_NAMES, PARENTS, fk, get_skeleton
 from habitsim.species import Species, load_species
 
@@ -75,7 +76,6 @@ __all__ = [
 ]
 
 MODELS_DIR = Path(__file__).resolve().parent
-GRAVITY = 9.81  # [m/s^2]
 TIMESTEP = 0.002  # [s]
 END_POINTS = ("snout", "tail3", *FOOT_JOINTS)
 FOOT_FRICTION = 1.0  # sliding friction of feet (dry ground, unitless)

@@ -117,8 +117,55 @@ def test_one_controller_registry() -> None:
 
     assert S.CONTROLLERS is C.CONTROLLERS is C.CONTROLLER_NAMES
     assert set(C.CONTROLLERS) == set(C.REGISTRY)
+    assert all(callable(spec.build) for spec in C.REGISTRY.values())  # make_controller calls it
     assert {"servo", "pd", "balance", "mpc"} <= set(C.CONTROLLERS)
     assert track_cmd is not None
+
+
+def test_one_method_registry() -> None:
+    """One transfer-method registry: the API, the pipeline, the evaluation and the
+    command line take every method name from :data:`habitsim.transfer_methods.METHODS`,
+    and nothing else defines a ``register_method``."""
+    import habitsim.evaluation.methods as E
+    import habitsim.transfer_methods as T
+    from habitsim.cli import build_parser
+    from habitsim.models.config import VARIANTS
+
+    assert E.METHODS is T.METHODS and E.register_method is T.register_method
+    assert E.get_method("direct") is T.METHODS["direct"]
+    assert E.run_method is T.run_method  # the pipeline's _transfer runs it
+    assert "habitsim.transfer_methods" in import_graph()["habitsim.pipeline"]
+    assert [n for n, m in T.METHODS.items() if m.learned] == list(VARIANTS)
+    transfer_help = next(
+        a.choices["transfer"]
+        for a in build_parser()._actions
+        if hasattr(a, "choices") and a.choices
+    ).description
+    assert all(f"{name}:" in transfer_help for name in T.METHODS)
+    defined = []
+    for path in _python_files():
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef) and node.name == "register_method":
+                defined.append(str(path.relative_to(ROOT)))
+            if isinstance(node, ast.Assign | ast.AnnAssign):
+                targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                if any(isinstance(t, ast.Name) and t.id == "register_method" for t in targets):
+                    defined.append(str(path.relative_to(ROOT)))
+    assert defined == ["habitsim/transfer_methods.py"], defined
+
+
+def test_lazy_methods_name_modules_of_the_learning_layer() -> None:
+    """A lazily loaded method names a module that exists; the learned ones live in the
+    learning layer (loaded on first call, so the core never imports torch)."""
+    from habitsim.transfer_methods import METHODS, LazyFunction
+
+    modules = _project_modules()
+    learning = [i for i, (name, _) in enumerate(LAYERS) if name == "learning"][0]
+    for m in METHODS.values():
+        if isinstance(m.fn, LazyFunction):
+            assert m.fn.module in modules, m
+            assert layer_of(m.fn.module) == learning, m
 
 
 def test_command_selections_come_from_the_registry() -> None:
@@ -158,6 +205,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
         "core",
         (
             "habitsim.errors",
+            "habitsim.physics_constants",
             "habitsim.fileio",
             "habitsim.rotations",
             "habitsim.skeleton",
@@ -171,6 +219,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.stance",
             "habitsim.gait_stats",
             "habitsim.gaits",
+            "habitsim.transfer_methods",
             "habitsim.bvh",
             "habitsim.gltf",
             "habitsim.bvh_mapping",
@@ -197,7 +246,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ),
     ("learning", ("habitsim.models",)),
     ("benchmark", ("habitsim.pipeline", "habitsim.evaluation")),
-    ("apps", ("habitsim.cli", "habitsim.__main__", "habitsim.fuzz", "habitsim.examples")),
+    ("apps", ("habitsim.cli", "habitsim.__main__", "habitsim.examples")),
 )
 #: The package itself (``habitsim/__init__.py``): the facade above every layer, which any
 #: submodule's import runs first anyway; importing it is not an upward import.

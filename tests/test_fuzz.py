@@ -1,19 +1,21 @@
-"""Hypothesis-driven fuzzing of the readers and the command line (issue 17): every input
-is either read or refused with a :class:`~habitsim.errors.HabitsimError`, never another
-exception. The mutations are those of :mod:`habitsim.fuzz` (whose long campaign is
-``python -m habitsim.fuzz``), driven here by hypothesis with a small number of examples
-so the file runs in seconds."""
+"""Hypothesis-driven fuzzing of the readers and the command line: every input is either
+read or refused with a :class:`~habitsim.errors.HabitsimError`, never another exception.
+The mutations are those of the developer tool ``tests/fuzzing`` (whose long campaign is
+``make fuzz``), driven here by hypothesis with a small number of examples so the file
+runs in seconds, and a short campaign through the tool's command line."""
 
 from __future__ import annotations
 
+import argparse
 import tempfile
 from pathlib import Path
 
 import pytest
+from fuzzing import campaign as fuzz
+from fuzzing.__main__ import main as fuzz_main
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from habitsim import fuzz
 from habitsim.bvh import parse_bvh
 from habitsim.errors import HabitsimError
 
@@ -151,13 +153,11 @@ def test_campaign_counts() -> None:
     assert "total" in res.table()
 
 
-# ---------------------------------------------------------------------- habitsim fuzz
+# ---------------------------------------------------------------------- python -m fuzzing
 
 
-def test_fuzz_command_prints_counts_by_outcome(capsys) -> None:
-    from habitsim.cli import main
-
-    code = main(["fuzz", "--n", "12", "--targets", "bvh,species", "--no-progress", "--check"])
+def test_fuzz_tool_prints_counts_by_outcome(capsys) -> None:
+    code = fuzz_main(["--n", "12", "--targets", "bvh,species", "--no-progress", "--check"])
     out = capsys.readouterr().out
     assert code == 0, out
     assert "fuzz: 12 inputs, seed 0" in out and "target: 0 raw tracebacks" in out
@@ -167,35 +167,37 @@ def test_fuzz_command_prints_counts_by_outcome(capsys) -> None:
     assert total.split()[1] == "12" and total.split()[4] == "0"
 
 
-def test_fuzz_command_check_exit_code(monkeypatch, capsys) -> None:
+def test_fuzz_tool_check_exit_code(monkeypatch, capsys) -> None:
     """A raw exception is shown with its input; only --check turns it into exit code 1."""
-    from habitsim.cli import main
 
     def broken(ws, case):
         raise RuntimeError("a raw bug")
 
     monkeypatch.setitem(fuzz._RUNNERS, "species", broken)
-    argv = ["fuzz", "--n", "3", "--targets", "species", "--no-progress"]
-    assert main(argv) == 0
+    argv = ["--n", "3", "--targets", "species", "--no-progress"]
+    assert fuzz_main(argv) == 0
     out = capsys.readouterr().out
     assert "raw RuntimeError on a species input" in out and "MISSED" in out
-    assert main([*argv, "--check"]) == 1
+    assert fuzz_main([*argv, "--check"]) == 1
 
 
 @pytest.mark.parametrize(
     "argv", [["--n", "0"], ["--n", "10000000"], ["--show", "-1"], ["--seed", "-1"]]
 )
-def test_fuzz_command_bounds(capsys, argv: list[str]) -> None:
-    from habitsim.cli import main
-
-    assert main(["fuzz", *argv]) == 2
+def test_fuzz_tool_bounds(capsys, argv: list[str]) -> None:
+    assert fuzz_main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "valid" in err
 
 
-def test_fuzz_module_entry_point_still_works(capsys) -> None:
-    assert fuzz.main(["--n", "4", "--targets", "species"]) == 0
-    assert "total" in capsys.readouterr().out
+def test_fuzz_is_not_in_the_package() -> None:
+    import importlib.util
+
+    from habitsim.cli import build_parser
+
+    assert importlib.util.find_spec("habitsim.fuzz") is None
+    commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert "fuzz" not in commands.choices
 
 
 @pytest.mark.slow

@@ -39,17 +39,19 @@ def trot():
 
 
 def test_method_registry():
-    assert available_methods()[:6] == [
+    assert available_methods()[:8] == [
         "habit",
         "habit_ema",
         "no_habit",
         "habit_only",
         "text_only",
         "direct",
+        "direct_relabelled",
+        "ground_truth",
     ]
-    assert METHODS["direct"].variant is None
+    assert METHODS["direct"].variant is None and METHODS["direct_relabelled"].variant is None
     assert all(
-        METHODS[v].variant == v
+        METHODS[v].variant == v and METHODS[v].learned
         for v in ("habit", "habit_ema", "no_habit", "habit_only", "text_only")
     )
     with pytest.raises(UnknownMethodError, match="valid: habit, habit_ema"):
@@ -57,7 +59,7 @@ def test_method_registry():
 
 
 def test_direct_transfer(trot):
-    out = transfer(trot, to="cat", method="direct")
+    out = transfer(trot, to="cat", method="direct_relabelled")
     assert out.species == "cat" and out.num_frames == trot.num_frames
     np.testing.assert_allclose(out.rotations, trot.rotations)
     from habitsim.species import load_species
@@ -65,7 +67,7 @@ def test_direct_transfer(trot):
     k = load_species("cat").hip_height / load_species("horse").hip_height
     np.testing.assert_allclose(out.root_positions, trot.root_positions * k)
     with pytest.raises(UnknownSpeciesError):
-        transfer(trot, to="unicorn", method="direct")
+        transfer(trot, to="unicorn", method="direct_relabelled")
 
 
 @needs_ckpt
@@ -114,7 +116,7 @@ def test_habit_transfer_to_training_and_held_out_species(trot):
     from habitsim.models.evaluate import clip_mpjpe
 
     gt = generate("cat", "trot", seed=5, duration_s=3.0)
-    direct = transfer(trot, to="cat", method="direct")
+    direct = transfer(trot, to="cat", method="direct_relabelled")
     e_habit, e_direct = clip_mpjpe(cat, gt), clip_mpjpe(direct, gt)
     assert e_habit["root_relative_mm"] < 0.8 * e_direct["root_relative_mm"]
     assert e_habit["mpjpe_mm"] < 0.8 * e_direct["mpjpe_mm"]

@@ -148,8 +148,8 @@ def test_walking_stance_only_where_the_target_walks() -> None:
 def test_transfer_keeps_the_source_footfalls(trot) -> None:
     assert trot.contacts is not None
     src = drop_short_runs(warp_contacts(trot.contacts, trot.num_frames))
-    # direct copies the source's schedule
-    out = transfer(trot, to="cat", method="direct", seed=0)
+    # direct_relabelled carries the source's schedule over
+    out = transfer(trot, to="cat", method="direct_relabelled", seed=0)
     assert out.metadata["transfer"]["contacts"]["method"] == "source"
     np.testing.assert_array_equal(out.contacts, src)
     # the network's decoded contacts, checked foot by foot against the source's schedule
@@ -338,7 +338,7 @@ def test_transfer_contacts_time_warped_when_the_length_changes(trot) -> None:
 def test_transfer_without_source_labels_falls_back_and_says_so(trot) -> None:
     bare = trot.slice(0)
     bare.contacts = None
-    for method in ("habit", "direct"):
+    for method in ("habit", "direct_relabelled"):
         out = transfer(bare, to="cat", method=method, seed=0)
         how = out.metadata["transfer"]["contacts"]
         assert how["method"] in ("detected", "duty") and "no stance labels" in how["reason"]
@@ -711,7 +711,7 @@ def test_a_transfer_keeps_the_sources_frame_count_through_the_models_rate(walk) 
     np.testing.assert_allclose(held.root_positions[-60:], walk.root_positions[[-1] * 60])
     with pytest.raises(InvalidMotionError, match="num_frames"):
         resample_motion(walk, 120.0, 0)
-    for method in ("habit", "direct"):
+    for method in ("habit", "direct_relabelled"):
         out = transfer(src, to="cat", method=method, seed=0)
         assert out.num_frames == src.num_frames and out.fps == src.fps
         assert out.contacts is not None and out.contacts.shape == (src.num_frames, 4)

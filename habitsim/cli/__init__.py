@@ -40,7 +40,6 @@ _GROUPS: list[tuple[str | None, str, tuple[str, ...]]] = [
             "transfer_cmd",
             "refine_cmd",
             "retarget_cmd",
-            "fuzz_cmd",
         ),
     ),
 ]

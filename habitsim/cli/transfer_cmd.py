@@ -7,9 +7,8 @@ from pathlib import Path
 
 
 def _description() -> str:
-    """The command's description, with every registered method (imports the learning
-    core, so it is built when the help is shown, not with the parser)."""
-    from ..models.transfer import METHODS
+    """The command's description, with every registered method."""
+    from ..transfer_methods import METHODS
 
     return (
         "Re-express a motion (.npz, or .bvh with --from) on another species' skeleton. "
@@ -19,32 +18,13 @@ def _description() -> str:
     )
 
 
-class _Help(argparse.Action):
-    """``-h/--help`` that fills in the description first (see :func:`_description`)."""
-
-    def __init__(self, option_strings: list[str], dest: str, help: str | None = None) -> None:
-        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
-
-    def __call__(
-        self,
-        parser: argparse.ArgumentParser,
-        namespace: argparse.Namespace,
-        values: object,
-        option_string: str | None = None,
-    ) -> None:
-        parser.description = _description()
-        parser.print_help()
-        parser.exit()
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the top-level ``transfer`` command."""
     p = sub.add_parser(
         "transfer",
         help="transfer a motion to another species, keeping the target's habits",
-        add_help=False,
+        description=_description(),
     )
-    p.add_argument("-h", "--help", action=_Help, help="show this help message and exit")
     p.add_argument(
         "source", type=Path, nargs="?", metavar="SRC", help="source motion (.npz or .bvh)"
     )
@@ -83,26 +63,24 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _transfer(ns: argparse.Namespace) -> int:
     from ..errors import MotionFileError
-    from ..models.errors import UnknownMethodError
-    from ..models.transfer import METHODS, resolve_checkpoint
+    from ..transfer_methods import METHODS
 
     if ns.list_methods:
         for m in METHODS.values():
             where = "no network"
             if m.variant is not None:
+                from ..models.transfer import resolve_checkpoint
+
                 try:
                     where = f"checkpoint {resolve_checkpoint(m.variant)}"
                 except Exception:  # noqa: BLE001 - listing only
                     where = "no checkpoint (train one with --variant)"
-            print(f"{m.name:11s} {m.description} [{where}]")
+            print(f"{m.name:17s} {m.description} [{where}]")
         return 0
     missing = [f for f, v in (("SRC", ns.source), ("--to", ns.to), ("--out", ns.out)) if v is None]
     if missing:
         raise MotionFileError(f"habitsim transfer needs {', '.join(missing)}")
-    if ns.method not in METHODS:
-        raise UnknownMethodError(
-            f"unknown transfer method {ns.method!r}; valid: {', '.join(METHODS)}"
-        )
+    METHODS[ns.method]  # UnknownMethodError listing the registered ones
     if ns.out.suffix != ".npz":
         raise MotionFileError(f"--out must end in .npz, got {ns.out.name!r}")
     if ns.bvh is not None and ns.bvh.suffix.lower() != ".bvh":

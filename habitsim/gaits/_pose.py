@@ -27,7 +27,6 @@ from ..rotations import quat_mul, rot_x, rot_y, rot_z
 from ..skeleton import JOINT_NAMES, fk, get_skeleton, standing_leg_angles
 from ..species import Species
 
-GRAVITY = 9.81
 _J = {n: i for i, n in enumerate(JOINT_NAMES)}
 #: How much the scapula / ilium follows the leg's sweep angle (fore, hind).
 GIRDLE_SWEEP_GAIN = {"fore": 0.35, "hind": 0.0}

@@ -17,8 +17,8 @@ import numpy as np
 
 from ..errors import GaitError
 from ..motion import Motion
+from ..physics_constants import GRAVITY
 from ..species import FEET, Species, load_species
-from ._pose import GRAVITY
 from .actions import ACTIONS, LOCOMOTION_ACTIONS, action_gait
 from .jump import build_jump, min_jump_duration
 from .locomotion import build_locomotion, gait_numbers

@@ -8,7 +8,8 @@ pelvis):
   crouch depth c, reaching the take-off height with vertical speed v_z = sqrt(2·g·H)
   (H the jump height); the horizontal speed rises linearly to v_x;
 * flight (every contact false): z(t) = z_to + v_z·t − g·t²/2, x(t) = x_to + v_x·t with
-  g = 9.81 m/s², lasting 2·v_z/g; the feet follow the body, tucked;
+  g = :data:`~habitsim.physics_constants.GRAVITY`, lasting 2·v_z/g; the feet follow the
+  body, tucked;
 * landing (feet planted at new footholds): the mirror image of the push-off;
 * recovery: back to the take-off height (minimum-jerk), then stand.
 """
@@ -20,9 +21,9 @@ import math
 import numpy as np
 
 from ..errors import GaitError
+from ..physics_constants import GRAVITY
 from ..species import Species
 from ._pose import (
-    GRAVITY,
     LegPlan,
     Solved,
     Trunk,

@@ -26,9 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import GaitError
+from ..physics_constants import GRAVITY
 from ..species import FEET, Species
 from ._pose import (
-    GRAVITY,
     LegPlan,
     Solved,
     Trunk,

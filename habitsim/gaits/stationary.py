@@ -15,8 +15,9 @@ import numpy as np
 
 from ..errors import GaitError
 from ..ik import LEGS, axial_frames, leg_geometry
+from ..physics_constants import GRAVITY
 from ..species import Species
-from ._pose import GRAVITY, LegPlan, Solved, Trunk, fix_reach, min_jerk, smooth_noise, standing_info
+from ._pose import LegPlan, Solved, Trunk, fix_reach, min_jerk, smooth_noise, standing_info
 
 
 def _planted_plan(sp: Species, t: int, heading: float) -> LegPlan:

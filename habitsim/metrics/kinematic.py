@@ -51,10 +51,10 @@ import numpy as np
 from habitsim.errors import InvalidMotionError
 from habitsim.hinges import hinge_angles, hinge_limits
 from habitsim.motion import Motion
+from habitsim.physics_constants import CONTACT_HEIGHT_PER_LEG
 
 __all__ = [
     "FLOAT_TOLERANCE_PER_LEG",
-    "SKATE_CONTACT_HEIGHT_PER_LEG",
     "SKATE_SPEED_PER_LEG",
     "SKATE_SMOOTHING_FRAMES",
     "KINEMATIC_KEYS",
@@ -70,8 +70,6 @@ __all__ = [
 
 #: ``float_mm`` tolerance as a fraction of the hind-leg length.
 FLOAT_TOLERANCE_PER_LEG = 0.01
-#: Contact height for the skating metrics, fraction of the hind-leg length.
-SKATE_CONTACT_HEIGHT_PER_LEG = 0.02
 #: ``skate_ratio`` speed threshold in hind-leg lengths per second.
 SKATE_SPEED_PER_LEG = 0.10
 #: Moving-average window of ``skate_ratio`` [frames].
@@ -123,7 +121,7 @@ def float_mm(motion: Motion, positions: np.ndarray | None = None) -> float:
 def _pair_contacts(motion: Motion, feet: np.ndarray, contacts: np.ndarray | None) -> np.ndarray:
     """(T-1, 4) bool: foot in contact in both frames of the pair (t, t+1)."""
     if contacts is None:
-        c = feet[..., 2] < SKATE_CONTACT_HEIGHT_PER_LEG * _leg(motion)
+        c = feet[..., 2] < CONTACT_HEIGHT_PER_LEG * _leg(motion)
     else:
         c = np.asarray(contacts, dtype=bool)
         if c.shape != feet.shape[:2]:

@@ -66,7 +66,7 @@ _EXPORTS = {
     "METHODS": "transfer",
     "TransferMethod": "transfer",
     "available_methods": "transfer",
-    "direct_transfer": "transfer",
+    "network_method": "transfer",
     "load_model": "transfer",
     "reconstruct": "transfer",
     "register_method": "transfer",
@@ -77,7 +77,7 @@ _EXPORTS = {
 __all__ = [
     "transfer",
     "reconstruct",
-    "direct_transfer",
+    "network_method",
     "METHODS",
     "TransferMethod",
     "available_methods",

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..errors import HabitsimError, UnknownMethodError
+from ..errors import HabitsimError, MethodUnavailable, UnknownMethodError
 
 __all__ = [
     "ModelError",
@@ -27,8 +27,9 @@ class CheckpointError(ModelError):
     """A checkpoint folder that is missing files, corrupt, or does not match its config."""
 
 
-class MethodNotAvailableError(ModelError):
-    """A registered transfer method whose trained checkpoint is not shipped / not given."""
+class MethodNotAvailableError(ModelError, MethodUnavailable):
+    """A registered transfer method whose trained checkpoint is not shipped / not given
+    (a :class:`~habitsim.errors.MethodUnavailable`: the benchmarks record it in the row)."""
 
 
 class TextEncoderError(ModelError):

@@ -35,6 +35,7 @@ import numpy as np
 import torch
 
 from ..motion import Motion
+from ..physics_constants import GRAVITY
 from ..rotations import heading_yaw, quat_fix_continuity, quat_mul
 from ..skeleton import JOINT_NAMES, get_skeleton
 from ..species import load_species
@@ -65,7 +66,6 @@ __all__ = [
 
 #: Version of this representation; a checkpoint records the one it was trained on.
 FEATURE_VERSION = 3
-GRAVITY = 9.81  # [m/s²]
 NUM_JOINTS = len(JOINT_NAMES)
 Q_DIM = NUM_JOINTS * 4
 V_DIM = NUM_JOINTS * 3

@@ -1,8 +1,9 @@
-"""Motion transfer to another species: the API, the method registry and the model cache.
+"""Motion transfer to another species: the API, the learned methods and the model cache.
 
 ``transfer(motion, to="cat", method="habit")`` re-expresses a motion on the target
-species' skeleton. Registered methods (:data:`METHODS`, extendable with
-:func:`register_method`):
+species' skeleton with a method of the one registry,
+:data:`habitsim.transfer_methods.METHODS` (re-exported here): the learned methods
+(:func:`network_method` of each model variant)
 
 ==============  ================================================================
 ``habit``       VQ-VAE, EMA + code reset, decoder gets z_c (target's flow prior) and g_c
@@ -10,8 +11,12 @@ species' skeleton. Registered methods (:data:`METHODS`, extendable with
 ``no_habit``    VQ-VAE whose decoder gets neither z_c nor g_c (reconstruction model)
 ``habit_only``  decoder gets z_c only
 ``text_only``   decoder gets g_c only
-``direct``      no network: copy the local rotations, scale the root by the hip-height ratio
 ==============  ================================================================
+
+and the baselines ``direct`` (no network: copy the local rotations, scale the root by the
+hip-height ratio, keep the source's labels and metadata), ``direct_relabelled`` (the same
+motion, labelled by :func:`transfer_contacts`) and
+``ground_truth``.
 
 A network method needs a checkpoint of its variant: the ``checkpoint=`` argument, else
 ``$HABITSIM_MODELS_DIR/<variant>``, else the one shipped in
@@ -39,7 +44,6 @@ import functools
 import logging
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -53,9 +57,11 @@ from ..species import load_species
 from ..stance.conform import conform
 from ..stance.policy import ConformPolicy
 from ..stance.schedule import transfer_contacts, walking_stance
+from ..transfer_methods import METHODS, TransferMethod, register_method, run_method
+from ..transfer_methods import method_names as available_methods
 from .checkpoint import CONFIG_FILE, LoadedCheckpoint, load_checkpoint
 from .config import VARIANTS
-from .errors import MethodNotAvailableError, TextEncoderError, UnknownMethodError
+from .errors import MethodNotAvailableError, TextEncoderError
 from .features import (
     NUM_JOINTS,
     Q_DIM,
@@ -74,7 +80,7 @@ __all__ = [
     "register_method",
     "transfer",
     "reconstruct",
-    "direct_transfer",
+    "network_method",
     "transfer_contacts",
     "walking_stance",
     "resolve_checkpoint",
@@ -87,55 +93,6 @@ _LOG = logging.getLogger("habitsim.models")
 
 #: Environment variable naming a folder of ``<variant>/`` checkpoint folders.
 MODELS_DIR_ENV = "HABITSIM_MODELS_DIR"
-
-
-@dataclass(frozen=True)
-class TransferMethod:
-    """A registered transfer method.
-
-    Attributes:
-        name: registry key (``method=`` of :func:`transfer`).
-        description: one line for listings.
-        variant: model variant whose checkpoint it needs (None: no network).
-        fn: ``fn(motion, to, *, seed, checkpoint, temperature) -> Motion``.
-    """
-
-    name: str
-    description: str
-    variant: str | None
-    fn: Callable[..., Motion]
-
-
-METHODS: dict[str, TransferMethod] = {}
-
-
-def register_method(
-    name: str,
-    fn: Callable[..., Motion],
-    *,
-    description: str,
-    variant: str | None = None,
-    overwrite: bool = False,
-) -> TransferMethod:
-    """Add a transfer method to :data:`METHODS` (plug-in point for evaluation).
-
-    :func:`transfer` calls ``fn(motion, to, seed=…, checkpoint=…, temperature=…,
-    plant=…)`` (and ``policy=…`` when one is given); a method takes ``**kwargs`` for the
-    options it has no use for.
-
-    Raises:
-        ValueError: the name is taken (unless ``overwrite``).
-    """
-    if name in METHODS and not overwrite:
-        raise ValueError(f"transfer method {name!r} is already registered")
-    m = TransferMethod(name, description, variant, fn)
-    METHODS[name] = m
-    return m
-
-
-def available_methods() -> list[str]:
-    """Names of the registered methods (registration order)."""
-    return list(METHODS)
 
 
 # ---------------------------------------------------------------------------- checkpoints
@@ -344,28 +301,20 @@ def _run_network(
 # ---------------------------------------------------------------------------- methods
 
 
-def direct_transfer(
-    motion: Motion, to: str, *, policy: ConformPolicy | None = None, **_: Any
-) -> Motion:
-    """The ``direct`` baseline: the source's local rotations on the target skeleton, the
-    root path scaled by the hip-height ratio h_target / h_source; stance labels by
-    :func:`transfer_contacts` (the source's, frame for frame, when it has them)."""
-    tgt = load_species(to).name
-    ratio = load_species(tgt).hip_height / load_species(motion.species).hip_height
-    info = {
-        "method": "direct",
-        "from": motion.species,
-        "to": tgt,
-        "hip_height_ratio": round(ratio, 4),
-    }
-    meta = {k: v for k, v in motion.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
-    out = Motion(tgt, motion.fps, motion.root_positions * ratio, motion.rotations.copy())
-    contacts, how = transfer_contacts(out, motion, policy=policy)
-    meta["transfer"] = {**info, "contacts": how}
-    return Motion(out.species, out.fps, out.root_positions, out.rotations, contacts, meta)
+def network_method(variant: str) -> Callable[..., Motion]:
+    """The transfer function of the learned method ``variant`` (a name of
+    :data:`habitsim.models.config.VARIANTS`): ``fn(motion, to, *, seed, checkpoint,
+    temperature, plant)`` runs the network of that variant's checkpoint and conforms its
+    output (:func:`_finish`).
 
+    Raises:
+        ConfigError: an unknown variant.
+    """
+    if variant not in VARIANTS:
+        from .errors import ConfigError
 
-def _network_method(variant: str) -> Callable[..., Motion]:
+        raise ConfigError(f"unknown model variant {variant!r}; valid: {', '.join(VARIANTS)}")
+
     def run(
         motion: Motion,
         to: str,
@@ -393,20 +342,6 @@ def _network_method(variant: str) -> Callable[..., Motion]:
     return run
 
 
-_DESCRIPTIONS = {
-    "habit": "VQ-VAE (EMA + code reset) with habit latent z_c and text embedding g_c",
-    "habit_ema": "VQ-VAE (EMA, no code reset) with z_c and g_c",
-    "no_habit": "VQ-VAE without z_c and g_c (reconstruction model)",
-    "habit_only": "VQ-VAE with the habit latent z_c only",
-    "text_only": "VQ-VAE with the text embedding g_c only",
-}
-for _v in VARIANTS:
-    register_method(_v, _network_method(_v), description=_DESCRIPTIONS[_v], variant=_v)
-register_method(
-    "direct", direct_transfer, description="copy local rotations, scale the root by hip height"
-)
-
-
 def transfer(
     motion: Motion,
     to: str,
@@ -424,33 +359,35 @@ def transfer(
     Args:
         motion: the source motion (any catalog species, any frame rate).
         to: target species name.
-        method: a name of :data:`METHODS` (default ``habit``).
+        method: a name of the registry :data:`METHODS` (default ``habit``).
         source: treat the motion as this species' (relabel) instead of ``motion.species``.
         seed: seed of the habit latent z_c drawn from the target's prior (same seed ⇒
             same output).
         checkpoint: checkpoint folder to use instead of the default of the method.
         temperature: scale of the flow's base Gaussian when drawing z_c (1 = the prior).
         plant: the network methods plant the decoded feet on the output's stance labels
-            by leg IK (``False``: the decoder's raw kinematics; ``direct`` keeps the
-            source's planted feet either way).
+            by leg IK (``False``: the decoder's raw kinematics; the ``direct`` methods
+            keep the source's planted feet either way).
         policy: the knobs and switches of conforming the decoded motion to its source
             (stance labels, bounds, levelling, planting; None: the defaults of
             :class:`~habitsim.stance.policy.ConformPolicy`).
 
     Returns:
         A :class:`~habitsim.motion.Motion` on ``to``'s skeleton at the source's frame
-        rate, with foot contacts (:func:`transfer_contacts`) and ``metadata["transfer"]``
-        (method, habit species, retrieval explanation for held-out targets, how the
-        contacts were found, what the planting did).
+        rate. The learned methods and ``direct_relabelled`` give it foot contacts
+        (:func:`transfer_contacts`) and ``metadata["transfer"]`` (method, habit species,
+        retrieval explanation for held-out targets, how the contacts were found, what
+        the planting did); ``direct`` keeps the source's labels and metadata
+        (:func:`habitsim.transfer_methods.direct_transfer`).
 
     Raises:
         UnknownMethodError: the method is not registered (lists the valid ones).
         UnknownSpeciesError: unknown target / source species.
         MethodNotAvailableError: no checkpoint for the method's variant.
+        MethodUnavailable: the method cannot serve this pair (``ground_truth``).
         CheckpointError: the checkpoint cannot be loaded.
     """
-    if method not in METHODS:
-        raise UnknownMethodError(f"unknown transfer method {method!r}; valid: {', '.join(METHODS)}")
+    entry = METHODS[method]  # UnknownMethodError listing the registered ones
     if not isinstance(motion, Motion):
         raise InvalidMotionError(f"transfer needs a habitsim Motion, got {type(motion).__name__}")
     tgt = load_species(to).name
@@ -466,7 +403,8 @@ def transfer(
                 dict(motion.metadata),
             )
     options: dict[str, Any] = {} if policy is None else {"policy": policy}
-    return METHODS[method].fn(
+    return run_method(
+        entry,
         motion,
         tgt,
         seed=seed,

@@ -65,9 +65,9 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from ..contacts import CONTACT_HEIGHT_PER_LEG as _CONTACT_HEIGHT_PER_LEG
 from ..errors import InvalidMotionError
 from ..motion import Motion
+from ..physics_constants import CONTACT_HEIGHT_PER_LEG, GRAVITY
 from ..qpos import (
     QposTrajectory,
     motion_to_qpos,
@@ -107,8 +107,6 @@ __all__ = [
     "swing_clearance",
 ]
 
-#: docs/metrics.md's contact height of ``skate_mm`` (toe height, share of leg length).
-CONTACT_HEIGHT_PER_LEG = _CONTACT_HEIGHT_PER_LEG
 #: Default lowest toe height of a moving swing foot, share of leg length: the contact
 #: height plus a margin of 0.5 % L.
 SWING_CLEARANCE_PER_LEG = 0.025
@@ -293,7 +291,7 @@ class RefineOptions:
             return plan_windows(n_frames, sw, self.short_overlap)
         return plan_windows(n_frames, self.window, self.overlap)
 
-    def cutoff_hz(self, leg_length: float, gravity: float = 9.81) -> float | None:
+    def cutoff_hz(self, leg_length: float, gravity: float = GRAVITY) -> float | None:
         """The pre-filter's cutoff frequency [Hz] for a leg length [m] (None: off)."""
         if self.filter_cutoff is None:
             return None
