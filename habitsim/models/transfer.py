@@ -406,7 +406,7 @@ def transfer_contacts(
         ``decoded``, ``source``, ``detected``, ``duty``) with the details of that method.
     """
     from ..contacts import contacts_by_duty, contacts_from_feet, drop_short_runs, warp_contacts
-    from ..planting import contact_f1
+    from ..stance.labels import stance_f1
 
     src = None
     if source.contacts is not None:
@@ -415,7 +415,7 @@ def transfer_contacts(
         labels = drop_short_runs(np.asarray(decoded, dtype=bool), 2)
         info: dict[str, Any] = {"method": "decoded"}
         if src is not None:
-            f1 = contact_f1(labels, src)
+            f1 = stance_f1(labels, src)
             duty, duty_src = labels.mean(axis=0), src.mean(axis=0)
             info["source_f1"] = [round(float(v), 3) for v in f1]
             info["duty"] = [round(float(v), 3) for v in duty]
@@ -623,13 +623,13 @@ def _swing_lift(out: Motion, labels: np.ndarray) -> np.ndarray | None:
     (``habits.swing_height`` of its species file, share of leg length), so a decoded
     foot that shuffles along the ground in swing is lifted; a toe already higher keeps
     its height. None when :data:`SWING_LIFT` is off."""
-    from ..contacts import contact_segments
+    from ..stance.labels import stance_runs
 
     if not SWING_LIFT:
         return None
     lift = np.full(labels.shape, np.nan)
     height = out.species_info.habits.swing_height * out.species_info.leg_length
-    for f, runs in enumerate(contact_segments(~np.asarray(labels, dtype=bool))):
+    for f, runs in enumerate(stance_runs(~np.asarray(labels, dtype=bool))):
         for a, b in runs:
             lift[a:b, f] = height * np.sin(np.pi * (np.arange(b - a) + 0.5) / (b - a))
     return lift
@@ -775,10 +775,10 @@ PARTIAL_PASSES = 4
 
 def _run_mask(contacts: np.ndarray, hit: np.ndarray) -> np.ndarray:
     """(T, 4) bool: the whole stance runs of ``contacts`` that have a frame in ``hit``."""
-    from ..contacts import contact_segments
+    from ..stance.labels import stance_runs
 
     out = np.zeros_like(contacts, dtype=bool)
-    for k, segs in enumerate(contact_segments(contacts)):
+    for k, segs in enumerate(stance_runs(contacts)):
         for a, b in segs:
             if hit[a:b, k].any():
                 out[a:b, k] = True
@@ -829,8 +829,8 @@ def _trim_to_reach(
     targets): stance toes at rest on 88.8 % of the transfers' stance frames without
     trimming, 96.6 % with it; the back-walk sent to the cat 33 → 78 %.
     """
-    from ..contacts import contact_segments
     from ..planting import stance_run_shortfall
+    from ..stance.labels import stance_runs
 
     before = np.asarray(contacts, dtype=bool)  # read only
     c = before.copy()
@@ -841,7 +841,7 @@ def _trim_to_reach(
     # (foot, start, stop) of the runs to trim, by their original extent
     active = [
         (k, a, b)
-        for k, segs in enumerate(contact_segments(c))
+        for k, segs in enumerate(stance_runs(c))
         for a, b in segs
         if short[a:b, k].max() > 0.0 and (only is None or only[a:b, k].any())
     ]
@@ -905,8 +905,8 @@ def _plant_partly(
     at rest is kept, the trimming reported as ``trimmed`` (the output's labels are the
     trimmed ones).
     """
-    from ..contacts import contact_segments
     from ..planting import plant_motion, stance_run_shortfall
+    from ..stance.labels import stance_runs
 
     c = np.asarray(contacts, dtype=bool)
     stance = int(c.sum())
@@ -936,8 +936,8 @@ def _plant_partly(
     else:
         return None
     n_free = int(free.sum())  # checked before the last pass, which freed nothing more
-    runs = sum(len(s) for s in contact_segments(c))
-    loose = sum(len(s) for s in contact_segments(free))
+    runs = sum(len(s) for s in stance_runs(c))
+    loose = sum(len(s) for s in stance_runs(free))
     summary = _summary(report, c, leg, free)
     result = (
         moved,
