@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 
 from habitsim.physics_constants import CONTACT_HEIGHT_PER_LEG
+from habitsim.stance.labels import stance_runs, swing_bounds
 
 from .base import ControllerError
 from .legs import LegSet, model_leg_length
@@ -250,29 +251,14 @@ class MotionPlan:
         )
 
 
-def _segments(contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Per frame and foot the lift-off and next touch-down frame; mean stride [frames]."""
-    t, nf = contacts.shape
-    liftoff = np.full((t, nf), -1, dtype=int)
-    touchdown = np.full((t, nf), -1, dtype=int)
-    strides = []
-    for f in range(nf):
-        c = contacts[:, f]
-        last_lo = 0
-        for k in range(t):
-            if not c[k] and (k == 0 or c[k - 1]):
-                last_lo = k
-            if not c[k]:
-                liftoff[k, f] = last_lo
-        nxt = t
-        for k in range(t - 1, -1, -1):
-            if c[k] and (k == 0 or not c[k - 1]):
-                nxt = k
-            if not c[k]:
-                touchdown[k, f] = nxt
-        tds = [k for k in range(1, t) if c[k] and not c[k - 1]]
-        strides += list(np.diff(tds))
-    return liftoff, touchdown, float(np.mean(strides)) if strides else float("nan")
+def _mean_stride(contacts: np.ndarray) -> float:
+    """Mean interval between successive touch-downs of a foot, over all feet [frames]
+    (NaN when no foot touches down twice); a stance at frame 0 is not a touch-down."""
+    strides: list[int] = []
+    for foot_runs in stance_runs(contacts):
+        tds = [a for a, _ in foot_runs if a > 0]
+        strides += np.diff(tds).tolist()
+    return float(np.mean(strides)) if strides else float("nan")
 
 
 def plan_from_qpos(
@@ -375,7 +361,8 @@ def plan_from_qpos(
         cont = np.asarray(contacts, dtype=bool)
         if cont.shape != (t, nf):
             raise ControllerError(f"plan contacts must have shape ({t}, {nf}), got {cont.shape}")
-    liftoff, touchdown, stride = _segments(cont)
+    liftoff, touchdown = swing_bounds(cont)
+    stride = _mean_stride(cont)
     com = np.concatenate([smooth(com[:, :2], smooth_s), smooth(com[:, 2:], smooth_fast_s)], axis=1)
     rpy, omega = smooth(rpy, smooth_fast_s), smooth(omega, smooth_fast_s)
     com_vel = deriv(com)

@@ -49,10 +49,10 @@ from .motion import Motion
 from .rotations import matrix_to_quat, quat_fix_continuity, quat_identity, quat_to_matrix
 from .skeleton import JOINT_NAMES, PARENTS, get_skeleton
 from .species import Species, load_species
+from .stance.labels import stance_f1
 from .stance.planting import (
     FOOT_ANCHORS,
     SourceStance,
-    contact_f1,
     label_source_stance,
     plant_legs,
     smooth_path,
@@ -1424,7 +1424,7 @@ def retarget(
         report["planted"] = pr.to_dict(sp.leg_length)
     else:
         motion = motion.with_contacts(st.contacts)
-    f1 = contact_f1(motion.detect_contacts(), st.contacts)
+    f1 = stance_f1(motion.detect_contacts(), st.contacts)
     report["contact_f1"] = [round(float(v), 4) for v in f1]
     _limb_confidence(t, j2s, st, limb_len, mapping)
     report["confidence"] = dict(mapping.confidence)

@@ -34,6 +34,7 @@ import numpy as np
 
 from .errors import InvalidMotionError
 from .physics_constants import CONTACT_HEIGHT_PER_LEG, GRAVITY
+from .stance.labels import runs_holding, stance_runs, swing_gaps
 
 if TYPE_CHECKING:  # pragma: no cover
     from .species import Species
@@ -46,7 +47,6 @@ __all__ = [
     "detect_contacts",
     "contacts_from_feet",
     "contacts_by_duty",
-    "contact_segments",
     "touchdown_frames",
     "drop_short_runs",
     "lengthen_stance",
@@ -85,24 +85,6 @@ def _toe_speed(feet: np.ndarray, fps: float) -> np.ndarray:
     back = np.concatenate([step[:1], step], axis=0)
     fwd = np.concatenate([step, step[-1:]], axis=0)
     return np.minimum(back, fwd)
-
-
-def _runs_with_seed(loose: np.ndarray, strict: np.ndarray) -> np.ndarray:
-    """Keep the runs of ``loose`` (along axis 0) that contain a ``strict`` frame."""
-    t, f = loose.shape
-    pad = np.zeros((1, f), dtype=bool)
-    lp = np.concatenate([pad, loose, pad], axis=0)
-    starts = lp[1:] & ~lp[:-1]  # (T+1, F): True at the first frame of a run
-    run_id = np.cumsum(starts, axis=0)[:-1]  # (T, F) id of the run a frame belongs to
-    run_id = np.where(loose, run_id, 0)
-    # A run is seeded if it holds a strict frame: per foot, mark seeded ids.
-    n_ids = int(run_id.max()) + 1 if run_id.size else 1
-    seeded = np.zeros((n_ids, f), dtype=bool)
-    cols = np.broadcast_to(np.arange(f), (t, f))
-    sel = strict & loose
-    seeded[run_id[sel], cols[sel]] = True
-    seeded[0] = False
-    return seeded[run_id, cols]
 
 
 def _fill_and_open(c: np.ndarray) -> np.ndarray:
@@ -144,7 +126,7 @@ def contacts_from_feet(feet: np.ndarray, fps: float, leg_length: float) -> np.nd
     speed = _toe_speed(feet, fps)
     strict = (height < h_thr) & (speed < v_thr)
     loose = (height < HYSTERESIS * h_thr) & (speed < HYSTERESIS * v_thr)
-    return _fill_and_open(_runs_with_seed(loose, strict))
+    return _fill_and_open(runs_holding(loose, strict))
 
 
 def detect_contacts(motion: FootTrack) -> np.ndarray:
@@ -199,31 +181,6 @@ def contacts_by_duty(
     return _fill_and_open(c)
 
 
-def contact_segments(contacts: np.ndarray) -> list[list[tuple[int, int]]]:
-    """Runs of contact per foot.
-
-    Args:
-        contacts: (T, F) bool contact flags.
-
-    Returns:
-        For each of the F feet, the list of ``(start, stop)`` frame ranges (``stop``
-        exclusive, Python slice convention) during which the foot is in contact, in
-        time order. A run touching the clip's start has ``start = 0``; one touching its
-        end has ``stop = T``.
-    """
-    c = np.asarray(contacts, dtype=bool)
-    if c.ndim != 2:
-        raise InvalidMotionError(f"contacts must have shape (T, F), got {c.shape}")
-    pad = np.zeros((1, c.shape[1]), dtype=bool)
-    d = np.diff(np.concatenate([pad, c, pad], axis=0).astype(np.int8), axis=0)  # (T+1, F)
-    out: list[list[tuple[int, int]]] = []
-    for f in range(c.shape[1]):
-        starts = np.flatnonzero(d[:, f] == 1)
-        stops = np.flatnonzero(d[:, f] == -1)
-        out.append([(int(a), int(b)) for a, b in zip(starts, stops, strict=True)])
-    return out
-
-
 def touchdown_frames(contacts: np.ndarray) -> list[np.ndarray]:
     """Touchdown frames per foot: frames t ≥ 1 with contact at t and none at t − 1.
 
@@ -265,11 +222,11 @@ def drop_short_runs(contacts: np.ndarray, min_frames: int = 2) -> np.ndarray:
         raise InvalidMotionError(f"min_frames must be >= 1, got {min_frames}")
     out = c.copy()
     t = c.shape[0]
-    for f, runs in enumerate(contact_segments(~out)):
+    for f, runs in enumerate(swing_gaps(out)):
         for a, b in runs:
             if a > 0 and b < t and b - a < min_frames:  # a gap between two stance phases
                 out[a:b, f] = True
-    for f, runs in enumerate(contact_segments(out)):
+    for f, runs in enumerate(stance_runs(out)):
         for a, b in runs:
             if b - a < min_frames:
                 out[a:b, f] = False

@@ -54,6 +54,7 @@ from .errors import HabitsimError
 from .mjutils import foot_soles, free_body, home_qpos
 from .motion import Motion
 from .physics_constants import GRAVITY
+from .stance.labels import runs
 from .stance.planting import carriage_drop
 
 __all__ = [
@@ -597,13 +598,6 @@ def _source_paths(motion: Motion) -> dict[str, np.ndarray]:
     return {"pos": pos, "rot": rot, "sole": foot_soles(model, q, feet)}
 
 
-def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
-    """[start, stop) of the True runs of a 1-D bool array."""
-    f = np.concatenate([[False], flags.astype(bool), [False]])
-    edges = np.flatnonzero(np.diff(f.astype(int)))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
-
-
 def retarget(
     motion: Motion,
     robot: mujoco.MjModel | RobotLegs,
@@ -673,7 +667,7 @@ def retarget(
         target[k] = k_scale * sole[k] + shift.T * np.array([1.0, 1.0, 0.0])
     target[:, :, 2] = np.maximum(k_scale * sole[:, :, 2], 0.0)
     for i in range(4):  # stance feet stay put, on the ground
-        for a, b in _runs(contacts[:, i]):
+        for a, b in runs(contacts[:, i]):
             mid = (a + b - 1) // 2
             target[a:b, i, :2] = target[mid, i, :2]
             target[a:b, i, 2] = 0.0

@@ -13,7 +13,6 @@ from habitsim import get_skeleton, load_species
 from habitsim.cli import main
 from habitsim.contacts import (
     CONTACT_HEIGHT_PER_LEG,
-    contact_segments,
     contacts_by_duty,
     contacts_from_feet,
     detect_contacts,
@@ -34,6 +33,7 @@ from habitsim.metrics.kinematic import (
 )
 from habitsim.motion import Motion
 from habitsim.rotations import quat_mul, rot_x, rot_y
+from habitsim.stance.labels import stance_runs
 
 FPS = 30.0
 LEG = load_species("dog").leg_length  # 0.61 m
@@ -121,16 +121,16 @@ def test_hysteresis_keeps_but_does_not_start_contact() -> None:
     assert np.array_equal(np.flatnonzero(c), np.arange(20))
 
 
-def test_contact_segments_and_touchdowns() -> None:
+def test_stance_runs_and_touchdowns() -> None:
     c = np.array(
         [[1, 0], [1, 0], [0, 1], [0, 1], [1, 0], [1, 1]],
         dtype=bool,
     )
-    segs = contact_segments(c)
+    segs = stance_runs(c)
     assert segs == [[(0, 2), (4, 6)], [(2, 4), (5, 6)]]
     td = touchdown_frames(c)
     assert td[0].tolist() == [4] and td[1].tolist() == [2, 5]
-    assert contact_segments(np.zeros((5, 4), bool)) == [[], [], [], []]
+    assert stance_runs(np.zeros((5, 4), bool)) == [[], [], [], []]
 
 
 # ----------------------------------------------------------------------------- hinges

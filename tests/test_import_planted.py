@@ -19,7 +19,8 @@ from habitsim.bvh import BVHData, bvh_text, parse_bvh
 from habitsim.bvh_mapping import import_bvh, is_helper_name, load_joint_map, read_source
 from habitsim.cli import main
 from habitsim.errors import SkeletonMappingError
-from habitsim.stance.planting import contact_f1, label_source_stance
+from habitsim.stance.labels import stance_f1, stance_runs
+from habitsim.stance.planting import label_source_stance
 
 RENAME = {
     "pelvis": "Hips_jnt",
@@ -244,7 +245,7 @@ def test_anonymous_rig_finds_legs_by_mirrored_chains(walk, rig):
     assert not tail & set(mapping.joints.values())
     assert any("geometry" in n for n in mapping.notes)
     assert named_motion.contacts is not None and motion.contacts is not None
-    assert min(contact_f1(motion.contacts, named_motion.contacts)) >= 0.95
+    assert min(stance_f1(motion.contacts, named_motion.contacts)) >= 0.95
     # a nub pointing ahead (as a 3ds Max biped's finger nub does) is no foot point either
     ahead = _foreign_rig(walk, anonymous=True, nub=(0.25, 0.0, 0.0))
     motion, mapping = import_bvh(ahead, "dog")
@@ -253,7 +254,7 @@ def test_anonymous_rig_finds_legs_by_mirrored_chains(walk, rig):
     points = motion.metadata["import"]["contacts"]["foot_points"]
     assert len(points) == 4 and all(p and not nubs & set(p) for p in points)
     assert motion.contacts is not None
-    assert min(contact_f1(motion.contacts, named_motion.contacts)) >= 0.95
+    assert min(stance_f1(motion.contacts, named_motion.contacts)) >= 0.95
 
 
 def test_source_stance_matches_the_known_footfalls(walk, rig):
@@ -261,7 +262,7 @@ def test_source_stance_matches_the_known_footfalls(walk, rig):
     imp = motion.metadata["import"]
     assert imp["contacts"]["method"] == "source foot path"
     # the labels found on the foreign rig's own feet are the walk's own stance
-    f1 = contact_f1(motion.contacts, walk.contacts)
+    f1 = stance_f1(motion.contacts, walk.contacts)
     assert np.all(f1 >= 0.85), f1
     assert np.allclose(imp["contacts"]["duty"], motion.contacts.mean(axis=0), atol=1e-3)
 
@@ -541,7 +542,6 @@ def test_stance_driven_root_measures_how_far_the_legs_carry_the_body():
 
 
 def test_centred_footholds_hold_the_sweep_under_the_joint_and_reach_further():
-    from habitsim.contacts import contact_segments
     from habitsim.motion import Motion
     from habitsim.skeleton import JOINT_NAMES
     from habitsim.stance.planting import FOOT_ANCHORS, plant_motion, stance_reach_shortfall
@@ -560,7 +560,7 @@ def test_centred_footholds_hold_the_sweep_under_the_joint_and_reach_further():
     toes = out.foot_positions()
     anchors = slide.global_positions()[:, [JOINT_NAMES.index(n) for n in FOOT_ANCHORS]]
     checked = 0
-    for k, runs in enumerate(contact_segments(c)):
+    for k, runs in enumerate(stance_runs(c)):
         for a, b in runs:
             travel = anchors[b - 1, k, :2] - anchors[a, k, :2]
             if np.linalg.norm(travel) < 0.2 * leg or a == 0 or b == len(c):
@@ -591,7 +591,6 @@ def test_centred_footholds_hold_the_sweep_under_the_joint_and_reach_further():
 
 
 def test_free_stance_runs_keep_their_own_toe_path_and_the_reach_test_skips_them():
-    from habitsim.contacts import contact_segments
     from habitsim.motion import Motion
     from habitsim.stance.planting import plant_motion, stance_run_shortfall
 
@@ -601,7 +600,7 @@ def test_free_stance_runs_keep_their_own_toe_path_and_the_reach_test_skips_them(
     fast = m.root_positions.copy()
     fast[:, :2] = fast[0, :2] + 1.3 * (fast[:, :2] - fast[0, :2])  # feet slide in stance
     slide = Motion("dog", m.fps, fast, m.rotations, c)
-    runs = contact_segments(c)[0]
+    runs = stance_runs(c)[0]
     a, b = next((a, b) for a, b in runs if a > 0 and b < len(c))  # an inner LF run
     free = np.zeros_like(c)
     free[a + 1, 0] = True  # one frame marks the whole run

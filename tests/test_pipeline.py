@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from habitsim.contacts import (
-    contact_segments,
     drop_short_runs,
     fill_support,
     lengthen_stance,
@@ -24,9 +23,9 @@ from habitsim.models import transfer
 from habitsim.motion import resample_motion
 from habitsim.pipeline import PipelineError, refine_mode, run_clip, stance_toe_height
 from habitsim.stance.bounds import bound_heading, bound_height, bound_speed
+from habitsim.stance.labels import stance_f1, stance_runs
 from habitsim.stance.ladder import plant_partly, trim_to_reach
 from habitsim.stance.level import level_trunk
-from habitsim.stance.planting import contact_f1
 from habitsim.stance.policy import ConformPolicy
 from habitsim.stance.schedule import transfer_contacts, walking_stance
 
@@ -79,9 +78,9 @@ def test_lengthen_stance_keeps_the_middles_of_the_runs() -> None:
     c[:45, 2] = True  # already stands 75 %
     out = lengthen_stance(c, 0.5)
     # foot 0: 3 frames more at both ends of both runs, 32 of 60 (2 more give 28 < 30)
-    assert contact_segments(out[:, :1]) == [[(7, 23), (37, 53)]]
+    assert stance_runs(out[:, :1]) == [[(7, 23), (37, 53)]]
     # foot 1 grows inward only; foot 2 is kept; nothing else changes
-    assert contact_segments(out[:, 1:2]) == [[(0, 30)]]
+    assert stance_runs(out[:, 1:2]) == [[(0, 30)]]
     np.testing.assert_array_equal(out[:, 2], c[:, 2])
     np.testing.assert_array_equal(lengthen_stance(c, 0.0), c)
     with pytest.raises(InvalidMotionError, match="min_share"):
@@ -158,7 +157,7 @@ def test_transfer_keeps_the_source_footfalls(trot) -> None:
     how = out.metadata["transfer"]["contacts"]
     assert how["method"] == "decoded" and len(how["source_f1"]) == 4
     for k, foot in enumerate(("LF", "RF", "LH", "RH")):
-        f1 = contact_f1(out.contacts[:, k : k + 1], src[:, k : k + 1])[0]
+        f1 = stance_f1(out.contacts[:, k : k + 1], src[:, k : k + 1])[0]
         if foot in how.get("feet_from_source", []):
             np.testing.assert_array_equal(out.contacts[:, k], src[:, k])
         else:  # kept: it agreed with the source's footfalls and stands as long
@@ -191,7 +190,7 @@ def test_habit_transfer_plants_its_feet_on_its_labels(trot) -> None:
     leg = planted.species_info.leg_length
     height = planted.species_info.habits.swing_height * leg
     mid_planted, mid_raw = [], []
-    for f, runs in enumerate(contact_segments(~c)):
+    for f, runs in enumerate(stance_runs(~c)):
         for a, b in runs:
             if b - a >= 5 and a > 0 and b < len(c):  # whole swings between two stances
                 mid_planted.append(planted.foot_positions()[(a + b) // 2, f, 2])
@@ -421,7 +420,6 @@ def test_one_model_cache_and_explicit_track_contacts(walk) -> None:
 def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
     # the dog walk with its body travelling three times as fast over its second half:
     # the stance runs there are out of reach, the first half's are held
-    from habitsim.contacts import contact_segments
     from habitsim.motion import Motion
 
     c = walk.contacts
@@ -440,7 +438,7 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
     assert rep.max_pelvis_drop_per_leg <= POLICY.plant_max_drop_per_leg
     toes = moved.foot_positions()
     early = 0
-    for k, runs in enumerate(contact_segments(c)):
+    for k, runs in enumerate(stance_runs(c)):
         for a, b in runs:
             if b <= half - 2:  # a run of the slow half: held
                 assert np.ptp(toes[a:b, k, :2], axis=0).max() <= 0.01 * leg
@@ -457,7 +455,7 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
     toes = moved.foot_positions()
     still = sum(
         np.ptp(toes[a:b, k, :2], axis=0).max() <= 0.01 * leg
-        for k, segs in enumerate(contact_segments(c))
+        for k, segs in enumerate(stance_runs(c))
         for a, b in segs
     )
     assert still >= runs - loose
@@ -469,7 +467,6 @@ def test_partial_planting_holds_the_runs_the_legs_reach(walk) -> None:
 def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) -> None:
     # the dog walk with its body three times as fast: long stance runs sweep beyond the
     # legs; trimmed at both ends they are held, and fewer stance frames slide
-    from habitsim.contacts import contact_segments
     from habitsim.motion import Motion
 
     c = walk.contacts
@@ -483,7 +480,7 @@ def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) ->
     assert rep.frames == int((c & ~labels).sum()) > 0
     t = len(c)
     shortest = max(2, round(POLICY.trim_min_run_s * walk.fps))
-    for k, segs in enumerate(contact_segments(c)):
+    for k, segs in enumerate(stance_runs(c)):
         for a, b in segs:
             kept = np.flatnonzero(labels[a:b, k])
             if kept.size == b - a:
@@ -513,7 +510,7 @@ def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) ->
     toes = moved.foot_positions()
     held_runs = [
         (k, a, b)
-        for k, segs in enumerate(contact_segments(moved.contacts))
+        for k, segs in enumerate(stance_runs(moved.contacts))
         for a, b in segs
         if np.ptp(toes[a:b, k, :2], axis=0).max() <= 0.01 * leg
     ]

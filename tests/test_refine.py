@@ -32,6 +32,7 @@ from habitsim.refine import (
 )
 from habitsim.refine import problem as P
 from habitsim.refine import solve as S
+from habitsim.stance.labels import EditReason, StanceLabels, StanceSource, runs
 
 FEET = ("lf", "rf", "lh", "rh")
 
@@ -178,7 +179,8 @@ def _small_problem(dynamics: bool, frames: int = 6):
     motion = _clip("dog", "trot", 20).slice(0, frames)
     model = load_species_model("dog")
     ev = P.clip_evaluator(model, frames, dynamics)
-    prep = S._prepare(motion, None, RefineOptions(dynamics=dynamics), model, ev)
+    labels = S._resolve_contacts(motion, None)
+    prep = S._prepare(motion, labels, RefineOptions(dynamics=dynamics), model, ev)
     p = ev.parameters(prep.targets, prep.qref, prep.href, prep.glob)
     rng = np.random.default_rng(2)
     x = ev.pack(prep.x0) + 0.01 * rng.normal(size=ev.n_x)
@@ -220,7 +222,7 @@ def test_gauss_newton_hessian_is_exact_at_zero_residual():
     opts = RefineOptions(
         w_smooth=0.0, w_jerk=0.0, w_hinge_jerk=0.0, filter_cutoff=None, align_ground=False
     )
-    prep = S._prepare(motion, None, opts, model, ev)
+    prep = S._prepare(motion, S._resolve_contacts(motion, None), opts, model, ev)
     x0 = ev.pack(prep.x0)
     joints = np.asarray(ev.frame.map(frames)(prep.x0[:, : ev.nv].T, prep.qref.T)[0])
     targets = joints.reshape(3, frames, 30).transpose(1, 2, 0)  # FK of x0 itself
@@ -681,7 +683,7 @@ def _shortened_stance(contacts: np.ndarray) -> np.ndarray:
     """Labels keeping only the middle half of every stance run."""
     c = contacts.copy()
     for f in range(4):
-        for a, b in S._runs(c[:, f]):
+        for a, b in runs(c[:, f]):
             k = (b - a) // 4
             c[a : a + k, f] = False
             c[b - k : b, f] = False
@@ -758,25 +760,97 @@ def test_contact_labels_are_cleaned():
     c[5:15, 1] = True  # RF labelled stance but the input drags it: trimmed to its middle
     c[5:10, 2] = c[11:15, 2] = True  # LH: a one-frame gap in a resting stance
     toes[5:15, 2, 0] = 2.0
-    out, changes = S.clean_contact_labels(c, toes, 30.0, leg)
+    given = StanceLabels(c, StanceSource.GIVEN)
+    cleaned = S.clean_contact_labels(given, toes, 30.0, leg)
+    out, changes = cleaned.array, S.cleaning_summary(cleaned)
+    # one edit per step, recorded under its reason code: LF's blip dropped at frame 20
+    assert [e.reason for e in cleaned.edits] == [
+        EditReason.SLIP_TRIM,
+        EditReason.GAP_FILL,
+        EditReason.BLIP_DROP,
+    ]
+    assert all(e.by == S.CLEANED_BY for e in cleaned.edits)
+    assert cleaned.edits[1].frames == ((), (), (10,), ())
+    assert cleaned.edits[2].frames[0] == (20,)
+    assert cleaned.source is StanceSource.GIVEN and np.array_equal(given.array, c)
     assert out[5:15, 0].all() and not out[20, 0]
     assert changes["LF"] == {"trimmed": 0, "filled": 0, "dropped": 1}
     assert out[:, 1].sum() < 10 and changes["RF"]["trimmed"] >= 6
-    capped, ch = S.clean_contact_labels(c, toes, 30.0, leg, max_trim_share=1 / 6)
+    capped_labels = S.clean_contact_labels(given, toes, 30.0, leg, max_trim_share=1 / 6)
+    capped, ch = capped_labels.array, S.cleaning_summary(capped_labels)
     assert ch["RF"]["trimmed"] == 2 and capped[6:14, 1].all()  # a sixth at each end
     assert out[5:15, 2].all() and changes["LH"]["filled"] == 1
     assert changes["frames_changed"] == int((out != c).sum())
     # without trimming the dragged RF keeps its whole stance; filling and dropping stay
-    kept, changes = S.clean_contact_labels(c, toes, 30.0, leg, trim=False)
+    kept_labels = S.clean_contact_labels(given, toes, 30.0, leg, trim=False)
+    kept, changes = kept_labels.array, S.cleaning_summary(kept_labels)
+    assert EditReason.SLIP_TRIM not in [e.reason for e in kept_labels.edits]
     assert kept[5:15, 1].all() and changes["RF"]["trimmed"] == 0
     assert kept[5:15, 2].all() and not kept[20, 0]
+
+
+def _clean_by_foot(c, toes, fps, leg, trim=True, share=1.0):
+    """The cleaning of :func:`~habitsim.refine.solve.clean_contact_labels` written foot
+    by foot, all three steps on one column, counting as it goes (reference)."""
+    c = c.copy()
+    xy = toes[..., :2]
+    tol, t = S.STANCE_SLIP_PER_LEG * leg, len(c)
+    max_gap = max(1, round(S.MIN_RUN_S * fps))
+    min_stance = max(2, round(S.MIN_RUN_S * fps))
+    changes = {}
+    for f in range(c.shape[1]):
+        col, n = c[:, f], {"trimmed": 0, "filled": 0, "dropped": 0}
+        for a, b in runs(col) if trim else ():
+            far = np.linalg.norm(xy[a:b, f] - np.median(xy[a:b, f], axis=0), axis=1) > tol
+            lo, hi, cap = a, b, int(np.floor(share * (b - a)))
+            while lo < hi and far[lo - a] and lo - a < cap:
+                lo += 1
+            while hi > lo and far[hi - 1 - a] and b - hi < cap:
+                hi -= 1
+            col[a:lo] = col[hi:b] = False
+            n["trimmed"] += (lo - a) + (b - hi)
+        rs = runs(col)
+        for (a0, b0), (a1, b1) in zip(rs, rs[1:], strict=False):
+            p0, p1 = np.median(xy[a0:b0, f], axis=0), np.median(xy[a1:b1, f], axis=0)
+            if a1 - b0 <= max_gap and np.linalg.norm(p1 - p0) <= tol:
+                col[b0:a1] = True
+                n["filled"] += 1
+        for a, b in runs(col):
+            if b - a < min_stance and a > 0 and b < t:
+                col[a:b] = False
+                n["dropped"] += 1
+        changes[("LF", "RF", "LH", "RH")[f]] = n
+    return c, changes
+
+
+@pytest.mark.parametrize("trim,share", [(True, 1.0), (True, 1 / 6), (False, 1.0)])
+def test_cleaning_and_its_summary_match_a_foot_by_foot_reference(trim, share):
+    rng = np.random.default_rng(11)
+    leg = 0.6
+    for _ in range(40):
+        t = int(rng.integers(8, 40))
+        c = rng.random((t, 4)) < 0.6
+        toes = np.cumsum(rng.normal(scale=0.06, size=(t, 4, 3)), axis=0)
+        toes[rng.random((t, 4)) < 0.5] *= 0.0  # many frames rest at the origin
+        given = StanceLabels(c, StanceSource.INPUT)
+        cleaned = S.clean_contact_labels(given, toes, 60.0, leg, trim=trim, max_trim_share=share)
+        ref, ref_changes = _clean_by_foot(c, toes, 60.0, leg, trim, share)
+        assert np.array_equal(cleaned.array, ref)
+        summary = S.cleaning_summary(cleaned)
+        assert summary == {"frames_changed": int((ref != c).sum()), **ref_changes}
+        # the summary of labels cleaned after earlier edits counts the cleaning's only
+        again = S.clean_contact_labels(cleaned, toes, 60.0, leg, trim=trim, max_trim_share=share)
+        n = len(cleaned.edits)
+        assert S.cleaning_summary(again, since=n)["frames_changed"] == int(
+            (again.array != cleaned.array).sum()
+        )
 
 
 @pytest.mark.slow
 def test_refine_reports_cleaned_labels():
     clean = _clip("dog", "trot", 64, seed=4)
     labels = clean.contacts.copy()
-    a, b = max(S._runs(~labels[:, 0]), key=lambda r: r[1] - r[0])
+    a, b = max(runs(~labels[:, 0]), key=lambda r: r[1] - r[0])
     blip = (a + b) // 2
     labels[blip, 0] = True  # a stance frame in the middle of a swing
     res = refine(clean, RefineOptions(metrics=False), contacts=labels)

@@ -42,6 +42,7 @@ import numpy as np
 from habitsim.errors import InvalidMotionError
 from habitsim.mjutils import free_joints
 from habitsim.qpos import qpos_joint_positions
+from habitsim.stance.labels import pooled_stance_f1
 
 __all__ = [
     "SIMULATED_KEYS",
@@ -120,7 +121,8 @@ def root_drift_mm(model: mujoco.MjModel, sim_qpos: np.ndarray, ref_qpos: np.ndar
 
 
 def contact_f1(sim_contacts: np.ndarray, ref_contacts: np.ndarray) -> float:
-    """F1 of simulated vs. reference contacts (pooled over feet and frames).
+    """F1 of simulated vs. reference contacts over the simulated frames, pooled over feet
+    and frames (:func:`habitsim.stance.labels.pooled_stance_f1`).
 
     Args:
         sim_contacts: (K, 4) bool.
@@ -135,12 +137,7 @@ def contact_f1(sim_contacts: np.ndarray, ref_contacts: np.ndarray) -> float:
         raise InvalidMotionError(f"contacts shapes differ: {s.shape} vs {r.shape}")
     if s.size == 0:
         return math.nan
-    tp = np.sum(s & r)
-    fp = np.sum(s & ~r)
-    fn = np.sum(~s & r)
-    if tp + fp + fn == 0:
-        return 1.0
-    return float(2 * tp / (2 * tp + fp + fn))
+    return pooled_stance_f1(s, r)
 
 
 def cost_of_transport(

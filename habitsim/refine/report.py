@@ -181,9 +181,9 @@ def build_report(
         "constraint_violation": violation,
         "checks": checks,
         "contacts": {
-            "source": prep.contact_source,
+            "source": prep.labels_input.source.value,
             "stance_share": prep.contacts.mean(axis=0).tolist(),
-            "stance_share_input": prep.contacts_input.mean(axis=0).tolist(),
+            "stance_share_input": prep.labels_input.array.mean(axis=0).tolist(),
             "cleaning": prep.cleaning,
             "swing_clearance_mm": None
             if opts.swing_clearance is None

@@ -30,8 +30,9 @@ Preparation, in this order:
    of a run at each end, uncapped by default), one-frame swing gaps whose two
    stance runs rest at the same place are filled, and stance runs shorter than
    :data:`MIN_RUN_S` are dropped. Planting a label the input does not follow bends the
-   whole leg for its duration and kinks it at the lift-off; the report lists the
-   changes (``contacts.cleaning``).
+   whole leg for its duration and kinks it at the lift-off. Each step is an edit of
+   the :class:`~habitsim.stance.labels.StanceLabels` under its reason code; the report
+   lists the changes (``contacts.cleaning``, :func:`cleaning_summary`).
 5. **Swing clearance** (:func:`swing_clearance`): docs/metrics.md counts a foot as in contact
    whenever its toe is below :data:`CONTACT_HEIGHT_PER_LEG` × L, labelled or not, so a
    swing foot skimming the ground while it moves reads as skating. Each swing phase
@@ -76,6 +77,7 @@ from ..qpos import (
     species_model,
 )
 from ..rotations import quat_mul, quat_normalize
+from ..stance.labels import EditReason, StanceLabels, StanceSource, runs
 from ..stance.planting import plant_motion
 from .errors import RefineConvergenceError, RefineError, RefineInputError
 from .problem import (
@@ -103,7 +105,10 @@ __all__ = [
     "WORSE_TOLERANCE",
     "VERDICT_METRICS",
     "compare_metrics",
+    "RefineAttempt",
     "clean_contact_labels",
+    "cleaning_summary",
+    "CLEANED_BY",
     "swing_clearance",
 ]
 
@@ -427,15 +432,21 @@ def _check_motion(motion: Any) -> Motion:
     return motion
 
 
-def _resolve_contacts(motion: Motion, contacts: np.ndarray | None) -> tuple[np.ndarray, str]:
+def _resolve_contacts(motion: Motion, contacts: np.ndarray | None) -> StanceLabels:
+    """The labels a refinement plants: ``contacts`` when given, else the motion's own,
+    else those detected on it.
+
+    Raises:
+        RefineInputError: labels of the wrong shape, or not booleans (or 0/1).
+    """
     t = motion.num_frames
     if contacts is None:
         if motion.contacts is not None:
-            contacts, source = motion.contacts, "input"
+            contacts, source = motion.contacts, StanceSource.INPUT
         else:
-            return motion.detect_contacts().astype(bool), "detected"
+            return StanceLabels(motion.detect_contacts(), StanceSource.DETECTED)
     else:
-        source = "given"
+        source = StanceSource.GIVEN
     c = np.asarray(contacts)
     if c.shape != (t, 4):
         raise RefineInputError(
@@ -444,7 +455,7 @@ def _resolve_contacts(motion: Motion, contacts: np.ndarray | None) -> tuple[np.n
     if c.dtype != bool:
         if not np.issubdtype(c.dtype, np.number) or not np.all(np.isin(c, (0, 1))):
             raise RefineInputError("contacts must be booleans (or 0/1)")
-    return c.astype(bool), source
+    return StanceLabels(c, source)
 
 
 def _ground_offset(
@@ -467,15 +478,14 @@ def _ground_offset(
     return filled
 
 
-def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
-    """(start, stop) of the runs of True in a 1-D bool array (stop exclusive)."""
-    f = np.concatenate([[False], np.asarray(flags, bool), [False]])
-    edges = np.flatnonzero(f[1:] != f[:-1])
-    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+#: Who :func:`clean_contact_labels` is in the labels' edit records.
+CLEANED_BY = "refine.clean_contact_labels"
+#: Foot names of the cleaning summary (a fifth foot and beyond go by their index).
+_FOOT_NAMES = ("LF", "RF", "LH", "RH")
 
 
 def clean_contact_labels(
-    contacts: np.ndarray,
+    labels: StanceLabels,
     toes: np.ndarray,
     fps: float,
     leg_length: float,
@@ -483,48 +493,48 @@ def clean_contact_labels(
     min_run_s: float = MIN_RUN_S,
     trim: bool = True,
     max_trim_share: float = MAX_TRIM_SHARE,
-) -> tuple[np.ndarray, dict[str, Any]]:
+) -> StanceLabels:
     """Contact labels made consistent with the motion before they are planted.
 
-    Per foot, in this order:
+    For every foot, in this order (one recorded edit per step, by :data:`CLEANED_BY`):
 
-    1. *trim*: the frames at either end of a stance run whose toe lies horizontally
-       further than ``slip_per_leg`` × L from where the run rests (the median of its toe
-       positions) become swing — the input moves that foot, so planting it there would
-       drag the leg — at most ``max_trim_share`` of the run at each end (below 1, every
-       labelled footfall keeps a stance even where the foot slides through all of it);
-    2. *fill*: a swing gap of at most ``min_run_s`` (at least one frame) between two
-       stance runs that rest within ``slip_per_leg`` × L of each other becomes stance (the
-       foot did not step);
-    3. *drop*: a stance run shorter than ``min_run_s`` (at least two frames) that does
-       not touch the clip's first or last frame becomes swing (a blip, not a step).
+    1. *trim* (:attr:`~habitsim.stance.labels.EditReason.SLIP_TRIM`): the frames at either
+       end of a stance run whose toe lies horizontally further than ``slip_per_leg`` × L
+       from where the run rests (the median of its toe positions) become swing — the
+       input moves that foot, so planting it there would drag the leg — at most
+       ``max_trim_share`` of the run at each end (below 1, every labelled footfall keeps
+       a stance even where the foot slides through all of it);
+    2. *fill* (:attr:`~habitsim.stance.labels.EditReason.GAP_FILL`): a swing gap of at
+       most ``min_run_s`` (at least one frame) between two stance runs that rest within
+       ``slip_per_leg`` × L of each other becomes stance (the foot did not step);
+    3. *drop* (:attr:`~habitsim.stance.labels.EditReason.BLIP_DROP`): a stance run
+       shorter than ``min_run_s`` (at least two frames) that does not touch the clip's
+       first or last frame becomes swing (a blip, not a step).
 
     Args:
-        contacts: (T, 4) bool labels (LF, RF, LH, RH).
+        labels: (T, 4) stance labels (LF, RF, LH, RH).
         toes: (T, 4, ≥2) toe positions of the motion [m] (x, y used).
         fps: frame rate [Hz].
         leg_length: the species' hind-leg length L [m].
+        slip_per_leg: the distance a stance toe may lie from its run's rest, share of L.
+        min_run_s: shortest stance run kept and longest swing gap filled [s].
         trim: run step 1 (off: only fill and drop).
         max_trim_share: step 1 trims at most this share of a run at each end
             (:data:`MAX_TRIM_SHARE`; 1 for no cap).
 
     Returns:
-        The cleaned (T, 4) labels and what changed: ``frames_changed`` (total), and per
-        foot (``LF`` …) the frames ``trimmed``, the gaps ``filled`` and the stance runs
-        ``dropped``.
+        The cleaned labels, ``labels`` with the edits of the steps that changed a frame
+        (:func:`cleaning_summary` tells what changed).
     """
-    c = np.asarray(contacts, bool).copy()
+    c0 = labels.array
     xy = np.asarray(toes, float)[..., :2]
-    t = len(c)
+    t, nf = c0.shape
     tol = float(slip_per_leg) * float(leg_length)
     max_gap = max(1, int(round(min_run_s * fps)))
     min_stance = max(2, int(round(min_run_s * fps)))
-    changes: dict[str, Any] = {}
-    names = ("LF", "RF", "LH", "RH")
-    for f in range(c.shape[1]):
-        trimmed = filled = dropped = 0
-        col = c[:, f]
-        for a, b in _runs(col) if trim else ():
+    trimmed = c0.copy()
+    for f in range(nf):
+        for a, b in runs(c0[:, f]) if trim else ():
             anchor = np.median(xy[a:b, f], axis=0)
             far = np.linalg.norm(xy[a:b, f] - anchor, axis=1) > tol
             lo, hi = a, b
@@ -533,32 +543,60 @@ def clean_contact_labels(
                 lo += 1
             while hi > lo and far[hi - 1 - a] and b - hi < cap:
                 hi -= 1
-            col[a:lo] = False
-            col[hi:b] = False
-            trimmed += (lo - a) + (b - hi)
-        runs = _runs(col)
-        for (a0, b0), (a1, b1) in zip(runs, runs[1:], strict=False):
+            trimmed[a:lo, f] = False
+            trimmed[hi:b, f] = False
+    filled = trimmed.copy()
+    for f in range(nf):
+        rs = runs(trimmed[:, f])
+        for (a0, b0), (a1, b1) in zip(rs, rs[1:], strict=False):
             if b0 < a1 and a1 - b0 <= max_gap:
                 p0 = np.median(xy[a0:b0, f], axis=0)
                 p1 = np.median(xy[a1:b1, f], axis=0)
                 if np.linalg.norm(p1 - p0) <= tol:
-                    col[b0:a1] = True
-                    filled += 1
-        for a, b in _runs(col):
+                    filled[b0:a1, f] = True
+    dropped = filled.copy()
+    for f in range(nf):
+        for a, b in runs(filled[:, f]):
             if b - a < min_stance and a > 0 and b < t:
-                col[a:b] = False
-                dropped += 1
-        c[:, f] = col
-        changes[names[f] if f < 4 else str(f)] = {
-            "trimmed": trimmed,
-            "filled": filled,
-            "dropped": dropped,
+                dropped[a:b, f] = False
+    return (
+        labels.edited(trimmed, by=CLEANED_BY, reason=EditReason.SLIP_TRIM)
+        .edited(filled, by=CLEANED_BY, reason=EditReason.GAP_FILL)
+        .edited(dropped, by=CLEANED_BY, reason=EditReason.BLIP_DROP)
+    )
+
+
+def cleaning_summary(cleaned: StanceLabels, since: int = 0) -> dict[str, Any]:
+    """What :func:`clean_contact_labels` changed, as the report lists it
+    (``contacts.cleaning``).
+
+    Args:
+        cleaned: labels returned by :func:`clean_contact_labels`.
+        since: the number of edits the labels had before they were cleaned.
+
+    Returns:
+        ``frames_changed``: labels that differ from those before the cleaning (a frame
+        trimmed and filled again is unchanged); per foot (``LF`` …): the frames
+        ``trimmed``, the gaps ``filled`` and the stance runs ``dropped``.
+    """
+    counts = np.zeros((3, cleaned.n_feet), dtype=int)
+    steps = (EditReason.SLIP_TRIM, EditReason.GAP_FILL, EditReason.BLIP_DROP)
+    for e in cleaned.edits[since:]:
+        if e.by != CLEANED_BY or e.reason not in steps:
+            continue
+        k = steps.index(e.reason)
+        for f, frames in enumerate(e.frames):
+            # trimmed: frames; filled gaps and dropped runs: blocks of consecutive frames
+            # (the gaps and runs of one foot never touch each other)
+            counts[k, f] += len(frames) if k == 0 else len(runs(e.mask(cleaned.n_frames)[:, f]))
+    out: dict[str, Any] = {"frames_changed": int(cleaned.changed_since(since).sum())}
+    for f in range(cleaned.n_feet):
+        out[_FOOT_NAMES[f] if f < len(_FOOT_NAMES) else str(f)] = {
+            "trimmed": int(counts[0, f]),
+            "filled": int(counts[1, f]),
+            "dropped": int(counts[2, f]),
         }
-    changes = {
-        "frames_changed": int((c != np.asarray(contacts, bool)).sum()),
-        **changes,
-    }
-    return c, changes
+    return out
 
 
 def swing_clearance(
@@ -598,7 +636,7 @@ def swing_clearance(
     rest = c.copy()
     for f in range(nf):
         stance = np.flatnonzero(c[:, f])
-        for a, b in _runs(~c[:, f]):
+        for a, b in runs(~c[:, f]):
             k = frames[a:b]
             if len(stance):
                 d = np.abs(k[:, None] - stance[None, :]).min(axis=1).astype(float)
@@ -694,15 +732,19 @@ class _Prepared:
     qref: np.ndarray
     href: np.ndarray
     x0: np.ndarray
-    contacts: np.ndarray
-    contact_source: str
+    labels: StanceLabels  # the labels planted (cleaned)
     glob: dict[str, float]
     offset: np.ndarray
     swing_floor: np.ndarray | None
     clearance: np.ndarray | None
     pins: np.ndarray
-    contacts_input: np.ndarray
-    cleaning: dict[str, Any] | None
+    labels_input: StanceLabels  # the labels as they came (given, the input's, detected)
+    cleaning: dict[str, Any] | None  # :func:`cleaning_summary` (None: not cleaned)
+
+    @property
+    def contacts(self) -> np.ndarray:
+        """(T, 4) bool labels planted (read-only)."""
+        return self.labels.array
 
 
 def _inside_ranges(info: ModelInfo, hinges: np.ndarray) -> np.ndarray:
@@ -715,14 +757,14 @@ def _inside_ranges(info: ModelInfo, hinges: np.ndarray) -> np.ndarray:
 
 def _prepare(
     motion: Motion,
-    contacts: np.ndarray | None,
+    labels_in: StanceLabels,
     opts: RefineOptions,
     model: mujoco.MjModel,
     pr: RefinementProblem,
 ) -> _Prepared:
     info, nx, nv = pr.info, pr.nx, pr.nv
-    c_in, source = _resolve_contacts(motion, contacts)
-    c = c_in
+    labels = labels_in
+    c = labels.array
     q_raw = motion_to_qpos(motion, model).qpos
     f_c = opts.cutoff_hz(motion.species_info.leg_length, info.gravity)
     if f_c is None:
@@ -734,9 +776,11 @@ def _prepare(
     sp = motion.species_info
     cleaning = None
     if opts.clean_contacts:
-        c, cleaning = clean_contact_labels(
-            c_in, targets[:, toe_idx], motion.fps, sp.leg_length, trim=opts.trim_contacts
+        labels = clean_contact_labels(
+            labels_in, targets[:, toe_idx], motion.fps, sp.leg_length, trim=opts.trim_contacts
         )
+        cleaning = cleaning_summary(labels, since=len(labels_in.edits))
+        c = labels.array
         if cleaning["frames_changed"] and f_c is not None:  # corners moved: filter again
             q = _lowpass_qpos(q_raw, info, motion.fps, f_c, c)
             targets = qpos_joint_positions(model, q)
@@ -782,14 +826,13 @@ def _prepare(
         qref,
         href,
         x0,
-        c,
-        source,
+        labels,
         glob,
         offset,
         None,
         clearance,
         pins,
-        c_in,
+        labels_in,
         cleaning,
     )
 
@@ -827,26 +870,27 @@ def _planted_start(
 
 
 def _preplant(
-    motion: Motion, contacts: np.ndarray | None, opts: RefineOptions
-) -> tuple[Motion, np.ndarray, dict[str, Any]]:
+    motion: Motion, labels_in: StanceLabels, opts: RefineOptions
+) -> tuple[Motion, StanceLabels, dict[str, Any]]:
     """The input with its feet planted on its (cleaned) labels and lifted to the swing
     clearance by leg IK (:func:`habitsim.stance.planting.plant_motion`), the labels, and the
-    label fields of :class:`_Prepared` (source, input labels, cleaning). The optimisation
-    then starts from, and tracks, a motion whose feet already rest where they are
-    labelled to and clear the ground where they move."""
-    c_in, source = _resolve_contacts(motion, contacts)
+    label fields of :class:`_Prepared` (input labels, cleaning). The optimisation then
+    starts from, and tracks, a motion whose feet already rest where they are labelled to
+    and clear the ground where they move."""
     sp = motion.species_info
-    c, cleaning = c_in, None
+    labels, cleaning = labels_in, None
     if opts.clean_contacts:
-        c, cleaning = clean_contact_labels(
-            c_in, motion.foot_positions(), motion.fps, sp.leg_length, trim=opts.trim_contacts
+        labels = clean_contact_labels(
+            labels_in, motion.foot_positions(), motion.fps, sp.leg_length, trim=opts.trim_contacts
         )
+        cleaning = cleaning_summary(labels, since=len(labels_in.edits))
+    c = labels.array
     floor = None
     if opts.swing_clearance is not None:
         floor = swing_clearance(c, motion.fps, sp.leg_length, opts.swing_clearance)[0]
     planted, _ = plant_motion(motion, c, floor)
-    fields_ = {"contact_source": source, "contacts_input": c_in, "cleaning": cleaning}
-    return planted, c, fields_
+    fields_ = {"labels_input": labels_in, "cleaning": cleaning}
+    return planted, labels, fields_
 
 
 def _stance_height(sole: np.ndarray, contacts: np.ndarray) -> np.ndarray:
@@ -946,6 +990,34 @@ def _solve_windows(
     return x, log, status, build_s
 
 
+@dataclass(frozen=True)
+class RefineAttempt:
+    """One solve of every window of a clip, assembled and checked (:func:`_solve_checked`).
+
+    Attributes:
+        x: (T, nx) the solution (the initial guess after a window failure).
+        log: per window what IPOPT did (the report's ``windows``).
+        status: IPOPT's status of the last window solved or of the failing one, or
+            ``Verification_Failed``.
+        failure: what failed; None when every window was solved and the result passed
+            the MuJoCo check.
+        checks: the MuJoCo-FK checks of the result (:func:`_verify`; of the input after
+            a window failure).
+        qpos: (T, nq) the result (the input after a failure).
+        motion: the result as a motion carrying the labels (the input after a failure).
+        build_s: time spent building problems during the attempt [s].
+    """
+
+    x: np.ndarray
+    log: list[dict[str, Any]]
+    status: str
+    failure: _WindowFailed | None
+    checks: dict[str, float]
+    qpos: np.ndarray
+    motion: Motion
+    build_s: float
+
+
 def _solve_checked(
     prep: _Prepared,
     motion: Motion,
@@ -955,7 +1027,7 @@ def _solve_checked(
     info: ModelInfo,
     m: mujoco.MjModel,
     x_init: np.ndarray | None = None,
-) -> tuple:
+) -> RefineAttempt:
     """Solve every window (from ``x_init`` if given, :func:`_solve_windows`), assemble,
     check with MuJoCo; the output motion is the input (with the labels) after a
     failure."""
@@ -987,7 +1059,7 @@ def _solve_checked(
         out = motion.slice(0)
         out.contacts = prep.contacts.copy()
         qpos = prep.qpos_in.copy()
-    return x, log, status, failure, checks, qpos, out, build_s
+    return RefineAttempt(x, log, status, failure, checks, qpos, out, build_s)
 
 
 class _WindowFailed(Exception):
@@ -1012,18 +1084,9 @@ def _verify(
         low[k] = min(d.xpos[1:, 2].min(), d.site_xpos[:, 2].min())
     drift = 0.0
     for f in range(4):
-        c = contacts[:, f]
-        k = 0
-        while k < len(c):
-            if not c[k]:
-                k += 1
-                continue
-            e = k
-            while e + 1 < len(c) and c[e + 1]:
-                e += 1
-            seg = toe[k : e + 1, f, :2]
+        for a, b in runs(contacts[:, f]):
+            seg = toe[a:b, f, :2]
             drift = max(drift, float(np.linalg.norm(seg - seg[0], axis=1).max()))
-            k = e + 1
     stance_height = float(np.abs(sole[contacts]).max()) if contacts.any() else 0.0
     h = qpos[:, info.hinge_qposadr]
     excess = np.maximum(info.lower - h, 0) + np.maximum(h - info.upper, 0)
@@ -1075,8 +1138,7 @@ def refine(
     if fallback is not None:
         opts = replace(opts, fallback=bool(fallback))
     motion = _check_motion(motion)
-    if contacts is not None:
-        _resolve_contacts(motion, contacts)  # bad labels fail before a problem is built
+    labels = _resolve_contacts(motion, contacts)  # bad labels fail before a problem is built
     motion_in = motion
     m = _species_model(motion.species) if model is None else model
     t = motion.num_frames
@@ -1085,18 +1147,18 @@ def refine(
     info = pr0.info
     pre = None
     if opts.preplant:
-        motion, contacts, pre = _preplant(motion, contacts, opts)
-    prep = _prepare(motion, contacts, opts, m, pr0)
+        motion, labels, pre = _preplant(motion, labels, opts)
+    prep = _prepare(motion, labels, opts, m, pr0)
     if pre is not None:  # how the labels came and were cleaned, as given by the caller
         prep = replace(prep, **pre)
     guard: list[dict[str, Any]] = []
     build_total = 0.0
-    previous = None
+    previous: tuple[RefineAttempt, dict[str, Any], RefineOptions] | None = None
     while True:
-        warm = None if previous is None else previous[0][0]  # a retry: the last solution
+        warm = None if previous is None else previous[0].x  # a retry: the last solution
         attempt = _solve_checked(prep, motion, opts, plan, model, info, m, warm)
-        build_total += attempt[-1]
-        verdict = compare_metrics(motion_in, attempt[6]) if attempt[3] is None else None
+        build_total += attempt.build_s
+        verdict = compare_metrics(motion_in, attempt.motion) if attempt.failure is None else None
         if verdict is None and previous is not None:  # a guard retry failed: keep the last
             attempt, verdict, opts = previous
             guard[-1]["status"] = "failed"
@@ -1104,7 +1166,7 @@ def refine(
         if verdict is None or verdict["ok"] or len(guard) >= int(opts.guard):
             break
         # worse than the input (in practice: jerkier): again with smoother weights
-        log0 = attempt[1]
+        log0 = attempt.log
         guard.append(
             {
                 "worse": verdict["worse"],
@@ -1118,18 +1180,19 @@ def refine(
         escalated: dict[str, Any] = {k: _escalate(k, getattr(opts, k)) for k in GUARD_WEIGHTS}
         opts = replace(opts, **escalated)
         prep.glob.update(opts.weights)
-    x, log, status, failure, checks, qpos, out, _ = attempt
+    status, failure, checks = attempt.status, attempt.failure, attempt.checks
+    qpos, out = attempt.qpos, attempt.motion
     prep.glob.update(opts.weights)
     build_s = build_total
     success = failure is None
     report = build_report(
         motion_in=motion_in,
         motion_out=out,
-        x=x,
+        x=attempt.x,
         prep=prep,
         opts=opts,
         plan=plan,
-        log=log,
+        log=attempt.log,
         status=status if success else f"fallback: {status}" if opts.fallback else status,
         success=success,
         build_s=build_s,
@@ -1143,7 +1206,7 @@ def refine(
     residual = None
     if success and opts.dynamics and "residual_mg" in report:
         residual = np.asarray(report["residual_mg"]["per_frame"])
-    if not success:
+    if failure is not None:
         msg = (
             f"IPOPT did not converge on frames {failure.window[0]}:{failure.window[1]} "
             f"of the {t}-frame {motion.species} clip (status {failure.status}); "
@@ -1158,7 +1221,7 @@ def refine(
         if not opts.fallback:
             raise RefineConvergenceError(msg, failure.status, failure.window, report)
         if pre is not None:  # the input itself comes back, not its pre-planted form
-            out = motion_in.with_contacts(prep.contacts)
+            out = motion_in.with_contacts(prep.contacts.copy())
             qpos = motion_to_qpos(motion_in, m).qpos
     # no timing here: the motion file of a seeded run is byte-identical from run to run
     # (solve and wall times are in the report)

@@ -14,6 +14,7 @@ from ..errors import InvalidMotionError, SimulationError
 from ..motion import Motion
 from ..qpos import QposTrajectory, motion_to_qpos
 from ..species import load_species
+from ..stance.labels import StanceLabels, StanceSource
 from .model import _foot_points, _model_leg_length, _species_model
 from .reference import _check_qpos
 
@@ -24,9 +25,14 @@ class _Clip:
     base: mujoco.MjModel  # the model the reference was mapped on (torque motors or servos)
     qpos: np.ndarray  # (T, nq)
     fps: float
-    contacts: np.ndarray  # (T, nf) bool reference contact labels
+    labels: StanceLabels  # (T, nf) reference stance labels and where they came from
     leg_length: float
     feet: tuple[str, ...] | None = None  # a robot's foot names (None: habitsim's)
+
+    @property
+    def contacts(self) -> np.ndarray:
+        """(T, nf) bool reference contact labels (read-only)."""
+        return self.labels.array
 
 
 def _check_contacts(contacts: Any, n_frames: int, n_feet: int = 4) -> np.ndarray:
@@ -78,20 +84,13 @@ def _resolve(
         except InvalidMotionError as e:
             raise SimulationError(f"the motion does not fit the model: {e}") from e
         if contacts is not None:
-            contacts = _check_contacts(contacts, motion.num_frames)
+            labels = StanceLabels(_check_contacts(contacts, motion.num_frames), StanceSource.GIVEN)
         elif motion.contacts is not None:
-            contacts = motion.contacts
+            labels = StanceLabels(np.asarray(motion.contacts, bool), StanceSource.INPUT)
         else:
-            contacts = motion.detect_contacts()
+            labels = StanceLabels(motion.detect_contacts(), StanceSource.DETECTED)
         sp = motion.species_info
-        return _Clip(
-            sp.name,
-            base,
-            _check_qpos(base, traj.qpos),
-            motion.fps,
-            np.asarray(contacts, bool),
-            sp.leg_length,
-        )
+        return _Clip(sp.name, base, _check_qpos(base, traj.qpos), motion.fps, labels, sp.leg_length)
     if isinstance(motion_or_qpos, QposTrajectory | np.ndarray):
         if species is None and model is None:
             raise SimulationError("a qpos trajectory needs species= (or model=)")
@@ -111,13 +110,15 @@ def _resolve(
         leg = spq.leg_length if spq is not None else _model_leg_length(base, feet)
         nf = 4 if feet is None else len(feet)
         if contacts is not None:
-            contacts = _check_contacts(contacts, len(q), nf)
+            labels = StanceLabels(_check_contacts(contacts, len(q), nf), StanceSource.GIVEN)
         else:
-            contacts = contacts_from_feet(_foot_points(base, q, feet), f, leg)
+            labels = StanceLabels(
+                contacts_from_feet(_foot_points(base, q, feet), f, leg), StanceSource.DETECTED
+            )
         name = spq.name if spq is not None else "model"
         if spq is None and feet is not None:
             name = bytes(base.names).split(b"\0", 1)[0].decode() or "robot"
-        return _Clip(name, base, q, float(f), contacts, leg, feet)
+        return _Clip(name, base, q, float(f), labels, leg, feet)
     raise SimulationError(
         f"expected a Motion or a QposTrajectory, got {type(motion_or_qpos).__name__}"
     )

@@ -162,7 +162,7 @@ def _finish(
         reference_qpos=clip.qpos,
         contacts=contacts,
         touch=run.touch,
-        reference_contacts=clip.contacts,
+        reference_contacts=clip.contacts.copy(),
         fell=run.fall_frame is not None,
         fall_time=fall_t,
         fall_reason=run.fall_reason,

@@ -29,13 +29,13 @@ def swing_lift(
     (``habits.swing_height`` of its species file, share of leg length), so a decoded
     foot that shuffles along the ground in swing is lifted; a toe already higher keeps
     its height. None when ``policy.swing_lift`` is off."""
-    from ..contacts import contact_segments
+    from .labels import stance_runs
 
     if not resolve_policy(policy).swing_lift:
         return None
     lift = np.full(labels.shape, np.nan)
     height = out.species_info.habits.swing_height * out.species_info.leg_length
-    for f, runs in enumerate(contact_segments(~np.asarray(labels, dtype=bool))):
+    for f, runs in enumerate(stance_runs(~np.asarray(labels, dtype=bool))):
         for a, b in runs:
             lift[a:b, f] = height * np.sin(np.pi * (np.arange(b - a) + 0.5) / (b - a))
     return lift
@@ -175,10 +175,10 @@ def plant_decoded(
 
 def _run_mask(contacts: np.ndarray, hit: np.ndarray) -> np.ndarray:
     """(T, 4) bool: the whole stance runs of ``contacts`` that have a frame in ``hit``."""
-    from ..contacts import contact_segments
+    from .labels import stance_runs
 
     out = np.zeros_like(contacts, dtype=bool)
-    for k, segs in enumerate(contact_segments(contacts)):
+    for k, segs in enumerate(stance_runs(contacts)):
         for a, b in segs:
             if hit[a:b, k].any():
                 out[a:b, k] = True
@@ -208,7 +208,7 @@ def trim_to_reach(
     frees it). The reach test is :func:`habitsim.stance.planting.stance_run_shortfall` of the
     centred foothold with the pelvis raised by ``policy.trim_margin_per_leg``.
     """
-    from ..contacts import contact_segments
+    from .labels import stance_runs
     from .planting import stance_run_shortfall
 
     policy = resolve_policy(policy)
@@ -221,7 +221,7 @@ def trim_to_reach(
     # (foot, start, stop) of the runs to trim, by their original extent
     active = [
         (k, a, b)
-        for k, segs in enumerate(contact_segments(c))
+        for k, segs in enumerate(stance_runs(c))
         for a, b in segs
         if short[a:b, k].max() > 0.0 and (only is None or only[a:b, k].any())
     ]
@@ -284,7 +284,7 @@ def plant_partly(
     at rest is kept, the trimming reported as ``trimmed`` (the output's labels are the
     trimmed ones).
     """
-    from ..contacts import contact_segments
+    from .labels import stance_runs
     from .planting import plant_motion, stance_run_shortfall
 
     policy = resolve_policy(policy)
@@ -316,8 +316,8 @@ def plant_partly(
     else:
         return None
     n_free = int(free.sum())  # checked before the last pass, which freed nothing more
-    runs = sum(len(s) for s in contact_segments(c))
-    loose = sum(len(s) for s in contact_segments(free))
+    runs = sum(len(s) for s in stance_runs(c))
+    loose = sum(len(s) for s in stance_runs(free))
     planting = replace(
         Planting.judged(report, c, leg, "centred", free),
         free_frames=n_free,

@@ -45,7 +45,6 @@ from scipy.signal import savgol_filter
 from ..contacts import (
     CONTACT_HEIGHT_PER_LEG,
     CONTACT_SPEED_PER_LEG,
-    contact_segments,
     contacts_from_feet,
 )
 from ..errors import InvalidMotionError
@@ -53,6 +52,7 @@ from ..ik import axial_frames, foot_inclination, pose_from_targets
 from ..motion import Motion
 from ..skeleton import ABDUCTION_SIGN, JOINT_NAMES, get_skeleton
 from ..species import Species, load_species
+from .labels import stance_runs
 
 __all__ = [
     "FOOT_ANCHORS",
@@ -68,7 +68,6 @@ __all__ = [
     "stance_sweep_limit",
     "stance_driven_root",
     "leg_pose_angles",
-    "contact_f1",
 ]
 
 #: The habitsim joint each foot's offset is measured from (its shoulder / hip joint).
@@ -257,21 +256,6 @@ def label_source_stance(
     return SourceStance(contacts, heights, floors, float(floors.min()), float(leg_length))
 
 
-def contact_f1(pred: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """(F,) F1 score per foot of predicted contact flags against reference flags.
-
-    A foot with no contact in either sequence scores 1 (they agree); one with contacts in
-    only one of them scores 0.
-    """
-    p = np.asarray(pred, dtype=bool)
-    r = np.asarray(ref, dtype=bool)
-    if p.shape != r.shape or p.ndim != 2:
-        raise InvalidMotionError(f"contact arrays must match as (T, F), got {p.shape}, {r.shape}")
-    tp = (p & r).sum(axis=0)
-    den = p.sum(axis=0) + r.sum(axis=0)
-    return np.where(den > 0, 2.0 * tp / np.maximum(den, 1), 1.0)
-
-
 @dataclass(frozen=True)
 class PlantReport:
     """What :func:`plant_legs` did.
@@ -363,7 +347,7 @@ def _planted_targets(
     out = raw.copy()
     out[..., 2] = np.maximum(out[..., 2], 0.0)
     t = raw.shape[0]
-    for k, segs in enumerate(contact_segments(contacts)):
+    for k, segs in enumerate(stance_runs(contacts)):
         if not segs:
             continue
         runs = [(a, b - 1) for a, b in segs]  # inclusive last stance frame

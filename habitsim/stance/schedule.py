@@ -76,7 +76,7 @@ def transfer_contacts(
         ``decoded``, ``source``, ``detected``, ``duty``) with the details of that method.
     """
     from ..contacts import contacts_by_duty, contacts_from_feet, drop_short_runs, warp_contacts
-    from .planting import contact_f1
+    from .labels import stance_f1
 
     policy = resolve_policy(policy)
     src = None
@@ -86,7 +86,7 @@ def transfer_contacts(
         labels = drop_short_runs(np.asarray(decoded, dtype=bool), 2)
         info: dict[str, Any] = {"method": "decoded"}
         if src is not None:
-            f1 = contact_f1(labels, src)
+            f1 = stance_f1(labels, src)
             duty, duty_src = labels.mean(axis=0), src.mean(axis=0)
             info["source_f1"] = [round(float(v), 3) for v in f1]
             info["duty"] = [round(float(v), 3) for v in duty]
