@@ -15,7 +15,9 @@ Modules: :mod:`~habitsim.models.config` (typed configs and presets),
 :mod:`~habitsim.models.features` (the network's motion representation),
 :mod:`~habitsim.models.vqvae`, :mod:`~habitsim.models.quantizer`,
 :mod:`~habitsim.models.habit`, :mod:`~habitsim.models.text`,
-:mod:`~habitsim.models.model` (the network), :mod:`~habitsim.models.train`,
+:mod:`~habitsim.models.model` (the network), :mod:`~habitsim.models.train` (with
+:mod:`~habitsim.models.losses`, :mod:`~habitsim.models.validation`,
+:mod:`~habitsim.models.resume` and :mod:`~habitsim.models.finetune`),
 :mod:`~habitsim.models.recipe` (staged presets: the shipped model's stages),
 :mod:`~habitsim.models.checkpoint`, :mod:`~habitsim.models.transfer`,
 :mod:`~habitsim.models.evaluate`.

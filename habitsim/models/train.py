@@ -28,25 +28,28 @@ Everything random is seeded from ``TrainConfig.seed``: the weights (inside
 :func:`torch.random.fork_rng`, so the caller's global RNG is untouched), the window
 sampler (:class:`numpy.random.Generator`) and the stochastic layers (a
 :class:`torch.Generator`). A resumable checkpoint stores all three states.
+
+Parts: the loss terms in :mod:`habitsim.models.losses`, validation in
+:mod:`habitsim.models.validation`, the optimiser state of a resumable checkpoint in
+:mod:`habitsim.models.resume`, and the start of a fine-tune in
+:mod:`habitsim.models.finetune`; the training windows come from
+:mod:`habitsim.models.data`.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
-from ..skeleton import FOOT_JOINTS, JOINT_NAMES
-from ..species import load_species, training_species
+from ..species import training_species
 from .checkpoint import (
     CONFIG_FILE,
     LoadedCheckpoint,
@@ -55,23 +58,21 @@ from .checkpoint import (
     read_checkpoint_config,
     save_checkpoint,
 )
-from .config import Config, ModelConfig
-from .data import (
-    Batch,
-    ClipSet,
-    WindowSampler,
-    feature_stats,
-    fixed_windows,
-    load_clip_set,
-    stack_windows,
-)
+from .config import Config
+from .data import ClipSet, WindowSampler, feature_stats, load_clip_set
 from .errors import CheckpointError, TrainingDataError
-from .features import C_DIM, C_INDEX, H_INDEX, Q_DIM, window_positions
+from .finetune import _init_state, _load_init
+from .finetune import resolve_init as resolve_init
+from .losses import _contact_loss as _contact_loss
+from .losses import _position_loss as _position_loss
+from .losses import _recon_terms as _recon_terms
+from .losses import _stance_loss as _stance_loss
+from .losses import compute_losses
 from .model import HabitVQVAE
+from .resume import _optimizer_state, _restore_optimizer, _same_except_steps
 from .text import species_embeddings
-
-#: Joint indices of the four toes (LF, RF, LH, RH), for the stance term.
-_TOES = [JOINT_NAMES.index(n) for n in FOOT_JOINTS]
+from .validation import _Validator, evaluate_windows
+from .validation import direct_windows as direct_windows
 
 __all__ = ["TrainResult", "build_untrained", "compute_losses", "evaluate_windows", "train", "lr_at"]
 
@@ -124,396 +125,6 @@ def build_untrained(
         model.feat_mean.copy_(torch.from_numpy(stats[0]))
         model.feat_std.copy_(torch.from_numpy(stats[1]))
     return model
-
-
-def _masked_smooth_l1(
-    pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, beta: float
-) -> torch.Tensor:
-    """Mean smooth-L1 over valid frames (B, T) and the last axis."""
-    e = F.smooth_l1_loss(pred, target, reduction="none", beta=beta).mean(-1)
-    w = valid.to(e.dtype)
-    return (e * w).sum() / w.sum().clamp_min(1.0)
-
-
-def _recon_terms(
-    pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, cfg: Config
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """(rotation + height term, velocity term) of L_re."""
-    b = cfg.train.smooth_l1_beta
-    lq = _masked_smooth_l1(pred[..., :Q_DIM], target[..., :Q_DIM], valid, b)
-    lh = _masked_smooth_l1(pred[..., H_INDEX:C_INDEX], target[..., H_INDEX:C_INDEX], valid, b)
-    lv = _masked_smooth_l1(pred[..., Q_DIM:H_INDEX], target[..., Q_DIM:H_INDEX], valid, b)
-    if cfg.train.root_velocity_weight > 0:  # the pelvis' channels, whose error the path integrates
-        lv = lv + cfg.train.root_velocity_weight * _masked_smooth_l1(
-            pred[..., Q_DIM : Q_DIM + 3], target[..., Q_DIM : Q_DIM + 3], valid, b
-        )
-    return lq + lh, lv
-
-
-def _position_loss(
-    pred: torch.Tensor,
-    target: torch.Tensor,
-    valid: torch.Tensor,
-    species: list[str],
-    fps: float,
-    beta: float,
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Smooth-L1 on forward-kinematics positions [hip heights], as two terms: the pose
-    (every joint relative to the pelvis) plus the pelvis' path (integrated from the
-    decoded velocities). In one term on global positions the integrated drift of the
-    root enters every joint's error, drowns the limbs' gradient, and the limbs were learnt
-    several times slower.
-
-    Returns:
-        (the loss, the decoded joint positions (B, T, J, 3) [m]).
-    """
-    pos = window_positions(pred, species, fps)
-    with torch.no_grad():
-        pt = window_positions(target, species, fps)
-    h = torch.tensor([load_species(s).hip_height for s in species], dtype=pred.dtype)[
-        :, None, None, None
-    ]
-    pp, pt = pos / h, pt / h
-    pose = F.smooth_l1_loss(
-        pp[..., 1:, :] - pp[..., :1, :],
-        pt[..., 1:, :] - pt[..., :1, :],
-        reduction="none",
-        beta=beta,
-    ).mean((-1, -2))
-    path = F.smooth_l1_loss(pp[..., 0, :], pt[..., 0, :], reduction="none", beta=beta).mean(-1)
-    w = valid.to(pose.dtype)
-    return ((pose + path) * w).sum() / w.sum().clamp_min(1.0), pos
-
-
-def _contact_loss(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
-    """Binary cross-entropy of the decoded contact logits against the stance labels."""
-    e = F.binary_cross_entropy_with_logits(
-        pred[..., C_INDEX : C_INDEX + C_DIM],
-        target[..., C_INDEX : C_INDEX + C_DIM],
-        reduction="none",
-    ).mean(-1)
-    w = valid.to(e.dtype)
-    return (e * w).sum() / w.sum().clamp_min(1.0)
-
-
-def _stance_loss(
-    pos: torch.Tensor,
-    target: torch.Tensor,
-    valid: torch.Tensor,
-    species: list[str],
-    fps: float,
-    beta: float,
-) -> torch.Tensor:
-    """Smooth-L1 of the decoded toe velocity [leg lengths / s] towards zero on frames
-    whose label and the previous frame's are both stance (mean over those frames)."""
-    toes = _TOES
-    leg = torch.tensor([load_species(s).leg_length for s in species], dtype=pos.dtype)
-    v = (pos[:, 1:, toes] - pos[:, :-1, toes]) * (fps / leg[:, None, None, None])
-    c = target[..., C_INDEX : C_INDEX + C_DIM] > 0.5
-    on = c[:, 1:] & c[:, :-1] & (valid[:, 1:] & valid[:, :-1])[..., None]
-    e = F.smooth_l1_loss(v, torch.zeros_like(v), reduction="none", beta=beta).sum(-1)
-    w = on.to(e.dtype)
-    return (e * w).sum() / w.sum().clamp_min(1.0)
-
-
-def _kinematic_terms(
-    pred: torch.Tensor,
-    target: torch.Tensor,
-    valid: torch.Tensor,
-    species: list[str],
-    fps: float,
-    cfg: Config,
-    logs: dict[str, float],
-    tag: str = "",
-) -> torch.Tensor:
-    """Position, contact and stance terms of one set of decoded windows (weighted)."""
-    t = cfg.train
-    total = pred.new_zeros(())
-    if t.position_weight > 0 or t.stance_weight > 0:
-        lp, pos = _position_loss(pred, target, valid, species, fps, t.smooth_l1_beta)
-        if t.position_weight > 0:
-            total = total + t.position_weight * lp
-            logs[f"{tag}pos"] = float(lp.detach())
-        if t.stance_weight > 0:
-            ls = _stance_loss(pos, target, valid, species, fps, t.smooth_l1_beta)
-            total = total + t.stance_weight * ls
-            logs[f"{tag}stance"] = float(ls.detach())
-    if t.contact_weight > 0:
-        lc = _contact_loss(pred, target, valid)
-        total = total + t.contact_weight * lc
-        logs[f"{tag}contact"] = float(lc.detach())
-    return total
-
-
-def _prior_draws(
-    model: HabitVQVAE, species: list[str], generator: torch.Generator | None
-) -> torch.Tensor:
-    """One z_c ~ p_c per item (B, z_dim), drawn per species group."""
-    z = torch.zeros(len(species), model.cfg.habit.z_dim)
-    groups: dict[str, list[int]] = {}
-    for i, s in enumerate(species):
-        groups.setdefault(s, []).append(i)
-    for s, idx in groups.items():
-        z[idx] = model.sample_prior(s, len(idx), generator)
-    return z
-
-
-def compute_losses(
-    model: HabitVQVAE, batch: Batch, cfg: Config, generator: torch.Generator | None, fps: float
-) -> tuple[torch.Tensor, dict[str, float]]:
-    """Total training loss of one batch and its logged parts (training mode: sampled
-    codes, EMA update, reparameterised z)."""
-    t = cfg.train
-    x_in = batch.x
-    if t.input_noise > 0:  # noise in normalised units, on every channel but the contacts
-        noise = torch.randn(batch.x.shape, generator=generator, dtype=batch.x.dtype)
-        noise[..., C_INDEX:] = 0.0
-        x_in = batch.x + t.input_noise * noise * model.feat_std
-    f = model.encode(x_in)
-    n_levels = None
-    levels = model.cfg.quantizer.levels
-    if levels > 1 and t.quantizer_dropout > 0:
-        b0 = batch.x.shape[0]
-        drop = torch.rand(b0, generator=generator) < t.quantizer_dropout
-        fewer = torch.randint(1, levels, (b0,), generator=generator)
-        n_levels = torch.where(drop, fewer, torch.full_like(fewer, levels))
-    qo = model.quantize(f, generator=generator, n_levels=n_levels)
-    logs: dict[str, float] = {}
-    codes = [qo.quantized]
-    species = list(batch.species)
-    kl = batch.x.new_zeros(())
-    n_pair = int(batch.pair_src.numel()) if t.paired_weight > 0 else 0
-    z_a = z_b = None
-    if model.cfg.use_z:
-        z_a, kl_a = model.sample_posterior(batch.x, species, generator)
-        kl = kl_a.mean()
-        if n_pair:  # as at transfer time: the target's z_c is a draw from its prior
-            with torch.no_grad():
-                z_b = _prior_draws(model, batch.pair_species, generator)
-    cond_a = model.condition(species, z_a)
-    if n_pair:
-        codes.append(qo.quantized[batch.pair_src])
-        cond_b = model.condition(batch.pair_species, z_b)
-    dec_in = torch.cat(codes, dim=0)
-    cond = None
-    if cond_a is not None:
-        # cond_b is set whenever cond_a is (same model, same condition kinds)
-        cond = torch.cat([cond_a, cast(torch.Tensor, cond_b)], dim=0) if n_pair else cond_a
-    path = model.path(x_in)
-    if path is not None and n_pair:  # a paired window follows its source's path
-        path = torch.cat([path, path[batch.pair_src]], dim=0)
-    y = model.decode(dec_in, cond, path)
-    b = batch.x.shape[0]
-    lq, lv = _recon_terms(y[:b], batch.x, batch.valid, cfg)
-    recon = lq + t.alpha * lv
-    total = recon + t.beta * qo.commit_loss + t.kl_weight * kl
-    total = total + _kinematic_terms(y[:b], batch.x, batch.valid, species, fps, cfg, logs)
-    if n_pair:
-        pq, pv = _recon_terms(y[b:], batch.pair_x, batch.pair_valid, cfg)
-        pair_logs: dict[str, float] = {}
-        paired = (
-            pq
-            + t.alpha * pv
-            + _kinematic_terms(
-                y[b:],
-                batch.pair_x,
-                batch.pair_valid,
-                batch.pair_species,
-                fps,
-                cfg,
-                pair_logs,
-                "paired_",
-            )
-        )
-        total = total + t.paired_weight * paired
-        logs["paired"] = float(paired.detach())
-    logs.update(
-        loss=float(total.detach()),
-        rec_q=float(lq.detach()),
-        rec_v=float(lv.detach()),
-        commit=float(qo.commit_loss.detach()),
-        kl=float(kl.detach()),
-        perplexity=float(qo.perplexity),
-    )
-    return total, logs
-
-
-def _mpjpe(
-    pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, species: list[str], fps: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per-window MPJPE [m] and as a fraction of leg length, (N,) each."""
-    pp = window_positions(pred, species, fps)
-    pt = window_positions(target, species, fps)
-    e = torch.linalg.norm(pp - pt, dim=-1).mean(-1)  # (N, T)
-    w = valid.to(e.dtype)
-    m = ((e * w).sum(1) / w.sum(1).clamp_min(1.0)).numpy()
-    leg = np.array([load_species(s).leg_length for s in species])
-    return m, m / leg
-
-
-@torch.no_grad()
-def evaluate_windows(
-    model: HabitVQVAE,
-    x: torch.Tensor,
-    valid: torch.Tensor,
-    species: list[str],
-    fps: float,
-    target_species: list[str] | None = None,
-    target_x: torch.Tensor | None = None,
-    target_valid: torch.Tensor | None = None,
-    seed: int = 0,
-    batch: int = 64,
-) -> dict[str, np.ndarray]:
-    """Deterministic reconstruction (or transfer) of fixed windows.
-
-    Without ``target_*``: reconstruct each window (nearest codes, posterior-mean z) and
-    return per-window ``mpjpe_m`` / ``mpjpe_frac``. With them: decode with the target
-    species' condition (z from its prior, seeded) and compare with the target windows.
-    """
-    was = model.training
-    model.eval()
-    gen = torch.Generator().manual_seed(seed)
-    out_m, out_f = [], []
-    for s in range(0, x.shape[0], batch):
-        xb, sp = x[s : s + batch], species[s : s + batch]
-        qo = model.quantize(model.encode(xb), sample=False, update=False)
-        if target_species is None:
-            z = model.posterior(xb, sp)[0] if model.cfg.use_z else None
-            y = model.decode(qo.quantized, model.condition(sp, z), model.path(xb))
-            m, fr = _mpjpe(y, xb, valid[s : s + batch], sp, fps)
-        else:
-            assert target_x is not None and target_valid is not None
-            tsp = target_species[s : s + batch]
-            z = None
-            if model.cfg.use_z:
-                z = torch.cat([model.sample_prior(t, 1, gen) for t in tsp], dim=0)
-            y = model.decode(qo.quantized, model.condition(tsp, z), model.path(xb))
-            m, fr = _mpjpe(y, target_x[s : s + batch], target_valid[s : s + batch], tsp, fps)
-        out_m.append(m)
-        out_f.append(fr)
-    model.train(was)
-    return {"mpjpe_m": np.concatenate(out_m), "mpjpe_frac": np.concatenate(out_f)}
-
-
-def direct_windows(x: torch.Tensor, species: list[str], target_species: list[str]) -> torch.Tensor:
-    """The ``direct`` baseline on canonical windows: same quaternions and height ratio,
-    root speed scaled by the hip-height ratio (velocities in the target's Froude units)."""
-    y = x.clone()
-    ratio = torch.tensor(
-        [
-            math.sqrt(load_species(t).hip_height / load_species(s).hip_height)
-            for s, t in zip(species, target_species, strict=True)
-        ],
-        dtype=x.dtype,
-    )
-    y[..., Q_DIM:H_INDEX] = x[..., Q_DIM:H_INDEX] * ratio[:, None, None]
-    return y
-
-
-class _Validator:
-    """Fixed validation windows and their pairs, built once."""
-
-    def __init__(self, val: ClipSet, window: int, max_windows: int = 256):
-        wins = fixed_windows(val, window, per_clip=2)[:max_windows]
-        self.x, self.valid, self.species, clip_idx = stack_windows(val, wins, window)
-        partners = val.partners()
-        px, pv, psp, src = [], [], [], []
-        from .features import canonical_window
-
-        for k, ((_ci, st), i) in enumerate(zip(wins, clip_idx, strict=True)):
-            for j in partners[i][:2]:
-                f, v, _ = canonical_window(val.clips[j], st, window)
-                px.append(torch.from_numpy(f))
-                pv.append(torch.from_numpy(v))
-                psp.append(val.clips[j].species)
-                src.append(k)
-        self.has_pairs = bool(src)
-        if src:
-            self.pair_x = torch.stack(px)
-            self.pair_valid = torch.stack(pv)
-            self.pair_species = psp
-            self.pair_src = torch.as_tensor(src)
-            self.pair_valid = self.pair_valid & self.valid[self.pair_src]
-
-    def __call__(self, model: HabitVQVAE, fps: float, seed: int) -> dict[str, float]:
-        r = evaluate_windows(model, self.x, self.valid, self.species, fps)
-        out = {
-            "val_mpjpe_mm": float(r["mpjpe_m"].mean() * 1000.0),
-            "val_mpjpe_pct_leg": float(r["mpjpe_frac"].mean() * 100.0),
-        }
-        if self.has_pairs:
-            src_sp = [self.species[i] for i in self.pair_src.tolist()]
-            xs = self.x[self.pair_src]
-            p = evaluate_windows(
-                model,
-                xs,
-                self.valid[self.pair_src],
-                src_sp,
-                fps,
-                self.pair_species,
-                self.pair_x,
-                self.pair_valid,
-                seed=seed,
-            )
-            d = _mpjpe(
-                direct_windows(xs, src_sp, self.pair_species),
-                self.pair_x,
-                self.pair_valid,
-                self.pair_species,
-                fps,
-            )
-            out["val_paired_mpjpe_mm"] = float(p["mpjpe_m"].mean() * 1000.0)
-            out["val_paired_direct_mm"] = float(d[0].mean() * 1000.0)
-        return out
-
-
-def _optimizer_state(opt: torch.optim.Optimizer) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
-    sd = opt.state_dict()
-    tensors: dict[str, torch.Tensor] = {}
-    scalars: dict[str, dict[str, float]] = {}
-    for idx, st in sd["state"].items():
-        for k, v in st.items():
-            if torch.is_tensor(v) and v.dim() > 0:
-                tensors[f"opt.{idx}.{k}"] = v
-            else:
-                scalars.setdefault(str(idx), {})[k] = float(v)
-    groups = [
-        {k: v for k, v in g.items() if k != "params"} | {"params": list(g["params"])}
-        for g in sd["param_groups"]
-    ]
-    return tensors, {"scalars": scalars, "param_groups": groups}
-
-
-def _restore_optimizer(
-    opt: torch.optim.Optimizer, tensors: dict[str, torch.Tensor], js: dict[str, Any]
-) -> None:
-    state: dict[int, dict[str, Any]] = {}
-    for key, v in tensors.items():
-        if key.startswith("opt."):
-            _, idx, k = key.split(".", 2)
-            state.setdefault(int(idx), {})[k] = v
-    for idx, sc in js["scalars"].items():
-        for k, v in sc.items():
-            state.setdefault(int(idx), {})[k] = torch.tensor(v, dtype=torch.float32)
-    groups = js["param_groups"]
-    for g in groups:
-        if isinstance(g.get("betas"), list):
-            g["betas"] = tuple(g["betas"])
-    try:
-        opt.load_state_dict({"state": state, "param_groups": groups})
-    except (ValueError, KeyError) as e:
-        raise CheckpointError(f"optimiser state does not fit the model ({e})") from e
-
-
-def _same_except_steps(a: Config, b: Config) -> bool:
-    da, db = a.to_dict(), b.to_dict()
-    for d in (da, db):
-        d["train"].pop("steps")
-        d["train"].pop("threads")
-        d["train"].pop("val_every")
-        d["train"].pop("checkpoint_every")
-        d.pop("name")
-    return da == db
 
 
 def train(
@@ -795,68 +406,6 @@ def train(
         return TrainResult(out, max(start, t.steps), time.perf_counter() - t0, metrics, history)
     finally:
         torch.set_num_threads(old_threads)
-
-
-def resolve_init(init: str | Path) -> Path:
-    """The folder of the checkpoint a fine-tune starts from: ``init`` itself, or the
-    shipped checkpoint of a variant name (``habit``) unless a folder of that name exists."""
-    from .config import VARIANTS
-    from .transfer import resolve_checkpoint
-
-    named = str(init) in VARIANTS and not Path(init).is_dir()
-    return resolve_checkpoint(str(init)) if named else Path(init)
-
-
-def _load_init(init: str | Path, cfg: Config) -> LoadedCheckpoint:
-    """The checkpoint a fine-tune starts from (folder or shipped variant name)."""
-    base = load_checkpoint(resolve_init(init))
-    if base.config.model != cfg.model and not _adds_heading(base.config.model, cfg.model):
-        raise CheckpointError(
-            f"--init {init}: its model configuration differs from this run's; fine-tuning "
-            "keeps the checkpoint's model (only training settings may change, or "
-            "model.path_heading be switched on for a path-conditioned checkpoint)"
-        )
-    return base
-
-
-def _adds_heading(old: ModelConfig, new: ModelConfig) -> bool:
-    """``new`` is the path-conditioned ``old`` with the path's heading channels and / or
-    the heading-relative output switched on."""
-    return (
-        old.path_condition
-        and new.path_heading >= old.path_heading
-        and new.heading_relative >= old.heading_relative
-        and dataclasses.replace(
-            new, path_heading=old.path_heading, heading_relative=old.heading_relative
-        )
-        == old
-    )
-
-
-def _init_state(base: HabitVQVAE, model: HabitVQVAE) -> dict[str, torch.Tensor]:
-    """``base``'s tensors for ``model``. When ``model``'s path also carries the heading
-    (:func:`_adds_heading`), the decoder's weights on the new heading channels start at
-    zero, so the fine-tune starts from the base's decoder (exactly so on windows whose
-    heading stays the first frame's; a turning window's velocity is now read in the
-    turning heading's frame)."""
-    state = dict(base.state_dict())
-    if model.path_dim == base.path_dim:
-        return state
-    old, code_dim = base.path_dim, base.cfg.quantizer.code_dim
-    for key, new in model.state_dict().items():
-        v = state[key]
-        if v.shape == new.shape:
-            continue
-        w = torch.zeros_like(new)
-        if key == "decoder.inp.weight":  # input channels: codes, path, condition
-            w[:, : code_dim + old] = v[:, : code_dim + old]
-            w[:, code_dim + model.path_dim :] = v[:, code_dim + old :]
-        elif key.startswith("decoder.path_bias."):
-            w[:, :old] = v
-        else:
-            raise CheckpointError(f"cannot carry tensor {key} {tuple(v.shape)} into the model")
-        state[key] = w
-    return state
 
 
 def record_metrics(out_dir: str | Path, metrics: dict[str, Any]) -> None:

@@ -6,7 +6,10 @@ jitter while staying close to the input motion; stage B adds contact forces and
 centroidal dynamics. See :func:`refine` and, for the pieces:
 
 * :mod:`~habitsim.refine.kinematics` — symbolic forward kinematics of an MjModel;
-* :mod:`~habitsim.refine.problem` — the NLP of one window, built apart from solving it;
+* :mod:`~habitsim.refine.problem` — the NLP of one window, built apart from solving it
+  (from :mod:`~habitsim.refine.layout`, :mod:`~habitsim.refine.settings`,
+  :mod:`~habitsim.refine.model_facts`, :mod:`~habitsim.refine.expressions` and
+  :mod:`~habitsim.refine.nlp`);
 * :mod:`~habitsim.refine.windows` — overlapping windows for long clips;
 * :mod:`~habitsim.refine.solve` — :func:`refine` itself;
 * :mod:`~habitsim.refine.verdict` — is the result worse than the input (solver guard, report);

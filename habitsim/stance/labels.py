@@ -69,7 +69,7 @@ class StanceSource(StrEnum):
     #: The source clip's footfall schedule carried over to a transfer's output.
     SOURCE = "source"
     #: Found on the source skeleton's foot paths when a motion-capture file was imported
-    #: (:func:`habitsim.planting.label_source_stance`).
+    #: (:func:`habitsim.stance.planting.label_source_stance`).
     IMPORTED = "imported"
     #: The walking schedule of a transfer to a species that walks at the clip's speed.
     WALKING = "walking"

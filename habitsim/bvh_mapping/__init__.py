@@ -1,0 +1,73 @@
+"""Map a BVH skeleton onto a species' habitsim skeleton and retarget its motion.
+
+Pipeline of :func:`import_bvh`:
+
+1. Read the file (:func:`habitsim.bvh.read_bvh`).
+2. A file written by :func:`habitsim.bvh.write_bvh` (joint names and hierarchy identical to
+   the habitsim skeleton) is imported as an *identity* mapping: rotations and root
+   translation are copied, no retargeting.
+3. Otherwise find the joint mapping, either from an explicit joint-map TOML
+   (:func:`load_joint_map`) or automatically from names and hierarchy
+   (:func:`auto_map`): the four legs (left/right name cues, fore/hind from name cues and
+   from where they hang: legs hanging from the hips are hind legs, legs hanging from the
+   chest are fore legs; unnamed symmetric chains are accepted too and sided by geometry),
+   the hips (where the hind legs hang), the spine chain from the hips to the chest (where
+   the fore legs hang), neck and head beyond the chest, and the tail from the hips.
+4. Detect the file's frame (:func:`detect_frame`): units (cm / m / mm, from the hind-leg
+   length against the species'), up axis (from the feet toward the hips, averaged over the
+   clip) and forward axis (from the hips toward the chest in the first frame, snapped to
+   a coordinate axis), giving a proper rotation to habitsim's frame (z up, x forward, y left).
+5. Retarget (:func:`retarget`): the source's global joint positions are converted to
+   habitsim's frame; the pelvis takes the source hips' frame (heading along hips → chest,
+   up from the world up); then, root to leaf, every habitsim joint that drives a bone of
+   its chain gets the shortest-arc rotation that points that bone along the world
+   direction between the corresponding mapped source joints. Joints whose bone has no
+   mapped counterpart keep the species' standing pose; end points get identity. The root
+   translation is scaled by species hip height / source hip height (heights above the
+   source's ground, estimated as the median lowest foot height).
+
+The retargeted rotations are general quaternions (no hinge projection; that is done
+downstream).
+
+Submodules, one concept each: :mod:`.names` (name cues, rig helpers), :mod:`.chains` (the
+habitsim chains filled), :mod:`.tree` (the source rig as a tree), :mod:`.limbs` (leg
+chains, mirrored pairs, leg roles), :mod:`.automap` (the automatic mapping),
+:mod:`.map_files` (explicit joint maps), :mod:`.frame` (units and axes),
+:mod:`.result` (:class:`JointMapping`), :mod:`.identity` (habitsim's own files),
+:mod:`.retargeting` (retargeting, source stance, leg confidence) and :mod:`.importing`
+(the entry points).
+"""
+
+from __future__ import annotations
+
+from .automap import auto_map
+from .frame import DETECTED_UNITS as DETECTED_UNITS
+from .frame import UNIT_SCALES, FrameConversion, detect_frame
+from .identity import is_habitsim_bvh
+from .importing import SOURCE_SUFFIXES, describe_hierarchy, import_bvh, read_source
+from .limbs import LEG_PROPORTIONS as LEG_PROPORTIONS
+from .limbs import MIRROR_BONE_TOLERANCE as MIRROR_BONE_TOLERANCE
+from .map_files import load_joint_map, validate_joint_map
+from .names import is_helper_name, name_cues
+from .result import CONFIDENCE_CHECKS, CONFIDENCE_WARN, JointMapping
+from .retargeting import retarget
+
+__all__ = [
+    "UNIT_SCALES",
+    "FrameConversion",
+    "JointMapping",
+    "name_cues",
+    "auto_map",
+    "load_joint_map",
+    "validate_joint_map",
+    "detect_frame",
+    "is_habitsim_bvh",
+    "retarget",
+    "import_bvh",
+    "read_source",
+    "SOURCE_SUFFIXES",
+    "CONFIDENCE_CHECKS",
+    "CONFIDENCE_WARN",
+    "is_helper_name",
+    "describe_hierarchy",
+]

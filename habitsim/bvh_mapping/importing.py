@@ -1,0 +1,177 @@
+"""The entry points: read a source clip (:func:`read_source`), import it onto a species
+(:func:`import_bvh`), and describe its hierarchy (:func:`describe_hierarchy`)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+from ..bvh import BVHData, read_bvh
+from ..errors import SkeletonMappingError
+from ..motion import Motion
+from ..skeleton import JOINT_NAMES
+from ..species import Species, load_species
+from .automap import _analyse, _Analysis, _resolve_sides
+from .chains import _LEG_CHAINS
+from .frame import _parse_up, detect_frame
+from .identity import _identity_import, is_habitsim_bvh
+from .map_files import load_joint_map, validate_joint_map
+from .result import JointMapping
+from .retargeting import retarget
+from .tree import _Tree
+
+
+def describe_hierarchy(bvh: BVHData, mapping: JointMapping | None = None) -> str:
+    """The source hierarchy as an indented tree, each joint with its proposed habitsim joint.
+
+    Each line: the joint, its bone length in file units, ``[helper]`` for rig helpers that
+    are never limbs, ``[end]`` for End Sites, and ``-> habitsim_joint`` where mapped.
+    """
+    inv = {v: k for k, v in mapping.mapped().items()} if mapping is not None else {}
+    t = _Tree(bvh)
+    lines = []
+    for j, name in enumerate(bvh.names):
+        tags = []
+        if bvh.is_end_site[j]:
+            tags.append("[end]")
+        elif t.helper[j]:
+            tags.append("[helper]")
+        text = f"{'  ' * t.depth[j]}{name}  ({t.blen[j]:.4g})"
+        if tags:
+            text += " " + " ".join(tags)
+        if name in inv:
+            text += f"  -> {inv[name]}"
+        lines.append(text)
+    return "\n".join(lines)
+
+
+#: File types :func:`read_source` reads (BVH motion capture, glTF skinned animations).
+SOURCE_SUFFIXES: tuple[str, ...] = (".bvh", ".glb", ".gltf")
+
+
+def read_source(
+    path: str | Path,
+    animation: str | int | None = None,
+    fps: float | None = None,
+    strict: bool = True,
+) -> BVHData:
+    """Read a source clip: a BVH file, or one animation of a glTF/GLB skinned model.
+
+    Args:
+        path: a ``.bvh``, ``.glb`` or ``.gltf`` file.
+        animation: glTF only: the animation's name or index (None: the first).
+        fps: glTF only: sampling rate [Hz] (default 30).
+        strict: BVH only: see :func:`habitsim.bvh.parse_bvh`.
+
+    Returns:
+        The clip as :class:`~habitsim.bvh.BVHData`.
+
+    Raises:
+        SkeletonMappingError: an unknown file type (lists the valid ones), or glTF
+            options given for a BVH file.
+        BVHParseError, GLTFError: an unreadable file.
+    """
+    p = Path(path)
+    kind = p.suffix.lower()
+    if kind == ".bvh":
+        if animation is not None or fps is not None:
+            raise SkeletonMappingError(
+                f"{p.name}: animation and fps apply to glTF files only (.glb, .gltf)"
+            )
+        return read_bvh(p, strict=strict)
+    if kind in (".glb", ".gltf"):
+        from ..gltf import read_gltf
+
+        return read_gltf(p, animation=animation, fps=30.0 if fps is None else fps)
+    raise SkeletonMappingError(
+        f"{p.name}: unknown source file type {p.suffix!r}; valid: {', '.join(SOURCE_SUFFIXES)}"
+    )
+
+
+def import_bvh(
+    path: str | Path | BVHData,
+    species: str | Species,
+    joint_map: str | Path | Mapping[str, str] | None = None,
+    units: str | float | None = None,
+    up: str | None = None,
+    strict: bool = True,
+    plant: bool = True,
+    animation: str | int | None = None,
+    fps: float | None = None,
+) -> tuple[Motion, JointMapping]:
+    """Read a BVH file (or a glTF/GLB animation) and retarget it onto a species' skeleton.
+
+    Args:
+        path: the ``.bvh`` file (or an already parsed :class:`~habitsim.bvh.BVHData`).
+        species: target catalog species.
+        joint_map: None for the automatic mapping, a joint-map TOML path
+            (:func:`load_joint_map`) or a dict habitsim joint → source joint.
+        units: source length unit (``"m"``, ``"cm"``, ``"mm"`` or metres per unit);
+            None = detect (a TOML's ``units`` applies when this is None).
+        up: source up axis (``"y"``, ``"z"``, ``"-y"``…); None = detect.
+        strict: see :func:`habitsim.bvh.parse_bvh`.
+        plant: plant the legs on the source's footholds (see :func:`retarget`).
+        animation, fps: for a glTF/GLB file, the animation and the sampling rate
+            (:func:`read_source`).
+
+    Returns:
+        ``(motion, mapping)``; print ``mapping`` for the habitsim ← source lines.
+
+    Raises:
+        UnknownSpeciesError: unknown species (lists the known ones).
+        BVHParseError: unreadable / malformed file.
+        SkeletonMappingError: unmappable skeleton or invalid joint map.
+    """
+    sp = load_species(species)
+    bvh = (
+        path
+        if isinstance(path, BVHData)
+        else read_source(path, animation=animation, fps=fps, strict=strict)
+    )
+    plain = (units is None or (isinstance(units, str) and units.lower() == "m")) and (
+        up is None or _parse_up(up) == "+z"
+    )
+    if joint_map is None and is_habitsim_bvh(bvh) and plain:
+        return _identity_import(bvh, sp)
+
+    notes: list[str] = []
+    geometric: list[tuple[str, str]] = []
+    if joint_map is None:
+        if is_habitsim_bvh(bvh):
+            joints = validate_joint_map({n: n for n in JOINT_NAMES}, bvh)
+            method = "habitsim names, converted"
+        else:
+            an = _analyse(bvh)
+            joints, geometric, notes = an.joints, an.geometric_sides, an.notes
+            method = "auto"
+    elif isinstance(joint_map, Mapping):
+        joints = validate_joint_map(joint_map, bvh)
+        method = "explicit"
+    else:
+        spec = load_joint_map(joint_map)
+        if spec["extends"] == "auto":
+            an = _analyse(bvh)
+            base = dict(an.joints)
+            base.update(spec["map"])
+            joints = validate_joint_map(base, bvh, where=str(joint_map))
+            notes = an.notes + [f"joints set by hand: {', '.join(sorted(spec['map']))}"]
+            geometric = [
+                (lp, rp)
+                for lp, rp in an.geometric_sides
+                if not any(n in spec["map"] for n in _LEG_CHAINS[lp] + _LEG_CHAINS[rp])
+            ]
+            method = f"auto, overridden by map file {joint_map}"
+        else:
+            joints = validate_joint_map(spec["map"], bvh, where=str(joint_map))
+            method = f"map file {joint_map}"
+        units = units if units is not None else spec["units"]
+        up = up if up is not None else spec["up"]
+
+    frame = detect_frame(bvh, joints, units=units, up=up, species=sp)
+    if geometric:
+        an2 = _Analysis(joints, geometric, notes)
+        _resolve_sides(bvh, an2, frame)
+    mapping = JointMapping(joints, method, frame, 1.0, list(notes))
+    motion = retarget(bvh, mapping, sp, plant=plant)
+    motion.metadata["mapping"] = mapping.to_dict()
+    return motion, mapping
