@@ -100,7 +100,7 @@ def test_bench_real_rows_and_json(folder: Path, tmp_path: Path, capsys) -> None:
     names = [t["name"] for t in doc["targets"]]
     assert len(names) == 5 and doc["targets"][1]["verdict"] == "n/a"  # servo, not mpc
     assert "targets:" in text and "walk@" in text
-    assert code == exit_code(doc["targets"])
+    assert code == int(any(t["verdict"] == "MISSED" for t in doc["targets"]))
 
 
 def test_bench_real_no_track_no_refine_meets_what_applies(folder: Path, capsys) -> None:
