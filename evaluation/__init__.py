@@ -15,6 +15,9 @@ layer down, in :mod:`habitsim.metrics`. Modules:
   :mod:`~.planning`, :mod:`~.pairs`, :mod:`~.tables`, :mod:`~.summary`.
 * :mod:`habitsim.evaluation.executors` — local process pool and Dask executors.
 * :mod:`habitsim.evaluation.report` — HTML / Markdown report: :func:`write_report`.
+* :mod:`habitsim.evaluation.rows` — the one row builder: a pipeline run flattened into
+  the columns ``eval`` and ``bench real`` pick (:func:`~habitsim.evaluation.rows.run_row`).
+* :mod:`habitsim.evaluation.bench` — the ``habitsim bench`` benchmarks, one module each.
 
 The names below are imported lazily (the evaluator pulls in torch, the report
 matplotlib), so ``import habitsim.evaluation.distribution`` stays light.

@@ -18,6 +18,7 @@ from habitsim.fileio import atomic_write, make_dirs
 from habitsim.motion import Motion
 
 from .config import PairTask
+from .rows import reference_dynamics, run_row
 from .tables import _finite
 
 __all__ = ["evaluate_pair"]
@@ -80,7 +81,8 @@ def evaluate_pair(task: PairTask) -> dict[str, Any]:
         out = run.transferred.motion
         ref = run.refined.motion
         assert out is not None and ref is not None  # run_clip's transfer and refine ran
-        row["time_transfer_s"] = run.times["transfer"]
+        figures = run_row(run)
+        row["time_transfer_s"] = figures.times["transfer"]
         row.update(_paper_metrics(task, src, out))
         try:
             gt = out if task.method == "ground_truth" else ground_truth_transfer(src, task.target)
@@ -96,26 +98,20 @@ def evaluate_pair(task: PairTask) -> dict[str, Any]:
 
         row.update(biomech_metrics(out, use_labels=False).to_dict())
 
-        row["refine_status"] = run.refined.status
-        row["time_refine_s"] = run.times["refine"]
+        row["refine_status"] = figures.refine_status
+        row["time_refine_s"] = figures.times["refine"]
         from habitsim.metrics.kinematic import KINEMATIC_KEYS
 
-        row.update({k: run.refined.metrics[k] for k in KINEMATIC_KEYS})
+        row.update(figures.refine_columns(KINEMATIC_KEYS))
         if task.dynamic:
-            from habitsim.metrics.dynamic import dynamic_metrics
-
-            row.update(dynamic_metrics(ref, run.model, run.refined.contacts))
+            # the refined clip is the tracked reference: run_clip runs without its check
+            row.update(reference_dynamics(run, strict=True))
         sim_res = run.track_result
         if task.track:
-            row["track_status"] = run.tracked.status
-            row["time_track_s"] = run.times["track"]
+            row["track_status"] = figures.track_status
+            row["time_track_s"] = figures.times["track"]
             if sim_res is not None:
-                row.update(
-                    {
-                        k: (float(v) if isinstance(v, bool | int | float) else v)
-                        for k, v in dict(getattr(sim_res, "metrics", {}) or {}).items()
-                    }
-                )
+                row.update(figures.track_columns())
                 try:
                     if not math.isfinite(_finite(row.get("biomech_score"))):
                         raise _NotAGait  # the reference is no gait (standing, sitting)

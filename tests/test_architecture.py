@@ -170,12 +170,54 @@ def test_lazy_methods_name_modules_of_the_learning_layer() -> None:
 
 def test_command_selections_come_from_the_registry() -> None:
     """Benchmarks and commands that offer a subset of the controllers offer registry names."""
-    from habitsim.cli import bench_balance, bench_refine, retarget_cmd
+    from habitsim.cli import retarget_cmd
     from habitsim.controllers import CONTROLLERS, REGISTRY
+    from habitsim.evaluation.bench import balance, refine
 
     torque = {n for n, s in REGISTRY.items() if s.actuators == "torque"}
-    assert set(bench_balance.CONTROLLERS) == set(retarget_cmd.TRACK_CONTROLLERS) == torque
-    assert set(bench_refine._SURVIVAL_CONTROLLERS) <= set(CONTROLLERS)
+    assert set(balance.CONTROLLERS) == set(retarget_cmd.TRACK_CONTROLLERS) == torque
+    assert set(refine.SURVIVAL_CONTROLLERS) <= set(CONTROLLERS)
+
+
+#: What benchmarks compute with, and a command that only parses and prints never needs.
+NUMERIC_MODULES = ("numpy", "scipy", "mujoco", "torch", "casadi")
+#: Lines a ``habitsim/cli/bench_*.py`` may hold: its options, its calls and its print
+#: formats (the longest, ``bench real``'s, is about 220).
+CLI_BENCH_MAX_LINES = 300
+
+
+def test_no_benchmark_logic_in_the_cli() -> None:
+    """The benchmarks live in ``habitsim.evaluation.bench``; ``habitsim/cli/bench_*.py``
+    only parse the options, call it and print. Two checks on every one of them:
+
+    * it imports none of :data:`NUMERIC_MODULES`, at any level (module, function,
+      ``TYPE_CHECKING``): measuring, aggregating or simulating needs them, parsing and
+      formatting figures the library computed does not. A median, a rollout or a solve
+      written in a command fails here.
+    * it holds at most :data:`CLI_BENCH_MAX_LINES` lines, so that logic written without
+      those imports (loops over clips, target arithmetic) cannot grow there unnoticed.
+    """
+    bad = []
+    files = sorted((ROOT / "habitsim" / "cli").glob("bench_*.py"))
+    assert files, "no habitsim/cli/bench_*.py found"
+    for path in files:
+        text = path.read_text(encoding="utf-8")
+        name = path.relative_to(ROOT)
+        for node in ast.walk(ast.parse(text, filename=str(path))):
+            names: list[str] = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            bad += [
+                f"{name}:{node.lineno}: imports {n}"
+                for n in names
+                if n.split(".")[0] in NUMERIC_MODULES
+            ]
+        lines = len(text.splitlines())
+        if lines > CLI_BENCH_MAX_LINES:
+            bad.append(f"{name}: {lines} lines > {CLI_BENCH_MAX_LINES}")
+    assert not bad, "benchmark logic belongs in habitsim.evaluation.bench:\n" + "\n".join(bad)
 
 
 @pytest.mark.parametrize("name", ["servo", "servo+id+stance", "pd"])
@@ -245,7 +287,15 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
         ),
     ),
     ("learning", ("habitsim.models",)),
-    ("benchmark", ("habitsim.pipeline", "habitsim.evaluation")),
+    (
+        "benchmark",
+        (
+            "habitsim.pipeline",
+            "habitsim.evaluation",
+            "habitsim.evaluation.rows",
+            "habitsim.evaluation.bench",
+        ),
+    ),
     ("apps", ("habitsim.cli", "habitsim.__main__", "habitsim.examples")),
 )
 #: The package itself (``habitsim/__init__.py``): the facade above every layer, which any

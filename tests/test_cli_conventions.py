@@ -145,7 +145,7 @@ def test_check_exit(capsys) -> None:
 
 def test_bench_check_exits_1_on_a_miss(monkeypatch, capsys) -> None:
     """bench sim prints MISSED and, with --check only, exits 1."""
-    import habitsim.cli.bench_sim as bench_sim
+    import habitsim.evaluation.bench.sim as bench_sim
 
     monkeypatch.setattr(bench_sim, "TARGET_BATCH_RATIO", 1e9)  # unreachable
     argv = [
@@ -172,7 +172,7 @@ def test_bench_check_exits_1_on_a_miss(monkeypatch, capsys) -> None:
 
 
 def test_balance_missed_targets() -> None:
-    from habitsim.cli.bench_balance import missed_targets
+    from habitsim.evaluation.bench.balance import missed_targets
 
     good = {
         "stance_qp_median_ms": 0.1,

@@ -469,17 +469,17 @@ def test_cli_inspect_takes_units_and_up(walk, tmp_path, capsys):
 
 def test_bench_real_import_options_reach_the_importer(rig, tmp_path):
     """``bench real --map / --units / --up`` are the importer's, for every clip."""
-    from habitsim.cli.bench_real import _read_source
+    from habitsim.evaluation.bench.real import read_clip
 
     clip = tmp_path / "rig.bvh"
     clip.write_text(rig.to_text())
-    found = _read_source(clip, "dog").metadata["mapping"]
+    found = read_clip(clip, "dog").metadata["mapping"]
     assert (found["units"], found["up"]) == ("cm", "+z")
-    told = _read_source(clip, "dog", units="in", up="z").metadata["mapping"]
+    told = read_clip(clip, "dog", units="in", up="z").metadata["mapping"]
     assert told["units"] == "in"
     m = tmp_path / "map.json"
     m.write_text(json.dumps({"extends": "auto", "map": {"tail3": None}}))
-    assert _read_source(clip, "dog", joint_map=m).metadata["mapping"]["joints"].get("tail3") is None
+    assert read_clip(clip, "dog", joint_map=m).metadata["mapping"]["joints"].get("tail3") is None
     assert found["joints"]["tail3"] is not None
 
 

@@ -657,7 +657,7 @@ def test_bench_train_plans_every_stage_of_the_large_preset(monkeypatch):
     options on) and plans the steps of all three stages."""
     import importlib
 
-    from habitsim.cli.bench_train import training_throughput
+    from habitsim.evaluation.bench.train import training_throughput
 
     mod = importlib.import_module("habitsim.models.train")
     seen = []

@@ -152,7 +152,8 @@ def test_transfer_labels_come_from_the_decoded_contacts_checked_against_the_sour
 
 
 def test_bench_model_phase_error_and_resting_feet():
-    from habitsim.cli.bench_model import _phase_error, _resting_share
+    from habitsim.evaluation.bench.model import phase_error as _phase_error
+    from habitsim.evaluation.bench.model import resting_share as _resting_share
 
     src = {"LF": 0.5, "RF": 0.0, "RH": 0.5, "LH": 0.0}
     assert _phase_error(src, src) == 0.0
@@ -174,6 +175,7 @@ def test_bench_model_reports_the_evaluators_habit_and_action_accuracy(monkeypatc
     from types import SimpleNamespace
 
     from habitsim.cli import bench_model
+    from habitsim.evaluation.bench.model import transfer_quality
 
     ev_mod = importlib.import_module("habitsim.evaluation.evaluator")
     seen: list[str] = []
@@ -192,7 +194,7 @@ def test_bench_model_reports_the_evaluators_habit_and_action_accuracy(monkeypatc
     monkeypatch.setattr(ev_mod, "load_evaluator", lambda *a, **k: FakeEvaluator())
     walk = generate("dog", "walk", seed=3, duration_s=2.5)
     unlabelled = Motion(walk.species, walk.fps, walk.root_positions, walk.rotations, walk.contacts)
-    q = bench_model.transfer_quality([walk, unlabelled], ["horse", "cat", "giraffe"])
+    q = transfer_quality([walk, unlabelled], ["horse", "cat", "giraffe"])
     assert q["transfers"] == 6 and sorted(seen) == sorted(["horse", "cat", "giraffe"] * 2)
     # habit: only the horse is a species the evaluator knows; both horse transfers right
     assert q["habit_classified"] == 2 and q["habit_accuracy"] == 1.0

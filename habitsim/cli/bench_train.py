@@ -1,24 +1,17 @@
 """``habitsim bench train``: training throughput and transfer latency of the learning core.
 
-Training throughput: optimiser steps of a preset's model (fresh weights) on windows of
-synthetic clips generated in memory (no data set needed): steps/s, windows/s, frames/s.
-Transfer latency: :func:`habitsim.models.transfer` of one 64-frame clip (horse trot to
-cat) with a checkpoint (default: the shipped ``habit`` one), best and median of repeats,
-end to end (features, network, blending, contacts) and for the network alone. Target of
-the issue: ≤ 20 ms per 64-frame clip on CPU.
+The benchmark is :mod:`habitsim.evaluation.bench.train`; this module parses its options
+and prints training steps/s, windows/s and frames/s of a preset, the steps its run
+plans, and the transfer latency per 64-frame clip against the target (≤ 20 ms on CPU).
 """
 
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 from pathlib import Path
 
+from ..evaluation.bench.train import TARGET_LATENCY_MS
 from .conventions import add_check_option, check_exit
-
-#: Transfer latency target per 64-frame clip [ms].
-TARGET_LATENCY_MS = 20.0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -51,116 +44,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_bench_train)
 
 
-def training_throughput(config: str = "default", steps: int = 10) -> dict[str, float]:
-    """Steps/s of fresh training on in-memory synthetic windows (after 2 warm-up steps);
-    for a staged preset (:data:`habitsim.models.recipe.RECIPES`) of its final model, with
-    the steps of every stage planned."""
-    import numpy as np
-    import torch
-
-    from ..gaits import available_actions, generate
-    from ..models.config import preset
-    from ..models.data import ClipSet, WindowSampler, feature_stats
-    from ..models.features import clip_arrays
-    from ..models.recipe import RECIPES, single_run_config, stage_configs
-    from ..models.train import build_untrained, compute_losses
-    from ..species import species_names, training_species
-
-    cfg = preset(config)
-    planned = cfg.train.steps
-    if config in RECIPES:  # a staged preset: time its final model, plan every stage's steps
-        planned = sum(c.train.steps for c in stage_configs(cfg, RECIPES[config]))
-        cfg = single_run_config(cfg, RECIPES[config])
-    clips, acts = [], []
-    keys: list[str | None] = []
-    for sp in training_species():
-        for k, action in enumerate(available_actions(sp)[:3]):
-            m = generate(sp, action, seed=1000 + k, duration_s=4.0)
-            clips.append(clip_arrays(m))
-            keys.append(f"{action}:{1000 + k}")
-            acts.append(action)
-    data = ClipSet(clips, keys, acts, clips[0].fps)
-    rng = np.random.default_rng(0)
-    emb = {
-        n: np.random.default_rng(i).standard_normal(384).astype(np.float32)
-        for i, n in enumerate(species_names())
-    }  # timing only: no text model needed
-    model = build_untrained(
-        cfg, sorted({c.species for c in clips}), emb, feature_stats(data, cfg.model.window)
-    )
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr)
-    sampler = WindowSampler(data, cfg.model.window, rng, paired=cfg.train.paired_weight > 0)
-    gen = torch.Generator().manual_seed(0)
-
-    def step() -> None:
-        loss, _ = compute_losses(model, sampler.sample(cfg.train.batch_size), cfg, gen, data.fps)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-
-    for _ in range(2):
-        step()
-    t = time.perf_counter()
-    for _ in range(steps):
-        step()
-    dt = (time.perf_counter() - t) / steps
-    return {
-        "s_per_step": dt,
-        "steps_per_s": 1.0 / dt,
-        "windows_per_s": cfg.train.batch_size / dt,
-        "frames_per_s": cfg.train.batch_size * cfg.model.window / dt,
-        "planned_steps": float(planned),
-        "planned_minutes": planned * dt / 60.0,
-    }
-
-
-def transfer_latency(checkpoint: str | Path | None = None, repeats: int = 20) -> dict[str, float]:
-    """Latency [ms] of transferring one 64-frame clip (best and median of ``repeats``)."""
-    import torch
-
-    from ..gaits import generate
-    from ..models.features import canonical_window, clip_arrays
-    from ..models.transfer import load_model, transfer
-
-    clip = generate("horse", "trot", seed=7, duration_s=70 / 30.0)
-    clip = clip.slice(0, 64)
-    ck = load_model(checkpoint)
-    transfer(clip, to="cat", checkpoint=checkpoint)  # warm-up (loads the model)
-    full = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        transfer(clip, to="cat", checkpoint=checkpoint, seed=1)
-        full.append(time.perf_counter() - t)
-    m = ck.model
-    w = ck.config.model.window
-    x = torch.from_numpy(canonical_window(clip_arrays(clip), 0, w)[0][None])
-    net = []
-    with torch.no_grad():
-        for _ in range(repeats):
-            t = time.perf_counter()
-            codes = m.quantize(m.encode(x), sample=False, update=False).quantized
-            z = m.sample_prior("cat", 1, torch.Generator().manual_seed(1)) if m.cfg.use_z else None
-            m.decode(codes, m.condition(["cat"], z), m.path(x))
-            net.append(time.perf_counter() - t)
-    return {
-        "frames": float(clip.num_frames),
-        "end_to_end_best_ms": 1000 * min(full),
-        "end_to_end_median_ms": 1000 * statistics.median(full),
-        "network_best_ms": 1000 * min(net),
-        "network_median_ms": 1000 * statistics.median(net),
-    }
-
-
 def _bench_train(ns: argparse.Namespace) -> int:
-    import torch
+    from ..evaluation.bench.train import TrainOptions, run_train
 
-    from ..models.config import preset
-
-    threads = ns.threads if ns.threads is not None else preset(ns.config).train.threads
-    if threads is not None:
-        torch.set_num_threads(threads)
-    tp = training_throughput(ns.config, ns.steps)
-    print(f"bench train ({ns.config} config, {torch.get_num_threads()} torch thread(s))")
+    res = run_train(
+        TrainOptions(
+            config=ns.config,
+            steps=ns.steps,
+            threads=ns.threads,
+            checkpoint=ns.checkpoint,
+            repeats=ns.repeats,
+        )
+    )
+    tp, lat = res.throughput, res.latency
+    print(f"bench train ({ns.config} config, {res.threads} torch thread(s))")
     print(
         f"  training      {tp['steps_per_s']:8.2f} steps/s  {tp['windows_per_s']:8.1f} windows/s  "
         f"{tp['frames_per_s']:9.0f} frames/s"
@@ -169,8 +66,7 @@ def _bench_train(ns: argparse.Namespace) -> int:
         f"  planned run   {tp['planned_steps']:8.0f} steps ≈ {tp['planned_minutes']:.1f} min "
         "(training steps only)"
     )
-    lat = transfer_latency(ns.checkpoint, ns.repeats)
-    verdict = "met" if lat["end_to_end_median_ms"] <= TARGET_LATENCY_MS else "MISSED"
+    verdict = "met" if res.latency_met else "MISSED"
     print(
         f"  transfer 64 frames  end-to-end {lat['end_to_end_best_ms']:6.1f} ms best, "
         f"{lat['end_to_end_median_ms']:6.1f} ms median "
@@ -180,9 +76,4 @@ def _bench_train(ns: argparse.Namespace) -> int:
         f"                      network    {lat['network_best_ms']:6.1f} ms best, "
         f"{lat['network_median_ms']:6.1f} ms median"
     )
-    missed = (
-        []
-        if verdict == "met"
-        else [f"transfer latency {lat['end_to_end_median_ms']:.1f} ms > {TARGET_LATENCY_MS:.0f} ms"]
-    )
-    return check_exit(missed, ns.check)
+    return check_exit(res.missed, ns.check)

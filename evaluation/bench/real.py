@@ -1,0 +1,601 @@
+"""``habitsim bench real``: real motion capture through the whole pipeline.
+
+Every clip of a folder (:data:`habitsim.bvh_mapping.SOURCE_SUFFIXES`: BVH, glTF/GLB) is
+imported onto ``species`` (default dog) with :func:`habitsim.bvh_mapping.import_bvh`
+(which reads it with :func:`habitsim.bvh_mapping.read_source`), resampled to ``fps``
+(default 30 Hz, the rate the shipped model and the refinement are built for) and cut into
+windows of ``seconds`` (default 4 s): consecutive windows from the first frame where the
+pelvis moves, at most ``windows_per_clip`` (default 1; ``all``: every whole window) per
+clip; a clip shorter than one window is skipped with a note. Each window × target
+(default cat, horse, camel, tiger, elephant) × method (default habit, direct) runs through
+:func:`habitsim.pipeline.run_clip` (transfer → refine stage A → unassisted ``mpc``
+tracking, with the refinement check), in an executor of the evaluation
+(:mod:`habitsim.evaluation.executors`, ``workers`` processes).
+
+Per row: the import's contact F1 against the source's own feet (the importer's
+``metadata["import"]["contact_f1"]``, one value per foot; None when the importer gives
+none), the stance toe height (median height of the labelled-stance toes / leg length:
+the import's own labels, and the transfer's), how the transfer's stance labels were
+found, skate / jerk / penetration before and after refinement, the refinement check,
+survival, sim MPJPE / leg length, the wall time per stage, and the dynamic plausibility
+of the tracked reference (docs/metrics.md's ``root_residual_mg`` and
+``torque_saturation`` under its stance labels: a window whose reference needs a large
+"hand of god" force, or more torque than the motors have, cannot be tracked by any
+controller without falling or deviating); the columns it takes from the pipeline's run
+come from the one row builder, :func:`habitsim.evaluation.rows.run_row`. Skating is
+docs/metrics.md's ``skate_mm`` (toes within 2 % of leg length of the ground count as in
+contact, labelled or not); the rows and the summary also give it over the labelled stance
+frames only (``skate_labelled_mm_*``), the frames the refinement plants.
+:func:`evaluate_targets` checks the issue's targets (``met`` / ``MISSED``; ``n/a`` when a
+target does not apply to the run):
+
+* refinement: skate ≤ 1 mm/frame, jerk ≤ the input's and penetration ≤ 1 mm on ≥ 95 % of
+  the refined transfers;
+* ≥ 90 % of the habit transfers survive the whole window unassisted under ``mpc``;
+* median sim MPJPE ≤ 0.15 leg length (over the habit and direct windows; the habit
+  windows' own median is shown beside it);
+* habit ≥ direct on mean survival;
+* transfer + refine + track of one 4 s window ≤ 10 s (median; scaled with ``seconds``).
+
+``repeats`` K tracks every kept reference K times: once from the reference's own state
+(the row's figures) and K − 1 times with Gaussian noise of ``perturb`` rad/s (default
+10⁻³) on the initial joint velocities, one seed each (:func:`habitsim.sim.track`'s
+``init_noise``). A window near its balance limit survives or falls on float-level
+differences (thread counts, a library version), so one run is one sample; with repeats
+the two survival targets count every run (share of whole runs, mean survival over all
+runs) and each row says in how many of its runs it was tracked whole. The sim MPJPE and
+the wall times stay those of the unperturbed run.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+
+from habitsim.errors import HabitsimError
+
+from ..rows import finite_or_none, run_row
+from .targets import TargetCheck, exit_code, verdict
+
+if TYPE_CHECKING:  # pragma: no cover
+    from habitsim.motion import Motion
+
+__all__ = [
+    "BenchRealError",
+    "RealOptions",
+    "RealPlan",
+    "WindowTask",
+    "evaluate_targets",
+    "exit_code",
+    "plan",
+    "read_clip",
+    "run_tasks",
+    "run_window",
+    "source_files",
+    "survival_runs",
+    "window_starts",
+]
+
+#: Default target species.
+DEFAULT_TARGETS = ("cat", "horse", "camel", "tiger", "elephant")
+#: Default transfer methods.
+DEFAULT_METHODS = ("habit", "direct")
+#: Refinement targets: skating [mm/frame] and mean penetration [mm] after refinement …
+REFINE_SKATE_MM = 1.0
+REFINE_PENETRATION_MM = 1.0
+#: … on at least this share of the refined transfers.
+REFINE_SHARE = 0.95
+#: Share of habit transfers that survive the whole window unassisted under mpc.
+SURVIVAL_SHARE = 0.90
+#: Median sim MPJPE [leg lengths].
+MPJPE_PER_LEG = 0.15
+#: Transfer + refine + track of one 4 s window [s].
+SECONDS_PER_4S_CLIP = 10.0
+#: Initial joint-velocity noise [rad/s] of the repeated runs.
+PERTURB_QVEL = 1e-3
+#: A window starts at the first frame whose pelvis speed (0.5 s moving average) exceeds
+#: this many leg lengths per second (frame 0 when the animal never does).
+MOVING_SPEED_PER_LEG = 0.25
+
+#: A row of ``bench real`` (one window × target × method), a JSON object: the window
+#: (``clip``, ``start_s`` [s], ``frames``, ``fps`` [Hz], ``species``, ``target``, the
+#: import's figures), ``method``, ``status`` (``ok``, ``unavailable``, ``error``) and
+#: ``note``, then on ``ok`` the columns of :meth:`habitsim.evaluation.rows.RunRow.real_columns`,
+#: the tracking runs (``survival_runs``, ``whole_runs``, ``time_repeats_s`` [s]) and
+#: :meth:`~habitsim.evaluation.rows.RunRow.real_tail_columns`, and ``time_total_s`` [s].
+RealRow = dict[str, Any]
+
+
+class BenchRealError(HabitsimError, ValueError):
+    """Bad input to ``bench real``: no readable clip in the folder, no clip long enough for
+    a window, bad window settings."""
+
+
+@dataclass(frozen=True)
+class RealOptions:
+    """What a ``bench real`` run does.
+
+    Attributes:
+        data: folder of source clips.
+        targets: target species.
+        methods: transfer methods (:func:`habitsim.evaluation.methods.method_names`).
+        species: skeleton the clips are imported onto.
+        joint_map, units, up: the importer's options for every clip
+            (:func:`habitsim.bvh_mapping.import_bvh`; None: its defaults).
+        seconds: window length [s].
+        windows_per_clip: consecutive windows per clip, or ``"all"``.
+        fps: frame rate the clips are resampled to [Hz] (0 keeps theirs).
+        refine: refinement stage (``none``, ``A``, ``B``).
+        controller: unassisted tracking controller (:data:`habitsim.controllers.CONTROLLERS`).
+        track: run the MuJoCo tracking.
+        check: track the unrefined transfer too, to check the refinement.
+        seed: seed of the transfer and the first tracking run.
+        repeats: tracking runs per kept reference (the first unperturbed).
+        perturb: initial joint-velocity noise of the repeated runs [rad/s].
+        workers: worker processes (None: the CPU count; 1: in this process).
+    """
+
+    data: str | Path
+    targets: tuple[str, ...] = DEFAULT_TARGETS
+    methods: tuple[str, ...] = DEFAULT_METHODS
+    species: str = "dog"
+    joint_map: Path | None = None
+    units: str | None = None
+    up: str | None = None
+    seconds: float = 4.0
+    windows_per_clip: int | Literal["all"] = 1
+    fps: float = 30.0
+    refine: str = "A"
+    controller: str = "mpc"
+    track: bool = True
+    check: bool = True
+    seed: int = 0
+    repeats: int = 1
+    perturb: float = PERTURB_QVEL
+    workers: int | None = None
+
+
+# ---------------------------------------------------------------------------- sources
+
+
+def read_clip(
+    path: str | Path,
+    species: str,
+    joint_map: Path | None = None,
+    units: str | None = None,
+    up: str | None = None,
+) -> Motion:
+    """One source clip on ``species``' skeleton (:func:`habitsim.bvh_mapping.import_bvh`,
+    the options as ``import-bvh`` takes them, None for its defaults), with stance labels
+    and ``metadata["import"]`` when the importer finds them. A glTF/GLB file gives its
+    first animation.
+
+    Raises:
+        SkeletonMappingError: a file type :func:`~habitsim.bvh_mapping.read_source` does
+            not read (lists the readable ones), an unmappable skeleton.
+        BVHParseError / GLTFError: an unreadable file.
+    """
+    from habitsim.bvh_mapping import import_bvh
+
+    motion, _ = import_bvh(path, species, joint_map=joint_map, units=units, up=up)
+    return motion
+
+
+def source_files(folder: str | Path) -> list[Path]:
+    """The readable source clips of a folder (sorted).
+
+    Raises:
+        BenchRealError: not a folder, or no readable clip in it.
+    """
+    from habitsim.bvh_mapping import SOURCE_SUFFIXES
+
+    d = Path(folder)
+    if not d.is_dir():
+        raise BenchRealError(f"--data {d}: not a folder")
+    files = sorted(p for p in d.iterdir() if p.is_file() and p.suffix.lower() in SOURCE_SUFFIXES)
+    if not files:
+        raise BenchRealError(
+            f"--data {d}: no source clips ({', '.join(sorted(SOURCE_SUFFIXES))} files) in it"
+        )
+    return files
+
+
+def window_starts(motion: Motion, frames: int, max_windows: int) -> list[int]:
+    """Start frames of up to ``max_windows`` consecutive ``frames``-long windows, from the
+    first frame where the pelvis moves (:data:`MOVING_SPEED_PER_LEG`); [] when the clip is
+    shorter than one window."""
+    n = motion.num_frames
+    if n < frames:
+        return []
+    root = motion.root_positions[:, :2]
+    speed = np.zeros(n)
+    if n > 1:
+        step = np.linalg.norm(np.diff(root, axis=0), axis=1) * motion.fps
+        speed[1:] = step
+        speed[0] = step[0]
+    k = max(1, int(round(0.5 * motion.fps)))
+    smooth = np.convolve(speed, np.ones(k) / k, mode="same")
+    moving = np.flatnonzero(smooth > MOVING_SPEED_PER_LEG * motion.species_info.leg_length)
+    first = int(moving[0]) if moving.size else 0
+    first = min(first, n - frames)
+    return [first + i * frames for i in range(max_windows) if first + (i + 1) * frames <= n]
+
+
+# ---------------------------------------------------------------------------- tasks
+
+
+@dataclass(frozen=True)
+class WindowTask:
+    """One window of a clip to one target with every method; plain data, picklable."""
+
+    clip: str
+    start_s: float
+    motion: Any  # the window (a Motion)
+    target: str
+    methods: tuple[str, ...]
+    refine: str
+    controller: str
+    track: bool
+    guard: bool
+    seed: int
+    repeats: int = 1
+    perturb: float = PERTURB_QVEL
+
+
+def _import_f1(motion: Motion) -> list[float] | None:
+    f1 = ((motion.metadata or {}).get("import") or {}).get("contact_f1")
+    if f1 is None:
+        return None
+    vals = [finite_or_none(x) for x in (f1 if isinstance(f1, list | tuple) else [f1])]
+    return [v for v in vals if v is not None] or None
+
+
+def run_window(task: WindowTask) -> list[RealRow]:
+    """Every method of one (window, target) through the pipeline: one row per method.
+
+    A failure inside a row (a typed error or a bug) becomes ``status = "error"`` with the
+    message in ``note``; the benchmark goes on.
+    """
+    from habitsim.gait_stats import peak_froude
+    from habitsim.pipeline import run_clip, stance_toe_height, track_reference
+
+    from ..methods import MethodUnavailable
+
+    src = task.motion
+    f1 = _import_f1(src)
+    base = {
+        "clip": task.clip,
+        "start_s": task.start_s,
+        "frames": src.num_frames,
+        "fps": src.fps,
+        "species": src.species,
+        "target": task.target,
+        "import_contact_f1": f1,
+        "import_contact_f1_mean": None if f1 is None else float(np.mean(f1)),
+        "source_labels": src.contacts is not None,
+        "stance_toe_height_import": finite_or_none(stance_toe_height(src, src.contacts)),
+        "source_froude_peak": peak_froude(src),
+        "source_flight_share": None
+        if src.contacts is None
+        else float((~np.asarray(src.contacts, bool).any(axis=1)).mean()),
+    }
+    rows = []
+    for method in task.methods:
+        row: RealRow = {**base, "method": method, "status": "ok", "note": ""}
+        t0 = time.perf_counter()
+        try:
+            run = run_clip(
+                src,
+                task.target,
+                method=method,
+                refine=task.refine,
+                controller=task.controller,
+                seed=task.seed,
+                track=task.track,
+                guard=task.guard,
+            )
+        except MethodUnavailable as e:
+            row.update(status="unavailable", note=str(e))
+            rows.append(row)
+            continue
+        except Exception as e:  # noqa: BLE001 - recorded in the row, the run goes on
+            msg = str(e) if isinstance(e, HabitsimError) else f"{type(e).__name__}: {e}"
+            row.update(status="error", note=msg, time_total_s=time.perf_counter() - t0)
+            rows.append(row)
+            continue
+        runs: list[float] = []
+        t_rep = time.perf_counter()
+        if run.track_result is not None:
+            runs.append(float(run.track_result.survival))
+            for i in range(1, task.repeats):
+                try:
+                    again = track_reference(
+                        run,
+                        controller=task.controller,
+                        seed=task.seed + i,
+                        init_noise=task.perturb,
+                    )
+                except HabitsimError as e:
+                    row["note"] = f"repeat {i} failed: {e}"
+                    continue
+                runs.append(float(again.survival))
+        t_rep = time.perf_counter() - t_rep
+        figures = run_row(run, dynamics=task.track)
+        row.update(
+            {
+                **figures.real_columns(),
+                "survival_runs": runs or None,
+                "whole_runs": sum(x >= 1.0 for x in runs) if runs else None,
+                "time_repeats_s": t_rep,
+                **figures.real_tail_columns(),
+                "time_total_s": time.perf_counter() - t0 - t_rep,
+            }
+        )
+        rows.append(row)
+    return rows
+
+
+@dataclass(frozen=True)
+class RealPlan:
+    """The tasks of a run (grouped by target) and the notes on skipped clips."""
+
+    tasks: tuple[WindowTask, ...]
+    notes: tuple[str, ...]
+
+
+def plan(options: RealOptions) -> RealPlan:
+    """The tasks of a run and the notes on skipped clips (every input checked first).
+
+    Raises:
+        BenchRealError / UnknownSpeciesError / UnknownMethodError / SimulationError: bad
+            options, a folder without a clip long enough for one window.
+    """
+    from habitsim.controllers import CONTROLLERS
+    from habitsim.motion import resample_motion
+    from habitsim.pipeline import refine_mode
+    from habitsim.sim import SimulationError
+    from habitsim.species import load_species
+
+    from ..methods import get_method
+
+    o = options
+    if not (math.isfinite(o.seconds) and o.seconds > 0):
+        raise BenchRealError(f"--seconds must be > 0, got {o.seconds}")
+    every = o.windows_per_clip == "all"
+    if not every and not (isinstance(o.windows_per_clip, int) and o.windows_per_clip >= 1):
+        raise BenchRealError(
+            f"--windows-per-clip must be >= 1 or 'all', got {o.windows_per_clip!r}"
+        )
+    if not (math.isfinite(o.fps) and o.fps >= 0):
+        raise BenchRealError(f"--fps must be >= 0, got {o.fps}")
+    repeats, perturb = int(o.repeats), float(o.perturb)
+    if repeats < 1:
+        raise BenchRealError(f"--repeats must be >= 1, got {repeats}")
+    if not (math.isfinite(perturb) and perturb > 0):
+        raise BenchRealError(f"--perturb must be a finite rate > 0 [rad/s], got {perturb}")
+    if o.controller not in CONTROLLERS:
+        from habitsim.errors import unknown_choice
+
+        raise SimulationError(unknown_choice("controller", o.controller, CONTROLLERS))
+    species = load_species(o.species).name
+    targets = [load_species(t).name for t in o.targets]
+    methods = list(o.methods)
+    if not targets:
+        raise BenchRealError("--targets names no species")
+    if not methods:
+        raise BenchRealError("--methods names no method")
+    for method in methods:
+        get_method(method)  # UnknownMethodError listing the registered ones
+    mode = refine_mode(o.refine)
+    files = source_files(o.data)
+    if o.joint_map is not None:
+        from habitsim.bvh_mapping import load_joint_map
+
+        load_joint_map(o.joint_map)  # a bad map file fails here, not once per clip
+    notes: list[str] = []
+    windows: list[tuple[str, float, Any]] = []
+    for f in files:
+        try:
+            m = read_clip(f, species, joint_map=o.joint_map, units=o.units, up=o.up)
+        except HabitsimError as e:
+            notes.append(f"{f.name}: skipped, import failed: {e}")
+            continue
+        if o.fps > 0:
+            m = resample_motion(m, o.fps)
+        frames = int(round(o.seconds * m.fps))
+        max_windows = m.num_frames if o.windows_per_clip == "all" else o.windows_per_clip
+        starts = window_starts(m, frames, max_windows)
+        if not starts:
+            notes.append(
+                f"{f.name}: skipped, {m.num_frames} frames ({m.duration:.2f} s) is "
+                f"shorter than one {o.seconds:g} s window ({frames} frames)"
+            )
+            continue
+        for s in starts:
+            windows.append((f.name, round(s / m.fps, 3), m.slice(s, s + frames)))
+    if not windows:
+        raise BenchRealError(
+            f"--data {o.data}: no clip gives a {o.seconds:g} s window; " + "; ".join(notes)
+        )
+    tasks = [
+        WindowTask(
+            clip,
+            start,
+            w,
+            t,
+            tuple(methods),
+            mode,
+            o.controller,
+            o.track,
+            o.check,
+            o.seed,
+            repeats,
+            perturb,
+        )
+        for t in targets  # grouped by target: a process keeps few built refinement problems
+        for clip, start, w in windows
+    ]
+    return RealPlan(tuple(tasks), tuple(notes))
+
+
+def run_tasks(
+    tasks: Sequence[WindowTask],
+    workers: int | None = None,
+    on_row: Callable[[RealRow], None] | None = None,
+) -> list[RealRow]:
+    """Run every task in a local executor (``workers`` processes; 1: in this process).
+
+    Args:
+        tasks: :func:`plan`'s tasks.
+        workers: worker processes (None: the CPU count).
+        on_row: called with every row as its task finishes (completion order).
+
+    Returns:
+        The rows in task order, each task's methods in its order.
+    """
+    from ..executors import make_executor
+
+    rows: list[RealRow] = []
+    ex = make_executor("local", workers=workers)
+    try:
+        for _, result in ex.map_unordered(run_window, list(tasks)):
+            for r in result:
+                rows.append(r)
+                if on_row is not None:
+                    on_row(r)
+    finally:
+        ex.close()
+    methods = list(tasks[0].methods) if tasks else []
+    order = {(t.clip, t.start_s, t.target): i for i, t in enumerate(tasks)}
+    rows.sort(
+        key=lambda r: (order[(r["clip"], r["start_s"], r["target"])], methods.index(r["method"]))
+    )
+    return rows
+
+
+# ---------------------------------------------------------------------------- targets
+
+
+def survival_runs(row: RealRow) -> list[float]:
+    """Survival of every tracking run of a row (the unperturbed run first; one run
+    without repeats)."""
+    runs = row.get("survival_runs")
+    if runs:
+        return [float(x) for x in runs]
+    return [] if row.get("survival") is None else [float(row["survival"])]
+
+
+def evaluate_targets(
+    rows: Sequence[RealRow],
+    *,
+    seconds: float,
+    refine: str = "A",
+    controller: str = "mpc",
+    tracked: bool = True,
+) -> list[TargetCheck]:
+    """The issue's targets over the rows: name, measured value, target, verdict.
+
+    Verdicts are ``met``, ``MISSED`` or ``n/a`` (the run does not measure it: no
+    refinement, no tracking, another controller, a method missing).
+    """
+    ok = [r for r in rows if r.get("status") == "ok"]
+    out: list[TargetCheck] = []
+
+    # refinement
+    ref = [r for r in ok if refine != "none"]
+    good = [
+        r
+        for r in ref
+        if (r.get("skate_mm_after") is not None and r["skate_mm_after"] <= REFINE_SKATE_MM)
+        and (
+            r.get("penetration_mm_after") is not None
+            and r["penetration_mm_after"] <= REFINE_PENETRATION_MM
+        )
+        and (
+            r.get("jerk_after") is not None
+            and r.get("jerk_before") is not None
+            and r["jerk_after"] <= r["jerk_before"] * (1 + 1e-9)
+        )
+    ]
+    share = len(good) / len(ref) if ref else None
+    out.append(
+        TargetCheck(
+            "refinement: skate ≤ 1 mm/frame, jerk ≤ input, penetration ≤ 1 mm",
+            share,
+            "-" if share is None else f"{100 * share:.0f} % of {len(ref)}",
+            f"≥ {100 * REFINE_SHARE:.0f} % of transfers",
+            verdict(None if share is None else share >= REFINE_SHARE),
+        )
+    )
+
+    # survival of habit transfers under mpc, unassisted (every run of every window)
+    trk = [r for r in ok if tracked and r.get("survival") is not None]
+    habit = [r for r in trk if r["method"] == "habit"]
+    applies = tracked and controller == "mpc" and habit
+    hruns = [x for r in habit for x in survival_runs(r)]
+    share = (sum(x >= 1.0 for x in hruns) / len(hruns)) if applies else None
+    shown = "-"
+    if share is not None:
+        shown = f"{100 * share:.0f} % of {len(habit)}"
+        if len(hruns) > len(habit):
+            shown = f"{100 * share:.0f} % of {len(hruns)} runs"
+    out.append(
+        TargetCheck(
+            "habit transfers surviving unassisted (mpc)",
+            share,
+            shown,
+            f"≥ {100 * SURVIVAL_SHARE:.0f} %",
+            verdict(None if share is None else share >= SURVIVAL_SHARE),
+        )
+    )
+
+    # median sim MPJPE, over every tracked window (habit and direct); the habit windows'
+    # own median is shown beside it
+    e = [r["sim_mpjpe_per_leg"] for r in trk if r.get("sim_mpjpe_per_leg") is not None]
+    med = float(np.median(e)) if e else None
+    eh = [r["sim_mpjpe_per_leg"] for r in habit if r.get("sim_mpjpe_per_leg") is not None]
+    shown = "-" if med is None else f"{med:.3f} of {len(e)}"
+    if med is not None and eh:
+        shown += f" (habit {float(np.median(eh)):.3f})"
+    out.append(
+        TargetCheck(
+            "median sim MPJPE / leg length, all tracked windows",
+            med,
+            shown,
+            f"≤ {MPJPE_PER_LEG}",
+            verdict(None if med is None else med <= MPJPE_PER_LEG),
+        )
+    )
+
+    # habit ≥ direct on survival
+    direct = [r for r in trk if r["method"] == "direct"]
+    value: float | None = None
+    if habit and direct:
+        sh = float(np.mean([x for r in habit for x in survival_runs(r)]))
+        sd = float(np.mean([x for r in direct for x in survival_runs(r)]))
+        shown, value = f"{sh:.2f} vs {sd:.2f}", sh - sd
+        met = verdict(sh >= sd - 1e-9)
+    else:
+        shown, met = "-", verdict(None)
+    out.append(TargetCheck("habit ≥ direct on mean survival", value, shown, "habit ≥ direct", met))
+
+    # time per clip
+    limit = SECONDS_PER_4S_CLIP * seconds / 4.0
+    tt = [sum(r.get(f"time_{k}_s") or 0.0 for k in ("transfer", "refine", "track")) for r in ok]
+    med = float(np.median(tt)) if tt else None
+    out.append(
+        TargetCheck(
+            f"transfer + refine + track of one {seconds:g} s window (median)",
+            med,
+            "-" if med is None else f"{med:.1f} s",
+            f"≤ {limit:.1f} s" + ("" if seconds == 4 else " (10 s per 4 s)"),
+            verdict(None if med is None else med <= limit),
+        )
+    )
+    return out
