@@ -456,7 +456,7 @@ def transfer_contacts(
     return labels, info
 
 
-#: A gait whose duty factor is below one half has an aerial phase (BIOMECH.md, footfall
+#: A gait whose duty factor is below one half has an aerial phase (docs/biomechanics.md, footfall
 #: table); a target species that walks at the transfer's speed has none, so a transfer
 #: below the top of the target's walking Froude band has every foot in stance at least
 #: this share of the clip (:func:`walking_stance`). Measured with ``habitsim bench real``:
