@@ -87,9 +87,9 @@ def _run_python(code: str, workdir: Path, monkeypatch: pytest.MonkeyPatch, name:
 def _run_plugin_tests(code: str, pytester: pytest.Pytester) -> None:
     n = len(re.findall(r"^def test_", code, re.M))
     pytester.makepyfile(test_readme_plugin=code)
-    pytester.runpytest_inprocess("-p", "no:cacheprovider", "--habitsim-update-goldens").assert_outcomes(
-        passed=n
-    )
+    pytester.runpytest_inprocess(
+        "-p", "no:cacheprovider", "--habitsim-update-goldens"
+    ).assert_outcomes(passed=n)
     pytester.runpytest_inprocess("-p", "no:cacheprovider").assert_outcomes(passed=n)
 
 
