@@ -8,8 +8,9 @@ its goldens and once checking them. Each ```bash block's ``habitsim`` commands a
 by the command line's own parser (the subcommand and every option exist), ``make``
 targets are looked up in the Makefile, and blocks of quick commands are run with the
 installed command. The ``habitsim`` commands in ``docs/*.md`` are parsed the same way and
-their ```python blocks compiled. The working directory holds ``habitsim/examples`` and
-``tests/robots`` of this checkout, the paths the README's commands name.
+their ```python blocks compiled, and ``docs/cli.md`` must name every command and option of
+the command line. The working directory holds ``habitsim/examples`` and ``tests/robots``
+of this checkout, the paths the README's commands name.
 """
 
 from __future__ import annotations
@@ -172,6 +173,43 @@ def test_links_resolve(page: Path) -> None:
         if not (page.parent / target.split("#")[0]).exists():
             missing.append(target)
     assert not missing, f"{page.name}: links to missing files: {missing}"
+
+
+#: Commands on their way out, not documented.
+UNDOCUMENTED = {"fuzz"}
+
+
+def _parser_commands(parser, prefix: str = ""):
+    """(command path, parser) of every (sub)command of the command line."""
+    import argparse
+
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                if name in UNDOCUMENTED:
+                    continue
+                path = f"{prefix} {name}".strip()
+                yield path, sub
+                yield from _parser_commands(sub, path)
+
+
+def test_cli_page_covers_every_command_and_option() -> None:
+    """docs/cli.md names every command and every one of its options."""
+    from habitsim.cli import build_parser
+
+    text = (ROOT / "docs" / "cli.md").read_text()
+    missing = []
+    for path, sub in _parser_commands(build_parser()):
+        head = re.compile(rf"^\| `{re.escape(path)}[ `]")
+        rows = " ".join(ln for ln in text.splitlines() if head.match(ln))
+        if not rows:
+            missing.append(path)
+            continue
+        for action in sub._actions:
+            long = [o for o in action.option_strings if o.startswith("--") and o != "--help"]
+            if long and not any(re.search(rf"{re.escape(o)}(?![\w-])", rows) for o in long):
+                missing.append(f"{path} {long[0]}")
+    assert not missing, f"docs/cli.md does not name: {missing}"
 
 
 def test_readme_is_a_guide() -> None:
