@@ -44,7 +44,7 @@ Undefined numbers are ``float('nan')`` in the dataclass and ``None`` in ``to_dic
 :func:`peak_froude` is the fastest stretch of a clip, for clips that change gait (a walk
 that breaks into a gallop): the largest v² / (g·h) of the horizontal root speed averaged
 over any ``span_s`` (default :data:`PEAK_SPAN_S`) of the clip, the path length over that
-span divided by its duration. Its regimes follow BIOMECH.md (Alexander & Jayes 1983):
+span divided by its duration. Its regimes follow docs/biomechanics.md (Alexander & Jayes 1983):
 walk below about 0.5, trot or amble up to :data:`GALLOP_FROUDE`, gallop above.
 """
 

@@ -1,4 +1,4 @@
-"""The synthetic gait generator against the species' gait tables (BIOMECH.md)."""
+"""The synthetic gait generator against the species' gait tables (docs/biomechanics.md)."""
 
 from __future__ import annotations
 

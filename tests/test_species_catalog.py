@@ -1,5 +1,5 @@
 """The species catalog: every file loads, its numbers agree with the published facts of
-/work/shared/reference/BIOMECH.md, and broken files and names are rejected clearly."""
+docs/biomechanics.md, and broken files and names are rejected clearly."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from habitsim.species import (
 CATALOG = Path(__file__).resolve().parents[1] / "habitsim" / "catalog"
 DOG = CATALOG / "dog.toml"
 
-# Hip heights [m] of BIOMECH.md, "Approximate body sizes" table (Alexander & Jayes 1983 and
+# Hip heights [m] of docs/biomechanics.md, "Body sizes" table (Alexander & Jayes 1983 and
 # the species sources cited in each TOML file).
 REFERENCE_HIP_HEIGHT = {
     "cat": 0.25,
@@ -68,7 +68,8 @@ REFERENCE_MASS = {
     "elephant": (3500, 3500),
 }
 
-# Footfall phases (LH = 0) per gait type, BIOMECH.md "Footfall patterns" table (Hildebrand).
+# Footfall phases (LH = 0) per gait type, docs/biomechanics.md "Footfall patterns and duty
+# factors" table (Hildebrand).
 # A lateral-sequence walk may shift LF toward LH (pace-like walks of camels and giraffes),
 # which the 0.1 tolerance plus the wider WALK_LF_RANGE allow.
 GAIT_PHASES = {

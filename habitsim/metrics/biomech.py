@@ -5,7 +5,7 @@ The measured numbers are docs/metrics.md's (from foot contacts, via
 ``relative_stride_length`` λ/h and ``phase_offsets`` (touchdown phase of each foot
 relative to the left hind foot). They are compared with each gait of the species' gait
 table (``[gaits.*]`` of its catalog file: Froude band, duty-factor band, footfall
-phases) and with Alexander's stride relation λ/h ≈ 2.3·Fr^0.3 (BIOMECH.md). Four
+phases) and with Alexander's stride relation λ/h ≈ 2.3·Fr^0.3 (docs/biomechanics.md). Four
 dimensionless components, each reading about 1 for a clear departure:
 
 ==========================  ==============================================================

@@ -88,7 +88,7 @@ FLOOR_WINDOW_S = 0.75
 #: A foot point slower than this share of the body's speed counts as at rest (when that
 #: is above the absolute rest speed of habitsim.contacts; 0 switches it off). On the
 #: Labrador's walkrun clips the absolute speed alone gave walks duty factors of
-#: 0.38–0.50 (a dog walks at 0.6 or more, BIOMECH.md) and left the hind feet of a run
+#: 0.38–0.50 (a dog walks at 0.6 or more, docs/biomechanics.md) and left the hind feet of a run
 #: without stance for its last second; with 0.35 the walks stand 0.44–0.62 of the time,
 #: the run's every step is found, and ``habitsim bench real`` habit transfers survived
 #: whole in 118 of 125 runs instead of 100 (direct transfers 110 instead of 92) ...
