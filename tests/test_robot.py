@@ -1,7 +1,7 @@
 """The controllers on a robot habitsim did not build: MuJoCo Menagerie's Unitree Go1.
 
 The Go1 (tests/robots/unitree_go1, collision primitives only) has position servos and
-names its feet ``FL``, ``FR``, ``RL``, ``RR``; the README's robot section must run on it as
+names its feet ``FL``, ``FR``, ``RL``, ``RR``; docs/controllers.md's robot section must run on it as
 written, and ``habitsim.sim.track`` must simulate it with fall detection and metrics.
 """
 
@@ -175,21 +175,22 @@ def test_go1_trots_under_mpc_through_track(go1, speed):
     assert res.controller_stats["mpc_failures"] == 0
 
 
-def _readme_section_code() -> list[str]:
-    text = (Path(__file__).parents[1] / "README.md").read_text()
-    sec = text.split("## Using the controllers on your own robot", 1)[1].split("\n## ", 1)[0]
+def _docs_section_code() -> list[str]:
+    text = (Path(__file__).parents[1] / "docs" / "controllers.md").read_text()
+    sec = text.split("## On your own robot", 1)[1].split("\n## ", 1)[0]
     return [b.split("\n", 1)[1] for b in sec.split("```")[1::2] if b.startswith("python")]
 
 
 @pytest.mark.slow
 def test_readme_robot_code_runs_as_written(monkeypatch, capsys):
-    """The README section's code blocks, verbatim, from the repository root."""
+    """docs/controllers.md's "On your own robot" code blocks, verbatim, from the repository
+    root."""
     monkeypatch.chdir(Path(__file__).parents[1])
-    blocks = _readme_section_code()
+    blocks = _docs_section_code()
     assert len(blocks) == 2 and 'feet=["FL", "FR", "RL", "RR"]' in blocks[0]
     scope: dict = {}
     for code in blocks:
-        exec(compile(code, "README.md", "exec"), scope)  # noqa: S102 - our own README
+        exec(compile(code, "controllers.md", "exec"), scope)  # noqa: S102 - our own docs
     res = scope["res"]
     assert res.survival == 1.0 and res.qpos[-1, 0] > 4.0  # 10 s at 0.5 m/s
     survival, mpjpe, _ = capsys.readouterr().out.split()
