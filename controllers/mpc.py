@@ -69,6 +69,8 @@ __all__ = [
 
 #: CasADi conic plugins the MPC accepts (sparse solvers).
 MPC_SOLVERS = ("osqp", "proxqp")
+#: State size of the single rigid body (orientation, position, angular velocity,
+#: velocity, gravity).
 NX = 13
 
 

@@ -45,6 +45,7 @@ __all__ = [
     "FEATURE_DIM",
 ]
 
+#: Format version of the ``.npz`` motion files this module writes (docs/formats.md).
 FORMAT_VERSION = 1
 #: Frame rates [Hz] a motion may have.
 FPS_RANGE = (1.0, 1000.0)
