@@ -89,11 +89,8 @@ __all__ = [
     "STANCE_SOLVERS",
 ]
 
-#: Upper bound of the trunk PD natural frequencies [rad/s]: above ~12 rad/s the trunk
-#: loop excites the redundant legs of small species (rabbit, cat, fox) and they fold.
-OMEGA_CAP = 10.0
-#: A joint torque at or above this share of its limit counts as at the limit
-#: (``torque_at_limit_share`` in the controller's stats).
+#: Definition of a reported statistic: a joint torque at or above this share of its limit
+#: counts as at the limit (``torque_at_limit_share`` in the controller's stats) [unitless].
 AT_LIMIT_SHARE = 0.99
 
 
@@ -122,7 +119,7 @@ class BalanceConfig:
     Attributes:
         mass: total mass m [kg]; leg_length: L [m]; gravity: g [m/s²].
         trunk_omega: natural frequency of the CoM PD [rad/s] (default 2·sqrt(g/L), at
-            most :data:`OMEGA_CAP`).
+            most ``omega_cap`` of :meth:`scaled`).
         rot_omega: of the trunk orientation PD [rad/s] (same default).
         damping_ratio: ζ of both.
         mu: friction coefficient of the pyramid (keep below the floor's).
@@ -146,10 +143,8 @@ class BalanceConfig:
             plain joint PD acts on the legs as well (stiffer posture, foot forces a little
             off the QP's plan — it keeps the fox standing).
         leg_damping: scale of the (unprojected) damping of the leg joints.
-        early_phase: swing phase after which a touch-down switches to stance (0.75:
-            across the bench every real early landing came after 88 % of the swing; a
-            touch at mid-swing is a scuff — with 0.5 a pig's trot planted its dragging
-            front feet half a step short and pitched over).
+        early_phase: swing phase after which a touch-down switches to stance [share of
+            the swing] (why 0.75: docs/controllers.md).
         early_reach: ... only when the foot is within this horizontal distance of its
             swing target [m] (default 0.1·L); farther behind, the foot is scuffing, not
             landing (:class:`~habitsim.controllers.contact_state.ContactTracker`).
@@ -183,9 +178,17 @@ class BalanceConfig:
 
     @classmethod
     def scaled(
-        cls, mass: float, leg_length: float, gravity: float = GRAVITY, **overrides: Any
+        cls,
+        mass: float,
+        leg_length: float,
+        gravity: float = GRAVITY,
+        omega_cap: float = 10.0,
+        **overrides: Any,
     ) -> BalanceConfig:
         """The defaults for a body of ``mass`` [kg] and ``leg_length`` [m].
+
+        ``omega_cap`` bounds the default trunk PD natural frequencies [rad/s] (why 10:
+        docs/controllers.md).
 
         Raises:
             ControllerError: non-positive mass, leg length or gravity; unknown field.
@@ -198,8 +201,8 @@ class BalanceConfig:
             mass=float(mass),
             leg_length=float(leg_length),
             gravity=float(gravity),
-            trunk_omega=min(2.0 * w0, OMEGA_CAP),
-            rot_omega=min(2.0 * w0, OMEGA_CAP),
+            trunk_omega=min(2.0 * w0, omega_cap),
+            rot_omega=min(2.0 * w0, omega_cap),
             fz_max=1.5 * mass * gravity,
             swing_omega=8.0 * w0,
             capture_max=0.15 * leg_length,

@@ -40,9 +40,7 @@ class ContactTracker:
       earlier in the swing, or far from the swing target, is a scuff (a leg at a joint
       limit under a trunk a little low, a foot lagging its path), not a landing: planted
       there, half a step short, the foot would carry the body on a support polygon the
-      plan never had. Across the bench every real early landing came after 88 % of the
-      swing within 0.1 L of the target; with ``early_phase`` 0.5 a pig's trot planted
-      its scuffing front feet at mid-swing, 0.5 L short, and pitched over;
+      plan never had (why ``early_phase`` is 0.75: docs/controllers.md);
 
     Args:
         n_feet: number of feet.

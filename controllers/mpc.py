@@ -69,6 +69,8 @@ __all__ = [
 
 #: CasADi conic plugins the MPC accepts (sparse solvers).
 MPC_SOLVERS = ("osqp", "proxqp")
+#: State size of the single rigid body (orientation, position, angular velocity,
+#: velocity, gravity).
 NX = 13
 
 
@@ -78,34 +80,11 @@ class MPCWeights:
 
     Errors are measured in natural units of the body: angles in rad, positions in leg
     lengths L, velocities in sqrt(g·L), angular velocities in sqrt(g/L), forces in m·g.
-    The defaults are the weights of the MIT Mini Cheetah's convex MPC (Di Carlo et al.
-    2018; Q = [0.25 0.25 10, 2 2 50, 0 0 0.3, 0.2 0.2 0.1], R = 4e-5 N⁻² for 9 kg and
-    L ≈ 0.3 m) in these units, with small roll/pitch rate weights added for damping, and
-    a horizontal position weight ten times theirs (three times before the real clips, see
-    below): the swing legs place the footholds relative to the body
-    (:meth:`~habitsim.controllers.swing.SwingLegs.correction`), so a lag or sideways drift
-    of the CoM is pulled back by the ground forces the MPC plans (with 0.2, the bench's
-    cow and horse trots drifted 0.3–1 L off the reference and tracking was 30 % worse),
-    and a roll weight eight times theirs: an animal's track is narrow for its height
-    (feet ±0.15 m under a camel's 1.5 m CoM, against ±0.1 m under a Mini Cheetah's
-    0.3 m), so a pace or trot stands on a support line close under the CoM. With 0.25
-    the MPC let the camel's pace roll 10–15° onto its unsupported side, then, to right
-    it, unloaded the stance feet and pushed sideways at the friction limit: the body
-    sank, slid sideways and fell (survival 0.47). With 2 it survives and its tracking
-    error is halved; no other case changes.
-
-    The horizontal position and velocity weights are 2 (they were 0.6). Real trots and
-    runs (``habitsim bench real``: dog motion capture at 1–2 m/s with turns, single-foot
-    support and flight phases) land feet away from the planned footholds: a leg short of
-    its reference reach (the imported dog's shoulders ask for more abduction than the
-    joints have) or late in its swing. Every such step pushed the CoM sideways, and with
-    0.6 the MPC let the drift build up (0.5–0.8 m, about one leg length, after 2 s on
-    the dog) rather than spend lateral force; the trunk then rolled over its misplaced
-    feet (the dog fell in 4 of 5 windows, trunk tilt > 60°). With 2 the MPC pulls the
-    CoM back every step: of the five windows × five targets × (habit, direct) transfers
-    30 of 50 survive instead of 25, median sim MPJPE 0.154 L instead of 0.198 L, and
-    the dog itself survives 3 of 5 (mean survival 0.93 against 0.80). The synthetic
-    bench (``habitsim bench balance``) keeps 100 % survival.
+    The defaults start from the weights of the MIT Mini Cheetah's convex MPC (Di Carlo
+    et al. 2018; Q = [0.25 0.25 10, 2 2 50, 0 0 0.3, 0.2 0.2 0.1], R = 4e-5 N⁻² for 9 kg
+    and L ≈ 0.3 m) in these units, with small roll/pitch rate weights added for damping,
+    horizontal position and velocity weights of 2 and a roll weight eight times theirs
+    (why: docs/controllers.md, "Why the defaults").
     """
 
     roll: float = 2.0
@@ -461,9 +440,8 @@ class MPCController(BalanceController):
         feedback_scale: share of the balance PD gains used between MPC solves to track
             the MPC's own prediction.
         integral_rate: gain k_i [1/s] of the integral action on the forward lag of the
-            CoM (see :meth:`_integrate`; 0 turns it off). With 1/s instead of 3/s the
-            camel's flying pace trailed its reference by up to 0.17 L for its first two
-            seconds (sim MPJPE 0.104 L against 0.089 L).
+            CoM (see :meth:`_integrate`; 0 turns it off; why its default:
+            docs/controllers.md).
         integral_max: bound of the integral's shift of the reference [leg lengths].
         resolve_on_contact: solve again as soon as the stance set changes (touch-down,
             lift-off, early touch-down, lost contact) instead of waiting for the next
@@ -477,10 +455,8 @@ class MPCController(BalanceController):
 
     name = "mpc"
     #: The single-rigid-body model's ω is the rate the ground forces change: the whole
-    #: body's centroidal angular velocity ``I_c⁻¹ h_c``, not the trunk body's own. An
-    #: animal's pelvis carries a fraction of the mass and rocks on the spine and hips
-    #: against the rest of the body; fed its rate, the MPC chased that rocking (a fox's
-    #: walk oscillated at half the MPC rate until it fell).
+    #: body's centroidal angular velocity ``I_c⁻¹ h_c`` (True), not the trunk body's own
+    #: (False; why: docs/controllers.md).
     centroidal_rate = True
 
     def __init__(

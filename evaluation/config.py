@@ -38,6 +38,7 @@ DEFAULT_CONTROLLER = "mpc"
 #: build (small digitigrade, large unguligrade, pacer): 33 pairs per method, 99 in all.
 DEFAULT_TARGETS = ("cat", "horse", "camel")
 DEFAULT_CLIPS_PER_SOURCE = 1
+#: Format version of a run folder's files.
 RUN_FORMAT_VERSION = 1
 
 

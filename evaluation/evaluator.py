@@ -67,6 +67,7 @@ DEFAULT_EVALUATOR_DIR = Path(__file__).resolve().parent / "evaluator"
 _WEIGHTS = "model.safetensors"
 _CONFIG = "config.json"
 _README = "README.md"
+#: Format version of the evaluator's ``config.json``.
 CONFIG_FORMAT_VERSION = 1
 
 

@@ -22,10 +22,12 @@ def default_data(
     workers: int | None = None,
     progress: bool = True,
     log: Callable[[str], None] | None = None,
+    clips_per_species: int = DEFAULT_DATA_CLIPS_PER_SPECIES,
 ) -> Path:
     """The synthetic data set of a run given no data: ``OUT/data``, every species,
-    :data:`DEFAULT_DATA_CLIPS_PER_SPECIES` clips each, seed 0; built on the first run and
-    reused after (a folder holding another configuration is rebuilt).
+    ``clips_per_species`` clips each (default :data:`DEFAULT_DATA_CLIPS_PER_SPECIES`),
+    seed 0; built on the first run and reused after (a folder holding another
+    configuration is rebuilt).
 
     Raises:
         DatasetError: ``OUT/data`` cannot be written.
@@ -42,11 +44,11 @@ def default_data(
     if log:
         log(
             f"eval: no --data given: the default synthetic data set in {folder} "
-            f"({DEFAULT_DATA_CLIPS_PER_SPECIES} clips per species, seed 0)"
+            f"({clips_per_species} clips per species, seed 0)"
         )
     build_dataset(
         folder,
-        clips_per_species=DEFAULT_DATA_CLIPS_PER_SPECIES,
+        clips_per_species=clips_per_species,
         seed=0,
         workers=workers,
         progress=progress,

@@ -5,7 +5,7 @@ contact with the ground (the plane z = 0) in a frame when
 
 * its height is below :data:`CONTACT_HEIGHT_PER_LEG` × leg length (2 %, the contact
   definition of docs/metrics.md's ``skate_mm``), and
-* its horizontal speed is below :data:`CONTACT_SPEED_PER_LEG` × leg length per second
+* its horizontal speed is below :attr:`ContactOptions.speed_per_leg` × leg length per second
   (0.3 leg lengths per second; for a 0.61 m dog leg that is 0.18 m/s, for a cat's 0.27 m
   leg 0.08 m/s). The speed of frame t is the smaller of the backward and the forward
   one-frame displacement times fps, so the touchdown frame (foot still moving into frame
@@ -16,18 +16,23 @@ contact with the ground (the plane z = 0) in a frame when
 
 Cleanup, in this order:
 
-1. hysteresis: a frame that only meets the looser thresholds (× :data:`HYSTERESIS`, i.e.
-   1.5 × both limits) is in contact if it belongs to a run of such frames that contains
-   at least one frame meeting the strict thresholds — noise around the threshold does
-   not break a stance phase, but a hovering foot never starts one;
+1. hysteresis: a frame that only meets the looser thresholds
+   (× :attr:`ContactOptions.hysteresis`, i.e. 1.5 × both limits) is in contact if it
+   belongs to a run of such frames that contains at least one frame meeting the strict
+   thresholds — noise around the threshold does not break a stance phase, but a
+   hovering foot never starts one;
 2. single-frame gaps inside a stance phase are filled (``1 0 1`` → ``1 1 1``);
 3. single-frame contacts between two swing frames are removed (``0 1 0`` → ``0 0 0``).
 
-Everything is vectorised numpy.
+Everything is vectorised numpy. The two thresholds of the algorithm are the fields of
+:class:`ContactOptions` (``options`` of :func:`detect_contacts` and
+:func:`contacts_from_feet`); the contact height is the shared convention
+:data:`habitsim.physics_constants.CONTACT_HEIGHT_PER_LEG`.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
@@ -42,7 +47,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "CONTACT_HEIGHT_PER_LEG",
     "CONTACT_SPEED_PER_LEG",
-    "HYSTERESIS",
+    "ContactOptions",
     "FootTrack",
     "detect_contacts",
     "contacts_from_feet",
@@ -70,10 +75,24 @@ class FootTrack(Protocol):
     def foot_positions(self) -> np.ndarray: ...
 
 
-#: Horizontal toe speed threshold in hind-leg lengths per second.
-CONTACT_SPEED_PER_LEG = 0.3
-#: Factor on both thresholds for the loose (staying-in-contact) condition.
-HYSTERESIS = 1.5
+@dataclass(frozen=True)
+class ContactOptions:
+    """The knobs of contact detection from toe kinematics (:func:`detect_contacts`).
+
+    Attributes:
+        speed_per_leg: horizontal toe speed threshold [hind-leg lengths per second].
+        hysteresis: factor on both thresholds (height and speed) for the loose,
+            staying-in-contact condition [unitless, ≥ 1].
+    """
+
+    speed_per_leg: float = 0.3
+    hysteresis: float = 1.5
+
+
+#: The default :attr:`ContactOptions.speed_per_leg` [hind-leg lengths per second], for
+#: :mod:`habitsim.stance.planting`'s speed limit (being reworked: it goes when that module
+#: takes a :class:`ContactOptions`).
+CONTACT_SPEED_PER_LEG = ContactOptions().speed_per_leg
 
 
 def _toe_speed(feet: np.ndarray, fps: float) -> np.ndarray:
@@ -108,28 +127,32 @@ def _checked_feet(feet: np.ndarray, fps: float, leg_length: float) -> np.ndarray
     return feet
 
 
-def contacts_from_feet(feet: np.ndarray, fps: float, leg_length: float) -> np.ndarray:
+def contacts_from_feet(
+    feet: np.ndarray, fps: float, leg_length: float, options: ContactOptions = ContactOptions()
+) -> np.ndarray:
     """Contacts from toe trajectories (the core of :func:`detect_contacts`).
 
     Args:
         feet: (T, F, 3) toe positions [m], z up, ground at z = 0.
         fps: frame rate [Hz].
         leg_length: the normalising hind-leg length [m].
+        options: the detection's thresholds.
 
     Returns:
         (T, F) bool contact flags.
     """
     feet = _checked_feet(feet, fps, leg_length)
     h_thr = CONTACT_HEIGHT_PER_LEG * leg_length
-    v_thr = CONTACT_SPEED_PER_LEG * leg_length
+    v_thr = options.speed_per_leg * leg_length
     height = feet[..., 2]
     speed = _toe_speed(feet, fps)
     strict = (height < h_thr) & (speed < v_thr)
-    loose = (height < HYSTERESIS * h_thr) & (speed < HYSTERESIS * v_thr)
+    k = options.hysteresis
+    loose = (height < k * h_thr) & (speed < k * v_thr)
     return _fill_and_open(runs_holding(loose, strict))
 
 
-def detect_contacts(motion: FootTrack) -> np.ndarray:
+def detect_contacts(motion: FootTrack, options: ContactOptions = ContactOptions()) -> np.ndarray:
     """Foot contacts of a motion from toe height and horizontal speed.
 
     Thresholds are size-normalised (see the module docstring): height < 2 % and
@@ -138,11 +161,14 @@ def detect_contacts(motion: FootTrack) -> np.ndarray:
 
     Args:
         motion: the motion (its ``contacts`` labels are ignored).
+        options: the detection's thresholds.
 
     Returns:
         (T, 4) bool, feet LF, RF, LH, RH.
     """
-    return contacts_from_feet(motion.foot_positions(), motion.fps, motion.species_info.leg_length)
+    return contacts_from_feet(
+        motion.foot_positions(), motion.fps, motion.species_info.leg_length, options
+    )
 
 
 def contacts_by_duty(

@@ -23,7 +23,7 @@ import zipfile
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,6 +32,9 @@ from .fileio import atomic_write
 from .rotations import quat_fix_continuity, quat_slerp
 from .skeleton import JOINT_NAMES, Skeleton, get_skeleton
 from .species import Species, load_species
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .contacts import ContactOptions
 
 __all__ = [
     "Motion",
@@ -42,6 +45,7 @@ __all__ = [
     "FEATURE_DIM",
 ]
 
+#: Format version of the ``.npz`` motion files this module writes (docs/formats.md).
 FORMAT_VERSION = 1
 #: Frame rates [Hz] a motion may have.
 FPS_RANGE = (1.0, 1000.0)
@@ -241,11 +245,12 @@ class Motion:
         return cls(species, fps, root, q)
 
     # ------------------------------------------------------------------ contacts
-    def detect_contacts(self) -> np.ndarray:
-        """(T, 4) foot contacts from toe height and speed with size-normalised thresholds."""
-        from .contacts import detect_contacts
+    def detect_contacts(self, options: ContactOptions | None = None) -> np.ndarray:
+        """(T, 4) foot contacts from toe height and speed with size-normalised thresholds
+        (``options``: :class:`habitsim.contacts.ContactOptions`, None: the defaults)."""
+        from .contacts import ContactOptions, detect_contacts
 
-        return detect_contacts(self)
+        return detect_contacts(self, options or ContactOptions())
 
     def with_contacts(self, contacts: np.ndarray | None = None) -> Motion:
         """A copy with contact labels (detected when ``contacts`` is None)."""

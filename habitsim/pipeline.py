@@ -22,7 +22,8 @@ handed to refinement and used by tracking, so a species is compiled once per pro
 Refinement never makes a clip worse unnoticed: with ``guard=True`` (default) and a
 successful refinement, the unrefined transfer is tracked too; when the refined clip
 tracks worse (lower survival, or equal survival and a sim MPJPE more than
-:data:`WORSE_MPJPE_RATIO` × the input's plus :data:`WORSE_MPJPE_MARGIN_PER_LEG`), the
+:attr:`GuardOptions.mpjpe_ratio` × the input's plus
+:attr:`GuardOptions.mpjpe_margin_per_leg`), the
 pipeline keeps the unrefined clip as the tracked reference, says so in
 :attr:`ClipRun.refine_verdict` (``reverted``) and :attr:`ClipRun.refine_note`, and keeps
 both results.
@@ -51,8 +52,7 @@ __all__ = [
     "PipelineError",
     "REFINE_MODES",
     "REFINE_ALIASES",
-    "WORSE_MPJPE_RATIO",
-    "WORSE_MPJPE_MARGIN_PER_LEG",
+    "GuardOptions",
     "Stage",
     "ClipRun",
     "run_clip",
@@ -65,11 +65,21 @@ __all__ = [
 REFINE_MODES = ("none", "A", "B")
 #: Other names accepted for the modes (the evaluation's ``--refine`` values).
 REFINE_ALIASES = {"kinematic": "A", "dynamics": "B", "a": "A", "b": "B"}
-#: The refined clip "tracks clearly worse" at equal survival when its sim MPJPE exceeds
-#: the input's times this ratio …
-WORSE_MPJPE_RATIO = 1.10
-#: … plus this share of leg length.
-WORSE_MPJPE_MARGIN_PER_LEG = 0.005
+
+
+@dataclass(frozen=True)
+class GuardOptions:
+    """The thresholds of the refinement guard (``guard`` of :func:`run_clip`): at equal
+    survival the refined clip "tracks clearly worse" when its sim MPJPE exceeds the
+    input's × ``mpjpe_ratio`` + ``mpjpe_margin_per_leg``.
+
+    Attributes:
+        mpjpe_ratio: factor on the unrefined clip's sim MPJPE [unitless].
+        mpjpe_margin_per_leg: margin added to it [share of the hind-leg length].
+    """
+
+    mpjpe_ratio: float = 1.10
+    mpjpe_margin_per_leg: float = 0.005
 
 
 class PipelineError(HabitsimError, ValueError):
@@ -315,7 +325,9 @@ def _run_track(
     return res, ("fell" if res.failed else "ok"), time.perf_counter() - t0
 
 
-def _worse(refined: TrackResult, plain: TrackResult) -> str | None:
+def _worse(
+    refined: TrackResult, plain: TrackResult, options: GuardOptions = GuardOptions()
+) -> str | None:
     """Why the refined clip tracks worse than its input, or None."""
     sr, sp = float(refined.survival), float(plain.survival)
     if sr < sp - 1e-9:
@@ -323,7 +335,7 @@ def _worse(refined: TrackResult, plain: TrackResult) -> str | None:
     er = float(refined.metrics.get("sim_mpjpe_per_leg", math.nan))
     ep = float(plain.metrics.get("sim_mpjpe_per_leg", math.nan))
     if abs(sr - sp) <= 1e-9 and math.isfinite(er) and math.isfinite(ep):
-        if er > ep * WORSE_MPJPE_RATIO + WORSE_MPJPE_MARGIN_PER_LEG:
+        if er > ep * options.mpjpe_ratio + options.mpjpe_margin_per_leg:
             return f"equal survival {sr:.2f}, sim MPJPE {er:.3f} > {ep:.3f} leg lengths unrefined"
     return None
 
@@ -360,6 +372,7 @@ def run_clip(
     track: bool = True,
     guard: bool = True,
     refine_options: RefineOptions | None = None,
+    guard_options: GuardOptions = GuardOptions(),
 ) -> ClipRun:
     """Run one clip through transfer → refine → track, with the metrics of every stage.
 
@@ -381,6 +394,7 @@ def run_clip(
         refine_options: :class:`~habitsim.refine.RefineOptions` (default: its defaults
             without its own before/after metrics; ``dynamics`` and ``fallback`` are set
             here).
+        guard_options: the guard's thresholds (:class:`GuardOptions`).
 
     Returns:
         The :class:`ClipRun`.
@@ -447,7 +461,7 @@ def run_clip(
             run.refine_note = f"kept the refined clip (the unrefined one: {pstatus})"
             run.tracked.wall_time_s += pwall
         else:
-            why = _worse(res, plain)
+            why = _worse(res, plain, guard_options)
             if why is None:
                 run.refine_verdict = "kept"
                 run.refine_note = (

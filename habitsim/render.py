@@ -110,15 +110,15 @@ class GhostStyle:
     floor_drop: float | None = None
 
 
-_BACKEND_CHECKED = False
+_backend_checked = False
 
 
 def _headless_context() -> None:
     """Make mujoco.Renderer use EGL/OSMesa when MUJOCO_GL is unset and there is no display."""
-    global _BACKEND_CHECKED
-    if _BACKEND_CHECKED:
+    global _backend_checked
+    if _backend_checked:
         return
-    _BACKEND_CHECKED = True
+    _backend_checked = True
     if os.environ.get("MUJOCO_GL") or os.environ.get("DISPLAY"):
         return
     from mujoco.rendering.classic import gl_context

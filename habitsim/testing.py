@@ -44,6 +44,7 @@ __all__ = [
     "DEFAULT_TOLERANCE",
 ]
 
+#: Format version of the golden figure files.
 GOLDEN_FORMAT = 1
 
 

@@ -31,7 +31,9 @@ Mass properties: each bone is a capsule (radius from the species' girth, i.e.
 circumference / 2π) made with trimesh, which gives its volume and inertia tensor; one
 density for the whole animal is chosen so the total mass equals the species' mass.
 Actuator torque limits scale with m·g·L (L = hind-leg length), damping and armature with
-the size too (see :data:`ROLE_TORQUE`).
+the size too (see :attr:`BuildRules.role_torque`). The builder's rules (timestep,
+foot friction, torque per joint role, the position actuators' stiffness and damping) are
+the fields of :class:`BuildRules`, an argument of every build function.
 """
 
 from __future__ import annotations
@@ -39,8 +41,10 @@ from __future__ import annotations
 import math
 import shutil
 import tempfile
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 from typing import cast
 
 import mujoco
@@ -56,8 +60,7 @@ from habitsim.species import Species, load_species
 __all__ = [
     "MODELS_DIR",
     "GRAVITY",
-    "TIMESTEP",
-    "ROLE_TORQUE",
+    "BuildRules",
     "HingeJoint",
     "hinge_joints",
     "build_spec",
@@ -65,8 +68,6 @@ __all__ = [
     "build_all",
     "model_path",
     "scene_path",
-    "POSITION_FULL_TORQUE_ERROR",
-    "POSITION_DAMPRATIO",
     "to_position_actuators",
     "position_spec",
     "position_model_path",
@@ -76,36 +77,52 @@ __all__ = [
 ]
 
 MODELS_DIR = Path(__file__).resolve().parent
-TIMESTEP = 0.002  # [s]
 END_POINTS = ("snout", "tail3", *FOOT_JOINTS)
-FOOT_FRICTION = 1.0  # sliding friction of feet (dry ground, unitless)
-
-#: Peak actuator torque per joint role as a multiple of m·g·L; each joint also gets at
-#: least :data:`LOAD_FACTOR` times the gravity moment of the body parts it carries.
-ROLE_TORQUE = {
-    "girdle": 0.40,
-    "upper_flex": 0.40,
-    "upper_abd": 0.15,
-    "lower": 0.35,
-    "distal": 0.25,
-    "spine": 0.40,
-    "neck": 0.06,
-    "head": 0.02,
-    "tail": 0.01,
-}
 
 
-LOAD_FACTOR = 4.0
+def _role_torque() -> Mapping[str, float]:
+    """The default :attr:`BuildRules.role_torque`."""
+    return MappingProxyType(
+        {
+            "girdle": 0.40,
+            "upper_flex": 0.40,
+            "upper_abd": 0.15,
+            "lower": 0.35,
+            "distal": 0.25,
+            "spine": 0.40,
+            "neck": 0.06,
+            "head": 0.02,
+            "tail": 0.01,
+        }
+    )
 
-#: Joint angle error [rad] at which a position actuator of the standing model reaches its
-#: torque limit (kp = τmax / this). Each limit scales with m·g·L, so the stiffness scales
-#: with the animal's size: 0.05 rad keeps every species' pelvis within 3 % of its ``home``
-#: height (0.15 rad, the servo rule of habitsim.controllers.servo, lets some sag 5 % and
-#: creep on their feet).
-POSITION_FULL_TORQUE_ERROR = 0.05
-#: Damping ratio of the position actuators (MuJoCo's ``dampratio``: kv from the joint's
-#: reflected inertia; 1 = critical), integrated implicitly by ``implicitfast``.
-POSITION_DAMPRATIO = 1.0
+
+@dataclass(frozen=True)
+class BuildRules:
+    """The rules the MJCF builder makes a species' models by (why each default:
+    docs/formats.md, "Species models").
+
+    Attributes:
+        timestep: the models' simulation timestep [s].
+        foot_friction: sliding friction of the feet [unitless] (dry ground).
+        role_torque: peak actuator torque per joint role [multiple of m·g·L]; the keys
+            are the roles of :func:`hinge_joints`.
+        load_factor: each joint also gets at least this many times the gravity moment of
+            the body parts it carries [unitless].
+        position_full_torque_error: joint angle error [rad] at which a position actuator
+            of the standing model reaches its torque limit (kp = τmax / this; each limit
+            scales with m·g·L, so the stiffness scales with the animal's size).
+        position_dampratio: damping ratio of the position actuators (MuJoCo's
+            ``dampratio``: kv from the joint's reflected inertia; 1 = critical), integrated
+            implicitly by ``implicitfast`` [unitless].
+    """
+
+    timestep: float = 0.002
+    foot_friction: float = 1.0
+    role_torque: Mapping[str, float] = field(default_factory=_role_torque)
+    load_factor: float = 4.0
+    position_full_torque_error: float = 0.05
+    position_dampratio: float = 1.0
 
 
 class ModelBuildError(HabitsimError, RuntimeError):
@@ -122,7 +139,7 @@ class HingeJoint:
         axis: unit axis in the body frame (x, y or z).
         kind: ``flex``, ``abd``, ``pitch`` or ``yaw``.
         role: the species joint-limit role (e.g. ``hind_upper_flex``).
-        torque_role: key of :data:`ROLE_TORQUE`.
+        torque_role: key of :attr:`BuildRules.role_torque`.
         sign: +1, or -1 where the limit role is expressed as "outward" abduction for a
             left leg (the range is mirrored).
     """
@@ -292,13 +309,18 @@ def _home_qpos(sp: Species, joints: list[HingeJoint], spec: mujoco.MjSpec) -> np
     return q
 
 
-def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mujoco.MjSpec:
+def build_spec(
+    species: str | Species,
+    mesh_dir: str | Path | None = None,
+    rules: BuildRules = BuildRules(),
+) -> mujoco.MjSpec:
     """The MjSpec of a species' model (no floor; see :func:`write_model` for the scene).
 
     Args:
         species: catalog name or Species.
         mesh_dir: folder the visual meshes are (or will be) written to as
             ``<body>.stl``; None builds the model without visual meshes.
+        rules: the builder's rules.
 
     Returns:
         An MjSpec ready to compile.
@@ -311,7 +333,7 @@ def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mu
     spec.modelname = sp.name
     spec.compiler.degree = False
     spec.compiler.autolimits = True
-    spec.option.timestep = TIMESTEP
+    spec.option.timestep = rules.timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.option.gravity = [0.0, 0.0, -g]
     spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
@@ -333,16 +355,17 @@ def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mu
     collision.geom.density = 0.0
     collision.geom.rgba = [0.5, 0.5, 0.9, 0.4]
     foot = spec.add_default("foot", collision)
-    foot.geom.friction = [FOOT_FRICTION, 0.005, 0.0001]
+    foot.geom.friction = [rules.foot_friction, 0.005, 0.0001]
     foot.geom.condim = 3
     classes = {}
     joints = hinge_joints()
-    for role in ROLE_TORQUE:
+    role_torque = rules.role_torque
+    for role in role_torque:
         d = spec.add_default(role, root_def)
-        tau = ROLE_TORQUE[role] * mgl
+        tau = role_torque[role] * mgl
         d.actuator.ctrlrange = [-tau, tau]
         d.actuator.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        d.joint.armature = 1e-3 * sp.mass_kg * sp.leg_length**2 * ROLE_TORQUE[role]
+        d.joint.armature = 1e-3 * sp.mass_kg * sp.leg_length**2 * role_torque[role]
         # damping time constant ~5 % of the pendulum time sqrt(L/g) at peak torque
         d.joint.damping = [0.05 * tau * math.sqrt(sp.leg_length / g), 0.0, 0.0]
         classes[role] = d
@@ -451,8 +474,8 @@ def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mu
             classes[h.torque_role], name=h.name, target=h.name, trntype=mujoco.mjtTrn.mjTRN_JOINT
         )
         act.set_to_motor()
-        tau = max(ROLE_TORQUE[h.torque_role] * mgl, LOAD_FACTOR * load[h.skeleton_joint])
-        if tau > ROLE_TORQUE[h.torque_role] * mgl:
+        tau = max(role_torque[h.torque_role] * mgl, rules.load_factor * load[h.skeleton_joint])
+        if tau > role_torque[h.torque_role] * mgl:
             act.ctrlrange = [-tau, tau]
     spec.add_key(name="home", qpos=list(_home_qpos(sp, joints, spec)))
     return spec
@@ -461,8 +484,8 @@ def build_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mu
 def to_position_actuators(
     spec: mujoco.MjSpec,
     keyframe: str = "home",
-    full_torque_error: float = POSITION_FULL_TORQUE_ERROR,
-    dampratio: float = POSITION_DAMPRATIO,
+    full_torque_error: float = BuildRules.position_full_torque_error,
+    dampratio: float = BuildRules.position_dampratio,
 ) -> mujoco.MjSpec:
     """Turn the joint torque motors of a spec into position actuators holding a keyframe.
 
@@ -542,11 +565,20 @@ def to_position_actuators(
     return spec
 
 
-def position_spec(species: str | Species, mesh_dir: str | Path | None = None) -> mujoco.MjSpec:
+def position_spec(
+    species: str | Species,
+    mesh_dir: str | Path | None = None,
+    rules: BuildRules = BuildRules(),
+) -> mujoco.MjSpec:
     """The MjSpec of a species' standing model: :func:`build_spec` with position
-    actuators holding ``home`` (:func:`to_position_actuators`)."""
+    actuators holding ``home`` (:func:`to_position_actuators`, with the stiffness and
+    damping of ``rules``)."""
     sp = load_species(species)
-    spec = to_position_actuators(build_spec(sp, mesh_dir=mesh_dir))
+    spec = to_position_actuators(
+        build_spec(sp, mesh_dir=mesh_dir, rules=rules),
+        full_torque_error=rules.position_full_torque_error,
+        dampratio=rules.position_dampratio,
+    )
     spec.modelname = f"{sp.name}_position"
     return spec
 
@@ -665,7 +697,7 @@ def write_preview(species: str | Species, root: str | Path | None = None) -> Pat
     return out
 
 
-def _readme(sp: Species, model: mujoco.MjModel, density: float) -> str:
+def _readme(sp: Species, model: mujoco.MjModel, density: float, rules: BuildRules) -> str:
     hinges = hinge_joints()
     lines = [
         f"# {sp.common_name} (`{sp.name}`)",
@@ -689,7 +721,8 @@ def _readme(sp: Species, model: mujoco.MjModel, density: float) -> str:
         f" (m·g·L = {sp.mass_kg * GRAVITY * sp.leg_length:.1f} N·m, L = hind-leg length"
         f" {sp.leg_length:.3f} m); joint damping and armature scale with the same size.",
         f"* `home` keyframe: the species' standing posture (hip height {sp.hip_height:.3f} m).",
-        f"* Integrator implicitfast, timestep {TIMESTEP * 1000:g} ms, pyramidal friction cones.",
+        f"* Integrator implicitfast, timestep {rules.timestep * 1000:g} ms,"
+        " pyramidal friction cones.",
         "",
         "## Standing model",
         "",
@@ -705,9 +738,9 @@ def _readme(sp: Species, model: mujoco.MjModel, density: float) -> str:
         " panel: Key 0, Load key) and it stands. In code: `mj_resetDataKeyframe(model, data,"
         " model.key('home').id)`, then `mj_step`.",
         "",
-        f"* kp = τmax / {POSITION_FULL_TORQUE_ERROR:g} rad (each actuator's torque limit is"
-        f" reached at {POSITION_FULL_TORQUE_ERROR:g} rad of error), damping ratio"
-        f" {POSITION_DAMPRATIO:g}; force range = the torque motor's limit; control range ="
+        f"* kp = τmax / {rules.position_full_torque_error:g} rad (each actuator's torque limit is"
+        f" reached at {rules.position_full_torque_error:g} rad of error), damping ratio"
+        f" {rules.position_dampratio:g}; force range = the torque motor's limit; control range ="
         " the joint's range; the `home` keyframe's `ctrl` holds the standing pose.",
         "* Made by `habitsim.mjcf_models.builder.to_position_actuators`, which converts any"
         " such torque model in one call. habitsim's controllers use the torque model.",
@@ -722,12 +755,16 @@ def _readme(sp: Species, model: mujoco.MjModel, density: float) -> str:
 
 
 def write_model(
-    species: str | Species, root: str | Path | None = None, preview: bool = False
+    species: str | Species,
+    root: str | Path | None = None,
+    preview: bool = False,
+    rules: BuildRules = BuildRules(),
 ) -> Path:
     """Write ``<root>/<species>/{<species>.xml, scene.xml, <species>_position.xml,
     scene_position.xml, README.md, assets/*.stl}`` (and ``preview.png`` with ``preview``).
 
-    A previous ``preview.png`` is kept when ``preview`` is False.
+    A previous ``preview.png`` is kept when ``preview`` is False; ``rules`` are the
+    builder's rules (:class:`BuildRules`).
 
     Everything is built in a temporary folder, compiled from the written XML as a check,
     then moved into place, so a failed build leaves the previous model untouched.
@@ -747,11 +784,11 @@ def write_model(
         assets.mkdir()
         for body, mesh in _body_meshes(sp).items():
             mesh.export(assets / f"{body}.stl")
-        spec = build_spec(sp, mesh_dir="assets")
+        spec = build_spec(sp, mesh_dir="assets", rules=rules)
         spec.modelfiledir = str(tmp)  # resolve "assets/" while compiling for to_xml
         xml = spec.to_xml()
         (tmp / f"{sp.name}.xml").write_text(xml, encoding="utf-8")
-        pspec = position_spec(sp, mesh_dir="assets")
+        pspec = position_spec(sp, mesh_dir="assets", rules=rules)
         pspec.modelfiledir = str(tmp)
         (tmp / f"{sp.name}_position.xml").write_text(pspec.to_xml(), encoding="utf-8")
         solids = _body_meshes(sp)
@@ -777,7 +814,7 @@ def write_model(
             raise ModelBuildError(f"generated model of {sp.name!r} does not compile: {e}") from e
         if (final / "preview.png").is_file():
             shutil.copy2(final / "preview.png", tmp / "preview.png")
-        (tmp / "README.md").write_text(_readme(sp, model, density), encoding="utf-8")
+        (tmp / "README.md").write_text(_readme(sp, model, density, rules), encoding="utf-8")
         if final.exists():
             old = final.with_name(f".{sp.name}.old")
             shutil.rmtree(old, ignore_errors=True)
@@ -795,9 +832,12 @@ def write_model(
 
 
 def build_all(
-    root: str | Path | None = None, species: list[str] | None = None, preview: bool = False
+    root: str | Path | None = None,
+    species: list[str] | None = None,
+    preview: bool = False,
+    rules: BuildRules = BuildRules(),
 ) -> list[Path]:
-    """Write the models of the given (default: all catalog) species."""
+    """Write the models of the given (default: all catalog) species by ``rules``."""
     from habitsim.species import species_names
 
-    return [write_model(n, root, preview) for n in (species or species_names())]
+    return [write_model(n, root, preview, rules) for n in (species or species_names())]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -452,3 +453,155 @@ def test_layers_run_one_way() -> None:
                     f"{mod}:{line} ({LAYERS[here][0]}) imports {target} ({LAYERS[there][0]})"
                 )
     assert not bad, "imports of a higher layer:\n" + "\n".join(sorted(bad))
+
+
+# ---------------------------------------------------------------------- tuning constants
+#: Why a module may hold module-level UPPER_CASE numeric or bool constants, by kind. A
+#: tuning knob (a number that changes what an algorithm computes) is never one of them:
+#: it is a field of its stage's frozen options object (``ConformPolicy``,
+#: ``RefineOptions``, ``BalanceConfig``, ``ContactOptions``, ``FallOptions``,
+#: ``GuardOptions``, ``BuildRules``, …), passed as an argument with its default.
+_LIMITS = "limits: the largest input a reader or a command accepts (a guard, not a knob)"
+_FORMAT = "format: a file or output format's version, sizes or layout"
+_METRIC = "definitions: a metric's definition (docs/metrics.md), changed only with its docs"
+_TARGET = "benchmark targets and the benchmark's own definitions (docs/benchmarks.md)"
+_DEFINES = "definitions: dimensions, modes or index layout the code is written for"
+_MOVING = "being moved: another slice of issue 46 splits this module and moves its knobs"
+_PENDING = "pending: tuning knobs not yet in an options object (issue 46, item 3)"
+
+#: Modules allowed to hold such constants, every constant of the module (path from the
+#: repository root; a folder ends with "/").
+CONSTANT_MODULES: dict[str, str] = {
+    "habitsim/physics_constants.py": "physical constants and the shared contact convention",
+    "habitsim/bvh/limits.py": _LIMITS,
+    "habitsim/motion.py": _FORMAT + "; " + _LIMITS,
+    "habitsim/cli/": "the command line: exit codes, output widths, argument bounds",
+    "habitsim/dataset/records.py": _FORMAT + "; " + _LIMITS + "; the train/val split rule",
+    "habitsim/dataset_import.py": _LIMITS,
+    "habitsim/errors.py": _FORMAT + " (message lengths)",
+    "habitsim/species.py": _LIMITS,
+    "habitsim/testing.py": _FORMAT + " (golden figure files)",
+    "habitsim/models/checkpoint.py": _FORMAT + " (checkpoint version)",
+    "habitsim/models/features.py": _FORMAT + " (feature version and layout)",
+    "habitsim/refine/layout.py": _DEFINES + " (the NLP's variable layout)",
+    "habitsim/metrics/": _METRIC,
+    "habitsim/gltf.py": _FORMAT + " (end-site length, a rotation's uniformity tolerance)",
+    "evaluation/bench/": _TARGET,
+    "evaluation/distribution.py": _METRIC + " (pair counts, numerical tolerances)",
+    "evaluation/config.py": _FORMAT + "; the default run's size",
+    "evaluation/evaluator.py": _FORMAT + " (evaluator config version)",
+    "evaluation/planning.py": "the default data set of a run given none (docs/evaluation.md)",
+    # being moved by another slice
+    "habitsim/refine/solve.py": _MOVING,
+    "habitsim/retarget.py": _MOVING,
+    "habitsim/stance/": _MOVING,
+    # tuning knobs of the synthetic generator, versioned by GENERATOR_VERSION
+    "habitsim/gaits/": _PENDING + " (the synthetic generator's, versioned by its version)",
+}
+
+#: Single constants allowed in other modules: (path, name) → why.
+CONSTANT_NAMES: dict[tuple[str, str], str] = {
+    ("habitsim/sim/model.py", "TOUCH_THRESHOLD_MG"): _METRIC + " (a simulated foot contact)",
+    ("habitsim/models/model.py", "ROTATION_INPUT_CLIP"): "the trained network's input "
+    "definition (the default of a model's rotation_input_clip; a checkpoint is trained with it)",
+    ("habitsim/models/model.py", "PATH_DIM"): _DEFINES,
+    ("habitsim/models/model.py", "HEADING_DIM"): _DEFINES,
+    ("habitsim/models/transfer.py", "PRIOR_DRAWS_KEPT"): "a cache's size (a limit)",
+    ("habitsim/models/config.py", "FINETUNE_STEPS"): _PENDING + " (fine-tune schedule)",
+    ("habitsim/models/config.py", "FINETUNE_LR"): _PENDING + " (fine-tune schedule)",
+    ("habitsim/gait_stats.py", "GALLOP_FROUDE"): _METRIC + " (the trot → gallop Froude number)",
+    ("habitsim/gait_stats.py", "PEAK_SPAN_S"): _METRIC + " (the span of the peak Froude number)",
+    ("habitsim/bvh_mapping/result.py", "CONFIDENCE_WARN"): "a report's warning threshold",
+    ("habitsim/bvh_mapping/limbs.py", "MIRROR_BONE_TOLERANCE"): _PENDING + " (automatic mapping)",
+    ("habitsim/mjutils.py", "FOOT_HEIGHT_SHARE"): _PENDING + " (standing feet of a model)",
+    ("habitsim/render.py", "DEFAULT_COLOUR"): _FORMAT + " (an RGB colour)",
+    ("habitsim/sim/assist.py", "ASSIST_FREQUENCY_HZ"): _PENDING + " (root assistance)",
+    ("habitsim/sim/control.py", "MPC_CONTROL_HZ"): _PENDING + " (the mpc torque-layer rate)",
+    ("habitsim/workers.py", "WATCHDOG_INTERVAL_S"): "a process watchdog's polling period",
+    ("habitsim/workers.py", "_PR_SET_PDEATHSIG"): "an operating-system constant (prctl)",
+    ("controllers/contact_state.py", "STANCE"): _DEFINES + " (leg modes)",
+    ("controllers/contact_state.py", "SWING"): _DEFINES + " (leg modes)",
+    ("controllers/contact_state.py", "SEEK"): _DEFINES + " (leg modes)",
+    ("controllers/balance.py", "AT_LIMIT_SHARE"): "definition of a reported statistic",
+    ("controllers/feedforward.py", "_CONE_EDGES"): _DEFINES + " (friction pyramid edges)",
+    ("controllers/feedforward.py", "_FORCE_REG"): _PENDING + " (a QP regulariser)",
+    ("controllers/mpc.py", "NX"): _DEFINES + " (the single rigid body's state size)",
+    ("mjcf_models/builder.py", "PREVIEW_SIZE"): _FORMAT + " (preview image)",
+    ("mjcf_models/builder.py", "PREVIEW_DISTANCE"): _FORMAT + " (preview image)",
+    ("mjcf_models/builder.py", "PREVIEW_VIEW"): _FORMAT + " (preview image)",
+}
+
+_UPPER = re.compile(r"_?[A-Z][A-Z0-9_]*\Z")
+
+
+def _is_number(node: ast.expr) -> bool:
+    """A numeric or bool literal, arithmetic over literals and other constants' names, or
+    a tuple / list of those (a bare name or attribute alone is an alias, not a value)."""
+    if isinstance(node, ast.Constant):
+        return isinstance(node.value, (bool, int, float)) and not isinstance(node.value, str)
+    if isinstance(node, ast.UnaryOp):
+        return _is_number(node.operand)
+    if isinstance(node, ast.BinOp):
+        sides = (node.left, node.right)
+        return all(_is_number(s) or isinstance(s, ast.Name) for s in sides) and any(
+            _is_number(s) or isinstance(s, ast.Name) for s in sides
+        )
+    if isinstance(node, (ast.Tuple, ast.List)):
+        return bool(node.elts) and all(_is_number(e) for e in node.elts)
+    return False
+
+
+def _numeric_constants() -> list[tuple[str, str, int]]:
+    """(path, name, line) of every module-level UPPER_CASE numeric or bool constant of
+    the library (``habitsim/``, ``controllers/``, ``evaluation/``, ``mjcf_models/``)."""
+    out = []
+    for folder in ("habitsim", *BARE):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            if "__pycache__" in path.parts:
+                continue
+            rel = path.relative_to(ROOT).as_posix()
+            for node in ast.parse(path.read_text(encoding="utf-8")).body:
+                if isinstance(node, ast.Assign) and len(node.targets) == 1:
+                    target, value = node.targets[0], node.value
+                elif isinstance(node, ast.AnnAssign) and node.value is not None:
+                    target, value = node.target, node.value
+                else:
+                    continue
+                if isinstance(target, ast.Name) and _UPPER.match(target.id) and _is_number(value):
+                    out.append((rel, target.id, node.lineno))
+    return out
+
+
+def _allowed(path: str, name: str) -> bool:
+    return (path, name) in CONSTANT_NAMES or any(
+        path == m or (m.endswith("/") and path.startswith(m)) for m in CONSTANT_MODULES
+    )
+
+
+def test_no_tuning_constants_outside_options() -> None:
+    """A module-level UPPER_CASE number or bool of the library is a definition, a limit, a
+    format, a physical constant or a benchmark target, listed with its reason in
+    :data:`CONSTANT_MODULES` / :data:`CONSTANT_NAMES`; a tuning knob is a field of its
+    stage's options object (docs/architecture.md, "Where new things go")."""
+    found = _numeric_constants()
+    bad = [f"{p}:{line}: {n}" for p, n, line in found if not _allowed(p, n)]
+    assert not bad, (
+        "module-level numeric constants outside the allow-list (a tuning knob goes into "
+        "its stage's options object; a definition, limit or format is listed with its "
+        "reason in tests/test_architecture.py):\n" + "\n".join(bad)
+    )
+    # the lists stay honest: every entry names something that exists
+    names = {(p, n) for p, n, _ in found}
+    stale = [f"{p}: {n}" for p, n in CONSTANT_NAMES if (p, n) not in names]
+    stale += [m for m in CONSTANT_MODULES if not any(p == m or p.startswith(m) for p, _ in names)]
+    assert not stale, "allow-list entries that no longer exist:\n" + "\n".join(stale)
+    assert all(CONSTANT_MODULES.values()) and all(CONSTANT_NAMES.values())  # a reason each
+
+
+def test_the_tuning_constant_check_can_fail() -> None:
+    """The check's detector sees the forms a knob takes."""
+    for src in ("X = 0.3", "X: float = 2", "_X = -1e-3", "X = True", "X = (0.1, 0.2)", "X = Y * 4"):
+        assert _is_number(ast.parse(src).body[0].value), src  # type: ignore[attr-defined]
+    for src in ("X = 'a'", "X = Y", "X = f(0.3)", "X = {'a': 1}", "X = Path('a') / 'b'"):
+        assert not _is_number(ast.parse(src).body[0].value), src  # type: ignore[attr-defined]
+    assert not _allowed("habitsim/pipeline.py", "WORSE_MPJPE_RATIO")

@@ -20,7 +20,7 @@ from habitsim.controllers import (
     Reference,
     StanceQP,
 )
-from habitsim.controllers.balance import OMEGA_CAP, BalanceConfig, wrench_matrix
+from habitsim.controllers.balance import BalanceConfig, wrench_matrix
 from habitsim.controllers.swing import LegSet
 
 ROBOT_XML = Path(__file__).parent / "data" / "quadruped12.xml"
@@ -269,7 +269,8 @@ def test_config_scales_with_the_body() -> None:
     assert big.capture_max / small.capture_max == pytest.approx(9.0)
     # same dimensionless trunk stiffness ω² L / g, up to the frequency cap
     assert mid.trunk_omega**2 * 1.0 == pytest.approx(big.trunk_omega**2 * 1.8)
-    assert small.trunk_omega == small.rot_omega == OMEGA_CAP
+    assert small.trunk_omega == small.rot_omega == 10.0  # the default cap
+    assert BalanceConfig.scaled(2.0, 0.2, omega_cap=5.0).trunk_omega == 5.0
     with pytest.raises(ControllerError, match="unknown balance option"):
         BalanceConfig.scaled(10.0, 0.5, frobnicate=1.0)
     with pytest.raises(ControllerError, match="must be"):

@@ -143,11 +143,15 @@ def test_check_exit(capsys) -> None:
     assert "solve 3 s > 2 s" in capsys.readouterr().err
 
 
-def test_bench_check_exits_1_on_a_miss(monkeypatch, capsys) -> None:
+def test_bench_check_exits_1_on_a_miss(capsys) -> None:
     """bench sim prints MISSED and, with --check only, exits 1."""
-    import habitsim.evaluation.bench.sim as bench_sim
+    from habitsim.cli.bench_sim import _bench_sim
+    from habitsim.evaluation.bench.sim import SimTargets
 
-    monkeypatch.setattr(bench_sim, "TARGET_BATCH_RATIO", 1e9)  # unreachable
+    def run(args: list[str], targets: SimTargets) -> int:
+        return _bench_sim(build_parser().parse_args(args), targets)
+
+    unreachable = SimTargets(batch_ratio=1e9)
     argv = [
         "bench",
         "sim",
@@ -163,12 +167,11 @@ def test_bench_check_exits_1_on_a_miss(monkeypatch, capsys) -> None:
         "--threads",
         "1",
     ]
-    assert main(argv) == 0
+    assert run(argv, unreachable) == 0
     out = capsys.readouterr().out
     assert "MISSED" in out and "b/raw: batch/s ÷ raw/s" in out.replace("\n", " ")
-    assert main([*argv, "--check"]) == 1
-    monkeypatch.setattr(bench_sim, "TARGET_BATCH_RATIO", 0.0)  # always met
-    assert main([*argv, "--check"]) == 0
+    assert run([*argv, "--check"], unreachable) == 1
+    assert run([*argv, "--check"], SimTargets(batch_ratio=0.0)) == 0  # always met
 
 
 def test_balance_missed_targets() -> None:

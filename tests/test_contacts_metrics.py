@@ -13,6 +13,7 @@ from habitsim import get_skeleton, load_species
 from habitsim.cli import main
 from habitsim.contacts import (
     CONTACT_HEIGHT_PER_LEG,
+    ContactOptions,
     contacts_by_duty,
     contacts_from_feet,
     detect_contacts,
@@ -119,6 +120,9 @@ def test_hysteresis_keeps_but_does_not_start_contact() -> None:
     z = np.concatenate([np.full(10, 0.5 * h), np.full(10, 1.2 * h), np.full(10, 3 * h)])
     c = contacts_from_feet(_one_foot(z), FPS, LEG)[:, 0]
     assert np.array_equal(np.flatnonzero(c), np.arange(20))
+    # the hysteresis is an option: without it the hovering half is swing
+    c = contacts_from_feet(_one_foot(z), FPS, LEG, ContactOptions(hysteresis=1.0))[:, 0]
+    assert np.array_equal(np.flatnonzero(c), np.arange(10))
 
 
 def test_stance_runs_and_touchdowns() -> None:

@@ -271,10 +271,10 @@ def test_refine_stage_runs(data: Path, tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_defaults_measure_the_product(data: Path, tmp_path: Path, monkeypatch) -> None:
+def test_defaults_measure_the_product(data: Path, tmp_path: Path) -> None:
     """With no options: habit beside the baselines, stage A, mpc; one clip per source."""
     from habitsim.cli import build_parser
-    from habitsim.evaluation import planning, runner
+    from habitsim.evaluation import runner
 
     ns = build_parser().parse_args(["eval"])
     assert ns.methods == ["habit", "direct", "ground_truth"] and ns.controller == "mpc"
@@ -297,8 +297,7 @@ def test_defaults_measure_the_product(data: Path, tmp_path: Path, monkeypatch) -
     with pytest.raises(EvalError, match="clips_per_source"):
         _cfg(data, tmp_path / "o", clips_per_source=0)
     # the default data set: built on the first run, reused after
-    monkeypatch.setattr(planning, "DEFAULT_DATA_CLIPS_PER_SPECIES", 1)  # default_data's
-    folder = runner.default_data(tmp_path / "run", workers=1, progress=False)
+    folder = runner.default_data(tmp_path / "run", workers=1, progress=False, clips_per_species=1)
     from habitsim.dataset import load_manifest
     from habitsim.species import species_names
 
@@ -306,7 +305,7 @@ def test_defaults_measure_the_product(data: Path, tmp_path: Path, monkeypatch) -
     assert load_manifest(folder).species_names == species_names()
     clip = folder / load_manifest(folder).clips[0].path
     stamp = clip.stat().st_mtime_ns
-    runner.default_data(tmp_path / "run", workers=1, progress=False)
+    runner.default_data(tmp_path / "run", workers=1, progress=False, clips_per_species=1)
     assert clip.stat().st_mtime_ns == stamp  # reused, not generated again
 
 

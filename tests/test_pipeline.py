@@ -396,7 +396,7 @@ def test_refined_labels_reach_tracking_and_a_worse_refinement_is_reverted(
 
 
 def test_worse_rule() -> None:
-    from habitsim.pipeline import _worse
+    from habitsim.pipeline import GuardOptions, _worse
 
     def res(s: float, e: float) -> SimpleNamespace:
         return SimpleNamespace(survival=s, metrics={"sim_mpjpe_per_leg": e})
@@ -405,6 +405,8 @@ def test_worse_rule() -> None:
     assert "MPJPE" in _worse(res(1.0, 0.20), res(1.0, 0.10))
     assert _worse(res(1.0, 0.105), res(1.0, 0.10)) is None  # not clearly higher
     assert _worse(res(1.0, 0.5), res(0.5, 0.01)) is None  # survives longer
+    strict = GuardOptions(mpjpe_ratio=1.0, mpjpe_margin_per_leg=0.0)  # any rise is worse
+    assert "MPJPE" in _worse(res(1.0, 0.105), res(1.0, 0.10), strict)
 
 
 def test_one_model_cache_and_explicit_track_contacts(walk) -> None:

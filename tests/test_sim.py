@@ -19,6 +19,7 @@ from habitsim.sim import (
     CONTROLLERS,
     MPC_CONTROL_HZ,
     FallDetector,
+    FallOptions,
     SimulationError,
     servo_model,
     track,
@@ -113,6 +114,11 @@ def test_fall_detector_rules(dog) -> None:
     reasons = [det.check(k, at(nose)) for k in range(1, 9)]
     assert reasons[:6] == [None] * 6
     assert reasons[6] is not None and "head" in reasons[6]
+    # the rule's thresholds are options: a stricter tilt limit catches a smaller roll
+    strict = FallDetector(dog, np.tile(q, (40, 1)), FPS, 0.61, options=FallOptions(tilt_deg=5.0))
+    rolled = q.copy()
+    rolled[3:7] = [np.cos(np.pi / 36), np.sin(np.pi / 36), 0.0, 0.0]  # rolled 10°
+    assert det.check(1, at(rolled)) is None and "tilt" in strict.check(1, at(rolled))
 
 
 def test_unstable_run_is_reported_not_raised(dog) -> None:

@@ -57,7 +57,10 @@ __all__ = [
     "transfer_quality",
 ]
 
-#: Targets of the learning core (issue "[2/5] Learning core v2").
+#: Targets of the learning core (issue "[2/5] Learning core v2"): reconstruction error,
+#: whole and root-relative [% of leg length]; footfall phase error [share of a cycle];
+#: stance toe speed [leg lengths/s]; resting share of stance frames; checkpoint size [MB];
+#: transfer latency [ms]; evaluator habit and action accuracy [share].
 TARGET_WHOLE_PCT = 5.0
 TARGET_ROOT_REL_PCT = 2.5
 TARGET_PHASE_ERROR = 0.1

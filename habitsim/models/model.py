@@ -25,15 +25,9 @@ from .vqvae import MotionDecoder, MotionEncoder
 __all__ = ["HabitVQVAE", "ROTATION_INPUT_CLIP"]
 
 #: Normalised joint-rotation inputs of the encoders are clipped to ± this many training
-#: standard deviations. The synthetic training rigs hold some joints almost still (the
-#: third spine and second tail joints: standard deviation at the 0.01 floor), so a real
-#: rig's posture there reads as a 20-σ input and overwhelmed the encoder: without the clip
-#: the evaluator called five of six real Labrador walk/trot/run windows (4 s each) a jump,
-#: decoded at a median 0.28 of the source's Froude number; with it none is a jump and the
-#: median is 0.60. Synthetic test clips decode almost as before (most of their rotations
-#: stay within the band; the reference reconstruction went from 7.97 to 7.78 % of leg
-#: length). Velocities, height and contacts are not clipped: a fast gallop's velocities lie
-#: beyond 3 σ and are real.
+#: standard deviations [σ]: part of the trained network's input definition (a checkpoint
+#: is trained with it; :attr:`HabitVQVAE.rotation_input_clip` holds a model's own).
+#: Velocities, height and contacts are not clipped. Why 3: docs/training.md.
 ROTATION_INPUT_CLIP = 3.0
 
 #: Channels of the decoder's path input (pelvis velocity x, y): see ``ModelConfig``.
@@ -80,11 +74,18 @@ class HabitVQVAE(nn.Module):
     text_table: torch.Tensor
 
     def __init__(
-        self, cfg: ModelConfig, species: Sequence[str], text_names: Sequence[str], text_dim: int
+        self,
+        cfg: ModelConfig,
+        species: Sequence[str],
+        text_names: Sequence[str],
+        text_dim: int,
+        rotation_input_clip: float = ROTATION_INPUT_CLIP,
     ):
         super().__init__()
         cfg.validate()
         self.cfg = cfg
+        #: the encoders' joint-rotation inputs are clipped to ± this many σ
+        self.rotation_input_clip = float(rotation_input_clip)
         self.species = tuple(species)
         self.text_names = tuple(text_names)
         self.text_dim = int(text_dim)
@@ -116,9 +117,9 @@ class HabitVQVAE(nn.Module):
     # ------------------------------------------------------------------ normalisation
     def normalize(self, x: torch.Tensor) -> torch.Tensor:
         """Encoder input: (x − mean) / std, joint rotations clipped to
-        ± :data:`ROTATION_INPUT_CLIP`."""
+        ± :attr:`rotation_input_clip` (default :data:`ROTATION_INPUT_CLIP`)."""
         y = (x - self.feat_mean) / self.feat_std
-        c = ROTATION_INPUT_CLIP
+        c = self.rotation_input_clip
         return torch.cat([y[..., :Q_DIM].clamp(-c, c), y[..., Q_DIM:]], dim=-1)
 
     def denormalize(self, y: torch.Tensor) -> torch.Tensor:

@@ -41,15 +41,7 @@ from ..qpos import species_model as species_model  # the shipped-model cache
 from .assist import ASSIST_FREQUENCY_HZ as ASSIST_FREQUENCY_HZ
 from .assist import root_assist
 from .control import MPC_CONTROL_HZ
-from .falls import (
-    FALL_GROUND_CONTACT_S,
-    FALL_HEIGHT_RATIO,
-    FALL_TILT_DEG,
-    FallDetector,
-)
-from .falls import (
-    GROUND_TOLERANCE_PER_LEG as GROUND_TOLERANCE_PER_LEG,
-)
+from .falls import FallDetector, FallOptions
 from .model import FOOT_GEOMS, foot_geoms
 from .model import TOUCH_THRESHOLD_MG as TOUCH_THRESHOLD_MG
 from .model import _species_model as _species_model
@@ -64,9 +56,7 @@ __all__ = [
     "ReferenceTrajectory",
     "TrackResult",
     "FallDetector",
-    "FALL_HEIGHT_RATIO",
-    "FALL_TILT_DEG",
-    "FALL_GROUND_CONTACT_S",
+    "FallOptions",
     "finite_differences",
     "build_reference",
     "foot_geoms",

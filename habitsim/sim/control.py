@@ -52,7 +52,7 @@ def _make_controller(
 
 
 #: Default torque-layer rate of the ``"mpc"`` controller [Hz] (MPC solves at 30 Hz);
-#: ``balance`` keeps the full rate (the README gives the measurement behind the choice).
+#: ``balance`` keeps the full rate.
 MPC_CONTROL_HZ = 250.0
 
 

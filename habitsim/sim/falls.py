@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -12,32 +13,39 @@ from ..mjutils import lowest_z
 from .model import _free_body, foot_geoms
 from .reference import _check_qpos
 
-#: docs/metrics.md fall rule: trunk height below this share of its reference height …
-FALL_HEIGHT_RATIO = 0.5
 
+@dataclass(frozen=True)
+class FallOptions:
+    """The thresholds of docs/metrics.md's fall rule (:class:`FallDetector`).
 
-#: … or trunk tilt (from the reference's trunk orientation) above this [deg] …
-FALL_TILT_DEG = 60.0
+    Attributes:
+        height_ratio: a fall when the trunk is lower than this share of its reference
+            height [unitless] …
+        tilt_deg: … or tilted from the reference's trunk orientation by more than this
+            [deg] …
+        ground_contact_s: … or a non-foot body touches the ground for longer than this [s].
+        ground_tolerance_per_leg: a reference body counts as resting on the ground within
+            this share of leg length [unitless] (such bodies may touch it).
+    """
 
-
-#: … or a non-foot body touching the ground for longer than this [s].
-FALL_GROUND_CONTACT_S = 0.2
-
-
-#: A reference body counts as resting on the ground within this share of leg length.
-GROUND_TOLERANCE_PER_LEG = 0.01
+    height_ratio: float = 0.5
+    tilt_deg: float = 60.0
+    ground_contact_s: float = 0.2
+    ground_tolerance_per_leg: float = 0.01
 
 
 class FallDetector:
     """docs/metrics.md's fall rule, evaluated at the reference frames.
 
     A run has fallen at frame k when (a) the trunk (free-joint body) is lower than
-    :data:`FALL_HEIGHT_RATIO` × the reference trunk height at k, (b) the angle between
-    the simulated and the reference trunk "up" axes exceeds :data:`FALL_TILT_DEG` (tilt is
-    measured from the reference orientation, so a giraffe's sloping back or a sit does not
-    count), or (c) a non-foot body has touched the ground for more than
-    :data:`FALL_GROUND_CONTACT_S` (bodies that the reference itself rests on the ground at
-    that frame, within 1 % of leg length, are allowed: e.g. the haunches of a sit).
+    :attr:`FallOptions.height_ratio` × the reference trunk height at k, (b) the angle
+    between the simulated and the reference trunk "up" axes exceeds
+    :attr:`FallOptions.tilt_deg` (tilt is measured from the reference orientation, so a
+    giraffe's sloping back or a sit does not count), or (c) a non-foot body has touched
+    the ground for more than :attr:`FallOptions.ground_contact_s` (bodies that the
+    reference itself rests on the ground at that frame, within
+    :attr:`FallOptions.ground_tolerance_per_leg` of leg length, are allowed: e.g. the
+    haunches of a sit).
 
     Args:
         model: the simulated model (with a floor: geoms of the world body).
@@ -45,6 +53,7 @@ class FallDetector:
         fps: frame rate [Hz].
         leg_length: normalising length [m].
         feet: foot names of a robot (default habitsim's foot geoms, see :func:`foot_geoms`).
+        options: the rule's thresholds.
     """
 
     def __init__(
@@ -54,8 +63,10 @@ class FallDetector:
         fps: float,
         leg_length: float,
         feet: Sequence[str] | None = None,
+        options: FallOptions = FallOptions(),
     ) -> None:
         self.model = model
+        self.options = options
         self.fps = float(fps)
         self.trunk = _free_body(model)
         geoms = foot_geoms(model, feet)
@@ -66,7 +77,7 @@ class FallDetector:
         colliding = np.flatnonzero(
             ((model.geom_contype != 0) | (model.geom_conaffinity != 0)) & (model.geom_bodyid != 0)
         )
-        tol = GROUND_TOLERANCE_PER_LEG * leg_length
+        tol = options.ground_tolerance_per_leg * leg_length
         d = mujoco.MjData(model)
         self.ref_height = np.empty(len(q))
         self.ref_up = np.empty((len(q), 3))
@@ -100,20 +111,21 @@ class FallDetector:
     def check(self, k: int, data: mujoco.MjData) -> str | None:
         """The fall reason at frame k (``data`` after mj_step/mj_forward), or None."""
         k = min(k, len(self.ref_height) - 1)
+        o = self.options
         h = data.xpos[self.trunk, 2]
-        if h < FALL_HEIGHT_RATIO * self.ref_height[k]:
+        if h < o.height_ratio * self.ref_height[k]:
             ref = self.ref_height[k]
-            return f"trunk height {h:.3f} m < {FALL_HEIGHT_RATIO:.0%} of reference {ref:.3f} m"
+            return f"trunk height {h:.3f} m < {o.height_ratio:.0%} of reference {ref:.3f} m"
         up = data.xmat[self.trunk, [2, 5, 8]]
         tilt = math.degrees(math.acos(float(np.clip(up @ self.ref_up[k], -1.0, 1.0))))
-        if tilt > FALL_TILT_DEG:
-            return f"trunk tilt {tilt:.0f} deg > {FALL_TILT_DEG:.0f} deg"
+        if tilt > o.tilt_deg:
+            return f"trunk tilt {tilt:.0f} deg > {o.tilt_deg:.0f} deg"
         touching = self._ground_bodies(data) - self.foot_bodies - self.ref_ground[k]
         if touching:
             self.contact_frames += 1
-            if self.contact_frames / self.fps > FALL_GROUND_CONTACT_S:
+            if self.contact_frames / self.fps > o.ground_contact_s:
                 names = ", ".join(sorted(self.model.body(b).name for b in touching))
-                return f"non-foot body on the ground > {FALL_GROUND_CONTACT_S} s ({names})"
+                return f"non-foot body on the ground > {o.ground_contact_s} s ({names})"
         else:
             self.contact_frames = 0
         return None
