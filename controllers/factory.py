@@ -31,7 +31,7 @@ hind-leg length when ``species`` is given, else the model's trunk height over th
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal, Protocol, cast
 
@@ -152,34 +152,32 @@ def _pd(
     return PDController(model, kp, kd, joints)
 
 
-def _balance(
-    model: mujoco.MjModel,
-    species: Any,
-    feet: Sequence[str] | None,
-    options: dict[str, Any],
-) -> Controller:
-    """``balance``, scaled by the species' leg length unless ``leg_length`` is given."""
+def _balance_class() -> type:
     from .balance import BalanceController
 
-    leg = _leg_length(species)
-    if leg is not None:
-        options.setdefault("leg_length", leg)
-    return BalanceController(model, feet, **options)
+    return BalanceController
 
 
-def _mpc(
+def _mpc_class() -> type:
+    from .mpc import MPCController
+
+    return MPCController
+
+
+def _leg_scaled(
+    controller_class: Callable[[], type],
     model: mujoco.MjModel,
     species: Any,
     feet: Sequence[str] | None,
     options: dict[str, Any],
 ) -> Controller:
-    """``mpc``, scaled by the species' leg length unless ``leg_length`` is given."""
-    from .mpc import MPCController
-
+    """``balance`` / ``mpc`` (the class ``controller_class()`` returns, imported on first
+    use), scaled by the species' leg length unless ``leg_length`` is given."""
     leg = _leg_length(species)
     if leg is not None:
         options.setdefault("leg_length", leg)
-    return MPCController(model, feet, **options)
+    ctl: Controller = controller_class()(model, feet, **options)
+    return ctl
 
 
 #: Every controller name, in the order help texts and tables list them.
@@ -215,8 +213,20 @@ REGISTRY: Mapping[str, ControllerSpec] = {
             "servos + inverse-dynamics feed-forward + trunk stabiliser",
             functools.partial(_servo, "servo+id+stance"),
         ),
-        ControllerSpec("balance", "torque", True, "stance-force QP + swing legs", _balance),
-        ControllerSpec("mpc", "torque", True, "convex MPC feeding the stance-force QP", _mpc),
+        ControllerSpec(
+            "balance",
+            "torque",
+            True,
+            "stance-force QP + swing legs",
+            functools.partial(_leg_scaled, _balance_class),
+        ),
+        ControllerSpec(
+            "mpc",
+            "torque",
+            True,
+            "convex MPC feeding the stance-force QP",
+            functools.partial(_leg_scaled, _mpc_class),
+        ),
     )
 }
 #: The controller names accepted by :func:`make_controller` and :func:`habitsim.sim.track`.
