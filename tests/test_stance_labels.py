@@ -283,4 +283,5 @@ def test_labels_equality_and_methods() -> None:
 
 def test_codes_are_their_report_strings() -> None:
     assert StanceSource("input") is StanceSource.INPUT and f"{StanceSource.DETECTED}" == "detected"
-    assert {r.value for r in EditReason} == {"slip_trim", "gap_fill", "blip_drop"}
+    assert {r.value for r in EditReason} >= {"slip_trim", "gap_fill", "blip_drop", "restep", "trim"}
+    assert all(r.value == r.name.lower() for r in EditReason)
