@@ -71,6 +71,7 @@ def test_transfer_record_round_trip_of_a_conformed_transfer(conformed) -> None:
     rec = TransferRecord.from_metadata(meta)
     assert rec is not None and rec.contacts is not None
     assert rec.contacts.method == meta["transfer"]["contacts"]["method"]
+    assert report.schedule == rec.contacts
     assert _dump(rec.to_metadata()) == _dump(meta["transfer"])
     assert rec.planted_how == ("no" if not report.planted.kept else report.planted.root)
     # the report's labels are the motion's, with their source and edits

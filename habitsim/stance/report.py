@@ -287,6 +287,15 @@ class ConformReport:
     planted: PlantOutcome | None = None
     labels: StanceLabels | None = None
 
+    @property
+    def schedule(self) -> ScheduleRecord:
+        """:attr:`contacts`, typed.
+
+        Raises:
+            MetadataError: a missing or malformed field (named).
+        """
+        return ScheduleRecord.from_dict(self.contacts)
+
     def to_metadata(self, info: dict[str, Any]) -> dict[str, Any]:
         """``metadata["transfer"]`` of the transferred motion: ``info`` (the method's
         own entries) followed by this report's, ``planted`` False when nothing was."""
