@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from habitsim.errors import HabitsimError
 
 if TYPE_CHECKING:  # pragma: no cover
-    from habitsim.pipeline import ClipRun
+    from habitsim.pipeline import ClipRun, Metrics
 
 __all__ = ["RunRow", "run_row", "finite_or_none"]
 
@@ -33,23 +33,6 @@ def finite_or_none(v: Any) -> float | None:
     return f if math.isfinite(f) else None
 
 
-def _planted(metadata: Mapping[str, Any] | None) -> str:
-    """How the transfer planted its feet (``metadata["transfer"]["planted"]``):
-    ``decoded`` / ``carried`` (the root path the feet were planted under), ``no`` (out of
-    reach, decoded feet kept) or ``-`` (the method does not plant)."""
-    p = (metadata or {}).get("transfer", {}).get("planted")
-    if not isinstance(p, dict):
-        return "-"
-    return str(p.get("root", "decoded")) if p.get("kept") else "no"
-
-
-def _walking_stance(metadata: Mapping[str, Any] | None) -> dict[str, Any] | None:
-    """What :func:`habitsim.models.transfer.walking_stance` did to a transfer's labels
-    (None: not applied)."""
-    how = ((metadata or {}).get("transfer") or {}).get("contacts") or {}
-    return how.get("walking_stance") if isinstance(how, dict) else None
-
-
 @dataclass(frozen=True)
 class RunRow:
     """The figures of one :class:`~habitsim.pipeline.ClipRun`, flat.
@@ -57,8 +40,10 @@ class RunRow:
     Attributes:
         contacts_method: how the transfer found its stance labels
             (:attr:`habitsim.pipeline.Stage.contacts_method`).
-        walking_stance: what the walking-stance rule did to the labels (None: not applied).
-        planted: how the transfer planted its feet (``decoded``, ``carried``, ``no``, ``-``).
+        walking_stance: what the walking-stance rule did to the labels, the JSON form of
+            :class:`habitsim.stance.report.WalkingRecord` (None: not applied).
+        planted: how the transfer planted its feet (``decoded``, ``carried``, ``no``, ``-``:
+            :attr:`habitsim.stance.report.TransferRecord.planted_how`).
         refine_status, track_status: the refine and track stages' statuses.
         refine_check: the refinement check (:attr:`habitsim.pipeline.ClipRun.refine_verdict`).
         refine_note: one line saying what the check rests on.
@@ -79,9 +64,9 @@ class RunRow:
     track_status: str
     refine_check: str
     refine_note: str
-    transfer_metrics: Mapping[str, Any]
-    refine_metrics: Mapping[str, Any]
-    track_metrics: Mapping[str, Any]
+    transfer_metrics: Metrics
+    refine_metrics: Metrics
+    track_metrics: Metrics
     tracked: bool
     times: Mapping[str, float]
     reference_dynamics: Mapping[str, float] = field(default_factory=dict)
@@ -167,11 +152,13 @@ def run_row(run: ClipRun, *, dynamics: bool = False, strict: bool = False) -> Ru
             over the whole clip).
         strict: a dynamics measurement that fails raises (else it is left out).
     """
-    meta = run.transferred.motion.metadata if run.transferred.motion is not None else None
+    record = run.transferred.transfer
+    schedule = None if record is None else record.contacts
+    walking = None if schedule is None else schedule.walking_stance
     return RunRow(
         contacts_method=run.transferred.contacts_method,
-        walking_stance=_walking_stance(meta),
-        planted=_planted(meta),
+        walking_stance=None if walking is None else walking.to_dict(),
+        planted="-" if record is None else record.planted_how,
         refine_status=run.refined.status,
         track_status=run.tracked.status,
         refine_check=run.refine_verdict,

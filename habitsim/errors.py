@@ -123,3 +123,8 @@ def brief_path(path: object, limit: int = 160) -> str:
     name is the informative end)."""
     text = str(path)
     return text if len(text) <= limit else "…" + text[-limit:]
+
+
+class MetadataError(HabitsimError, ValueError):
+    """A motion's metadata entry (``metadata["import"]``, ``metadata["transfer"]``) with
+    a missing or malformed field; the message names the field."""

@@ -34,13 +34,15 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import HabitsimError, unknown_choice
 from .motion import Motion
 from .species import load_species
+from .stance.labels import EditReason, StanceLabels, StanceSource
+from .stance.report import TransferRecord
 
 if TYPE_CHECKING:  # pragma: no cover
     import mujoco
@@ -53,6 +55,7 @@ __all__ = [
     "REFINE_MODES",
     "REFINE_ALIASES",
     "GuardOptions",
+    "Metrics",
     "Stage",
     "ClipRun",
     "run_clip",
@@ -82,6 +85,10 @@ class GuardOptions:
     mpjpe_margin_per_leg: float = 0.005
 
 
+#: A stage's metrics: name → value (numbers; the simulated ``fell`` is a bool).
+Metrics = dict[str, float | bool]
+
+
 class PipelineError(HabitsimError, ValueError):
     """Bad pipeline options: an unknown refinement mode, a source that is no Motion."""
 
@@ -98,6 +105,10 @@ def refine_mode(mode: str) -> str:
     return m
 
 
+#: :attr:`Stage.contacts_method` of labels by their source (the others: their code).
+_METHOD_OF_SOURCE = {StanceSource.INPUT: "labels"}
+
+
 @dataclass
 class Stage:
     """One stage's output.
@@ -106,28 +117,46 @@ class Stage:
         name: ``source``, ``transfer``, ``refine`` or ``track``.
         motion: the stage's motion (tracking: the simulated frames; None when the stage
             did not run).
-        contacts: (T, 4) bool stance labels, feet LF, RF, LH, RH (tracking: the simulated
-            foot contacts); None when the stage has none.
-        contacts_method: how the labels were found: ``source`` (the source's footfalls),
-            ``detected``, ``duty``, ``method`` (the transfer method's own labels),
-            ``labels`` (the source motion's own), ``simulated``, or ``none``.
+        labels: its (T, 4) stance labels (feet LF, RF, LH, RH), where they came from and
+            the edits made to them (tracking: the simulated foot contacts); None when
+            the stage has none.
         wall_time_s: the stage's wall time [s] (0 for the source).
         metrics: the stage's metrics (kinematic plausibility and stance toe height for
             motions; the simulated metrics for tracking).
         status: ``ok``, or what happened (refinement's IPOPT status, ``fell``,
             ``error: …``, ``off``).
         species: the species of the motion.
+        transfer: the transferred motion's ``metadata["transfer"]``, typed (the
+            transfer and refine stages of a method that writes it; else None).
     """
 
     name: str
     motion: Motion | None
-    contacts: np.ndarray | None
-    contacts_method: str
+    labels: StanceLabels | None
     wall_time_s: float = 0.0
-    metrics: dict[str, Any] = field(default_factory=dict)
+    metrics: Metrics = field(default_factory=dict)
     status: str = "ok"
     species: str = ""
+    transfer: TransferRecord | None = None
     _qpos: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def contacts(self) -> np.ndarray | None:
+        """(T, 4) bool stance labels (read-only; None when the stage has none)."""
+        return None if self.labels is None else self.labels.array
+
+    @property
+    def contacts_method(self) -> str:
+        """How the labels were found: ``source`` (the source's footfalls), ``decoded``,
+        ``detected``, ``duty`` (a foot labelled by its gait's duty factor), ``method``
+        (the transfer method's own labels), ``labels`` (the source motion's own),
+        ``simulated``, or ``none`` (the code written to reports and rows)."""
+        lab = self.labels
+        if lab is None:
+            return "none"
+        if any(e.reason == EditReason.DUTY_FOOT for e in lab.edits):
+            return "duty"
+        return _METHOD_OF_SOURCE.get(lab.source, lab.source.value)
 
     @property
     def qpos(self) -> np.ndarray | None:
@@ -190,7 +219,7 @@ class ClipRun:
         return {k: s.wall_time_s for k, s in self.stages.items() if k != "source"}
 
     @property
-    def metrics(self) -> dict[str, dict[str, Any]]:
+    def metrics(self) -> dict[str, Metrics]:
         """Metrics per stage."""
         return {k: s.metrics for k, s in self.stages.items()}
 
@@ -225,12 +254,12 @@ def stance_toe_height(motion: Motion, contacts: np.ndarray | None) -> float:
     return float(np.median(z[c]) / motion.species_info.leg_length)
 
 
-def _motion_metrics(motion: Motion, contacts: np.ndarray | None) -> dict[str, Any]:
+def _motion_metrics(motion: Motion, contacts: np.ndarray | None) -> Metrics:
     """docs/metrics.md kinematic metrics (literal contact definition), the skating under the
     stage's own labels, and the stance toe height."""
     from .metrics.kinematic import kinematic_metrics, skate_mm
 
-    out: dict[str, Any] = dict(kinematic_metrics(motion))
+    out: Metrics = dict(kinematic_metrics(motion))
     out["stance_toe_height_per_leg"] = stance_toe_height(motion, contacts)
     out["skate_labelled_mm"] = (
         math.nan if contacts is None else float(skate_mm(motion, np.asarray(contacts, bool)))
@@ -238,11 +267,15 @@ def _motion_metrics(motion: Motion, contacts: np.ndarray | None) -> dict[str, An
     return out
 
 
-def _contacts_method(out: Motion, had_labels: bool) -> str:
-    how = ((out.metadata or {}).get("transfer") or {}).get("contacts") or {}
-    if isinstance(how, dict) and how.get("method"):
-        return str(how["method"])
-    return "method" if had_labels else "none"
+def _method_labels(contacts: np.ndarray, record: TransferRecord | None) -> StanceLabels:
+    """A transfer method's own labels: their source is the schedule's method its
+    ``metadata["transfer"]`` names (``decoded``, ``source``, ``detected``, ``duty``,
+    ``planned``, …), :attr:`StanceSource.METHOD` when it names none or a code of its own.
+    The edits the method made are recorded in its own report
+    (:attr:`habitsim.stance.report.ConformReport.labels`), not in the motion."""
+    code = None if record is None or record.contacts is None else record.contacts.method
+    known = {s.value for s in StanceSource}
+    return StanceLabels(contacts, StanceSource(code) if code in known else StanceSource.METHOD)
 
 
 # ---------------------------------------------------------------------------- stages
@@ -253,16 +286,22 @@ def _transfer(source: Motion, target: str, method: str, seed: int) -> Stage:
 
     t0 = time.perf_counter()
     out = run_method(method, source, target, seed=seed)
-    contacts = None if out.contacts is None else np.asarray(out.contacts, dtype=bool)
-    how = _contacts_method(out, contacts is not None)
-    if contacts is None:  # the method gave no labels: the transfer stage finds them, once
+    record = TransferRecord.from_metadata(out.metadata)
+    if out.contacts is not None:
+        labels = _method_labels(np.asarray(out.contacts, dtype=bool), record)
+    else:  # the method gave no labels: the transfer stage finds them, once
         from .stance.schedule import transfer_contacts
 
-        contacts, info = transfer_contacts(out, source)
-        how = str(info["method"])
+        labels, _ = transfer_contacts(out, source)
     wall = time.perf_counter() - t0
     return Stage(
-        "transfer", out, contacts, how, wall, _motion_metrics(out, contacts), species=out.species
+        "transfer",
+        out,
+        labels,
+        wall,
+        _motion_metrics(out, labels.array),
+        species=out.species,
+        transfer=record,
     )
 
 
@@ -274,12 +313,12 @@ def _refine(
             Stage(
                 "refine",
                 stage.motion,
-                stage.contacts,
-                stage.contacts_method,
+                stage.labels,
                 0.0,
                 dict(stage.metrics),
                 "none",
                 stage.species,
+                stage.transfer,
                 stage._qpos,
             ),
             None,
@@ -292,21 +331,31 @@ def _refine(
     opts = replace(opts, dynamics=mode == "B", fallback=True)
     assert stage.motion is not None  # the transfer stage always has a motion
     t0 = time.perf_counter()
-    res = refine(stage.motion, opts, contacts=stage.contacts, model=model)
+    res = refine(stage.motion, opts, contacts=np.array(stage.contacts), model=model)
     wall = time.perf_counter() - t0
-    contacts = np.asarray(res.contacts, dtype=bool)
+    labels = _refined_labels(stage.labels, res)
     st = Stage(
         "refine",
         res.motion,
-        contacts,
-        stage.contacts_method,
+        labels,
         wall,
-        _motion_metrics(res.motion, contacts),
+        _motion_metrics(res.motion, labels.array),
         str(res.status),
         stage.species,
+        stage.transfer,
         np.asarray(res.qpos),
     )
     return st, res
+
+
+def _refined_labels(given: StanceLabels | None, res: RefineResult) -> StanceLabels:
+    """The labels a refinement planted: the transfer's, their source kept, with the
+    refinement's edits (its cleaning) appended."""
+    contacts = np.asarray(res.contacts, dtype=bool)
+    done = () if res.labels is None else res.labels.edits
+    if given is None:
+        return StanceLabels(contacts, StanceSource.GIVEN, done)
+    return StanceLabels(contacts, given.source, (*given.edits, *done))
 
 
 def _run_track(
@@ -323,6 +372,11 @@ def _run_track(
     except Exception as e:  # noqa: BLE001 - a tracker bug is recorded, the caller goes on
         return None, f"error: {type(e).__name__}: {e}", time.perf_counter() - t0
     return res, ("fell" if res.failed else "ok"), time.perf_counter() - t0
+
+
+def _writable(stage: Stage) -> np.ndarray | None:
+    """A stage's (T, 4) labels as a fresh array (what tracking takes)."""
+    return None if stage.contacts is None else np.array(stage.contacts)
 
 
 def _worse(
@@ -342,17 +396,16 @@ def _worse(
 
 def _sim_stage(res: TrackResult | None, status: str, wall: float, species: str) -> Stage:
     if res is None:
-        return Stage("track", None, None, "none", wall, {}, status, species)
+        return Stage("track", None, None, wall, {}, status, species)
     st = Stage(
         "track",
         res.motion(),
-        np.asarray(res.contacts, bool),
-        "simulated",
+        StanceLabels(np.asarray(res.contacts, bool), StanceSource.SIMULATED),
         wall,
         dict(res.metrics),
         status,
         species,
-        np.asarray(res.qpos),
+        _qpos=np.asarray(res.qpos),
     )
     return st
 
@@ -412,12 +465,15 @@ def run_clip(
     mode = refine_mode(refine)
     tgt = load_species(target).name
     model = species_model(tgt)
-    src_how = "labels" if source.contacts is not None else "none"
+    src_labels = (
+        None
+        if source.contacts is None
+        else StanceLabels(np.asarray(source.contacts), StanceSource.INPUT)
+    )
     src = Stage(
         "source",
         source,
-        source.contacts,
-        src_how,
+        src_labels,
         0.0,
         _motion_metrics(source, source.contacts),
         species=source.species,
@@ -435,7 +491,7 @@ def run_clip(
         src,
         moved,
         refined,
-        Stage("track", None, None, "none", 0.0, {}, "off", tgt),
+        Stage("track", None, None, 0.0, {}, "off", tgt),
         refine_result=rres,
     )
     if mode == "none":
@@ -449,12 +505,12 @@ def run_clip(
     if not track:
         return run
     assert refined.motion is not None
-    res, status, wall = _run_track(refined.motion, refined.contacts, controller, assist, seed)
+    res, status, wall = _run_track(refined.motion, _writable(refined), controller, assist, seed)
     run.track_result = res
     run.tracked = _sim_stage(res, status, wall, tgt)
     if guard and run.refine_verdict == "unchecked" and res is not None:
         assert moved.motion is not None
-        plain, pstatus, pwall = _run_track(moved.motion, moved.contacts, controller, assist, seed)
+        plain, pstatus, pwall = _run_track(moved.motion, _writable(moved), controller, assist, seed)
         run.input_track_result = plain
         if plain is None:
             run.refine_verdict = "kept"

@@ -393,9 +393,9 @@ def direct_relabelled_transfer(
     }
     meta = {k: v for k, v in source.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
     out = Motion(tgt, source.fps, source.root_positions * ratio, source.rotations.copy())
-    contacts, how = transfer_contacts(out, source, policy=policy)
+    labels, how = transfer_contacts(out, source, policy=policy)
     meta["transfer"] = {**info, "contacts": how}
-    return Motion(out.species, out.fps, out.root_positions, out.rotations, contacts, meta)
+    return Motion(out.species, out.fps, out.root_positions, out.rotations, labels.array, meta)
 
 
 @METHODS.add(

@@ -16,7 +16,13 @@ import pytest
 
 import habitsim
 from habitsim.bvh import BVHData, bvh_text, parse_bvh
-from habitsim.bvh_mapping import import_bvh, is_helper_name, load_joint_map, read_source
+from habitsim.bvh_mapping import (
+    ImportReport,
+    import_bvh,
+    is_helper_name,
+    load_joint_map,
+    read_source,
+)
 from habitsim.cli import main
 from habitsim.errors import SkeletonMappingError
 from habitsim.stance.labels import stance_f1, stance_runs
@@ -261,6 +267,7 @@ def test_source_stance_matches_the_known_footfalls(walk, rig):
     motion, _ = import_bvh(rig, "dog")
     imp = motion.metadata["import"]
     assert imp["contacts"]["method"] == "source foot path"
+    assert ImportReport.from_metadata(motion.metadata).to_metadata() == imp  # type: ignore[union-attr]
     # the labels found on the foreign rig's own feet are the walk's own stance
     f1 = stance_f1(motion.contacts, walk.contacts)
     assert np.all(f1 >= 0.85), f1

@@ -122,6 +122,7 @@ def test_walking_stance_only_where_the_target_walks() -> None:
     slow = generate("cat", "walk", seed=1, duration_s=3.0, froude=0.3, duty_factor=0.35)
     assert slow.contacts is not None and slow.contacts.mean(0).max() < POLICY.walk_min_duty
     labels, info = walking_stance(slow, slow.contacts, slow)
+    labels = labels.array
     assert info is not None and info["froude"] <= info["walk_froude_max"] == 0.45
     assert labels.mean(0).min() >= POLICY.walk_min_duty
     assert (labels.sum(axis=1) >= POLICY.walk_min_feet).all()  # never fewer than two feet down
@@ -134,7 +135,7 @@ def test_walking_stance_only_where_the_target_walks() -> None:
     # a trot is a trot
     trot = generate("cat", "trot", seed=1, duration_s=3.0, froude=0.6, duty_factor=0.4)
     kept, none = walking_stance(trot, trot.contacts, trot)
-    assert none is None and (kept == trot.contacts).all()
+    assert none is None and (kept.array == trot.contacts).all()
     # faster than the cat walks, no action known: kept
     bare = trot.slice(0)
     bare.metadata = {}
@@ -325,6 +326,7 @@ def test_transfer_contacts_time_warped_when_the_length_changes(trot) -> None:
     slower = resample_motion(trot.with_contacts(trot.contacts), trot.fps * 1.5)
     slower.contacts = None  # an output of another length, labelled from the source
     labels, info = transfer_contacts(slower, trot)
+    labels = labels.array
     assert info == {"method": "source", "source_frames": trot.num_frames, "time_warped": True}
     assert labels.shape == (slower.num_frames, 4)
     np.testing.assert_array_equal(
@@ -477,6 +479,7 @@ def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) ->
     root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
     fast = Motion("dog", walk.fps, root, walk.rotations, c)
     labels, rep = trim_to_reach(fast, c)
+    labels = labels.array
     assert rep is not None and rep.runs >= 3
     assert not (labels & ~c).any()  # only stance frames are taken off
     assert rep.frames == int((c & ~labels).sum()) > 0
@@ -495,6 +498,7 @@ def test_out_of_reach_stance_runs_are_trimmed_to_their_reachable_middle(walk) ->
     first = np.zeros_like(c)
     first[: len(c) // 4] = True
     part, _ = trim_to_reach(fast, c, only=first)
+    part = part.array
     assert np.array_equal(part[len(c) // 2 :], c[len(c) // 2 :]) and (part != c).any()
     # the partial planting holds more of the stance on the trimmed labels, and with
     # ``trim`` it trims the runs it would leave free and steps on the new labels

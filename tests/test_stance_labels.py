@@ -283,4 +283,84 @@ def test_labels_equality_and_methods() -> None:
 
 def test_codes_are_their_report_strings() -> None:
     assert StanceSource("input") is StanceSource.INPUT and f"{StanceSource.DETECTED}" == "detected"
-    assert {r.value for r in EditReason} == {"slip_trim", "gap_fill", "blip_drop"}
+    assert {r.value for r in EditReason} >= {"slip_trim", "gap_fill", "blip_drop", "restep", "trim"}
+    assert all(r.value == r.name.lower() for r in EditReason)
+
+
+# ------------------------------------------------------- edit records of the stance stages
+@pytest.fixture(scope="module")
+def dog_walk():
+    from habitsim.gaits import generate
+
+    return generate("dog", "walk", seed=2, duration_s=2.0)
+
+
+def _faster(walk, k: float):
+    """The walk with its body ``k`` times as fast (the legs' labels unchanged)."""
+    from habitsim.motion import Motion
+
+    step = np.diff(walk.root_positions[:, :2], axis=0) * k
+    root = walk.root_positions.copy()
+    root[1:, :2] = root[0, :2] + np.cumsum(step, axis=0)
+    return Motion("dog", walk.fps, root, walk.rotations, walk.contacts)
+
+
+def test_schedule_records_where_labels_came_from_and_each_edit(dog_walk) -> None:
+    from habitsim.motion import Motion
+    from habitsim.stance.schedule import transfer_contacts
+
+    src = dog_walk
+    out = Motion("horse", src.fps, src.root_positions * 2.0, src.rotations)
+    labels, info = transfer_contacts(out, src)
+    assert labels.source is StanceSource.SOURCE and info["method"] == "source"
+    bad = src.contacts.copy()
+    bad[:, 2] = ~bad[:, 2]
+    a, b = max(stance_runs(bad)[0], key=lambda r: r[1] - r[0])
+    mid = (a + b) // 2
+    bad[mid, 0] = False  # a one-frame flicker in a stance run: filled
+    labels, info = transfer_contacts(out, src, bad)
+    assert labels.source is StanceSource.DECODED
+    reasons = [e.reason for e in labels.edits]
+    assert reasons == [EditReason.SHORT_RUN_DROP, EditReason.SOURCE_FOOT]
+    drop, swap = labels.edits
+    assert drop.frames[0] == (mid,) and drop.by == "stance.schedule.transfer_contacts"
+    assert swap.frames[2] == tuple(range(len(bad))) and swap.frames[0] == ()
+    np.testing.assert_array_equal(labels.array, src.contacts)
+    np.testing.assert_array_equal(labels.changed_since(0), bad != src.contacts)
+
+
+def test_walking_stance_records_the_frames_it_added() -> None:
+    from habitsim.gaits import generate
+    from habitsim.stance.schedule import walking_stance
+
+    slow = generate("cat", "walk", seed=1, duration_s=3.0, froude=0.3, duty_factor=0.35)
+    given = StanceLabels(slow.contacts, StanceSource.SOURCE)
+    labels, info = walking_stance(slow, given, slow)
+    assert info is not None and labels.source is StanceSource.SOURCE
+    assert [e.reason for e in labels.edits][0] is EditReason.WALK_LENGTHEN
+    assert {e.reason for e in labels.edits} <= {EditReason.WALK_LENGTHEN, EditReason.WALK_SUPPORT}
+    added = labels.changed_since(0)
+    np.testing.assert_array_equal(added, labels.array & ~slow.contacts)  # stance only grows
+    assert added.any()
+    trot = generate("cat", "trot", seed=1, duration_s=3.0, froude=0.6, duty_factor=0.4)
+    kept, none = walking_stance(trot, StanceLabels(trot.contacts, StanceSource.SOURCE), trot)
+    assert none is None and kept.edits == ()
+
+
+def test_ladder_records_trims_and_resteps(dog_walk) -> None:
+    from habitsim.stance.ladder import restep, trim_to_reach
+
+    fast = _faster(dog_walk, 3.0)
+    given = StanceLabels(dog_walk.contacts, StanceSource.DECODED)
+    trimmed, rep = trim_to_reach(fast, given)
+    assert rep is not None and trimmed.source is StanceSource.DECODED
+    (edit,) = trimmed.edits
+    assert edit.reason is EditReason.TRIM and edit.n_changed == rep.frames
+    stepped = restep(fast, given)
+    assert stepped is not None
+    moved, planting = stepped
+    assert planting.restep is not None and planting.labels is not None
+    assert [e.reason for e in planting.labels.edits] == [EditReason.RESTEP]
+    np.testing.assert_array_equal(planting.labels.array, moved.contacts)
+    # an array is taken as given labels
+    assert trim_to_reach(fast, dog_walk.contacts)[0].source is StanceSource.GIVEN

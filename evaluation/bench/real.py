@@ -13,9 +13,10 @@ tracking, with the refinement check), in an executor of the evaluation
 (:mod:`habitsim.evaluation.executors`, ``workers`` processes).
 
 Per row: the import's contact F1 against the source's own feet (the importer's
-``metadata["import"]["contact_f1"]``, one value per foot; None when the importer gives
-none), the stance toe height (median height of the labelled-stance toes / leg length:
-the import's own labels, and the transfer's), how the transfer's stance labels were
+``metadata["import"]["contact_f1"]``, read by :class:`habitsim.bvh_mapping.ImportReport`,
+one value per foot; None when the importer gives none), the stance toe height (median
+height of the labelled-stance toes / leg length: the import's own labels, and the
+transfer's), how the transfer's stance labels were
 found, skate / jerk / penetration before and after refinement, the refinement check,
 survival, sim MPJPE / leg length, the wall time per stage, and the dynamic plausibility
 of the tracked reference (docs/metrics.md's ``root_residual_mg`` and
@@ -249,10 +250,18 @@ class WindowTask:
 
 
 def _import_f1(motion: Motion) -> list[float] | None:
-    f1 = ((motion.metadata or {}).get("import") or {}).get("contact_f1")
-    if f1 is None:
+    """The import's per-foot contact F1 (:attr:`habitsim.bvh_mapping.ImportReport.
+    contact_f1`, its finite values), None when the motion has no import report.
+
+    Raises:
+        MetadataError: an import report with a missing or malformed field.
+    """
+    from habitsim.bvh_mapping import ImportReport
+
+    report = ImportReport.from_metadata(motion.metadata)
+    if report is None:
         return None
-    vals = [finite_or_none(x) for x in (f1 if isinstance(f1, list | tuple) else [f1])]
+    vals = [finite_or_none(x) for x in report.contact_f1]
     return [v for v in vals if v is not None] or None
 
 

@@ -49,10 +49,13 @@ from .limbs import LEG_PROPORTIONS as LEG_PROPORTIONS
 from .limbs import MIRROR_BONE_TOLERANCE as MIRROR_BONE_TOLERANCE
 from .map_files import load_joint_map, validate_joint_map
 from .names import is_helper_name, name_cues
+from .report import ImportReport, SourceStanceRecord
 from .result import CONFIDENCE_CHECKS, CONFIDENCE_WARN, JointMapping
 from .retargeting import retarget
 
 __all__ = [
+    "ImportReport",
+    "SourceStanceRecord",
     "UNIT_SCALES",
     "FrameConversion",
     "JointMapping",

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -27,6 +26,7 @@ from ..stance.planting import (
 from .chains import _AXIAL, _END_POINTS, _IDX, _LEG_CHAINS, _TAIL
 from .frame import _leg_ends
 from .names import _fore_vote
+from .report import ImportReport, SourceStanceRecord
 from .result import CONFIDENCE_WARN, JointMapping
 from .tree import _Tree
 
@@ -210,16 +210,15 @@ def retarget(
     if stance is None:
         return motion
     st, foot_idx, anchor_idx, limb_len, points = stance
-    report: dict[str, Any] = {
-        "contacts": {
-            "method": "source foot path",
-            "foot_joints": [bvh.names[i] for i in foot_idx],
-            "foot_points": [[bvh.names[i] for i in pts] for pts in points],
-            "floors_m": [round(float(f - st.ground), 5) for f in st.floors],
-            "source_leg_length_m": round(st.leg_length, 5),
-            "duty": [round(float(d), 4) for d in st.duty],
-        }
-    }
+    found = SourceStanceRecord(
+        "source foot path",
+        tuple(bvh.names[i] for i in foot_idx),
+        tuple(tuple(bvh.names[i] for i in pts) for pts in points),
+        tuple(round(float(f - st.ground), 5) for f in st.floors),
+        round(st.leg_length, 5),
+        tuple(round(float(d), 4) for d in st.duty),
+    )
+    planted = None
     if plant:
         feet_src = smooth_path(src[:, foot_idx], bvh.fps)
         feet_src[..., 2] = st.heights
@@ -227,15 +226,19 @@ def retarget(
         motion, pr = plant_legs(
             motion, feet_src, src[:, anchor_idx], st.contacts, target_len / limb_len
         )
-        report["planted"] = pr.to_dict(sp.leg_length)
+        planted = tuple(pr.to_dict(sp.leg_length).items())
     else:
         motion = motion.with_contacts(st.contacts)
     f1 = stance_f1(motion.detect_contacts(), st.contacts)
-    report["contact_f1"] = [round(float(v), 4) for v in f1]
     _limb_confidence(t, j2s, st, limb_len, mapping)
-    report["confidence"] = dict(mapping.confidence)
-    report["warnings"] = list(mapping.warnings)
-    motion.metadata["import"] = report
+    report = ImportReport(
+        found,
+        tuple(round(float(v), 4) for v in f1),
+        tuple(mapping.confidence.items()),
+        tuple(mapping.warnings),
+        planted,
+    )
+    motion.metadata["import"] = report.to_metadata()
     motion.metadata["mapping"] = mapping.to_dict()
     return motion
 

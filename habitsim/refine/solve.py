@@ -336,6 +336,8 @@ class RefineResult:
         contacts: (T, 4) the contact labels used (LF, RF, LH, RH).
         residual_mg: (T,) stage B's root residual force per frame / (m·g), else None.
         report: the JSON-ready report (:func:`habitsim.refine.report.build_report`).
+        labels: the labels used as :class:`~habitsim.stance.labels.StanceLabels`, with
+            the cleaning's and the preplanting's edits (None: not recorded).
     """
 
     motion: Motion
@@ -346,6 +348,7 @@ class RefineResult:
     contacts: np.ndarray
     residual_mg: np.ndarray | None
     report: dict[str, Any] = field(default_factory=dict)
+    labels: StanceLabels | None = None
 
     @property
     def trajectory(self) -> QposTrajectory:
@@ -1232,5 +1235,13 @@ def refine(
         "iterations": report["iterations"],
     }
     return RefineResult(
-        out, qpos, motion.fps, report["status"], success, prep.contacts.copy(), residual, report
+        out,
+        qpos,
+        motion.fps,
+        report["status"],
+        success,
+        prep.contacts.copy(),
+        residual,
+        report,
+        prep.labels,
     )

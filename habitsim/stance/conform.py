@@ -67,23 +67,24 @@ def conform(
     out, speed = bound_speed(out, source, policy)
     out, height = bound_height(out, source, policy)
     out, heading = bound_heading(out, source, policy)
-    contacts, how = transfer_contacts(out, source, out.contacts, policy)
-    contacts, walking = walking_stance(out, contacts, source, policy)
+    labels, how = transfer_contacts(out, source, out.contacts, policy)
+    labels, walking = walking_stance(out, labels, source, policy)
     if walking is not None:
         how = {**how, "walking_stance": walking}
     levelled = None
     planted: PlantOutcome | None = None
-    if plant and contacts.any():
+    if plant and labels.array.any():
         glob: np.ndarray | None = out.global_positions()
         if policy.level_trunk:
-            out, levelled = level_trunk(out, contacts, glob, policy)
+            out, levelled = level_trunk(out, labels.array, glob, policy)
             if levelled is not None:
                 glob = None  # the body turned
-        out, planted = plant_decoded(out, contacts, glob, policy)
+        out, planted = plant_decoded(out, labels, glob, policy)
         if planted.relabelled:
-            assert out.contacts is not None  # plant_motion labels its output
-            contacts = out.contacts  # the labels the legs now step on
-    report = ConformReport(how, speed, height, heading, levelled, planted)
+            assert planted.planting.labels is not None  # a kept planting is solved
+            labels = planted.planting.labels  # the labels the legs now step on
+    report = ConformReport(how, speed, height, heading, levelled, planted, labels)
     meta = {k: v for k, v in source.metadata.items() if k in ("action", "gait", "pair_key", "seed")}
     meta["transfer"] = report.to_metadata(info or {})
+    contacts = np.array(labels.array)
     return Motion(out.species, out.fps, out.root_positions, out.rotations, contacts, meta), report

@@ -39,6 +39,7 @@ __all__ = [
     "EditReason",
     "StanceEdit",
     "StanceLabels",
+    "as_labels",
     "runs",
     "stance_runs",
     "swing_gaps",
@@ -77,6 +78,8 @@ class StanceSource(StrEnum):
     PLANNED = "planned"
     #: The foot contacts of a physics simulation.
     SIMULATED = "simulated"
+    #: Returned by a transfer method that does not say how it found them.
+    METHOD = "method"
 
 
 class EditReason(StrEnum):
@@ -91,6 +94,28 @@ class EditReason(StrEnum):
     #: A stance run too short to be a step became swing (refinement's label cleaning,
     #: step 3).
     BLIP_DROP = "blip_drop"
+    #: Stance and swing runs shorter than two frames dropped from decoded or warped
+    #: labels (:func:`habitsim.contacts.drop_short_runs`, the footfall schedule).
+    SHORT_RUN_DROP = "short_run_drop"
+    #: A decoded foot that disagrees with the source's footfalls took the source's
+    #: schedule (the footfall schedule).
+    SOURCE_FOOT = "source_foot"
+    #: A foot whose detected stance share is under half its gait's duty factor took the
+    #: duty-factor labels (:func:`habitsim.contacts.contacts_by_duty`, the footfall
+    #: schedule).
+    DUTY_FOOT = "duty_foot"
+    #: Stance runs lengthened at both ends to the walking duty factor
+    #: (:func:`habitsim.contacts.lengthen_stance`, the walking stance).
+    WALK_LENGTHEN = "walk_lengthen"
+    #: Frames with too few feet down given the nearest stance run
+    #: (:func:`habitsim.contacts.fill_support`, the walking stance).
+    WALK_SUPPORT = "walk_support"
+    #: The labels played faster so the legs sweep what the body travels (the planting
+    #: ladder's restep).
+    RESTEP = "restep"
+    #: Out-of-reach stance runs shortened at both ends to the legs' reach (the planting
+    #: ladder's trim).
+    TRIM = "trim"
 
 
 @dataclass(frozen=True)
@@ -181,6 +206,11 @@ class StanceLabels:
         object.__setattr__(self, "source", source)
         object.__setattr__(self, "edits", edits)
 
+    def __array__(self, dtype: object = None, copy: object = None) -> np.ndarray:
+        """The (T, F) labels as a numpy array (``np.asarray(labels)``; read-only unless a
+        dtype conversion copies it)."""
+        return self.array if dtype is None else self.array.astype(dtype)  # type: ignore[call-overload]
+
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, StanceLabels):
             return NotImplemented
@@ -266,6 +296,20 @@ class StanceLabels:
         """(F,) per-foot F1 of these labels against ``reference`` (:func:`stance_f1`)."""
         ref = reference.array if isinstance(reference, StanceLabels) else reference
         return stance_f1(self.array, ref)
+
+
+def as_labels(
+    contacts: StanceLabels | np.ndarray, source: StanceSource = StanceSource.GIVEN
+) -> StanceLabels:
+    """``contacts`` as :class:`StanceLabels`: labels as they are, a (T, F) array wrapped
+    with ``source`` (the boundary where a stage takes a caller's plain array).
+
+    Raises:
+        InvalidMotionError: an array that is not (T, F) booleans (or 0/1).
+    """
+    if isinstance(contacts, StanceLabels):
+        return contacts
+    return StanceLabels(np.asarray(contacts), source)
 
 
 # ------------------------------------------------------------------------ run algebra

@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..motion import Motion
+from .labels import EditReason, StanceLabels, as_labels
 from .policy import ConformPolicy, resolve_policy
 from .report import Planting, PlantOutcome, Restep, Trim
 
@@ -43,25 +44,28 @@ def swing_lift(
 
 def plant_decoded(
     out: Motion,
-    contacts: np.ndarray,
+    labels: StanceLabels | np.ndarray,
     glob: np.ndarray | None = None,
     policy: ConformPolicy | None = None,
 ) -> tuple[Motion, PlantOutcome]:
-    """Plant ``out``'s feet on ``contacts``, falling back rung by rung (module docstring).
+    """Plant ``out``'s feet on ``labels``, falling back rung by rung (module docstring).
 
     Args:
         out: the decoded motion.
-        contacts: (T, 4) bool stance labels.
+        labels: its (T, 4) stance labels (an array is taken as given labels).
         glob: ``out``'s (T, J, 3) global joint positions, if already at hand.
         policy: the knobs and switches (None: the defaults).
 
     Returns:
         ``(motion to keep, what was done)``: the planted motion, or ``out`` itself when no
-        planting is kept.
+        planting is kept. The kept planting's ``labels`` are those the legs step on:
+        ``labels`` with a restep's and a trim's edits recorded.
     """
     from .planting import plant_motion, stance_driven_root, stance_reach_shortfall
 
     policy = resolve_policy(policy)
+    labels = as_labels(labels)
+    contacts = labels.array
     leg = out.species_info.leg_length
 
     def attempt(motion: Motion, glob: np.ndarray) -> tuple[Motion, Planting, Planting]:
@@ -81,7 +85,7 @@ def plant_decoded(
             else:
                 lift = swing_lift(motion, contacts, policy)
                 moved, report = plant_motion(motion, contacts, lift, centre=centre, glob=glob)
-                rep = Planting.judged(report, contacts, leg, rule)
+                rep = Planting.judged(report, labels, leg, rule)
             first = rep if first is None else first
             if rep.reaches(policy):
                 break
@@ -121,7 +125,7 @@ def plant_decoded(
             f"the stance legs carry the body only {100 * ratio:.0f} % of its decoded "
             f"speed (< {100 * policy.plant_min_speed_ratio:.0f} %)"
         )
-    stepped = restep(out, contacts, glob, policy)
+    stepped = restep(out, labels, glob, policy)
     tried: Planting | None = None
     if stepped is not None:
         moved, tried = stepped
@@ -139,12 +143,12 @@ def plant_decoded(
     partly = None
     if stepped is not None and policy.partly_on_restep:
         # the quickened labels ask the legs for the shorter sweeps: hold what they reach
-        assert stepped[0].contacts is not None  # plant_motion labels its output
-        partly = plant_partly(out, stepped[0].contacts, glob, policy.trim_to_reach, policy)
+        assert stepped[1].labels is not None  # a restep's planting is solved
+        partly = plant_partly(out, stepped[1].labels, glob, policy.trim_to_reach, policy)
         if partly is not None:
             why += " in every stance run; on the faster steps"
     if partly is None:
-        partly = plant_partly(out, contacts, glob, policy.trim_to_reach, policy)
+        partly = plant_partly(out, labels, glob, policy.trim_to_reach, policy)
     if partly is not None:
         moved, rep = partly
         shown = rep.to_dict()
@@ -187,14 +191,16 @@ def _run_mask(contacts: np.ndarray, hit: np.ndarray) -> np.ndarray:
 
 def trim_to_reach(
     out: Motion,
-    contacts: np.ndarray,
+    contacts: StanceLabels | np.ndarray,
     glob: np.ndarray | None = None,
     only: np.ndarray | None = None,
     policy: ConformPolicy | None = None,
-) -> tuple[np.ndarray, Trim | None]:
+) -> tuple[StanceLabels, Trim | None]:
     """``contacts`` with every stance run whose centred foothold lies beyond the legs'
     reach shortened at both ends until it does not, and what was changed (``None``:
-    nothing). ``only``: (T, 4) bool, the runs to consider (those with a frame in it;
+    nothing). ``contacts``: (T, 4) stance labels (an array is taken as given labels);
+    the labels returned record the frames taken off as an :attr:`EditReason.TRIM`
+    edit. ``only``: (T, 4) bool, the runs to consider (those with a frame in it;
     default every run).
 
     A decoded body that moves faster than its legs sweep in a long stance (a real dog's
@@ -212,7 +218,8 @@ def trim_to_reach(
     from .planting import stance_run_shortfall
 
     policy = resolve_policy(policy)
-    before = np.asarray(contacts, dtype=bool)  # read only
+    labels = as_labels(contacts)
+    before = labels.array  # read only
     c = before.copy()
     margin = policy.trim_margin_per_leg * out.species_info.leg_length
     glob = out.global_positions() if glob is None else glob
@@ -226,7 +233,7 @@ def trim_to_reach(
         if short[a:b, k].max() > 0.0 and (only is None or only[a:b, k].any())
     ]
     if not active:
-        return c, None
+        return labels, None
     span = {run: (run[1], run[2]) for run in active}  # the run's current extent
     failed: set[tuple[int, int, int]] = set()
     t = len(c)
@@ -253,13 +260,14 @@ def trim_to_reach(
         c[a:b, k] = before[a:b, k]
     trimmed = [run for run in span if run not in failed and span[run] != run[1:]]
     if not trimmed:
-        return before, None
-    return c, Trim(len(trimmed), int((before & ~c).sum()), before.mean(axis=0), c.mean(axis=0))
+        return labels, None
+    trim = Trim(len(trimmed), int((before & ~c).sum()), before.mean(axis=0), c.mean(axis=0))
+    return labels.edited(c, by="stance.ladder.trim_to_reach", reason=EditReason.TRIM), trim
 
 
 def plant_partly(
     out: Motion,
-    contacts: np.ndarray,
+    contacts: StanceLabels | np.ndarray,
     glob: np.ndarray | None = None,
     trim: bool = False,
     policy: ConformPolicy | None = None,
@@ -282,13 +290,15 @@ def plant_partly(
     at hand. With ``trim``, the runs left free are then shortened to the legs' reach
     (:func:`trim_to_reach`) and planted again; the result that holds more stance frames
     at rest is kept, the trimming reported as ``trimmed`` (the output's labels are the
-    trimmed ones).
+    trimmed ones). ``contacts``: (T, 4) stance labels (an array is taken as given
+    labels); the planting's ``labels`` are those it stepped on.
     """
     from .labels import stance_runs
     from .planting import plant_motion, stance_run_shortfall
 
     policy = resolve_policy(policy)
-    c = np.asarray(contacts, dtype=bool)
+    labels = as_labels(contacts)
+    c = labels.array
     stance = int(c.sum())
     if stance == 0:
         return None
@@ -319,14 +329,14 @@ def plant_partly(
     runs = sum(len(s) for s in stance_runs(c))
     loose = sum(len(s) for s in stance_runs(free))
     planting = replace(
-        Planting.judged(report, c, leg, "centred", free),
+        Planting.judged(report, labels, leg, "centred", free),
         free_frames=n_free,
         stance_frames=stance,
         free_runs=(loose, runs),
     )
     if trim and n_free:
-        labels, trimmed = trim_to_reach(out, c, glob, only=free, policy=policy)
-        again = None if trimmed is None else plant_partly(out, labels, glob, policy=policy)
+        shorter, trimmed = trim_to_reach(out, labels, glob, only=free, policy=policy)
+        again = None if trimmed is None else plant_partly(out, shorter, glob, policy=policy)
         if again is not None:
             tighter = again[1]
             assert tighter.free_frames is not None and tighter.stance_frames is not None
@@ -337,7 +347,7 @@ def plant_partly(
 
 def restep(
     out: Motion,
-    contacts: np.ndarray,
+    contacts: StanceLabels | np.ndarray,
     glob: np.ndarray | None = None,
     policy: ConformPolicy | None = None,
 ) -> tuple[Motion, Planting] | None:
@@ -355,13 +365,23 @@ def restep(
     (:func:`swing_lift`). The trunk, neck and tail and the root path stay the
     decoder's.
 
+    Args:
+        out: the decoded motion.
+        contacts: its (T, 4) stance labels (an array is taken as given labels).
+        glob: ``out``'s (T, J, 3) global joint positions, if already at hand.
+        policy: the knobs (None: the defaults).
+
     Returns:
-        ``(planted motion with the new labels, its planting with its ``restep``)``.
+        ``(planted motion with the new labels, its planting with its ``restep``)``; the
+        planting's ``labels`` record the quickened frames as an
+        :attr:`EditReason.RESTEP` edit.
     """
     from ..contacts import quicken_contacts, stride_period
     from .planting import plant_motion, stance_sweep_limit
 
     policy = resolve_policy(policy)
+    given = as_labels(contacts)
+    contacts = given.array
     period = stride_period(contacts)
     t = out.num_frames
     if period is None or t < 2 or period > t:
@@ -375,10 +395,14 @@ def restep(
     # one rate for the whole clip: a rate that follows the speed frame by frame makes the
     # stances of a short stride uneven by a frame or two, enough for a leg to miss
     rate = np.full(t, k)
-    labels = quicken_contacts(contacts, rate, period)
+    labels = given.edited(
+        quicken_contacts(contacts, rate, period),
+        by="stance.ladder.restep",
+        reason=EditReason.RESTEP,
+    )
     leg = out.species_info.leg_length
-    lift = swing_lift(out, labels, policy)
-    moved, report = plant_motion(out, labels, lift, centre=True, glob=glob)
-    new_period = stride_period(labels)
+    lift = swing_lift(out, labels.array, policy)
+    moved, report = plant_motion(out, labels.array, lift, centre=True, glob=glob)
+    new_period = stride_period(labels.array)
     step = Restep((period / out.fps, (new_period or period) / out.fps), float(rate[0]), sweep / leg)
     return moved, replace(Planting.judged(report, labels, leg, "centred"), restep=step)

@@ -52,7 +52,7 @@ from ..ik import axial_frames, foot_inclination, pose_from_targets
 from ..motion import Motion
 from ..skeleton import ABDUCTION_SIGN, JOINT_NAMES, get_skeleton
 from ..species import Species, load_species
-from .labels import stance_runs
+from .labels import StanceLabels, StanceSource, stance_runs
 
 __all__ = [
     "FOOT_ANCHORS",
@@ -148,6 +148,12 @@ class SourceStance:
     def duty(self) -> np.ndarray:
         """(4,) share of frames each foot is in stance."""
         return self.contacts.mean(axis=0)
+
+    @property
+    def labels(self) -> StanceLabels:
+        """The (T, 4) stance labels as :class:`StanceLabels` of source
+        :attr:`StanceSource.IMPORTED` (found on the source's feet, no edit since)."""
+        return StanceLabels(self.contacts, StanceSource.IMPORTED)
 
 
 def smooth_path(x: np.ndarray, fps: float) -> np.ndarray:

@@ -3,19 +3,34 @@
 The planting ladder (:mod:`habitsim.stance.ladder`) judges each planting by these typed
 values; ``to_dict`` methods write the JSON-ready, rounded form that goes into a
 transfer's ``metadata["transfer"]`` (the ``.npz`` format is unchanged).
+:class:`TransferRecord` (with :class:`ScheduleRecord`, :class:`WalkingRecord`,
+:class:`PlantedRecord`) is the one typed reader of that entry, and writes it back as read.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ..errors import MetadataError
+from .labels import StanceLabels, as_labels
 from .planting import PlantReport
 from .policy import ConformPolicy
 
-__all__ = ["Restep", "Trim", "Planting", "PlantOutcome", "ConformReport"]
+__all__ = [
+    "Restep",
+    "Trim",
+    "Planting",
+    "PlantOutcome",
+    "ConformReport",
+    "WalkingRecord",
+    "ScheduleRecord",
+    "PlantedRecord",
+    "TransferRecord",
+]
 
 
 @dataclass(frozen=True)
@@ -89,6 +104,8 @@ class Planting:
         free_runs: a partial planting's (free, all) stance runs (None: every run held).
         trimmed: the stance runs shortened first (None: none).
         restep: how the labels were played faster (None: they were not).
+        labels: the (T, 4) stance labels this planting stepped on, with their edits
+            (a restep's or a trim's recorded); None when the legs were not solved.
     """
 
     footholds: str
@@ -103,12 +120,13 @@ class Planting:
     free_runs: tuple[int, int] | None = None
     trimmed: Trim | None = None
     restep: Restep | None = None
+    labels: StanceLabels | None = None
 
     @classmethod
     def judged(
         cls,
         report: PlantReport,
-        contacts: np.ndarray,
+        contacts: StanceLabels | np.ndarray,
         leg: float,
         footholds: str,
         free: np.ndarray | None = None,
@@ -119,10 +137,12 @@ class Planting:
         to head for at the clip's end, the IK may leave a toe behind there).
 
         Args:
-            report: the planting's report; contacts: (T, 4) bool labels it planted;
-            leg: leg length [m]; footholds: the rule; free: (T, 4) bool runs left free.
+            report: the planting's report; contacts: the (T, 4) labels it planted (an
+            array is taken as given labels); leg: leg length [m]; footholds: the rule;
+            free: (T, 4) bool runs left free.
         """
-        c = np.asarray(contacts, dtype=bool)
+        labels = as_labels(contacts)
+        c = labels.array
         idx = np.arange(c.shape[0])[:, None]
         first = np.where(c.any(axis=0), c.argmax(axis=0), c.shape[0])
         last = np.where(c.any(axis=0), c.shape[0] - 1 - c[::-1].argmax(axis=0), -1)
@@ -141,6 +161,7 @@ class Planting:
             max_pelvis_drop_per_leg=float(report.pelvis_drop.max()) / leg,
             max_swing_reach_error_per_leg=worst(~c & ~edge),
             max_edge_reach_error_per_leg=worst(edge),
+            labels=labels,
         )
 
     @property
@@ -253,6 +274,9 @@ class ConformReport:
             changed (None: nothing).
         levelled: how the trunk was pitched level (None: it was not).
         planted: the planting ladder's outcome (None: planting off or no foot in stance).
+        labels: the conformed motion's (T, 4) stance labels, where they came from and
+            every edit of the schedule, the walking stance and the planting ladder
+            (None: not given).
     """
 
     contacts: dict[str, Any]
@@ -261,6 +285,16 @@ class ConformReport:
     heading_bounded: dict[str, Any] | None = None
     levelled: dict[str, Any] | None = None
     planted: PlantOutcome | None = None
+    labels: StanceLabels | None = None
+
+    @property
+    def schedule(self) -> ScheduleRecord:
+        """:attr:`contacts`, typed.
+
+        Raises:
+            MetadataError: a missing or malformed field (named).
+        """
+        return ScheduleRecord.from_dict(self.contacts)
 
     def to_metadata(self, info: dict[str, Any]) -> dict[str, Any]:
         """``metadata["transfer"]`` of the transferred motion: ``info`` (the method's
@@ -273,3 +307,220 @@ class ConformReport:
         meta["contacts"] = self.contacts
         meta["planted"] = False if self.planted is None else self.planted.to_dict()
         return meta
+
+
+# ------------------------------------------------------- metadata["transfer"], read back
+def _where(path: str, key: str) -> str:
+    return f"{path}.{key}" if path else key
+
+
+def _entry(d: Mapping[str, Any], key: str, kind: type | tuple[type, ...], path: str) -> Any:
+    """``d[key]``, checked to be of ``kind``.
+
+    Raises:
+        MetadataError: the field is missing or of another type (names ``path.key``).
+    """
+    if key not in d:
+        raise MetadataError(f"metadata field {_where(path, key)} is missing")
+    value = d[key]
+    if not isinstance(value, kind) or (isinstance(value, bool) and bool not in _kinds(kind)):
+        raise MetadataError(
+            f"metadata field {_where(path, key)} is malformed: {type(value).__name__} {value!r}"
+        )
+    return value
+
+
+def _kinds(kind: type | tuple[type, ...]) -> tuple[type, ...]:
+    return kind if isinstance(kind, tuple) else (kind,)
+
+
+def _mapping(value: object, path: str) -> Mapping[str, Any]:
+    """``value`` checked to be a mapping (names ``path`` when it is not)."""
+    if not isinstance(value, Mapping):
+        raise MetadataError(f"metadata field {path} is malformed: {type(value).__name__}")
+    return value
+
+
+def _floats(value: object, path: str) -> tuple[float, ...]:
+    """``value`` checked to be a list of numbers."""
+    if not isinstance(value, list | tuple) or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in value
+    ):
+        raise MetadataError(f"metadata field {path} is malformed: {value!r}")
+    return tuple(float(v) for v in value)
+
+
+@dataclass(frozen=True)
+class WalkingRecord:
+    """What the walking stance did (``metadata["transfer"]["contacts"]["walking_stance"]``,
+    :func:`habitsim.stance.schedule.walking_stance`).
+
+    Attributes:
+        froude: the transfer's Froude number.
+        walk_froude_max: the top of the target's walking band.
+        duty_before, duty_after: (4,) each foot's stance share before / after [0–1].
+    """
+
+    froude: float
+    walk_froude_max: float
+    duty_before: tuple[float, ...]
+    duty_after: tuple[float, ...]
+
+    @classmethod
+    def from_dict(cls, d: object, path: str) -> WalkingRecord:
+        """Read back from its JSON form (``path``: where it sits, for errors).
+
+        Raises:
+            MetadataError: a missing or malformed field (named).
+        """
+        m = _mapping(d, path)
+        return cls(
+            float(_entry(m, "froude", (int, float), path)),
+            float(_entry(m, "walk_froude_max", (int, float), path)),
+            _floats(_entry(m, "duty_before", list, path), f"{path}.duty_before"),
+            _floats(_entry(m, "duty_after", list, path), f"{path}.duty_after"),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form (as :func:`~habitsim.stance.schedule.walking_stance` writes it)."""
+        return {
+            "froude": self.froude,
+            "walk_froude_max": self.walk_froude_max,
+            "duty_before": list(self.duty_before),
+            "duty_after": list(self.duty_after),
+        }
+
+
+@dataclass(frozen=True)
+class ScheduleRecord:
+    """How a transfer's stance labels were found (``metadata["transfer"]["contacts"]``,
+    written by :func:`habitsim.stance.schedule.transfer_contacts`).
+
+    Attributes:
+        method: ``decoded``, ``source``, ``detected``, ``duty`` (or another method's own
+            code).
+        details: the method's details, in their written order (``source_f1``, ``duty``,
+            ``feet_from_source``, ``gait``, …; JSON values).
+        walking_stance: what the walking stance did (None: not applied).
+    """
+
+    method: str
+    details: tuple[tuple[str, Any], ...] = ()
+    walking_stance: WalkingRecord | None = None
+
+    @classmethod
+    def from_dict(cls, d: object, path: str = "transfer.contacts") -> ScheduleRecord:
+        """Read back from its JSON form.
+
+        Raises:
+            MetadataError: a missing or malformed field (named).
+        """
+        m = _mapping(d, path)
+        method = str(_entry(m, "method", str, path))
+        walking = m.get("walking_stance")
+        return cls(
+            method,
+            tuple((k, m[k]) for k in m if k not in ("method", "walking_stance")),
+            None if walking is None else WalkingRecord.from_dict(walking, f"{path}.walking_stance"),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form, keys in their written order."""
+        d: dict[str, Any] = {"method": self.method, **dict(self.details)}
+        if self.walking_stance is not None:
+            d["walking_stance"] = self.walking_stance.to_dict()
+        return d
+
+
+@dataclass(frozen=True)
+class PlantedRecord:
+    """How a transfer planted its feet (``metadata["transfer"]["planted"]``, written by
+    :meth:`PlantOutcome.to_dict`).
+
+    Attributes:
+        kept: whether a planting was kept.
+        root: the root path the kept planting stands under (``decoded`` / ``carried``;
+            None when not written).
+        summary: the whole JSON record, in its written order.
+    """
+
+    kept: bool
+    root: str | None
+    summary: tuple[tuple[str, Any], ...]
+
+    @classmethod
+    def from_dict(cls, d: object, path: str = "transfer.planted") -> PlantedRecord:
+        """Read back from its JSON form.
+
+        Raises:
+            MetadataError: a missing or malformed field (named).
+        """
+        m = _mapping(d, path)
+        kept = bool(_entry(m, "kept", bool, path))
+        root = m.get("root")
+        if root is not None and not isinstance(root, str):
+            raise MetadataError(f"metadata field {path}.root is malformed: {root!r}")
+        return cls(kept, root, tuple(m.items()))
+
+    @property
+    def how(self) -> str:
+        """``decoded`` / ``carried`` (the root path the feet were planted under) or ``no``
+        (out of reach, decoded feet kept)."""
+        return (self.root or "decoded") if self.kept else "no"
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form, keys in their written order."""
+        return dict(self.summary)
+
+
+@dataclass(frozen=True)
+class TransferRecord:
+    """A transferred motion's ``metadata["transfer"]``, typed: the one reader of what a
+    transfer method wrote (:meth:`ConformReport.to_metadata`, the direct methods).
+
+    Attributes:
+        contacts: how its stance labels were found (None: the method wrote none).
+        planted: how its feet were planted (None: ``planted`` False or not written).
+        entries: the other entries (the method's own: ``method``, ``species``, ``seed``;
+            the bounds to the source, ``levelled``), JSON values.
+        order: the keys in their written order (so the record is written back as read).
+    """
+
+    contacts: ScheduleRecord | None
+    planted: PlantedRecord | None
+    entries: tuple[tuple[str, Any], ...]
+    order: tuple[str, ...]
+
+    @classmethod
+    def from_metadata(cls, metadata: Mapping[str, Any] | None) -> TransferRecord | None:
+        """The record of a motion's metadata; None when it has no ``transfer`` entry.
+
+        Raises:
+            MetadataError: ``transfer`` is no mapping, or a missing or malformed field
+                (named, e.g. ``transfer.contacts.method``).
+        """
+        if not metadata or "transfer" not in metadata:
+            return None
+        m = _mapping(metadata["transfer"], "transfer")
+        contacts = m.get("contacts")
+        planted = m.get("planted", False)
+        return cls(
+            None if contacts is None else ScheduleRecord.from_dict(contacts),
+            None if planted is False else PlantedRecord.from_dict(planted),
+            tuple((k, v) for k, v in m.items() if k not in ("contacts", "planted")),
+            tuple(m),
+        )
+
+    @property
+    def planted_how(self) -> str:
+        """``decoded`` / ``carried`` / ``no`` (:attr:`PlantedRecord.how`), or ``-``
+        (the method does not plant)."""
+        return "-" if self.planted is None else self.planted.how
+
+    def to_metadata(self) -> dict[str, Any]:
+        """``metadata["transfer"]`` as it was read (same keys, order and values)."""
+        parts = dict(self.entries)
+        if self.contacts is not None:
+            parts["contacts"] = self.contacts.to_dict()
+        parts["planted"] = False if self.planted is None else self.planted.to_dict()
+        return {k: parts[k] for k in self.order}

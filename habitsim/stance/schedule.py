@@ -15,6 +15,7 @@ import numpy as np
 from ..errors import HabitsimError
 from ..motion import Motion
 from ..species import FEET, load_species
+from .labels import EditReason, StanceLabels, StanceSource, as_labels
 from .policy import ConformPolicy, resolve_policy
 
 __all__ = ["transfer_contacts", "walking_stance"]
@@ -45,9 +46,9 @@ def _gait_duty(target: str, source: Motion) -> tuple[str, float] | None:
 def transfer_contacts(
     out: Motion,
     source: Motion,
-    decoded: np.ndarray | None = None,
+    decoded: StanceLabels | np.ndarray | None = None,
     policy: ConformPolicy | None = None,
-) -> tuple[np.ndarray, dict[str, Any]]:
+) -> tuple[StanceLabels, dict[str, Any]]:
     """Foot-contact labels of a transferred motion, and how they were found.
 
     In this order:
@@ -71,23 +72,43 @@ def transfer_contacts(
        :func:`habitsim.contacts.contacts_by_duty` instead (the target's duty factor for
        the source's gait) — the last resort, reported.
 
+    Args:
+        out: the transferred motion (T frames).
+        source: the source motion (its ``contacts``: the source's labels, any length).
+        decoded: (T, 4) the network's contact outputs (an array is taken as
+            :attr:`StanceSource.DECODED` labels); None for a method without them.
+        policy: the knobs (None: the defaults).
+
     Returns:
-        ``(labels, info)``: (T, 4) bool labels of ``out`` and ``info["method"]`` (one of
+        ``(labels, info)``: ``out``'s (T, 4) :class:`StanceLabels`, their source
+        ``decoded``, ``source`` (the source's schedule warped to T frames) or
+        ``detected`` and each change recorded (:attr:`EditReason.SHORT_RUN_DROP`,
+        :attr:`EditReason.SOURCE_FOOT`, :attr:`EditReason.DUTY_FOOT`); and ``info``, the
+        JSON-ready ``metadata["transfer"]["contacts"]`` record (read back by
+        :class:`habitsim.stance.report.ScheduleRecord`): ``info["method"]`` (one of
         ``decoded``, ``source``, ``detected``, ``duty``) with the details of that method.
     """
     from ..contacts import contacts_by_duty, contacts_from_feet, drop_short_runs, warp_contacts
     from .labels import stance_f1
 
+    by = "stance.schedule.transfer_contacts"
     policy = resolve_policy(policy)
-    src = None
+    src: StanceLabels | None = None
     if source.contacts is not None:
-        src = drop_short_runs(warp_contacts(np.asarray(source.contacts, bool), out.num_frames), 2)
+        warped = warp_contacts(np.asarray(source.contacts, bool), out.num_frames)
+        src = StanceLabels(warped, StanceSource.SOURCE)
+        src = src.edited(drop_short_runs(warped, 2), by=by, reason=EditReason.SHORT_RUN_DROP)
     if decoded is not None:
-        labels = drop_short_runs(np.asarray(decoded, dtype=bool), 2)
+        raw = as_labels(decoded, StanceSource.DECODED)
+        labels = raw.edited(
+            drop_short_runs(np.array(raw.array, dtype=bool), 2),
+            by=by,
+            reason=EditReason.SHORT_RUN_DROP,
+        )
         info: dict[str, Any] = {"method": "decoded"}
         if src is not None:
-            f1 = stance_f1(labels, src)
-            duty, duty_src = labels.mean(axis=0), src.mean(axis=0)
+            f1 = stance_f1(labels.array, src.array)
+            duty, duty_src = labels.array.mean(axis=0), src.array.mean(axis=0)
             info["source_f1"] = [round(float(v), 3) for v in f1]
             info["duty"] = [round(float(v), 3) for v in duty]
             info["source_duty"] = [round(float(v), 3) for v in duty_src]
@@ -95,7 +116,8 @@ def transfer_contacts(
                 np.abs(duty - duty_src) > policy.max_duty_gap
             )
             if low.any():
-                labels[:, low] = src[:, low]
+                mixed = np.where(low[None, :], src.array, labels.array)
+                labels = labels.edited(mixed, by=by, reason=EditReason.SOURCE_FOOT)
                 info["feet_from_source"] = [n for n, lo in zip(FEET, low, strict=True) if lo]
             return labels, info
     elif src is not None:
@@ -107,18 +129,24 @@ def transfer_contacts(
         return src, info
     feet = out.foot_positions()  # one forward-kinematics pass for both labellings
     leg = out.species_info.leg_length
-    detected = labels if decoded is not None else contacts_from_feet(feet, out.fps, leg)
+    detected = (
+        labels
+        if decoded is not None
+        else StanceLabels(contacts_from_feet(feet, out.fps, leg), StanceSource.DETECTED)
+    )
     why = "the source has no stance labels"
     info = {"method": "decoded" if decoded is not None else "detected", "reason": why}
     gd = _gait_duty(out.species, source)
     if gd is None or out.num_frames < 5:
         return detected, info
     gait, duty = gd
-    low = detected.mean(axis=0) < 0.5 * duty
+    low = detected.array.mean(axis=0) < 0.5 * duty
     if not low.any():
         return detected, info
     by_duty = contacts_by_duty(feet, out.fps, leg, duty)
-    labels = np.where(low[None, :], by_duty, detected)
+    labels = detected.edited(
+        np.where(low[None, :], by_duty, detected.array), by=by, reason=EditReason.DUTY_FOOT
+    )
     info = {
         "method": "duty",
         "reason": why,
@@ -130,8 +158,11 @@ def transfer_contacts(
 
 
 def walking_stance(
-    out: Motion, contacts: np.ndarray, source: Motion, policy: ConformPolicy | None = None
-) -> tuple[np.ndarray, dict[str, Any] | None]:
+    out: Motion,
+    contacts: StanceLabels | np.ndarray,
+    source: Motion,
+    policy: ConformPolicy | None = None,
+) -> tuple[StanceLabels, dict[str, Any] | None]:
     """The stance labels of a transfer to a species that walks at the transfer's speed.
 
     When the transferred motion moves at a Froude number within the target's walking
@@ -145,40 +176,52 @@ def walking_stance(
     touchdowns: a jump, a stand), of a source whose action the target performs in
     another gait than its walk, and of a target species without a walk.
 
+    Args:
+        out: the transferred motion (T frames).
+        contacts: its (T, 4) stance labels (an array is taken as
+            :attr:`StanceSource.GIVEN` labels).
+        source: the source motion (its ``action`` metadata).
+        policy: the knobs (None: the defaults).
+
     Returns:
         ``(labels, info)``: the labels (the input when nothing changed) and None, or the
-        lengthened labels with what was done (``froude``, ``walk_froude_max``,
-        ``duty_before``, ``duty_after``).
+        lengthened labels, the frames added recorded as :attr:`EditReason.WALK_LENGTHEN`
+        and :attr:`EditReason.WALK_SUPPORT` edits, with what was done (``froude``,
+        ``walk_froude_max``, ``duty_before``, ``duty_after``).
     """
     from ..contacts import fill_support, lengthen_stance, touchdown_frames
     from ..gait_stats import gait_statistics
     from ..gaits import action_gait
     from ..gaits.actions import ACTIONS
 
+    by = "stance.schedule.walking_stance"
     policy = resolve_policy(policy)
+    labels = as_labels(contacts)
     walk = load_species(out.species).gaits.get("walk")
-    c = np.asarray(contacts, dtype=bool)
-    if walk is None or c.ndim != 2:
-        return c, None
+    c = labels.array
+    if walk is None:
+        return labels, None
     duty = c.mean(axis=0)
     if duty.min() >= policy.walk_min_duty:
-        return c, None
+        return labels, None
     action = source.metadata.get("action")
     if action in ACTIONS:
         try:
             if action_gait(out.species, str(action)) != "walk":
-                return c, None
+                return labels, None
         except HabitsimError:  # an action the target lacks
-            return c, None
+            return labels, None
     if any(td.size < 2 for td in touchdown_frames(c)):
-        return c, None
+        return labels, None
     froude = gait_statistics(out, c).froude
     if not froude <= walk.froude[1]:
-        return c, None
+        return labels, None
     longer = lengthen_stance(c, policy.walk_min_duty)
+    labels = labels.edited(longer, by=by, reason=EditReason.WALK_LENGTHEN)
     if policy.walk_min_feet:
         longer = fill_support(longer, policy.walk_min_feet)
-    return longer, {
+        labels = labels.edited(longer, by=by, reason=EditReason.WALK_SUPPORT)
+    return labels, {
         "froude": round(float(froude), 3),
         "walk_froude_max": float(walk.froude[1]),
         "duty_before": [round(float(v), 3) for v in duty],
