@@ -63,3 +63,13 @@ UNWRITABLE = [
 def _typed_output_error(exc: BaseException) -> None:
     assert isinstance(exc, OutputPathError), repr(exc)
     assert len(str(exc)) < 600
+
+
+DATA = Path(__file__).parent / "data"
+
+
+DOG = DATA / "dog_mocap_cm_yup.bvh"
+
+
+def _dog_text() -> str:
+    return DOG.read_text()
