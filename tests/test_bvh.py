@@ -2,83 +2,22 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import DOG, _dog_text
 
 from habitsim import species_names
-from habitsim.bvh import BVHData, parse_bvh, read_bvh, write_bvh
+from habitsim.bvh import parse_bvh, read_bvh, write_bvh
 from habitsim.bvh_mapping import (
-    auto_map,
-    detect_frame,
     import_bvh,
-    load_joint_map,
-    name_cues,
 )
 from habitsim.cli import main
-from habitsim.errors import BVHParseError, HabitsimError, SkeletonMappingError
+from habitsim.errors import BVHParseError, HabitsimError
 from habitsim.motion import Motion
 from habitsim.rotations import quat_angle, quat_from_axis_angle, quat_normalize, quat_to_euler
-from habitsim.skeleton import JOINT_NAMES, get_skeleton
-from habitsim.species import load_species
-
-DATA = Path(__file__).parent / "data"
-DOG = DATA / "dog_mocap_cm_yup.bvh"
-
-EXPECTED_DOG_MAP = {
-    "pelvis": "Hips",
-    "spine1": "Spine",
-    "spine2": None,
-    "spine3": "Spine1",
-    "neck": "Neck",
-    "head": "Head",
-    "snout": "Head_End",
-    "tail1": "Tail",
-    "tail2": "Tail1",
-    "tail3": "Tail1_End",
-    "lf_scapula": "LeftShoulder",
-    "lf_shoulder": "LeftArm",
-    "lf_elbow": "LeftForeArm",
-    "lf_wrist": "LeftHand",
-    "lf_toe": "LeftHand_End",
-    "rf_scapula": "RightShoulder",
-    "rf_shoulder": "RightArm",
-    "rf_elbow": "RightForeArm",
-    "rf_wrist": "RightHand",
-    "rf_toe": "RightHand_End",
-    "lh_ilium": None,
-    "lh_hip": "LeftUpLeg",
-    "lh_knee": "LeftLeg",
-    "lh_hock": "LeftFoot",
-    "lh_toe": "LeftToeBase",
-    "rh_ilium": None,
-    "rh_hip": "RightUpLeg",
-    "rh_knee": "RightLeg",
-    "rh_hock": "RightFoot",
-    "rh_toe": "RightToeBase",
-}
-
-# (habitsim joint, next mapped habitsim joint along its chain) for bones driven by a
-# non-root joint: their direction must follow the source.
-BONE_PAIRS = [
-    ("spine1", "spine3"),
-    ("spine3", "neck"),
-    ("neck", "head"),
-    ("head", "snout"),
-    ("tail1", "tail2"),
-    ("tail2", "tail3"),
-] + [
-    (f"{s}{limb}_{a}", f"{s}{limb}_{b}")
-    for s in "lr"
-    for limb, segs in (
-        ("f", ("scapula", "shoulder", "elbow", "wrist", "toe")),
-        ("h", ("hip", "knee", "hock", "toe")),
-    )
-    for a, b in zip(segs[:-1], segs[1:], strict=True)
-]
+from habitsim.skeleton import get_skeleton
 
 
 def _two_species() -> list[str]:
@@ -266,10 +205,6 @@ def test_to_text_round_trip():
 # ---------------------------------------------------------------------- reader errors
 
 
-def _dog_text() -> str:
-    return DOG.read_text()
-
-
 @pytest.mark.parametrize(
     "mutate, fragment",
     [
@@ -341,234 +276,6 @@ def test_missing_file():
 
 
 # ---------------------------------------------------------------------- mapping
-
-
-def test_name_cues():
-    assert name_cues("LeftUpLeg") == ("l", "upleg")
-    assert name_cues("RightForeArm") == ("r", "forearm")
-    assert name_cues("L_Thigh") == ("l", "thigh")
-    assert name_cues("hand.R") == ("r", "hand")
-    assert name_cues("Bip01_L_Foot") == ("l", "bip01foot")
-    assert name_cues("LHand") == ("l", "hand")
-    assert name_cues("Spine1") == (None, "spine1")
-    assert name_cues("LowerLeg")[0] is None
-
-
-def test_auto_mapping_of_dog_mocap_joint_by_joint():
-    d = read_bvh(DOG)
-    m = auto_map(d)
-    assert set(m) == set(JOINT_NAMES)
-    for k, v in EXPECTED_DOG_MAP.items():
-        assert m[k] == v, f"{k}: {m[k]} != {v}"
-
-
-def test_units_and_axes_detection_with_hand_fk():
-    d = read_bvh(DOG)
-    fr = detect_frame(d, auto_map(d), species="dog")
-    assert (fr.units, fr.scale, fr.up, fr.forward, fr.left) == ("cm", 0.01, "+y", "+z", "+x")
-    pos = fr.apply(d.fk())  # habitsim frame, metres
-    # Frame 0: no rotations, Hips at (0, 54, 0) cm. By hand (file x, y, z in cm):
-    # LeftHand_End = Hips + Spine(0,2,15) + Spine1(0,0,20) + LeftShoulder(6,-2,2)
-    #   + LeftArm(0,-15,-3) + LeftForeArm(0,-18,2) + LeftHand(0,-18,0) + End(0,-3,3) = (6, 0, 39)
-    # -> habitsim (forward = file z, left = file x, up = file y) = (0.39, 0.06, 0.0) m.
-    np.testing.assert_allclose(pos[0, d.index("LeftHand_End")], [0.39, 0.06, 0.0], atol=1e-12)
-    # Head_End = (0,54,0)+(0,2,15)+(0,0,20)+(0,5,10)+(0,12,8)+(0,-3,18) = (0, 70, 71)
-    np.testing.assert_allclose(pos[0, d.index("Head_End")], [0.71, 0.0, 0.70], atol=1e-12)
-    # RightToeBase = (0,54,0)+(-7,-4,-3)+(0,-20,4)+(0,-20,-6)+(0,-10,2) = (-7, 0, -3)
-    np.testing.assert_allclose(pos[0, d.index("RightToeBase")], [-0.03, -0.07, 0.0], atol=1e-12)
-    # Frame 1 root position channels (1.5, 54 + 0.5 sin 1, 8) cm
-    np.testing.assert_allclose(pos[1, 0], [0.08, 0.015, 0.54 + 0.005 * math.sin(1)], atol=1e-6)
-
-
-def test_explicit_units_and_up_override():
-    d = read_bvh(DOG)
-    fr = detect_frame(d, auto_map(d), units="m", up="y")
-    assert fr.scale == 1.0 and fr.up == "+y"
-    with pytest.raises(SkeletonMappingError, match="unknown units"):
-        detect_frame(d, auto_map(d), units="furlong")
-    with pytest.raises(SkeletonMappingError, match="unknown up axis"):
-        detect_frame(d, auto_map(d), up="w")
-
-
-def _to_zup_metres(d: BVHData) -> BVHData:
-    """The same clip re-expressed z-up in metres: p' = (x, -z, y) / 100 (a +90 deg turn about x).
-
-    Under that change of basis a rotation about x stays about x, about y becomes about z and
-    about z becomes about -y, so channels are relabelled (order kept) and Z angles negated.
-    """
-    relabel = {
-        "Xrotation": "Xrotation",
-        "Yrotation": "Zrotation",
-        "Zrotation": "Yrotation",
-        "Xposition": "Xposition",
-        "Yposition": "Zposition",
-        "Zposition": "Yposition",
-    }
-    off = np.stack([d.offsets[:, 0], -d.offsets[:, 2], d.offsets[:, 1]], axis=1) / 100.0
-    frames = d.frames.copy()
-    starts = d.channel_start
-    chans = []
-    for j, ch in enumerate(d.channels):
-        chans.append(tuple(relabel[c] for c in ch))
-        for k, c in enumerate(ch):
-            col = starts[j] + k
-            if c == "Zrotation":
-                frames[:, col] = -d.frames[:, col]
-            elif c == "Zposition":
-                frames[:, col] = -d.frames[:, col] / 100.0
-            elif c.endswith("position"):
-                frames[:, col] = d.frames[:, col] / 100.0
-    return dataclasses.replace(d, offsets=off, channels=tuple(chans), frames=frames)
-
-
-def test_zup_metres_file_gives_the_same_motion(tmp_path):
-    d = read_bvh(DOG)
-    z = _to_zup_metres(d)
-    p = tmp_path / "dog_zup_m.bvh"
-    p.write_text(z.to_text())
-    # sanity: the conversion really is the same physical motion
-    np.testing.assert_allclose(
-        read_bvh(p).fk()[:, :, [0, 2, 1]] * [1, 1, -1] * 100, d.fk(), atol=1e-5
-    )
-    m_y, map_y = import_bvh(DOG, "dog")
-    m_z, map_z = import_bvh(p, "dog")
-    assert (map_z.frame.units, map_z.frame.up, map_z.frame.forward) == ("m", "+z", "-y")
-    assert map_z.mapped() == map_y.mapped()
-    np.testing.assert_allclose(m_z.global_positions(), m_y.global_positions(), atol=1e-6)
-
-
-def test_retargeted_bone_directions_match_source():
-    # Without planting the legs keep the source's bone directions (the first stage).
-    d = read_bvh(DOG)
-    motion, mapping = import_bvh(DOG, "dog", plant=False)
-    src = mapping.frame.apply(d.fk())
-    dst = motion.global_positions()
-    idx = {n: i for i, n in enumerate(JOINT_NAMES)}
-    for f in range(motion.num_frames):
-        for a, b in BONE_PAIRS:
-            vs = src[f, d.index(mapping.joints[b])] - src[f, d.index(mapping.joints[a])]
-            vd = dst[f, idx[b]] - dst[f, idx[a]]
-            cos = vs @ vd / np.linalg.norm(vs) / np.linalg.norm(vd)
-            assert cos > 0.999, (f, a, b, cos)
-    # pelvis heading follows hips -> chest (Spine1) projected: first frame faces +x
-    from habitsim.rotations import quat_to_matrix
-
-    x_axis = quat_to_matrix(motion.rotations[:, 0])[:, :, 0]
-    chest = src[:, d.index("Spine1")] - src[:, d.index("Hips")]
-    chest /= np.linalg.norm(chest, axis=1, keepdims=True)
-    assert np.all(np.sum(x_axis * chest, axis=1) > 0.999)
-    # root translation: horizontal displacement = source displacement x root_scale
-    k = mapping.root_scale
-    sp = load_species("dog")
-    assert 0.7 * sp.hip_height / 0.5 < k < 1.3 * sp.hip_height / 0.5  # source hip height ~0.5 m
-    np.testing.assert_allclose(
-        motion.root_positions[1:, :2] - motion.root_positions[0, :2],
-        k * (src[1:, 0, :2] - src[0, 0, :2]),
-        atol=1e-12,
-    )
-    assert motion.fps == 30.0
-    assert motion.metadata["mapping"]["units"] == "cm"
-
-
-def test_unnamed_sides_are_found_by_geometry(tmp_path):
-    # Left -> Port, Right -> Starboard: no side cue in the names; left = +x in this file.
-    text = _dog_text().replace("Left", "Port").replace("Right", "Starboard")
-    p = tmp_path / "port.bvh"
-    p.write_text(text)
-    motion, mapping = import_bvh(p, "dog")
-    expected = {
-        k: (v.replace("Left", "Port").replace("Right", "Starboard") if v else None)
-        for k, v in EXPECTED_DOG_MAP.items()
-    }
-    assert mapping.joints == expected
-    assert any("geometry" in n for n in mapping.notes)
-
-
-def test_unmappable_three_joint_chain():
-    text = """HIERARCHY
-ROOT A
-{
- OFFSET 0 0 0
- CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
- JOINT B
- {
-  OFFSET 0 1 0
-  CHANNELS 3 Zrotation Xrotation Yrotation
-  JOINT C
-  {
-   OFFSET 0 1 0
-   CHANNELS 3 Zrotation Xrotation Yrotation
-   End Site
-   {
-    OFFSET 0 1 0
-   }
-  }
- }
-}
-MOTION
-Frames: 1
-Frame Time: 0.04
-0 0 0 0 0 0 0 0 0 0 0 0
-"""
-    with pytest.raises(
-        SkeletonMappingError, match=r"found 0 left and 0 right leg chains.*need 4 legs"
-    ):
-        import_bvh(parse_bvh(text), "dog")
-
-
-def test_explicit_map_toml(tmp_path):
-    toml = tmp_path / "map.toml"
-    body = "\n".join(f'{k} = "{v}"' for k, v in EXPECTED_DOG_MAP.items() if v)
-    toml.write_text('units = "cm"\nup = "y"\n[map]\n' + body + "\n")
-    spec = load_joint_map(toml)
-    assert spec["units"] == "cm" and spec["map"]["lf_wrist"] == "LeftHand"
-    m_map, mapping = import_bvh(DOG, "dog", joint_map=toml)
-    m_auto, _ = import_bvh(DOG, "dog")
-    assert mapping.method.startswith("map file")
-    np.testing.assert_allclose(m_map.global_positions(), m_auto.global_positions(), atol=1e-12)
-    # a partial map works too: unmapped joints keep the standing pose
-    part, pm = import_bvh(
-        DOG,
-        "dog",
-        joint_map={
-            "pelvis": "Hips",
-            "spine3": "Spine1",
-            "lh_hip": "LeftUpLeg",
-            "lh_toe": "LeftToeBase",
-            "rh_hip": "RightUpLeg",
-            "rh_toe": "RightToeBase",
-        },
-    )
-    stand = get_skeleton("dog").standing_pose()[1]
-    assert (
-        quat_angle(
-            part.rotations[0, JOINT_NAMES.index("lf_elbow")], stand[JOINT_NAMES.index("lf_elbow")]
-        )
-        < 1e-9
-    )
-
-
-@pytest.mark.parametrize(
-    "content, fragment",
-    [
-        (
-            '[map]\npelvis = "Hips"\nfront_paw = "LeftHand"\n',
-            "unknown habitsim joints ['front_paw']; valid: pelvis",
-        ),
-        ('[map]\npelvis = "Hips"\nlf_wrist = "LeftPaw"\n', "source joints ['LeftPaw'] are not in"),
-        ('[map]\nlf_wrist = "LeftHand"\n', "must map pelvis"),
-        ('[map]\npelvis = "Hips"\nspine1 = "Hips"\n', "mapped to both"),
-        ("[map]\npelvis = 3\n", "must be a source joint name"),
-        ('pelvis = "Hips"\n', "unknown keys"),
-        ("[map\n", "cannot read joint-map TOML"),
-    ],
-)
-def test_bad_map_toml(tmp_path, content, fragment):
-    toml = tmp_path / "bad.toml"
-    toml.write_text(content)
-    with pytest.raises(SkeletonMappingError) as ei:
-        import_bvh(DOG, "dog", joint_map=toml)
-    assert fragment in str(ei.value)
 
 
 # ---------------------------------------------------------------------- writer / round trip

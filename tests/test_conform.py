@@ -13,7 +13,7 @@ from habitsim.gaits import generate
 from habitsim.stance.conform import conform
 from habitsim.stance.planting import PlantReport
 from habitsim.stance.policy import ConformPolicy, ConformPolicyError, resolve_policy
-from habitsim.stance.report import ConformReport, PlantOutcome
+from habitsim.stance.report import ConformReport, PlantOutcome, PlantReason
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +86,7 @@ def test_a_policy_switches_the_planting_rungs(walk) -> None:
     out, report = conform(cat, walk, plant=True, policy=strict)
     assert report.planted is not None and not report.planted.kept
     assert report.planted.restep_tried is None and report.levelled is None
-    assert "the decoded feet are kept" in (report.planted.reason or "")
+    assert report.planted.reason_codes[-1] is PlantReason.DECODED_FEET_KEPT
     np.testing.assert_allclose(out.rotations, conform(cat, walk)[0].rotations)
     # one foothold rule: that rule's footholds
     _, centred = conform(cat, walk, plant=True, policy=ConformPolicy(foothold_rules=(True,)))

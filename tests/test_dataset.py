@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import files_under
 
 from habitsim import DatasetError, UnknownSpeciesError, load_species
 from habitsim.cli import main
@@ -25,6 +26,7 @@ from habitsim.dataset import (
     load_manifest,
     plan_clips,
 )
+from habitsim.errors import OutputPathError
 from habitsim.gaits import ACTIONS, LOCOMOTION_ACTIONS, available_actions
 from habitsim.motion import load_motion
 
@@ -458,3 +460,71 @@ def test_cli_synth_other_seed_keeps_existing_manifest(
     assert (out / MANIFEST_NAME).read_text() == before
     assert main([*args, "--seed", "9", "--overwrite"]) == 0
     assert load_manifest(out).seed == 9
+
+
+@pytest.mark.parametrize("value", ['"fast"', "[1]", '{"a": 1}', "true"])
+def test_manifest_non_numeric_measured(tmp_path: Path, small_dataset: Path, value: str) -> None:
+    import json
+    import shutil
+
+    from habitsim.dataset import load_manifest
+    from habitsim.errors import DatasetError
+
+    d = tmp_path / "d"
+    shutil.copytree(small_dataset, d)
+    m = json.loads((d / "manifest.json").read_text())
+    key = next(iter(m["clips"][0]["measured"]))
+    m["clips"][0]["measured"][key] = json.loads(value)
+    (d / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(DatasetError, match="measured"):
+        load_manifest(d)
+
+
+@pytest.mark.parametrize("path", ["a\x00b.npz", "x" * 300 + ".npz", "/abs.npz", "../up.npz"])
+def test_manifest_bad_clip_path(tmp_path: Path, small_dataset: Path, path: str) -> None:
+    import json
+    import shutil
+
+    from habitsim.dataset import load_manifest
+    from habitsim.errors import DatasetError
+
+    d = tmp_path / "d"
+    shutil.copytree(small_dataset, d)
+    m = json.loads((d / "manifest.json").read_text())
+    m["clips"][0]["path"] = path
+    (d / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(DatasetError, match="clip path"):
+        load_manifest(d)
+
+
+def test_build_dataset_fps_bounds(tmp_path: Path) -> None:
+    from habitsim.dataset import build_dataset
+    from habitsim.errors import DatasetError
+
+    for fps in (100000.0, 0.001):
+        with pytest.raises(DatasetError, match="valid"):
+            build_dataset(
+                tmp_path / "d",
+                clips_per_species=1,
+                fps=fps,
+                species=["cat"],
+                workers=1,
+                progress=False,
+            )
+
+
+def test_synth_into_existing_read_only_folder_even_for_root(tmp_path: Path, monkeypatch) -> None:
+    """An existing data set folder that refuses new files (EACCES on create, as a
+    read-only folder or file system answers) is refused before any clip is made."""
+    import tempfile
+
+    from habitsim.dataset import build_dataset
+
+    def denied(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    (tmp_path / "d").mkdir()
+    monkeypatch.setattr(tempfile, "mkstemp", denied)
+    with pytest.raises(OutputPathError, match="Permission denied"):
+        build_dataset(tmp_path / "d", clips_per_species=1, species=["cat"], workers=1)
+    assert files_under(tmp_path) == ["d"]

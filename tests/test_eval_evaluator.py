@@ -9,8 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import UNWRITABLE, _typed_output_error
 
 from habitsim.dataset import build_dataset, iter_clips
+from habitsim.errors import OutputPathError
 from habitsim.evaluation.evaluator import (
     DEFAULT_EVALUATOR_DIR,
     EvaluatorConfig,
@@ -146,3 +148,28 @@ def test_every_public_name_of_the_evaluation_package_resolves() -> None:
         assert getattr(ev_pkg, name) is not None, name
     with pytest.raises(AttributeError):
         ev_pkg.no_such_name  # noqa: B018
+
+
+@pytest.mark.parametrize("unwritable", UNWRITABLE, indirect=True)
+def test_evaluator_unwritable(unwritable: Path, small_dataset: Path) -> None:
+    from habitsim.evaluation.evaluator import load_evaluator, save_evaluator, train_evaluator
+
+    calls = []
+    with pytest.raises(OutputPathError) as ei:  # refused before training
+        train_evaluator(small_dataset, unwritable / "e", progress=False, log=calls.append)
+    _typed_output_error(ei.value)
+    assert calls == []
+    ev = load_evaluator()
+    with pytest.raises(OutputPathError) as ei:
+        save_evaluator(
+            ev.model,
+            unwritable / "e",
+            accuracy={},
+            data_dir=small_dataset,
+            seed=0,
+            clips_per_species=1,
+            wall_time_s=0.0,
+            final_loss=0.0,
+        )
+    _typed_output_error(ei.value)
+    assert not unwritable.exists()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -9,8 +10,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import _typed_output_error
 
 from habitsim.dataset import build_dataset
+from habitsim.errors import OutputPathError
 from habitsim.evaluation.report import ReportError, write_report
 from habitsim.evaluation.runner import EvalConfig, run_benchmark
 
@@ -114,3 +117,38 @@ def test_report_renders_in_headless_chromium(run_dir: Path, tmp_path: Path) -> N
 def test_report_of_a_folder_without_run_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(ReportError, match="not a finished benchmark run"):
         write_report(tmp_path)
+
+
+def test_write_report_unwritable(tmp_path: Path, eval_run: Path) -> None:
+    import shutil
+
+    from habitsim.evaluation.report import write_report
+
+    for case in ("file", "folder_inside"):
+        out = tmp_path / case
+        shutil.copytree(eval_run, out)
+        shutil.rmtree(out / "report_files", ignore_errors=True)
+        if case == "file":
+            (out / "report_files").write_text("x")
+        else:  # an old figure that is a folder cannot be cleared
+            (out / "report_files" / "01_old.png").mkdir(parents=True)
+        with pytest.raises(OutputPathError) as ei:
+            write_report(out)
+        _typed_output_error(ei.value)
+        assert not (out / "report.html").exists()
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="the super-user writes into read-only folders")
+def test_write_report_read_only(tmp_path: Path, eval_run: Path) -> None:
+    import shutil
+
+    from habitsim.evaluation.report import write_report
+
+    out = tmp_path / "run"
+    shutil.copytree(eval_run, out)
+    (out / "report_files").chmod(0o555)
+    try:
+        with pytest.raises(OutputPathError):
+            write_report(out)
+    finally:
+        (out / "report_files").chmod(0o755)

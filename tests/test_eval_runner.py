@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import EVAL_ARGS, run_cli
 
 from habitsim.dataset import build_dataset
 from habitsim.evaluation.methods import (
@@ -328,3 +329,59 @@ def test_cli_clips_per_source_must_be_a_count(tmp_path: Path, capsys) -> None:
         == 2
     )
     assert "--clips-per-source" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "tamper",
+    [
+        "run_list",
+        "run_config_str",
+        "run_deep",
+        "row_list",
+        "row_no_key",
+        "row_wrong_key",
+        "row_deep",
+    ],
+)
+def test_eval_resume_tampered_state(
+    tmp_path: Path, small_dataset: Path, eval_run: Path, capsys, tamper: str
+) -> None:
+    import json
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(eval_run, out)
+    run, rows = out / "run.json", sorted((out / "rows").glob("*.json"))
+    assert rows
+    deep = "[" * 100_000 + "]" * 100_000
+    if tamper == "run_list":
+        run.write_text("[1, 2]")
+    elif tamper == "run_config_str":
+        run.write_text(json.dumps({"config": "x"}))
+    elif tamper == "run_deep":
+        run.write_text(deep)
+    elif tamper == "row_list":
+        rows[0].write_text("[1]")
+    elif tamper == "row_no_key":
+        rows[0].write_text(json.dumps({"status": "ok"}))
+    elif tamper == "row_wrong_key":
+        rows[0].write_text(json.dumps({"key": 5, "status": "ok"}))
+    elif tamper == "row_deep":
+        rows[0].write_text(deep)
+    code, err = run_cli(
+        ["eval", "--data", small_dataset, "--out", out, *EVAL_ARGS, "--resume"], capsys
+    )
+    assert code == 2 and err.startswith("error: ") and len(err) < 600, err
+
+
+def test_eval_tables_when_no_pair_has_features(tmp_path: Path, eval_run: Path) -> None:
+    """Every pair failed (an absurd clip): the tables are still written, features
+    (0, 0), instead of a ValueError from reshape."""
+    from habitsim.evaluation.runner import load_rows, write_tables
+
+    rows = [{k: v for k, v in r.items() if k != "features"} for r in load_rows(eval_run)]
+    for r in rows:
+        r.update(status="error", note="InvalidMotionError: x")
+    write_tables(tmp_path, rows)
+    with np.load(tmp_path / "features.npz") as z:
+        assert z["features"].shape == (0, 0) and z["keys"].shape == (0,)

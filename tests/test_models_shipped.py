@@ -9,18 +9,13 @@ import numpy as np
 import pytest
 
 from habitsim.cli import main
-from habitsim.errors import HabitsimError, UnknownSpeciesError
 from habitsim.gaits import generate
 from habitsim.models import (
-    METHODS,
-    available_methods,
     load_model,
     reconstruction_error,
     shipped_checkpoint,
-    transfer,
 )
 from habitsim.models.checkpoint import MODEL_FILE
-from habitsim.models.errors import MethodNotAvailableError, UnknownMethodError
 from habitsim.models.evaluate import REFERENCE_CLIPS, reference_motions
 from habitsim.motion import load_motion
 
@@ -36,38 +31,6 @@ pytestmark = pytest.mark.usefixtures("torch_one_thread")
 @pytest.fixture(scope="module")
 def trot():
     return generate("horse", "trot", seed=5, duration_s=3.0)
-
-
-def test_method_registry():
-    assert available_methods()[:8] == [
-        "habit",
-        "habit_ema",
-        "no_habit",
-        "habit_only",
-        "text_only",
-        "direct",
-        "direct_relabelled",
-        "ground_truth",
-    ]
-    assert METHODS["direct"].variant is None and METHODS["direct_relabelled"].variant is None
-    assert all(
-        METHODS[v].variant == v and METHODS[v].learned
-        for v in ("habit", "habit_ema", "no_habit", "habit_only", "text_only")
-    )
-    with pytest.raises(UnknownMethodError, match="valid: habit, habit_ema"):
-        transfer(generate("cat", "walk", seed=1, duration_s=1.0), to="dog", method="best")
-
-
-def test_direct_transfer(trot):
-    out = transfer(trot, to="cat", method="direct_relabelled")
-    assert out.species == "cat" and out.num_frames == trot.num_frames
-    np.testing.assert_allclose(out.rotations, trot.rotations)
-    from habitsim.species import load_species
-
-    k = load_species("cat").hip_height / load_species("horse").hip_height
-    np.testing.assert_allclose(out.root_positions, trot.root_positions * k)
-    with pytest.raises(UnknownSpeciesError):
-        transfer(trot, to="unicorn", method="direct_relabelled")
 
 
 @needs_ckpt
@@ -96,58 +59,6 @@ def test_shipped_checkpoint_reproduces_recorded_reconstruction_error():
     res = reconstruction_error(reference_motions())
     assert res["mpjpe_mm"] == pytest.approx(rec["mpjpe_mm"], rel=1e-3, abs=0.05)
     assert res["pct_leg"] == pytest.approx(rec["pct_leg"], rel=1e-3, abs=0.01)
-
-
-@needs_ckpt
-def test_habit_transfer_to_training_and_held_out_species(trot):
-    cat = transfer(trot, to="cat", seed=3)
-    assert cat.species == "cat" and cat.num_frames == trot.num_frames and cat.fps == trot.fps
-    assert cat.contacts is not None and cat.contacts.shape == (trot.num_frames, 4)
-    assert cat.metadata["transfer"]["habit_species"] == "cat"
-    assert cat.metadata["transfer"]["retrieval"] is None
-    again = transfer(trot, to="cat", seed=3)
-    np.testing.assert_array_equal(cat.rotations, again.rotations)  # same seed, same motion
-    tiger = transfer(trot, to="tiger")
-    r = tiger.metadata["transfer"]["retrieval"]
-    assert tiger.species == "tiger" and r["neighbour"] == "cat"
-    assert "tiger" in r["explanation"] and "cat" in r["explanation"]
-    # closer to the cat's own trot (the paired synthetic clip: same action and draws) than
-    # the direct copy, both in posture (root-relative) and in the whole trajectory
-    from habitsim.models.evaluate import clip_mpjpe
-
-    gt = generate("cat", "trot", seed=5, duration_s=3.0)
-    direct = transfer(trot, to="cat", method="direct_relabelled")
-    e_habit, e_direct = clip_mpjpe(cat, gt), clip_mpjpe(direct, gt)
-    assert e_habit["root_relative_mm"] < 0.8 * e_direct["root_relative_mm"]
-    assert e_habit["mpjpe_mm"] < 0.8 * e_direct["mpjpe_mm"]
-    assert abs(cat.root_positions[:, 2].mean() - gt.root_positions[:, 2].mean()) < abs(
-        direct.root_positions[:, 2].mean() - gt.root_positions[:, 2].mean()
-    )
-
-
-@needs_ckpt
-def test_long_and_resampled_motions(trot):
-    long = generate("dog", "walk", seed=9, duration_s=6.0)  # 181 frames: several windows
-    out = transfer(long, to="goat")
-    assert out.num_frames == long.num_frames
-    assert out.metadata["transfer"]["windows"] >= 3
-    assert np.all(np.isfinite(out.global_positions()))
-    from habitsim.models.transfer import _resample
-
-    fast = _resample(trot, 60.0)
-    out60 = transfer(fast, to="cat")
-    assert out60.fps == 60.0 and abs(out60.num_frames - fast.num_frames) <= 1
-
-
-def test_unavailable_ablation_names_the_fix(tmp_path, monkeypatch, trot):
-    monkeypatch.setenv("HABITSIM_MODELS_DIR", str(tmp_path))
-    if shipped_checkpoint("no_habit") is None:
-        with pytest.raises(MethodNotAvailableError, match="--variant no_habit"):
-            transfer(trot, to="cat", method="no_habit")
-    if SHIPPED is not None:
-        with pytest.raises(MethodNotAvailableError, match="'habit' one"):
-            transfer(trot, to="cat", method="no_habit", checkpoint=SHIPPED)
-    assert issubclass(MethodNotAvailableError, HabitsimError)
 
 
 @needs_ckpt
@@ -380,31 +291,3 @@ def test_train_cli_staged_large_and_single_run(tmp_path, capsys, monkeypatch):
     bad = [*base, "--out", str(tmp_path / "bad"), "--set", "model.path_heading=false", *small]
     assert main(bad) == 2
     assert "--single-run" in capsys.readouterr().err and not (tmp_path / "bad").exists()
-
-
-@needs_ckpt
-def test_transfer_reuses_the_seeded_prior_draw_kept_on_the_checkpoint():
-    """The habit latent a transfer draws is the flow prior's draw for its seed and
-    temperature, drawn once and kept on the loaded checkpoint."""
-    import importlib
-
-    import torch
-
-    tr = importlib.import_module("habitsim.models.transfer")
-    ck = tr.load_model()
-    ck.prior_draws.clear()
-    z0 = tr._prior_draw(ck, "cat", None, 1.0)
-    fresh = ck.model.sample_prior("cat", 1, torch.Generator().manual_seed(0), 1.0)
-    torch.testing.assert_close(z0, fresh, rtol=0, atol=0)
-    assert tr._prior_draw(ck, "cat", 0, 1.0) is z0  # seed None draws as seed 0
-    assert not torch.equal(tr._prior_draw(ck, "cat", 1, 1.0), z0)
-    assert not torch.equal(tr._prior_draw(ck, "cat", 0, 0.5), z0)
-    assert not torch.equal(tr._prior_draw(ck, "horse", 0, 1.0), z0)
-    assert len(ck.prior_draws) == 4
-    clip = generate("horse", "trot", seed=7, duration_s=2.0)
-    first = transfer(clip, to="cat", seed=3)
-    again = transfer(clip, to="cat", seed=3)
-    np.testing.assert_array_equal(first.rotations, again.rotations)
-    np.testing.assert_array_equal(first.root_positions, again.root_positions)
-    ck.prior_draws.clear()  # a fresh draw gives the same transfer
-    np.testing.assert_array_equal(transfer(clip, to="cat", seed=3).rotations, first.rotations)

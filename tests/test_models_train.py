@@ -5,20 +5,35 @@ from __future__ import annotations
 import json
 import math
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from helpers import UNWRITABLE, _typed_output_error
 
 from habitsim.dataset import build_dataset
-from habitsim.errors import HabitsimError
+from habitsim.errors import HabitsimError, OutputPathError
 from habitsim.gaits import generate
 from habitsim.models.checkpoint import MODEL_FILE, load_checkpoint, save_checkpoint
 from habitsim.models.config import preset
-from habitsim.models.data import ClipSet, WindowSampler, feature_stats
+from habitsim.models.data import ClipSet, WindowSampler, feature_stats, speed_variant
 from habitsim.models.errors import CheckpointError, TrainingDataError
-from habitsim.models.features import canonical_window, clip_arrays
-from habitsim.models.train import build_untrained, compute_losses, train
+from habitsim.models.features import (
+    C_INDEX,
+    FEAT_DIM,
+    Q_DIM,
+    canonical_window,
+    clip_arrays,
+    window_positions,
+)
+from habitsim.models.train import (
+    _contact_loss,
+    _stance_loss,
+    build_untrained,
+    compute_losses,
+    train,
+)
 from habitsim.species import load_species, species_names
 
 SPECIES = ("cat", "dog", "horse")
@@ -672,3 +687,67 @@ def test_bench_train_plans_every_stage_of_the_large_preset(monkeypatch):
     assert len(seen) == 1 and seen[0].heading_relative and seen[0].path_heading
     assert tp["planned_steps"] == 18000.0
     assert tp["planned_minutes"] == pytest.approx(18000 * tp["s_per_step"] / 60.0)
+
+
+@pytest.mark.parametrize("unwritable", UNWRITABLE, indirect=True)
+def test_save_checkpoint_unwritable(unwritable: Path) -> None:
+    from habitsim.models import shipped_checkpoint
+    from habitsim.models.checkpoint import export_checkpoint, load_checkpoint, save_checkpoint
+
+    src = shipped_checkpoint()
+    ck = load_checkpoint(src)
+    with pytest.raises(OutputPathError) as ei:
+        save_checkpoint(unwritable / "ck", ck.model, ck.config, {"fps": 30.0})
+    _typed_output_error(ei.value)
+    with pytest.raises(OutputPathError) as ei:
+        export_checkpoint(src, unwritable / "shipped")
+    _typed_output_error(ei.value)
+    assert not unwritable.exists()
+
+
+def test_contact_loss_rewards_the_right_logits():
+    x = torch.zeros(1, 6, FEAT_DIM)
+    x[0, :3, C_INDEX:] = 1.0
+    valid = torch.ones(1, 6, dtype=torch.bool)
+    right, wrong = x.clone(), x.clone()
+    right[..., C_INDEX:] = torch.where(x[..., C_INDEX:] > 0.5, 6.0, -6.0)
+    wrong[..., C_INDEX:] = -right[..., C_INDEX:]
+    assert float(_contact_loss(right, x, valid)) < 0.01
+    assert float(_contact_loss(wrong, x, valid)) > 5.0
+    # padded frames do not count
+    assert float(_contact_loss(wrong, x, torch.zeros(1, 6, dtype=torch.bool))) == 0.0
+
+
+def test_stance_loss_measures_sliding_stance_toes():
+    m = generate("dog", "walk", seed=2, duration_s=2.0)
+    x = torch.from_numpy(canonical_window(clip_arrays(m), 0, 48)[0]).double()[None]
+    valid = torch.ones(1, 48, dtype=torch.bool)
+    pos = window_positions(x, ["dog"], 30.0)
+    clean = float(_stance_loss(pos, x, valid, ["dog"], 30.0, 0.05))
+    # a root-velocity bias of b (Froude units) slides every toe at b·√(g·h) / leg per second
+    b = 0.2
+    drift = x.clone()
+    drift[..., Q_DIM] += b
+    slid = float(
+        _stance_loss(window_positions(drift, ["dog"], 30.0), x, valid, ["dog"], 30.0, 0.05)
+    )
+    sp = load_species("dog")
+    v = b * math.sqrt(9.81 * sp.hip_height) / sp.leg_length
+    assert clean < 0.02  # the generator's planted feet rest
+    assert slid == pytest.approx(clean + (v - 0.025), abs=0.03)
+    # no stance frame, no term
+    none = x.clone()
+    none[..., C_INDEX:] = 0.0
+    assert float(_stance_loss(pos, none, valid, ["dog"], 30.0, 0.05)) == 0.0
+
+
+def test_speed_variant_plays_the_clip_faster_with_its_labels():
+    m = generate("horse", "trot", seed=3, duration_s=2.0)
+    fast = speed_variant(m, 1.25)
+    assert fast.fps == m.fps
+    assert fast.num_frames == int(round((m.num_frames - 1) / 1.25)) + 1
+    assert fast.contacts is not None and fast.contacts.shape == (fast.num_frames, 4)
+    assert abs(fast.contacts.mean() - m.contacts.mean()) < 0.05  # same duty factor
+    v0 = np.linalg.norm(np.diff(m.root_positions[:, :2], axis=0), axis=1).mean()
+    v1 = np.linalg.norm(np.diff(fast.root_positions[:, :2], axis=0), axis=1).mean()
+    assert v1 / v0 == pytest.approx(1.25, rel=0.03)

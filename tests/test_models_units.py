@@ -9,15 +9,21 @@ import numpy as np
 import pytest
 import torch
 
+from habitsim.contacts import contacts_from_feet
 from habitsim.gaits import generate
 from habitsim.models.config import Config, ModelConfig, NetConfig, QuantizerConfig, preset
+from habitsim.models.data import ClipSet, feature_stats
 from habitsim.models.errors import ConfigError, TextEncoderError
 from habitsim.models.features import (
+    C_DIM,
+    C_INDEX,
     FEAT_DIM,
+    FEATURE_VERSION,
     Q_DIM,
     batched_fk,
     canonical_window,
     clip_arrays,
+    decoded_contacts,
     features_to_motion,
     species_offsets,
     uncanonicalize,
@@ -29,6 +35,7 @@ from habitsim.models.model import HabitVQVAE
 from habitsim.models.quantizer import EMAQuantizer, code_probabilities, residual_quantize
 from habitsim.models.text import morphology_vector, retrieve_neighbour
 from habitsim.models.vqvae import MotionDecoder, MotionEncoder
+from habitsim.motion import Motion
 from habitsim.skeleton import get_skeleton
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
@@ -495,3 +502,45 @@ def test_config_round_trip_and_errors():
     with pytest.raises(ConfigError, match="expected int"):
         Config.from_dict({"train": {"steps": "10"}})
     assert cfg.replace(**{"train.steps": 7}).train.steps == 7
+
+
+def test_windows_carry_the_clips_stance_labels():
+    m = generate("dog", "trot", seed=4, duration_s=2.0)
+    assert FEATURE_VERSION == 3 and FEAT_DIM == C_INDEX + C_DIM
+    c = clip_arrays(m)
+    np.testing.assert_array_equal(c.contacts.astype(bool), m.contacts)
+    f, valid, _ = canonical_window(c, 5, 32)
+    assert valid.all()
+    np.testing.assert_array_equal(decoded_contacts(f), m.contacts[5:37])
+    # a clip without labels gets the ones detected on its own toes
+    bare = Motion(m.species, m.fps, m.root_positions, m.rotations)
+    det = contacts_from_feet(bare.foot_positions(), m.fps, m.species_info.leg_length)
+    np.testing.assert_array_equal(clip_arrays(bare).contacts.astype(bool), det)
+
+
+def test_feature_stats_leave_the_contact_logits_unscaled():
+    clips = [clip_arrays(generate(s, "walk", seed=1, duration_s=1.5)) for s in ("cat", "horse")]
+    mean, std = feature_stats(ClipSet(clips, [None, None], ["walk", "walk"], 30.0), 16)
+    assert mean.shape == (FEAT_DIM,)
+    np.testing.assert_array_equal(mean[C_INDEX:], 0.0)
+    np.testing.assert_array_equal(std[C_INDEX:], 1.0)
+    assert np.all(std[:C_INDEX] >= 1e-2) and np.any(mean[:Q_DIM] != 0.0)
+
+
+def test_quantizer_dropout_keeps_only_the_first_levels():
+    torch.manual_seed(0)
+    cfg = QuantizerConfig(num_codes=8, code_dim=4, levels=3)
+    levels = [EMAQuantizer(cfg, reset=False) for _ in range(3)]
+    for q in levels:
+        q.eval()
+        with torch.no_grad():
+            q.codebook.copy_(torch.randn(8, 4))
+            q.initialized.fill_(True)
+    f = torch.randn(2, 4, 5)
+    full = residual_quantize(levels, f, sample=False, update=False)
+    part = residual_quantize(levels, f, sample=False, update=False, n_levels=torch.tensor([1, 3]))
+    first = levels[0](f, sample=False, update=False).quantized
+    torch.testing.assert_close(part.quantized[0], first[0])
+    torch.testing.assert_close(part.quantized[1], full.quantized[1])
+    assert not torch.allclose(part.quantized[0], full.quantized[0])
+    torch.testing.assert_close(part.level_indices, full.level_indices)  # every level still ran

@@ -9,6 +9,7 @@ stage A (W = 64) and a tiny 8-frame problem for failures.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import casadi as ca
 import mujoco
@@ -858,3 +859,55 @@ def test_refine_reports_cleaned_labels():
     assert cl["frames_changed"] >= 1 and cl["LF"]["dropped"] >= 1
     assert not res.contacts[blip, 0]
     assert res.report["verdict"]["ok"]
+
+
+def _absurd(species: str, frames: int, fps: float, root_shift=(0.0, 0.0, 0.0), flip=False):
+    from habitsim.motion import Motion
+    from habitsim.skeleton import get_skeleton
+
+    root, rot = get_skeleton(species).standing_pose()
+    rp = np.repeat(root[None], frames, axis=0) + np.asarray(root_shift, float)
+    q = np.repeat(rot[None], frames, axis=0)
+    if flip:
+        q[::2] *= -1.0
+    return Motion(species, fps, rp, q)
+
+
+@pytest.mark.slow
+def test_refine_far_root_summary_prints(tmp_path: Path, capsys) -> None:
+    """A camel 75 km from the origin (3 frames at 240 fps): the report's verdict holds
+    missing figures, which the summary printed with a TypeError."""
+    src = tmp_path / "camel.npz"
+    _absurd("camel", 3, 240.0, (-0.8e5, 0.0, 0.0), flip=True).save(src)
+    code = main(["refine", str(src), "--out", str(tmp_path / "r.npz"), "--max-iter", "3"])
+    captured = capsys.readouterr()
+    assert code in (0, 1, 2), captured.err
+    assert code != 2 or captured.err.startswith("error: ")
+
+
+def test_refine_summary_missing_figures() -> None:
+    from habitsim.cli.refine_cmd import _summary
+
+    rep = {
+        "species": "camel",
+        "frames": 3,
+        "stage": "A",
+        "status": "Solve_Succeeded",
+        "iterations": 3,
+        "solve_time_s": None,
+        "windows": [{}],
+        "max_constraint_violation": None,
+        "checks": {"stance_drift_max_mm": None, "penetration_max_mm": float("nan")},
+        "cost": {"track": None},
+        "metrics_before": {"skate_mm": None, "jerk": 1.0},
+        "metrics_after": {"skate_mm": 2.0, "jerk": float("nan")},
+        "verdict": {
+            "before": {"skate_mm": None, "jerk": 1.0, "penetration_mm": None},
+            "after": {"skate_mm": None, "jerk": None, "penetration_mm": 0.0},
+            "ok": True,
+            "worse": [],
+        },
+        "residual_mg": {"mean": None, "max": 1.0},
+    }
+    text = _summary(rep)
+    assert "skate_mm n/a → n/a" in text and "n/a" in text

@@ -11,7 +11,11 @@ from pathlib import Path
 import pytest
 
 from habitsim.cli import main
-from habitsim.errors import SpeciesFileError, UnknownSpeciesError
+from habitsim.errors import (
+    HabitsimError,
+    SpeciesFileError,
+    UnknownSpeciesError,
+)
 from habitsim.skeleton import standing_leg_angles
 from habitsim.species import (
     POSTURES,
@@ -442,3 +446,42 @@ def test_cli_errors_exit_2(capsys):
     with pytest.raises(SystemExit) as ei:
         main(["species", "frobnicate"])
     assert ei.value.code == 2
+
+
+def _species_toml(tmp_path: Path, old: str, new: str, top: str = "") -> Path:
+    """The dog's species file with ``old`` replaced by ``new`` (every time) and ``top``
+    put first (top-level keys)."""
+    from habitsim.species import load_species
+
+    text = load_species("dog").path.read_text(encoding="utf-8")
+    assert old in text
+    p = tmp_path / "dog.toml"
+    p.write_text(top + "\n" + text.replace(old, new), encoding="utf-8")
+    return p
+
+
+@pytest.mark.parametrize(
+    "old, new, top, match",
+    [
+        ("[posture]", "[xposture]", "posture = 5", "posture must be a table"),
+        ("[gaits.", "[xgaits.", 'gaits = "x"', "gaits must be a table"),
+        ("[segments]", "[xsegments]", "segments = [1, 2]", "segments must be a table"),
+        ("mass_kg = ", "mass_kg = 1e300 # ", "", "within"),
+        ("mass_kg = ", "mass_kg = 100000000000000000000 # ", "", "within"),
+    ],
+    ids=["posture_int", "gaits_str", "segments_list", "mass_huge", "mass_bigint"],
+)
+def test_species_toml_wrong_types(tmp_path: Path, old: str, new: str, top: str, match: str):
+    from habitsim.errors import SpeciesFileError
+    from habitsim.species import load_species_file
+
+    with pytest.raises(SpeciesFileError, match=match):
+        load_species_file(_species_toml(tmp_path, old, new, top))
+
+
+def test_species_cli_bad_file_exit_2(tmp_path: Path, capsys) -> None:
+    from habitsim.species import load_species_file
+
+    p = _species_toml(tmp_path, "[posture]", "[xposture]", "posture = 5")
+    with pytest.raises(HabitsimError):
+        load_species_file(p)

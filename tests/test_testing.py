@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import UNWRITABLE, _typed_output_error
 
+from habitsim.errors import OutputPathError
 from habitsim.gaits import generate
 from habitsim.testing import (
     GoldenMissingError,
@@ -116,3 +119,12 @@ def test_plugin_fixtures_in_a_user_suite(pytester: pytest.Pytester) -> None:
     moved = pytester.runpytest("-q")
     moved.assert_outcomes(passed=2, failed=1)
     moved.stdout.fnmatch_lines(["*frames*MOVED*"])
+
+
+@pytest.mark.parametrize("unwritable", UNWRITABLE, indirect=True)
+def test_write_golden_unwritable(unwritable: Path) -> None:
+    from habitsim.testing import write_golden
+
+    with pytest.raises(OutputPathError) as ei:
+        write_golden(unwritable / "g.json", {"x": 1.0})
+    _typed_output_error(ei.value)

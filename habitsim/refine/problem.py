@@ -1,4 +1,4 @@
-"""Build the refinement NLP of one window — apart from solving it (STYLE.md habit 4).
+"""Build the refinement NLP of one window — apart from solving it.
 
 :func:`build_refinement_problem` returns a :class:`RefinementProblem`: the IPOPT solver
 (a casadi ``nlpsol`` built with ``expand=True``, i.e. a pure SX graph with exact

@@ -17,7 +17,7 @@ import numpy as np
 from ..motion import Motion
 from .labels import EditReason, StanceLabels, as_labels
 from .policy import ConformPolicy, resolve_policy
-from .report import Planting, PlantOutcome, Restep, Trim
+from .report import Planting, PlantOutcome, PlantReason, Restep, Trim
 
 __all__ = ["plant_decoded", "restep", "plant_partly", "trim_to_reach", "swing_lift"]
 
@@ -118,13 +118,16 @@ def plant_decoded(
                 speed_ratio=ratio,
                 reason=f"{missed} with the decoded root path; the body moved as far "
                 f"as its stance legs carry it ({100 * ratio:.0f} % of its decoded speed)",
+                reason_codes=(PlantReason.OUT_OF_REACH, PlantReason.CARRIED),
             )
         why = "not even with the body carried by its stance legs"
+        codes = [PlantReason.OUT_OF_REACH, PlantReason.CARRY_MISSED]
     else:
         why = (
             f"the stance legs carry the body only {100 * ratio:.0f} % of its decoded "
             f"speed (< {100 * policy.plant_min_speed_ratio:.0f} %)"
         )
+        codes = [PlantReason.OUT_OF_REACH, PlantReason.CARRY_TOO_SLOW]
     stepped = restep(out, labels, glob, policy)
     tried: Planting | None = None
     if stepped is not None:
@@ -138,8 +141,10 @@ def plant_decoded(
                 root="decoded",
                 reason=f"{missed}, {why}: the legs step faster "
                 f"(stride {period[0]:.2f} s → {period[1]:.2f} s)",
+                reason_codes=(*codes, PlantReason.RESTEPPED),
             )
         why += ", not even stepping faster"
+        codes.append(PlantReason.RESTEP_MISSED)
     partly = None
     if stepped is not None and policy.partly_on_restep:
         # the quickened labels ask the legs for the shorter sweeps: hold what they reach
@@ -147,6 +152,7 @@ def plant_decoded(
         partly = plant_partly(out, stepped[1].labels, glob, policy.trim_to_reach, policy)
         if partly is not None:
             why += " in every stance run; on the faster steps"
+            codes.append(PlantReason.PARTLY_ON_RESTEP)
     if partly is None:
         partly = plant_partly(out, labels, glob, policy.trim_to_reach, policy)
     if partly is not None:
@@ -167,6 +173,11 @@ def plant_decoded(
             f"feet ({shown['free_runs'][0]} of {shown['free_runs'][1]} runs, "
             f"{100 * shown['free_share']:.0f} % of the stance frames)",
             restep_tried=tried,
+            reason_codes=(
+                *codes,
+                *(() if trimmed is None else (PlantReason.TRIMMED,)),
+                PlantReason.PARTLY,
+            ),
         )
     return out, PlantOutcome(
         False,
@@ -174,6 +185,7 @@ def plant_decoded(
         speed_ratio=ratio,
         reason=f"{missed}, {why}: the decoded feet are kept",
         restep_tried=tried,
+        reason_codes=(*codes, PlantReason.DECODED_FEET_KEPT),
     )
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,7 @@ __all__ = [
     "Trim",
     "Planting",
     "PlantOutcome",
+    "PlantReason",
     "ConformReport",
     "WalkingRecord",
     "ScheduleRecord",
@@ -209,6 +211,32 @@ class Planting:
         return d
 
 
+class PlantReason(StrEnum):
+    """One clause of a :class:`PlantOutcome`'s ``reason``, as a typed code (the text says
+    the same in words, with the figures)."""
+
+    #: the legs do not reach the footholds with the decoded root path
+    OUT_OF_REACH = "out_of_reach"
+    #: kept: the body moved as far as its stance legs carry it
+    CARRIED = "carried"
+    #: the carried body was tried and its legs missed too
+    CARRY_MISSED = "carry_missed"
+    #: the stance legs carry the body too slowly to try it
+    CARRY_TOO_SLOW = "carry_too_slow"
+    #: kept: the legs step faster
+    RESTEPPED = "restepped"
+    #: stepping faster was tried and missed
+    RESTEP_MISSED = "restep_missed"
+    #: the partial planting holds the faster steps' labels
+    PARTLY_ON_RESTEP = "partly_on_restep"
+    #: stance runs were shortened to the legs' reach
+    TRIMMED = "trimmed"
+    #: kept: the stance runs out of reach keep the decoded feet
+    PARTLY = "partly"
+    #: nothing kept: the decoded feet are
+    DECODED_FEET_KEPT = "decoded_feet_kept"
+
+
 @dataclass(frozen=True)
 class PlantOutcome:
     """What the planting ladder (:func:`habitsim.stance.ladder.plant_decoded`) did.
@@ -224,6 +252,8 @@ class PlantOutcome:
         reason: why the first planting was not kept (None: it was).
         restep_tried: the planting on faster steps that missed, when a later fallback
             (or nothing) was kept (None: not tried, or it was kept).
+        reason_codes: the clauses of ``reason`` as typed codes, in its order (empty: the
+            first planting was kept); not written to the metadata.
     """
 
     kept: bool
@@ -232,6 +262,7 @@ class PlantOutcome:
     speed_ratio: float | None = None
     reason: str | None = None
     restep_tried: Planting | None = None
+    reason_codes: tuple[PlantReason, ...] = ()
 
     @property
     def relabelled(self) -> bool:

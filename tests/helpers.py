@@ -1,0 +1,75 @@
+"""Helpers shared by test files: running the command line in this process, listing a folder, the
+unwritable destinations and the small evaluation's arguments."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from habitsim.cli import main
+from habitsim.errors import OutputPathError
+
+
+def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    """Exit code and stderr of ``habitsim ARGV`` run in this process."""
+    code = main([str(a) for a in argv])
+    err = capsys.readouterr().err
+    return code, err
+
+
+def files_under(folder: Path) -> list[str]:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+EXAMPLE_BVH = Path(__file__).parents[1] / "habitsim" / "examples" / "dog_walk.bvh"
+
+
+EVAL_ARGS = [
+    "--methods",
+    "direct",
+    "--refine",
+    "none",
+    "--workers",
+    "1",
+    "--report-pairs",
+    "0",
+    "--no-videos",
+    "--no-report",
+    "--no-progress",
+    "--max-clips",
+    "1",
+    "--split",
+    "train",
+    "--no-track",
+    "--no-dynamic",
+    "--targets",
+    "all",
+]
+
+
+#: The two unwritable destinations of each writer's regression test: a file where a folder
+#: should be, and a read-only folder (skipped for the super-user, who writes there anyway).
+UNWRITABLE = [
+    "file",
+    pytest.param(
+        "read_only",
+        marks=pytest.mark.skipif(os.geteuid() == 0, reason="the super-user writes anywhere"),
+    ),
+]
+
+
+def _typed_output_error(exc: BaseException) -> None:
+    assert isinstance(exc, OutputPathError), repr(exc)
+    assert len(str(exc)) < 600
+
+
+DATA = Path(__file__).parent / "data"
+
+
+DOG = DATA / "dog_mocap_cm_yup.bvh"
+
+
+def _dog_text() -> str:
+    return DOG.read_text()
