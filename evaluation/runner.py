@@ -316,7 +316,7 @@ def run_benchmark(
         if r.get("status") in ("ok", "unavailable"):
             done[r["key"]] = r
     # grouped by target species (stable): a worker keeps only a few built refinement
-    # problems (habitsim.refine.solve.MAX_CACHED_PROBLEMS), one per target and stage
+    # problems (habitsim.refine.cache.MAX_CACHED_PROBLEMS), one per target and stage
     pending = sorted((t for t in tasks if t.key not in done), key=lambda t: t.target)
     if log:
         log(

@@ -26,10 +26,13 @@ from habitsim.refine import (
     RefineInputError,
     RefineOptions,
     SymbolicKinematics,
+    Window,
     inject_artefacts,
     plan_windows,
     refine,
 )
+from habitsim.refine import attempt as A
+from habitsim.refine import cache as C
 from habitsim.refine import problem as P
 from habitsim.refine import solve as S
 from habitsim.stance.labels import EditReason, StanceLabels, StanceSource, runs
@@ -332,7 +335,7 @@ def test_dynamics_lower_root_residual():
 
 # --------------------------------------------------------------------------- windows
 def test_plan_windows_cover_and_share_one_length():
-    assert plan_windows(40, 64, 16) == [S.Window(0, 40, 0, 40)]
+    assert plan_windows(40, 64, 16) == [Window(0, 40, 0, 40)]
     for t in (65, 100, 150, 1000):
         plan = plan_windows(t, 64, 16)
         assert plan[0].start == 0 and plan[-1].stop == t
@@ -355,15 +358,15 @@ def test_clip_lengths_map_to_two_window_lengths():
 
 @pytest.mark.slow
 def test_problem_cache_keeps_the_most_recently_used(monkeypatch):
-    monkeypatch.setattr(S, "MAX_CACHED_PROBLEMS", 2)
-    monkeypatch.setattr(S, "_PROBLEMS", type(S._PROBLEMS)())
+    monkeypatch.setattr(C, "MAX_CACHED_PROBLEMS", 2)
+    monkeypatch.setattr(C, "_PROBLEMS", type(C._PROBLEMS)())
     a = S.get_problem("dog", 4)
     b = S.get_problem("dog", 5)
     assert S.get_problem("dog", 4) is a  # a hit refreshes it
     S.get_problem("dog", 6)  # evicts the least recently used: the 5-frame window
-    assert S.get_problem("dog", 4) is a and len(S._PROBLEMS) == 2
-    built = S._BUILDS
-    assert S.get_problem("dog", 5) is not b and S._BUILDS == built + 1
+    assert S.get_problem("dog", 4) is a and len(C._PROBLEMS) == 2
+    built = C.builds()
+    assert S.get_problem("dog", 5) is not b and C.builds() == built + 1
 
 
 @pytest.mark.slow
@@ -402,7 +405,7 @@ def test_guard_retry_starts_from_the_previous_solution(monkeypatch, dog_trot_100
     """A guard retry (the first result called worse here) warm-starts from the first
     attempt's solution with the exact Hessian and its jerk weights switched on."""
     calls: list[tuple[np.ndarray | None, np.ndarray, list[dict], float]] = []
-    solve_windows, compare = S._solve_windows, S.compare_metrics
+    solve_windows, compare = A._solve_windows, S.compare_metrics
 
     def spy(prep, motion, opts, plan, model_arg, info, x_init=None):
         out = solve_windows(prep, motion, opts, plan, model_arg, info, x_init)
@@ -415,7 +418,7 @@ def test_guard_retry_starts_from_the_previous_solution(monkeypatch, dog_trot_100
         v = compare(a, b)
         return {**v, "worse": ["jerk"], "ok": False} if len(calls) == 1 else v
 
-    monkeypatch.setattr(S, "_solve_windows", spy)
+    monkeypatch.setattr(A, "_solve_windows", spy)
     monkeypatch.setattr(S, "compare_metrics", first_worse)
     clip = dog_trot_100.slice(0, 40)
     res = refine(clip, RefineOptions(guard=1))
@@ -545,6 +548,8 @@ def test_public_names_resolve():
 
     for name in R.__all__:
         assert getattr(R, name) is not None
+    for name in S.__all__:  # the names of refine.solve from before its split
+        assert getattr(S, name) is not None
 
 
 # --------------------------------------------------------------------------- CLI
