@@ -15,7 +15,7 @@ clip through :func:`habitsim.pipeline.run_clip` (transfer → refine → track, 
 labels passed from stage to stage; its refinement check is off here, so the rows measure
 the refinement as it is) and measures:
 
-1. **transfer** with the method (:mod:`habitsim.evaluation.methods`); a method that
+1. **transfer** with the method (:mod:`habitsim.transfer_methods`); a method that
    cannot serve the pair gives a row with ``status = "unavailable"``;
 2. the paper's metrics on the transferred motion: evaluator features (kept for the set
    metrics) and predictions (``habit_correct``: predicted species = target, NaN for a
