@@ -229,6 +229,31 @@ def test_no_benchmark_logic_in_the_cli() -> None:
     assert not bad, "benchmark logic belongs in habitsim.evaluation.bench:\n" + "\n".join(bad)
 
 
+#: Most lines of a module of the library (habitsim/, controllers/, evaluation/,
+#: mjcf_models/): beyond it a module holds more than one concept; split it by concept.
+MODULE_MAX_LINES = 800
+#: Per-module limits below :data:`MODULE_MAX_LINES` (path relative to the repository):
+#: the learning half of a transfer, its stance logic in :mod:`habitsim.stance`.
+MODULE_LIMITS = {"habitsim/models/transfer.py": 700}
+
+
+def test_no_module_over_the_size_limit() -> None:
+    """No module of the library is longer than :data:`MODULE_MAX_LINES` lines (or its own
+    limit in :data:`MODULE_LIMITS`); the failure lists each offender with its count."""
+    bad = []
+    for folder in ("habitsim", *BARE):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            if "__pycache__" in path.parts:
+                continue
+            name = str(path.relative_to(ROOT))
+            limit = MODULE_LIMITS.get(name, MODULE_MAX_LINES)
+            lines = len(path.read_text(encoding="utf-8").splitlines())
+            if lines > limit:
+                bad.append(f"{name}: {lines} lines > {limit}")
+    assert all((ROOT / name).is_file() for name in MODULE_LIMITS), "a limit names no module"
+    assert not bad, "modules over the size limit (split them by concept):\n" + "\n".join(bad)
+
+
 @pytest.mark.parametrize("name", ["servo", "servo+id+stance", "pd"])
 def test_registry_builds_every_kind(name: str) -> None:
     from habitsim.controllers import Controller, make_controller
