@@ -25,12 +25,7 @@ from .problem import (
 )
 from .windows import Window
 
-__all__ = ["RefineAttempt", "SUCCESS_STATUSES", "EXACT_FIRST_EXCESS_RAD"]
-
-#: A window whose input leaves the joint ranges by more than this [rad] starts with the
-#: exact Hessian: clipping such angles puts the initial guess centimetres off its
-#: contact constraints, a start Gauss-Newton does not recover from.
-EXACT_FIRST_EXCESS_RAD = 0.4
+__all__ = ["RefineAttempt", "SUCCESS_STATUSES"]
 #: IPOPT return statuses counted as success.
 SUCCESS_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
@@ -75,7 +70,7 @@ def _solve_windows(
         if opts.settings.hessian == "gauss-newton":
             exact = replace(opts.settings, hessian="exact", max_iter=int(opts.max_iter))
             excess = np.maximum(info.lower - prep.href[sl], prep.href[sl] - info.upper).max()
-            start_exact = excess > EXACT_FIRST_EXCESS_RAD or x_init is not None
+            start_exact = excess > opts.exact_first_excess_rad or x_init is not None
             settings = [exact] if start_exact else [opts.settings, exact]
         for k, st_k in enumerate(settings):
             built = cache.builds()

@@ -8,26 +8,17 @@ from collections import OrderedDict
 import mujoco
 
 from ..errors import InvalidMotionError
-from ..qpos import (
-    species_model,
-)
+from ..qpos import species_model
 from .errors import RefineError
 from .options import RefineOptions
-from .problem import (
-    RefinementProblem,
-    SolverSettings,
-    build_refinement_problem,
-)
+from .problem import RefinementProblem, SolverSettings, build_refinement_problem
 
-__all__ = ["get_problem", "clear_cache", "builds", "MAX_CACHED_PROBLEMS"]
+__all__ = ["ProblemCache", "get_problem", "clear_cache", "builds", "MAX_CACHED_PROBLEMS"]
 
-#: Most built problems kept per process (least recently used dropped first). A built
-#: 100-frame window holds 0.3 (stage A) to 0.8 GB (stage B, exact Hessian) of CasADi
-#: graphs; unbounded, a run over 17 species with both stages grew past 24 GB.
+#: Most built problems the process's cache keeps (least recently used dropped first): a
+#: built 100-frame window holds 0.3 (stage A) to 0.8 GB (stage B, exact Hessian) of
+#: CasADi graphs.
 MAX_CACHED_PROBLEMS = 6
-
-_PROBLEMS: OrderedDict[tuple, RefinementProblem] = OrderedDict()
-_BUILDS = 0  # problems built so far in this process
 
 
 @functools.lru_cache(maxsize=32)
@@ -36,6 +27,65 @@ def _species_model(species: str) -> mujoco.MjModel:
         return species_model(species)
     except InvalidMotionError as e:
         raise RefineError(str(e)) from e
+
+
+class ProblemCache:
+    """Built problems by (species or model, window length, stage, settings), at most
+    ``max_size`` of them, the least recently used dropped first.
+
+    Attributes:
+        max_size: most problems kept.
+        builds: problems built so far by this cache.
+    """
+
+    def __init__(self, max_size: int = MAX_CACHED_PROBLEMS) -> None:
+        if int(max_size) < 1:
+            raise ValueError(f"max_size must be ≥ 1, got {max_size}")
+        self.max_size = int(max_size)
+        self.builds = 0
+        self._problems: OrderedDict[tuple, RefinementProblem] = OrderedDict()
+
+    def __len__(self) -> int:
+        return len(self._problems)
+
+    def get(
+        self,
+        species: str,
+        n_frames: int,
+        dynamics: bool = False,
+        settings: SolverSettings | None = None,
+        model: mujoco.MjModel | None = None,
+    ) -> RefinementProblem:
+        """The problem of a species (or model) and window length: built on the first
+        call, the same object later while it is among the ``max_size`` most recently
+        used. Default settings: those :func:`refine` uses first."""
+        settings = settings or RefineOptions().settings
+        key = (
+            species if model is None else ("model", id(model)),
+            int(n_frames),
+            bool(dynamics),
+            settings,
+        )
+        pr = self._problems.get(key)
+        if pr is None:
+            m = _species_model(species) if model is None else model
+            pr = build_refinement_problem(m, int(n_frames), bool(dynamics), settings)
+            pr._model_ref = m  # keep id(model) alive
+            self._problems[key] = pr
+            self.builds += 1
+            while len(self._problems) > self.max_size:
+                self._problems.popitem(last=False)
+        else:
+            self._problems.move_to_end(key)
+        return pr
+
+    def clear(self) -> None:
+        """Forget every built problem."""
+        self._problems.clear()
+
+
+#: The cache of this process (:func:`get_problem`).
+_CACHE = ProblemCache()
 
 
 def get_problem(
@@ -52,33 +102,14 @@ def get_problem(
     recently used (so process clips grouped by species). Default settings: those
     :func:`refine` uses first (``RefineOptions().settings``).
     """
-    global _BUILDS
-    settings = settings or RefineOptions().settings
-    key = (
-        species if model is None else ("model", id(model)),
-        int(n_frames),
-        bool(dynamics),
-        settings,
-    )
-    pr = _PROBLEMS.get(key)
-    if pr is None:
-        m = _species_model(species) if model is None else model
-        pr = build_refinement_problem(m, int(n_frames), bool(dynamics), settings)
-        pr._model_ref = m  # keep id(model) alive
-        _PROBLEMS[key] = pr
-        _BUILDS += 1
-        while len(_PROBLEMS) > MAX_CACHED_PROBLEMS:
-            _PROBLEMS.popitem(last=False)
-    else:
-        _PROBLEMS.move_to_end(key)
-    return pr
+    return _CACHE.get(species, n_frames, dynamics, settings, model)
 
 
 def clear_cache() -> None:
     """Forget every built problem."""
-    _PROBLEMS.clear()
+    _CACHE.clear()
 
 
 def builds() -> int:
     """The number of problems built so far in this process."""
-    return _BUILDS
+    return _CACHE.builds

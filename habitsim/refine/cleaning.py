@@ -10,6 +10,7 @@ import numpy as np
 from ..motion import Motion
 from ..stance.labels import EditReason, StanceLabels, StanceSource, runs
 from .errors import RefineInputError
+from .options import MAX_TRIM_SHARE, MIN_RUN_S, STANCE_SLIP_PER_LEG
 
 __all__ = [
     "clean_contact_labels",
@@ -19,21 +20,6 @@ __all__ = [
     "MAX_TRIM_SHARE",
     "MIN_RUN_S",
 ]
-
-#: A stance frame whose input toe lies further than this share of leg length
-#: (horizontally) from where the stance run rests is relabelled swing if it is at an end
-#: of the run.
-STANCE_SLIP_PER_LEG = 0.15
-#: Largest share of a stance run the cleaning trims at each of its ends (1: no cap, the
-#: default). Measured on 50 transfers of real 4 s clips (``habitsim bench real``): a cap
-#: of a sixth kept the stance of the sliding decoded feet of habit transfers (refinement
-#: reverted by the tracking check on 3 transfers instead of 7, sim MPJPE 0.136 instead of
-#: 0.149 leg lengths) but planting the slides raised the jerk of four cat transfers, so
-#: the three refinement targets held on 90 % instead of 96 %, and as many habit
-#: transfers survived the window (17 against 18 of 25). The trade-off is an option.
-MAX_TRIM_SHARE = 1.0
-#: Shortest stance run kept and longest swing gap filled [s] (at least 2 resp. 1 frames).
-MIN_RUN_S = 0.04
 
 
 def _resolve_contacts(motion: Motion, contacts: np.ndarray | None) -> StanceLabels:
@@ -104,7 +90,7 @@ def clean_contact_labels(
         min_run_s: shortest stance run kept and longest swing gap filled [s].
         trim: run step 1 (off: only fill and drop).
         max_trim_share: step 1 trims at most this share of a run at each end
-            (:data:`MAX_TRIM_SHARE`; 1 for no cap).
+            (1 for no cap).
 
     Returns:
         The cleaned labels, ``labels`` with the edits of the steps that changed a frame

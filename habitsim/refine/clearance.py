@@ -6,13 +6,9 @@ import numpy as np
 
 from ..physics_constants import CONTACT_HEIGHT_PER_LEG
 from ..stance.labels import runs
-from .options import SWING_CLEARANCE_PER_LEG
+from .options import SWING_CLEARANCE_PER_LEG, SWING_RAMP_S
 
 __all__ = ["swing_clearance", "SWING_RAMP_S"]
-
-#: Time over which a swing foot's minimum height rises from the ground to the clearance
-#: [s] (one frame at 30 fps; four at 120 fps, three of them pinned and rising vertically).
-SWING_RAMP_S = 1.0 / 30.0
 
 
 def swing_clearance(

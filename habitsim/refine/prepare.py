@@ -26,10 +26,6 @@ from .problem import (
     RefinementProblem,
 )
 
-#: Largest ground-alignment shift, a share of leg length: beyond it a clip is not
-#: hovering or sinking but has legs of the wrong length, which alignment cannot fix.
-MAX_ALIGN_PER_LEG = 0.05
-
 
 def _ground_offset(
     targets: np.ndarray, contacts: np.ndarray, fps: float, toe_idx: list[int]
@@ -104,7 +100,14 @@ def _prepare(
     cleaning = None
     if opts.clean_contacts:
         labels = clean_contact_labels(
-            labels_in, targets[:, toe_idx], motion.fps, sp.leg_length, trim=opts.trim_contacts
+            labels_in,
+            targets[:, toe_idx],
+            motion.fps,
+            sp.leg_length,
+            slip_per_leg=opts.stance_slip_per_leg,
+            min_run_s=opts.min_run_s,
+            trim=opts.trim_contacts,
+            max_trim_share=opts.max_trim_share,
         )
         cleaning = cleaning_summary(labels, since=len(labels_in.edits))
         c = labels.array
@@ -113,7 +116,7 @@ def _prepare(
             targets = qpos_joint_positions(model, q)
     offset = np.zeros(len(q))
     if opts.align_ground:
-        lim = MAX_ALIGN_PER_LEG * motion.species_info.leg_length
+        lim = opts.max_align_per_leg * motion.species_info.leg_length
         offset = np.clip(_ground_offset(targets, c, motion.fps, toe_idx), -lim, lim)
     targets = targets.copy()
     targets[..., 2] -= offset[:, None]
@@ -143,7 +146,9 @@ def _prepare(
     if opts.swing_clearance is None:
         clearance, pins = None, c[1:] & c[:-1]
     else:
-        clearance, pins = swing_clearance(c, motion.fps, sp.leg_length, opts.swing_clearance)
+        clearance, pins = swing_clearance(
+            c, motion.fps, sp.leg_length, opts.swing_clearance, opts.swing_ramp_s
+        )
     if opts.plant_start:
         x0[:, :nv] = _planted_start(motion, model, info, q, offset, c, clearance, x0[:, :nv])
     return _Prepared(
@@ -208,13 +213,22 @@ def _preplant(
     labels, cleaning = labels_in, None
     if opts.clean_contacts:
         labels = clean_contact_labels(
-            labels_in, motion.foot_positions(), motion.fps, sp.leg_length, trim=opts.trim_contacts
+            labels_in,
+            motion.foot_positions(),
+            motion.fps,
+            sp.leg_length,
+            slip_per_leg=opts.stance_slip_per_leg,
+            min_run_s=opts.min_run_s,
+            trim=opts.trim_contacts,
+            max_trim_share=opts.max_trim_share,
         )
         cleaning = cleaning_summary(labels, since=len(labels_in.edits))
     c = labels.array
     floor = None
     if opts.swing_clearance is not None:
-        floor = swing_clearance(c, motion.fps, sp.leg_length, opts.swing_clearance)[0]
+        floor = swing_clearance(
+            c, motion.fps, sp.leg_length, opts.swing_clearance, opts.swing_ramp_s
+        )[0]
     planted, _ = plant_motion(motion, c, floor)
     fields_ = {"labels_input": labels_in, "cleaning": cleaning}
     return planted, labels, fields_

@@ -18,7 +18,8 @@ Preparation, in this order:
    jumps there; smoothing across them makes the foot glide over the ground).
 2. **Ground alignment** (``align_ground``): the targets are shifted vertically by a
    smooth per-frame offset, the mean height of the toes the labels put in contact
-   (interpolated through flight phases, moving average over 0.25 s, at most 5 % L). A
+   (interpolated through flight phases, moving average over 0.25 s, at most
+   ``max_align_per_leg`` × L). A
    clip that hovers or sinks as a whole is then tracked at the right height instead of
    being pulled against its stance constraints.
 3. **Initial guess**: the filtered, aligned input with hinges clipped into their ranges
@@ -26,10 +27,10 @@ Preparation, in this order:
    weight shared among the feet in contact and the CoM.
 4. **Contact-label cleaning** (``clean_contacts``, :func:`clean_contact_labels`): stance
    runs are trimmed at their ends where the input's toe has moved more than
-   :data:`STANCE_SLIP_PER_LEG` × L from where it rests (at most :data:`MAX_TRIM_SHARE`
+   ``stance_slip_per_leg`` × L from where it rests (at most ``max_trim_share``
    of a run at each end, uncapped by default), one-frame swing gaps whose two
    stance runs rest at the same place are filled, and stance runs shorter than
-   :data:`MIN_RUN_S` are dropped. Planting a label the input does not follow bends the
+   ``min_run_s`` are dropped. Planting a label the input does not follow bends the
    whole leg for its duration and kinks it at the lift-off. Each step is an edit of
    the :class:`~habitsim.stance.labels.StanceLabels` under its reason code; the report
    lists the changes (``contacts.cleaning``, :func:`cleaning_summary`).
@@ -37,22 +38,22 @@ Preparation, in this order:
    whenever its toe is below :data:`CONTACT_HEIGHT_PER_LEG` × L, labelled or not, so a
    swing foot skimming the ground while it moves reads as skating. Each swing phase
    gets a minimum toe height that rises linearly from the ground at the lift-off (and
-   falls to it at the touch-down) over :data:`SWING_RAMP_S` to ``swing_clearance`` × L
+   falls to it at the touch-down) over ``swing_ramp_s`` to ``swing_clearance`` × L
    (2.5 %: the contact height plus a margin); the swing frames whose minimum is still
    below the contact height are pinned horizontally to the foothold they leave or
    reach. A foot therefore either rests (planted) or rises vertically, or clears the
    contact height while it moves: it never slides where the metric looks.
 
 Each window is solved first with the Gauss-Newton Hessian (at most
-:data:`GAUSS_NEWTON_MAX_ITER` iterations), and if IPOPT fails with it, again from the
+``gauss_newton_max_iter`` iterations), and if IPOPT fails with it, again from the
 same start with the exact Hessian; windows whose input leaves the joint ranges by more
-than :data:`EXACT_FIRST_EXCESS_RAD` start with the exact Hessian.
+than ``exact_first_excess_rad`` start with the exact Hessian.
 
 Failure is never silent: a window on which IPOPT does not report success, or a result
 that fails the MuJoCo check (stance drift or penetration beyond ``verify_tol_mm``),
 raises :class:`~habitsim.refine.errors.RefineConvergenceError` — or, with
 ``fallback=True``, returns the input unchanged with ``success=False`` and the status in
-the report.
+the report. The knobs named here are fields of :class:`RefineOptions`.
 """
 
 from __future__ import annotations
@@ -73,15 +74,19 @@ from .attempt import SUCCESS_STATUSES, RefineAttempt, _solve_checked
 from .cache import _species_model, clear_cache, get_problem
 from .cleaning import (
     CLEANED_BY,
-    MIN_RUN_S,
-    STANCE_SLIP_PER_LEG,
     _resolve_contacts,
     clean_contact_labels,
     cleaning_summary,
 )
-from .clearance import SWING_RAMP_S, swing_clearance
+from .clearance import swing_clearance
 from .errors import RefineConvergenceError, RefineInputError
-from .options import SWING_CLEARANCE_PER_LEG, RefineOptions
+from .options import (
+    MIN_RUN_S,
+    STANCE_SLIP_PER_LEG,
+    SWING_CLEARANCE_PER_LEG,
+    SWING_RAMP_S,
+    RefineOptions,
+)
 from .prepare import _prepare, _preplant
 from .verdict import VERDICT_METRICS, WORSE_TOLERANCE, compare_metrics
 
@@ -105,30 +110,6 @@ __all__ = [
     "CLEANED_BY",
     "swing_clearance",
 ]
-
-#: The weights a guard retry multiplies by :data:`GUARD_FACTOR`; one that is 0 (the jerk
-#: terms by default) is switched on at its :data:`GUARD_START` value instead. The jerk
-#: terms are off in the first solve: they cost 3–5× its time (the Gauss-Newton attempt
-#: needs more iterations than its cap), and most clips come out no jerkier without them.
-#: Three retries (weights 1e-5, 1e-4, 1e-3): on 50 transfers of real 4 s clips
-#: (``habitsim bench real``) two transfers were still jerkier than their input after two
-#: retries (dog_back_001 to the camel, habit: 317 → 393 m/s³; to the cat, direct: 165 →
-#: 189) and came out smoother after the third (262 and 142). A retry starts from the
-#: previous attempt's solution (it already meets every constraint; only the weights
-#: changed) with the exact Hessian: with the jerk terms on, the Gauss-Newton attempt
-#: runs into its iteration cap before the exact one starts. On the direct transfers of
-#: five real 4 s windows to the tiger the retries took 24–36 IPOPT iterations instead of
-#: 40–80 (refinement 2.1–7.3 s instead of 5.0–11.3 s) and reached the same solutions
-#: (equal jerk); to the cat, whose retries start exact anyway, the iterations fell from
-#: 33–42 to 22–37.
-GUARD_WEIGHTS = ("w_smooth", "w_jerk", "w_hinge_jerk")
-GUARD_FACTOR = 10.0
-GUARD_START = {"w_smooth": 1e-5, "w_jerk": 1e-5, "w_hinge_jerk": 1e-5}
-
-
-def _escalate(name: str, value: float) -> float:
-    """A guard retry's weight: × GUARD_FACTOR, or the GUARD_START value if it was 0."""
-    return value * GUARD_FACTOR if value > 0 else GUARD_START[name]
 
 
 @dataclass(frozen=True)
@@ -262,8 +243,7 @@ def refine(
             }
         )
         previous = (attempt, verdict, opts)
-        escalated: dict[str, Any] = {k: _escalate(k, getattr(opts, k)) for k in GUARD_WEIGHTS}
-        opts = replace(opts, **escalated)
+        opts = opts.escalated()
         prep.glob.update(opts.weights)
     status, failure, checks = attempt.status, attempt.failure, attempt.checks
     qpos, out = attempt.qpos, attempt.motion
