@@ -43,21 +43,23 @@ from __future__ import annotations
 from .clip import CLIP_VERSION as CLIP_VERSION
 from .clip import RobotClip, load_robot_clip, track_clip
 from .errors import RetargetError
-from .ik import MAX_IK_STEP as MAX_IK_STEP
 from .ik import leg_ik
-from .legs import CROUCH_BEND as CROUCH_BEND
-from .legs import CROUCH_HEIGHT as CROUCH_HEIGHT
-from .legs import HINGE_SPAN as HINGE_SPAN
-from .legs import STRAIGHT_REACH as STRAIGHT_REACH
 from .legs import _knee_joints as _knee_joints
 from .legs import find_robot_feet, leg_extension, robot_legs
-from .mapping import LOWER_PASSES as LOWER_PASSES
 from .mapping import retarget
+from .options import CROUCH_BEND as CROUCH_BEND
+from .options import CROUCH_HEIGHT as CROUCH_HEIGHT
+from .options import HINGE_SPAN as HINGE_SPAN
+from .options import LOWER_PASSES as LOWER_PASSES
+from .options import MAX_IK_STEP as MAX_IK_STEP
+from .options import STRAIGHT_REACH as STRAIGHT_REACH
+from .options import RetargetOptions
 from .references import stand, trot
 from .robot import RobotLegs, drawable, load_robot
 
 __all__ = [
     "RetargetError",
+    "RetargetOptions",
     "RobotLegs",
     "RobotClip",
     "robot_legs",

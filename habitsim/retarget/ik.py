@@ -8,12 +8,10 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from .options import RetargetOptions
 from .robot import RobotLegs
 
-__all__ = ["leg_ik", "MAX_IK_STEP"]
-
-#: Largest change of one joint in one damped-least-squares step of the leg IK [rad].
-MAX_IK_STEP = 0.3
+__all__ = ["leg_ik"]
 
 
 def leg_ik(
@@ -25,12 +23,13 @@ def leg_ik(
     tolerance: float = 1e-5,
     damping: float | None = None,
     data: mujoco.MjData | None = None,
+    options: RetargetOptions | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Leg joint angles putting each foot point at its target, trunk as in ``qpos``.
 
     Damped least squares per leg on the leg's own joints,
     ``Δq = Jᵀ (J Jᵀ + λ² I)⁻¹ (p* − p)`` with ``J`` the foot point's translational
-    Jacobian (``mujoco.mj_jac``), each step scaled to at most :data:`MAX_IK_STEP` per
+    Jacobian (``mujoco.mj_jac``), each step scaled to at most ``options.max_ik_step`` per
     joint and clipped into the leg's bounds (:attr:`RobotLegs.lo` / ``hi``), until every
     foot is within ``tolerance`` [m] or after ``iterations`` steps.
 
@@ -39,12 +38,14 @@ def leg_ik(
         qpos: (nq,) start (trunk pose and initial leg angles).
         targets: (nf, 3) wanted foot points (world) [m].
         damping: λ [m] (default 1 % of the leg length).
+        options: the knobs (default :class:`~habitsim.retarget.options.RetargetOptions`).
 
     Returns:
         (qpos (nq,), residual (nf,) [m] distance of each foot from its target).
     """
     m = robot.model
     d = mujoco.MjData(m) if data is None else data
+    max_step = (options or RetargetOptions()).max_ik_step
     q = np.array(qpos, dtype=float)
     lam2 = (0.01 * robot.leg_length if damping is None else float(damping)) ** 2
     legs = robot.legs
@@ -64,8 +65,8 @@ def leg_ik(
             j = jac[:, robot.dadr[i]]
             step = j.T @ np.linalg.solve(j @ j.T + lam2 * eye, err[i])
             big = float(np.abs(step).max(initial=0.0))
-            if big > MAX_IK_STEP:  # near a singularity DLS steps grow as |err|/λ
-                step *= MAX_IK_STEP / big
+            if big > max_step:  # near a singularity DLS steps grow as |err|/λ
+                step *= max_step / big
             qa = robot.qadr[i]
             q[qa] = np.clip(q[qa] + step, robot.lo[i], robot.hi[i])
     d.qpos[:] = q
@@ -75,7 +76,11 @@ def leg_ik(
 
 
 def _solve_frames(
-    robot: RobotLegs, trunk_pos: np.ndarray, trunk_quat: np.ndarray, feet: np.ndarray
+    robot: RobotLegs,
+    trunk_pos: np.ndarray,
+    trunk_quat: np.ndarray,
+    feet: np.ndarray,
+    options: RetargetOptions | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(qpos (T, nq), residual (T, nf)) of trunk poses and foot targets per frame."""
     t = len(trunk_pos)
@@ -88,7 +93,9 @@ def _solve_frames(
     for k in range(t):
         q[a : a + 3] = trunk_pos[k]
         q[a + 3 : a + 7] = trunk_quat[k]
-        q, res[k] = leg_ik(robot, q, feet[k], iterations=60 if k == 0 else 30, data=d)
+        q, res[k] = leg_ik(
+            robot, q, feet[k], iterations=60 if k == 0 else 30, data=d, options=options
+        )
         out[k] = q
     return out, res
 

@@ -14,43 +14,29 @@ import numpy as np
 from ..mjutils import free_body, home_qpos
 from .errors import RetargetError
 from .ik import leg_ik
+from .options import RetargetOptions
 from .robot import RobotLegs, _point_names
 
 __all__ = [
     "robot_legs",
     "leg_extension",
     "find_robot_feet",
-    "STRAIGHT_REACH",
-    "CROUCH_HEIGHT",
-    "CROUCH_BEND",
-    "HINGE_SPAN",
 ]
 
-#: A pose whose legs all but reach their full length (:func:`leg_extension` above this
-#: on any leg) is straight-legged: ANYmal C's ``qpos0`` in
-#: MuJoCo Menagerie (no keyframe). Straight legs are a singular pose for the leg IK (no
-#: joint moves the foot vertically) and for the stance forces, so such a model stands
-#: on a crouched pose instead (:func:`robot_legs`).
-STRAIGHT_REACH = 0.97
-#: Trunk height of the crouched standing pose, share of the straight-legged height.
-CROUCH_HEIGHT = 0.85
-#: Knee bend [rad] that starts the crouch's leg IK off the straight-leg singularity.
-CROUCH_BEND = 0.5
-#: The leg IK keeps every hinge of a leg within half a turn [rad] of its standing angle
-#: (inside the joint's own range): robots that leave their leg joints unlimited
-#: (Menagerie's ANYmal B) or give them ±3π (ANYmal C) otherwise let a foot target out
-#: of reach spin a joint by whole turns (ANYmal B's dog trot: 47.7 rad in one frame).
-HINGE_SPAN = math.pi
 
-
-def robot_legs(model: mujoco.MjModel, feet: Sequence[str], home: str = "home") -> RobotLegs:
+def robot_legs(
+    model: mujoco.MjModel,
+    feet: Sequence[str],
+    home: str = "home",
+    options: RetargetOptions | None = None,
+) -> RobotLegs:
     """The legs of ``model`` ending at ``feet`` (site, geom or body names; a body is its
     foot sphere, :func:`habitsim.mjutils.resolve_feet`).
 
     The standing pose is the keyframe named ``home`` (default ``"home"``; Menagerie's
     ``anymal_c_mjx.xml`` calls it ``"standing"``); without a keyframe ``"home"``, ``qpos0``,
-    crouched when its legs are straight (:data:`STRAIGHT_REACH`): the trunk lowered to
-    :data:`CROUCH_HEIGHT` of its height with the feet kept where they stand, the legs
+    crouched when its legs are straight (``options.straight_reach``): the trunk lowered to
+    ``options.crouch_height`` of its height with the feet kept where they stand, the legs
     solved by :func:`leg_ik` from knees bent so that each foot moves forward (the knees
     point backward, as on most legged robots). :attr:`RobotLegs.home_source` says which.
 
@@ -64,6 +50,7 @@ def robot_legs(model: mujoco.MjModel, feet: Sequence[str], home: str = "home") -
     from ..controllers import ControllerError
     from ..controllers.legs import LegSet
 
+    opts = options or RetargetOptions()
     feet = tuple(str(f) for f in feet)
     if not feet:
         raise RetargetError("no feet given; name the robot's feet, e.g. --feet FL,FR,RL,RR")
@@ -86,23 +73,33 @@ def robot_legs(model: mujoco.MjModel, feet: Sequence[str], home: str = "home") -
     except ControllerError as e:
         raise RetargetError(str(e)) from e
     if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, str(home)) >= 0:
-        return _legs_at(model, feet, legs, home_qpos(model, str(home)), f"keyframe {home!r}")
+        return _legs_at(model, feet, legs, home_qpos(model, str(home)), f"keyframe {home!r}", opts)
     if home != "home":
         keys = [model.key(k).name or f"#{k}" for k in range(model.nkey)]
         raise RetargetError(
             f"the robot has no keyframe {home!r}; its keyframes: {', '.join(keys) or '(none)'}"
         )
-    rl = _legs_at(model, feet, legs, model.qpos0.copy(), "qpos0")
-    if float(leg_extension(rl).max()) <= STRAIGHT_REACH:
+    rl = _legs_at(model, feet, legs, model.qpos0.copy(), "qpos0", opts)
+    if float(leg_extension(rl).max()) <= opts.straight_reach:
         return rl
-    crouched = _crouch(rl)
+    crouched = _crouch(rl, opts)
     return _legs_at(
-        model, feet, legs, crouched, f"qpos0 crouched to {CROUCH_HEIGHT:.0%} of its height"
+        model,
+        feet,
+        legs,
+        crouched,
+        f"qpos0 crouched to {opts.crouch_height:.0%} of its height",
+        opts,
     )
 
 
 def _legs_at(
-    model: mujoco.MjModel, feet: tuple[str, ...], legs: Any, home: np.ndarray, source: str
+    model: mujoco.MjModel,
+    feet: tuple[str, ...],
+    legs: Any,
+    home: np.ndarray,
+    source: str,
+    opts: RetargetOptions,
 ) -> RobotLegs:
     """The :class:`RobotLegs` standing on ``home``."""
     d = mujoco.MjData(model)
@@ -139,27 +136,27 @@ def _legs_at(
         hi=tuple(hi),
         home_source=source,
     )
-    return _bounded(rl)
+    return _bounded(rl, opts)
 
 
-def _bounded(rl: RobotLegs) -> RobotLegs:
-    """``rl`` with the leg IK's bounds: every hinge within :data:`HINGE_SPAN` of its
+def _bounded(rl: RobotLegs, opts: RetargetOptions) -> RobotLegs:
+    """``rl`` with the leg IK's bounds: every hinge within ``opts.hinge_span`` of its
     standing angle, and each knee (the outermost own hinge about the trunk's lateral
     axis) on the side it bends to when standing, up to the straight leg, so that a foot
     target out of reach straightens the leg instead of folding the knee the other way
-    (not for a leg standing straight, :data:`STRAIGHT_REACH`: the crouch bends it first).
+    (not for a leg standing straight, ``opts.straight_reach``: the crouch bends it first).
     """
     m = rl.model
     d, knees = _at_home(rl)
-    straight = _extensions(rl, d, knees) > STRAIGHT_REACH
+    straight = _extensions(rl, d, knees) > opts.straight_reach
     hinge = mujoco.mjtJoint.mjJNT_HINGE
     lo, hi = [], []
     for i in range(len(rl.feet)):
         jid = rl.legs.jmap.joint_ids[rl.legs.own[i]]
         h = rl.home[rl.qadr[i]]
         turn = m.jnt_type[jid] == hinge
-        a = np.where(turn, np.maximum(rl.lo[i], h - HINGE_SPAN), rl.lo[i])
-        b = np.where(turn, np.minimum(rl.hi[i], h + HINGE_SPAN), rl.hi[i])
+        a = np.where(turn, np.maximum(rl.lo[i], h - opts.hinge_span), rl.lo[i])
+        b = np.where(turn, np.minimum(rl.hi[i], h + opts.hinge_span), rl.hi[i])
         hk = knees[i]
         if hk is not None and not straight[i]:
             k = int(np.flatnonzero(jid == hk[1])[0])
@@ -251,7 +248,7 @@ def _extensions(rl: RobotLegs, d: mujoco.MjData, knees: list) -> np.ndarray:
     return out
 
 
-def _crouch(rl: RobotLegs) -> np.ndarray:
+def _crouch(rl: RobotLegs, opts: RetargetOptions) -> np.ndarray:
     """A standing pose off the straight-leg singularity (see :func:`robot_legs`)."""
     m = rl.model
     d = mujoco.MjData(m)
@@ -268,15 +265,15 @@ def _crouch(rl: RobotLegs) -> np.ndarray:
         best, ahead = q[adr], -np.inf
         for sign in (1.0, -1.0):
             trial = q.copy()
-            trial[adr] = np.clip(q[adr] + sign * CROUCH_BEND, rl.lo[i][k], rl.hi[i][k])
+            trial[adr] = np.clip(q[adr] + sign * opts.crouch_bend, rl.lo[i][k], rl.hi[i][k])
             d.qpos[:] = trial
             mujoco.mj_kinematics(m, d)
             x = float((rl.legs.positions(d)[i] - d.xpos[rl.legs.trunk]) @ rot[:, 0])
             if x > ahead:
                 best, ahead = trial[adr], x
         q[adr] = best
-    q[rl.trunk_qadr + 2] -= (1.0 - CROUCH_HEIGHT) * rl.height
-    q, res = leg_ik(rl, q, feet, iterations=300, data=d)
+    q[rl.trunk_qadr + 2] -= (1.0 - opts.crouch_height) * rl.height
+    q, res = leg_ik(rl, q, feet, iterations=300, data=d, options=opts)
     if float(res.max()) > 0.01 * rl.leg_length:
         raise RetargetError(
             f"the robot has no 'home' keyframe and its qpos0 stands on straight legs; "

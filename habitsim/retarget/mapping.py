@@ -15,14 +15,11 @@ from ..stance.planting import carriage_drop
 from .clip import RobotClip
 from .errors import RetargetError
 from .ik import _fit_figures, _solve_frames
-from .legs import STRAIGHT_REACH, _at_home, _extensions, _need_feet, robot_legs
+from .legs import _at_home, _extensions, _need_feet, robot_legs
+from .options import RetargetOptions
 from .robot import RobotLegs
 
-__all__ = ["retarget", "LOWER_PASSES"]
-
-#: Passes of lowering the trunk where a stance leg would be straighter than
-#: :data:`STRAIGHT_REACH` or its foot short of the ground (:func:`retarget`).
-LOWER_PASSES = 4
+__all__ = ["retarget"]
 
 
 def _source_paths(motion: Motion) -> dict[str, np.ndarray]:
@@ -51,6 +48,7 @@ def retarget(
     robot: mujoco.MjModel | RobotLegs,
     feet: Sequence[str] | None = None,
     home: str = "home",
+    options: RetargetOptions | None = None,
 ) -> RobotClip:
     """Map a habitsim motion onto a legged robot (see :mod:`habitsim.retarget`).
 
@@ -61,6 +59,8 @@ def retarget(
             ``["FL", "FR", "RL", "RR"]``); not needed with a :class:`RobotLegs`; ``None``:
             found by :func:`find_robot_feet` (``metadata["feet_found"]`` says so).
         home: the keyframe the robot stands on (:func:`robot_legs`).
+        options: the knobs (default :class:`~habitsim.retarget.options.RetargetOptions`;
+            a given :class:`RobotLegs` keeps the bounds it was built with).
 
     Returns:
         The :class:`RobotClip` at the motion's frame rate; ``metadata`` holds the scale,
@@ -71,10 +71,12 @@ def retarget(
     """
     from ..controllers.plan import matrix_from_rpy, rpy_from_matrix
 
+    opts = options or RetargetOptions()
+
     if isinstance(robot, RobotLegs):
         rl = robot
     else:
-        rl = robot_legs(robot, _need_feet(feet, robot, home), home)
+        rl = robot_legs(robot, _need_feet(feet, robot, home), home, opts)
     if len(rl.feet) != 4:
         raise RetargetError(
             f"a habitsim motion has 4 feet (LF, RF, LH, RH); got "
@@ -120,16 +122,16 @@ def retarget(
             target[a:b, i, :2] = target[mid, i, :2]
             target[a:b, i, 2] = 0.0
     target[:, :, 2] += rl.radius[None, :]  # foot point = sphere centre
-    qpos, res = _solve_frames(rl, trunk, quat, target)
+    qpos, res = _solve_frames(rl, trunk, quat, target, opts)
     drop = np.zeros(t)
-    for _ in range(LOWER_PASSES):
-        short = _stance_shortfall(rl, qpos, target, contacts)
+    for _ in range(int(opts.lower_passes)):
+        short = _stance_shortfall(rl, qpos, target, contacts, opts.straight_reach)
         if float(short.max()) <= 0.002 * rl.leg_length:
             break
         drop += carriage_drop(short, float(motion.fps))
         lowered = trunk.copy()
         lowered[:, 2] -= drop
-        qpos, res = _solve_frames(rl, lowered, quat, target)
+        qpos, res = _solve_frames(rl, lowered, quat, target, opts)
     return RobotClip(
         qpos=qpos,
         fps=float(motion.fps),
@@ -152,10 +154,14 @@ def retarget(
 
 
 def _stance_shortfall(
-    rl: RobotLegs, qpos: np.ndarray, target: np.ndarray, contacts: np.ndarray
+    rl: RobotLegs,
+    qpos: np.ndarray,
+    target: np.ndarray,
+    contacts: np.ndarray,
+    straight_reach: float,
 ) -> np.ndarray:
     """(T,) per frame, the most a stance foot falls short [m]: how far it hangs above its
-    target, or how much its leg is straighter than :data:`STRAIGHT_REACH` (extension
+    target, or how much its leg is straighter than ``straight_reach`` (extension
     beyond it times the leg's hip-to-knee plus knee-to-foot length)."""
     m = rl.model
     d, knees = _at_home(rl)
@@ -173,7 +179,7 @@ def _stance_shortfall(
         d.qpos[:] = q
         mujoco.mj_kinematics(m, d)
         hang = np.array(rl.legs.positions(d))[:, 2] - target[k, :, 2]
-        stretch = (_extensions(rl, d, knees) - STRAIGHT_REACH) * full
+        stretch = (_extensions(rl, d, knees) - straight_reach) * full
         short = np.maximum(np.maximum(hang, 0.0), np.maximum(stretch, 0.0))
         out[k] = float(short[contacts[k]].max())
     return out

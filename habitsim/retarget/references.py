@@ -13,6 +13,7 @@ from .clip import RobotClip
 from .errors import RetargetError
 from .ik import _fit_figures, _solve_frames
 from .legs import _need_feet, robot_legs
+from .options import RetargetOptions
 from .robot import RobotLegs
 
 __all__ = ["trot", "stand"]
@@ -30,6 +31,7 @@ def trot(
     step_height: float | None = None,
     stand_s: float = 0.5,
     ramp_s: float = 1.0,
+    options: RetargetOptions | None = None,
 ) -> RobotClip:
     """A trot reference for a robot: stand, then trot at ``speed`` (0: in place).
 
@@ -46,12 +48,18 @@ def trot(
         period_s: stride period [s] (default ``2.4·sqrt(L/g)``, 0.4 s on a Go1).
         duty: stance share of a stride (> 0.5 keeps a double support at each switch).
         step_height: swing clearance [m] (default 0.25·L).
+        options: the knobs of the legs and the leg IK (default
+            :class:`~habitsim.retarget.options.RetargetOptions`).
 
     Raises:
         RetargetError: not four feet, non-positive durations or rates, duty outside
             (0.5, 1).
     """
-    rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet, robot))
+    rl = (
+        robot
+        if isinstance(robot, RobotLegs)
+        else robot_legs(robot, _need_feet(feet, robot), options=options)
+    )
     if len(rl.feet) != 4:
         raise RetargetError(
             f"a trot needs 4 feet in the order LF, RF, LH, RH; got {', '.join(rl.feet)}"
@@ -111,7 +119,7 @@ def trot(
             target[after, i] = hold
             pos = hold
             lift = land + duty * period
-    qpos, res = _solve_frames(rl, trunk, quat, target)
+    qpos, res = _solve_frames(rl, trunk, quat, target, options)
     return RobotClip(
         qpos=qpos,
         fps=float(fps),
@@ -139,13 +147,18 @@ def stand(
     *,
     duration_s: float = 10.0,
     fps: float = 100.0,
+    options: RetargetOptions | None = None,
 ) -> RobotClip:
     """A standing reference: the ``home`` pose with the feet on the ground, held.
 
     Raises:
         RetargetError: see :func:`robot_legs`; non-positive duration or rate.
     """
-    rl = robot if isinstance(robot, RobotLegs) else robot_legs(robot, _need_feet(feet, robot))
+    rl = (
+        robot
+        if isinstance(robot, RobotLegs)
+        else robot_legs(robot, _need_feet(feet, robot), options=options)
+    )
     for name, v in (("duration_s", duration_s), ("fps", fps)):
         if not (math.isfinite(v) and v > 0):
             raise RetargetError(f"{name} must be > 0, got {v}")

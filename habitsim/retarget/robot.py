@@ -33,7 +33,7 @@ class RobotLegs:
         leg_length: L [m], the trunk origin's height over the foot points at home.
         qadr, dadr, lo, hi: per foot, the qpos / dof addresses of the leg's own joints
             and the leg IK's bounds: the joint ranges, narrowed to half a turn about the
-            standing angle (:data:`HINGE_SPAN`) and, for the knee, to the side it bends
+            standing angle (``RetargetOptions.hinge_span``) and, for the knee, to the side it bends
             to when standing (±inf for an unlimited slide joint).
         home_source: where ``home`` comes from (``keyframe 'home'``, ``qpos0``, or
             ``qpos0`` crouched).
