@@ -7,9 +7,6 @@ layer down, in :mod:`habitsim.metrics`. Modules:
   ``intra_fid``, ``downstream_fid``, ``diversity``, ``one_nna``) and ``mpjpe_mm``.
 * :mod:`habitsim.evaluation.evaluator` — the frozen evaluator network (features and
   species / action heads): :func:`load_evaluator`, :func:`train_evaluator`.
-* :mod:`habitsim.evaluation.methods` — the benchmark's names for the one transfer-method
-  registry, :mod:`habitsim.transfer_methods` (``direct``, ``ground_truth``, the learned
-  methods of :mod:`habitsim.models`).
 * :mod:`habitsim.evaluation.runner` — the benchmark runner (``habitsim eval``):
   :class:`EvalConfig`, :func:`run_benchmark`; its pieces :mod:`~.config`,
   :mod:`~.planning`, :mod:`~.pairs`, :mod:`~.tables`, :mod:`~.summary`.
@@ -19,8 +16,12 @@ layer down, in :mod:`habitsim.metrics`. Modules:
   the columns ``eval`` and ``bench real`` pick (:func:`~habitsim.evaluation.rows.run_row`).
 * :mod:`habitsim.evaluation.bench` — the ``habitsim bench`` benchmarks, one module each.
 
-The names below are imported lazily (the evaluator pulls in torch, the report
-matplotlib), so ``import habitsim.evaluation.distribution`` stays light.
+The transfer methods it compares come from the one registry,
+:mod:`habitsim.transfer_methods` (``direct``, ``ground_truth``, the learned methods of
+:mod:`habitsim.models`); ``register_method``, ``get_method``, ``method_names`` and
+``MethodUnavailable`` are re-exported here from it. The names below are imported
+lazily (the evaluator pulls in torch, the report matplotlib), so
+``import habitsim.evaluation.distribution`` stays light.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-#: public name → defining submodule
+#: public name → defining submodule (or a module's full name)
 _EXPORTS = {
     "fid": "distribution",
     "intra_fid": "distribution",
@@ -44,10 +45,10 @@ _EXPORTS = {
     "EvaluatorError": "evaluator",
     "load_evaluator": "evaluator",
     "train_evaluator": "evaluator",
-    "register_method": "methods",
-    "get_method": "methods",
-    "method_names": "methods",
-    "MethodUnavailable": "methods",
+    "register_method": "habitsim.transfer_methods",
+    "get_method": "habitsim.transfer_methods",
+    "method_names": "habitsim.transfer_methods",
+    "MethodUnavailable": "habitsim.transfer_methods",
     "EvalConfig": "runner",
     "EvalError": "runner",
     "run_benchmark": "runner",
@@ -59,9 +60,13 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
+def _module(where: str) -> str:
+    return where if where.startswith("habitsim.") else f"{__name__}.{where}"
+
+
 def __getattr__(name: str) -> Any:
     if name in _EXPORTS:
-        value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+        value = getattr(importlib.import_module(_module(_EXPORTS[name])), name)
         globals()[name] = value
         return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -54,7 +54,7 @@ class EvalConfig:
     Attributes:
         data: synthetic data set folder.
         out: output folder.
-        methods: method names (:func:`habitsim.evaluation.methods.method_names`).
+        methods: method names (:func:`habitsim.transfer_methods.method_names`).
         refine: ``none``, ``kinematic`` or ``dynamics``.
         controller: tracking controller (:data:`habitsim.controllers.CONTROLLERS`).
         assist: root assistance while tracking.

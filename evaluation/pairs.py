@@ -53,8 +53,7 @@ def evaluate_pair(task: PairTask) -> dict[str, Any]:
     """
     from habitsim.motion import load_motion
     from habitsim.pipeline import run_clip
-
-    from .methods import MethodUnavailable, ground_truth_transfer
+    from habitsim.transfer_methods import MethodUnavailable, ground_truth_transfer
 
     t0 = time.perf_counter()
     c0 = time.process_time()

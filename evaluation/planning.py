@@ -77,7 +77,7 @@ def plan_tasks(cfg: EvalConfig) -> list[PairTask]:
     Raises:
         EvalError: unknown methods, no clips in the split, no targets.
     """
-    from .methods import get_method
+    from habitsim.transfer_methods import get_method
 
     for m in cfg.methods:
         get_method(m)  # raises UnknownMethodError listing the registered ones

@@ -15,7 +15,7 @@ clip through :func:`habitsim.pipeline.run_clip` (transfer → refine → track, 
 labels passed from stage to stage; its refinement check is off here, so the rows measure
 the refinement as it is) and measures:
 
-1. **transfer** with the method (:mod:`habitsim.evaluation.methods`); a method that
+1. **transfer** with the method (:mod:`habitsim.transfer_methods`); a method that
    cannot serve the pair gives a row with ``status = "unavailable"``;
 2. the paper's metrics on the transferred motion: evaluator features (kept for the set
    metrics) and predictions (``habit_correct``: predicted species = target, NaN for a
@@ -316,7 +316,7 @@ def run_benchmark(
         if r.get("status") in ("ok", "unavailable"):
             done[r["key"]] = r
     # grouped by target species (stable): a worker keeps only a few built refinement
-    # problems (habitsim.refine.solve.MAX_CACHED_PROBLEMS), one per target and stage
+    # problems (habitsim.refine.cache.MAX_CACHED_PROBLEMS), one per target and stage
     pending = sorted((t for t in tasks if t.key not in done), key=lambda t: t.target)
     if log:
         log(

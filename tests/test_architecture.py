@@ -125,16 +125,16 @@ def test_one_controller_registry() -> None:
 
 def test_one_method_registry() -> None:
     """One transfer-method registry: the API, the pipeline, the evaluation and the
-    command line take every method name from :data:`habitsim.transfer_methods.METHODS`,
-    and nothing else defines a ``register_method``."""
-    import habitsim.evaluation.methods as E
+    command line take every method name from :data:`habitsim.transfer_methods.METHODS`;
+    no other module defines a ``METHODS`` or a ``register_method``, and none re-exports
+    the registry under a second module name (the benchmark's old
+    ``habitsim.evaluation.methods`` is gone)."""
+    import habitsim.evaluation as E
     import habitsim.transfer_methods as T
     from habitsim.cli import build_parser
     from habitsim.models.config import VARIANTS
 
-    assert E.METHODS is T.METHODS and E.register_method is T.register_method
-    assert E.get_method("direct") is T.METHODS["direct"]
-    assert E.run_method is T.run_method  # the pipeline's _transfer runs it
+    assert E.register_method is T.register_method and E.get_method is T.get_method
     assert "habitsim.transfer_methods" in import_graph()["habitsim.pipeline"]
     assert [n for n, m in T.METHODS.items() if m.learned] == list(VARIANTS)
     transfer_help = next(
@@ -143,17 +143,26 @@ def test_one_method_registry() -> None:
         if hasattr(a, "choices") and a.choices
     ).description
     assert all(f"{name}:" in transfer_help for name in T.METHODS)
-    defined = []
+    assert not (ROOT / "evaluation" / "methods.py").exists()
+    defined, via = [], []
     for path in _python_files():
         tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
         for node in ast.walk(tree):
-            if isinstance(node, ast.FunctionDef) and node.name == "register_method":
+            if isinstance(node, ast.FunctionDef) and node.name in ("register_method", "METHODS"):
                 defined.append(str(path.relative_to(ROOT)))
             if isinstance(node, ast.Assign | ast.AnnAssign):
                 targets = node.targets if isinstance(node, ast.Assign) else [node.target]
-                if any(isinstance(t, ast.Name) and t.id == "register_method" for t in targets):
+                if any(
+                    isinstance(t, ast.Name) and t.id in ("register_method", "METHODS")
+                    for t in targets
+                ):
                     defined.append(str(path.relative_to(ROOT)))
-    assert defined == ["habitsim/transfer_methods.py"], defined
+            if isinstance(node, ast.ImportFrom) and (node.module or "").endswith(
+                "evaluation.methods"
+            ):
+                via.append(str(path.relative_to(ROOT)))
+    assert sorted(set(defined)) == ["habitsim/transfer_methods.py"], defined
+    assert not via, f"import habitsim.transfer_methods directly: {via}"
 
 
 def test_lazy_methods_name_modules_of_the_learning_layer() -> None:
@@ -219,6 +228,31 @@ def test_no_benchmark_logic_in_the_cli() -> None:
         if lines > CLI_BENCH_MAX_LINES:
             bad.append(f"{name}: {lines} lines > {CLI_BENCH_MAX_LINES}")
     assert not bad, "benchmark logic belongs in habitsim.evaluation.bench:\n" + "\n".join(bad)
+
+
+#: Most lines of a module of the library (habitsim/, controllers/, evaluation/,
+#: mjcf_models/): beyond it a module holds more than one concept; split it by concept.
+MODULE_MAX_LINES = 800
+#: Per-module limits below :data:`MODULE_MAX_LINES` (path relative to the repository):
+#: the learning half of a transfer, its stance logic in :mod:`habitsim.stance`.
+MODULE_LIMITS = {"habitsim/models/transfer.py": 700}
+
+
+def test_no_module_over_the_size_limit() -> None:
+    """No module of the library is longer than :data:`MODULE_MAX_LINES` lines (or its own
+    limit in :data:`MODULE_LIMITS`); the failure lists each offender with its count."""
+    bad = []
+    for folder in ("habitsim", *BARE):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            if "__pycache__" in path.parts:
+                continue
+            name = str(path.relative_to(ROOT))
+            limit = MODULE_LIMITS.get(name, MODULE_MAX_LINES)
+            lines = len(path.read_text(encoding="utf-8").splitlines())
+            if lines > limit:
+                bad.append(f"{name}: {lines} lines > {limit}")
+    assert all((ROOT / name).is_file() for name in MODULE_LIMITS), "a limit names no module"
+    assert not bad, "modules over the size limit (split them by concept):\n" + "\n".join(bad)
 
 
 @pytest.mark.parametrize("name", ["servo", "servo+id+stance", "pd"])

@@ -18,8 +18,8 @@ from habitsim.evaluation.distribution import (
     one_nna,
     transfer_mpjpe_mm,
 )
-from habitsim.evaluation.methods import direct_transfer
 from habitsim.metrics.biomech import BIOMECH_KEYS, biomech_metrics
+from habitsim.transfer_methods import direct_transfer
 
 # ---------------------------------------------------------------------------- FID
 

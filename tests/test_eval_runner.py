@@ -17,15 +17,6 @@ import pytest
 from helpers import EVAL_ARGS, run_cli
 
 from habitsim.dataset import build_dataset
-from habitsim.evaluation.methods import (
-    MethodUnavailable,
-    UnknownMethodError,
-    direct_transfer,
-    get_method,
-    ground_truth_transfer,
-    method_names,
-    register_method,
-)
 from habitsim.evaluation.runner import (
     PHYSICAL_COLUMNS,
     TABLE1_COLUMNS,
@@ -35,6 +26,15 @@ from habitsim.evaluation.runner import (
     plan_tasks,
     run_benchmark,
     summarize,
+)
+from habitsim.transfer_methods import (
+    MethodUnavailable,
+    UnknownMethodError,
+    direct_transfer,
+    get_method,
+    ground_truth_transfer,
+    method_names,
+    register_method,
 )
 
 SPECIES = ["cat", "dog", "horse"]

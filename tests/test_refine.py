@@ -27,10 +27,13 @@ from habitsim.refine import (
     RefineInputError,
     RefineOptions,
     SymbolicKinematics,
+    Window,
     inject_artefacts,
     plan_windows,
     refine,
 )
+from habitsim.refine import attempt as A
+from habitsim.refine import cache as C
 from habitsim.refine import problem as P
 from habitsim.refine import solve as S
 from habitsim.stance.labels import EditReason, StanceLabels, StanceSource, runs
@@ -333,7 +336,7 @@ def test_dynamics_lower_root_residual():
 
 # --------------------------------------------------------------------------- windows
 def test_plan_windows_cover_and_share_one_length():
-    assert plan_windows(40, 64, 16) == [S.Window(0, 40, 0, 40)]
+    assert plan_windows(40, 64, 16) == [Window(0, 40, 0, 40)]
     for t in (65, 100, 150, 1000):
         plan = plan_windows(t, 64, 16)
         assert plan[0].start == 0 and plan[-1].stop == t
@@ -354,17 +357,50 @@ def test_clip_lengths_map_to_two_window_lengths():
         RefineOptions(short_window=4)
 
 
+def test_options_hold_the_knobs_of_a_refinement():
+    """The knobs are fields of RefineOptions (no module constant steers a refinement):
+    the guard's escalation, the Gauss-Newton cap and the cleaning's thresholds."""
+    o = RefineOptions()
+    up = o.escalated()
+    assert (up.w_smooth, up.w_jerk, up.w_hinge_jerk) == (1e-4, o.guard_start, o.guard_start)
+    assert up.escalated().w_jerk == o.guard_start * o.guard_factor
+    mine = RefineOptions(guard_weights=("w_reg",), guard_factor=2.0).escalated()
+    assert mine.w_reg == 2 * o.w_reg and mine.w_smooth == o.w_smooth
+    assert RefineOptions(gauss_newton_max_iter=7).settings.max_iter == 7
+    assert RefineOptions(max_iter=5).settings.max_iter == 5
+    for bad in (
+        {"guard_weights": ("smooth",)},
+        {"min_run_s": -0.1},
+        {"swing_ramp_s": float("nan")},
+        {"gauss_newton_max_iter": 0},
+    ):
+        with pytest.raises(RefineInputError):
+            RefineOptions(**bad)
+    # the cleaning's thresholds from the options: a wider slip keeps a sliding stance
+    c = np.zeros((30, 4), bool)
+    c[5:25] = True
+    toes = np.zeros((30, 4, 3))
+    toes[5:8, :, 0] = -0.2  # the first three stance frames 0.2 m behind the rest
+    given = StanceLabels(c, StanceSource.GIVEN)
+    tight = S.clean_contact_labels(given, toes, 30.0, 1.0, slip_per_leg=o.stance_slip_per_leg)
+    loose = S.clean_contact_labels(given, toes, 30.0, 1.0, slip_per_leg=0.3)
+    assert not tight.array[5:8].any() and loose.array[5:8].all()
+
+
 @pytest.mark.slow
-def test_problem_cache_keeps_the_most_recently_used(monkeypatch):
-    monkeypatch.setattr(S, "MAX_CACHED_PROBLEMS", 2)
-    monkeypatch.setattr(S, "_PROBLEMS", type(S._PROBLEMS)())
-    a = S.get_problem("dog", 4)
-    b = S.get_problem("dog", 5)
-    assert S.get_problem("dog", 4) is a  # a hit refreshes it
-    S.get_problem("dog", 6)  # evicts the least recently used: the 5-frame window
-    assert S.get_problem("dog", 4) is a and len(S._PROBLEMS) == 2
-    built = S._BUILDS
-    assert S.get_problem("dog", 5) is not b and S._BUILDS == built + 1
+def test_problem_cache_keeps_the_most_recently_used():
+    cache = C.ProblemCache(max_size=2)
+    a = cache.get("dog", 4)
+    b = cache.get("dog", 5)
+    assert cache.get("dog", 4) is a  # a hit refreshes it
+    cache.get("dog", 6)  # evicts the least recently used: the 5-frame window
+    assert cache.get("dog", 4) is a and len(cache) == 2
+    built = cache.builds
+    assert cache.get("dog", 5) is not b and cache.builds == built + 1
+    # the process's cache behind get_problem counts its builds the same way
+    built = C.builds()
+    S.get_problem("dog", 7)
+    assert C.builds() == built + 1 and S.get_problem("dog", 7) is S.get_problem("dog", 7)
 
 
 @pytest.mark.slow
@@ -403,7 +439,7 @@ def test_guard_retry_starts_from_the_previous_solution(monkeypatch, dog_trot_100
     """A guard retry (the first result called worse here) warm-starts from the first
     attempt's solution with the exact Hessian and its jerk weights switched on."""
     calls: list[tuple[np.ndarray | None, np.ndarray, list[dict], float]] = []
-    solve_windows, compare = S._solve_windows, S.compare_metrics
+    solve_windows, compare = A._solve_windows, S.compare_metrics
 
     def spy(prep, motion, opts, plan, model_arg, info, x_init=None):
         out = solve_windows(prep, motion, opts, plan, model_arg, info, x_init)
@@ -416,7 +452,7 @@ def test_guard_retry_starts_from_the_previous_solution(monkeypatch, dog_trot_100
         v = compare(a, b)
         return {**v, "worse": ["jerk"], "ok": False} if len(calls) == 1 else v
 
-    monkeypatch.setattr(S, "_solve_windows", spy)
+    monkeypatch.setattr(A, "_solve_windows", spy)
     monkeypatch.setattr(S, "compare_metrics", first_worse)
     clip = dog_trot_100.slice(0, 40)
     res = refine(clip, RefineOptions(guard=1))
@@ -424,7 +460,7 @@ def test_guard_retry_starts_from_the_previous_solution(monkeypatch, dog_trot_100
     (x0, first, log0, jerk0), (warm, _, log1, jerk1) = calls
     assert x0 is None and warm is not None
     np.testing.assert_array_equal(warm, first)
-    assert jerk0 == 0.0 and jerk1 == S.GUARD_START["w_jerk"]
+    assert jerk0 == 0.0 and jerk1 == RefineOptions().guard_start
     assert log0[0]["hessian"] == "gauss-newton"
     assert all(e["hessian"] == "exact" and "retry_of" not in e for e in log1)
 
@@ -546,6 +582,8 @@ def test_public_names_resolve():
 
     for name in R.__all__:
         assert getattr(R, name) is not None
+    for name in S.__all__:  # the names of refine.solve from before its split
+        assert getattr(S, name) is not None
 
 
 # --------------------------------------------------------------------------- CLI
@@ -795,9 +833,10 @@ def _clean_by_foot(c, toes, fps, leg, trim=True, share=1.0):
     by foot, all three steps on one column, counting as it goes (reference)."""
     c = c.copy()
     xy = toes[..., :2]
-    tol, t = S.STANCE_SLIP_PER_LEG * leg, len(c)
-    max_gap = max(1, round(S.MIN_RUN_S * fps))
-    min_stance = max(2, round(S.MIN_RUN_S * fps))
+    defaults = RefineOptions()
+    tol, t = defaults.stance_slip_per_leg * leg, len(c)
+    max_gap = max(1, round(defaults.min_run_s * fps))
+    min_stance = max(2, round(defaults.min_run_s * fps))
     changes = {}
     for f in range(c.shape[1]):
         col, n = c[:, f], {"trimmed": 0, "filled": 0, "dropped": 0}

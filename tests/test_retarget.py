@@ -16,9 +16,8 @@ from habitsim.cli import main
 from habitsim.controllers import ControllerError, make_controller
 from habitsim.gaits import generate
 from habitsim.retarget import (
-    HINGE_SPAN,
-    STRAIGHT_REACH,
     RetargetError,
+    RetargetOptions,
     _knee_joints,
     find_robot_feet,
     leg_extension,
@@ -30,6 +29,8 @@ from habitsim.retarget import (
     track_clip,
 )
 
+#: The defaults of the knobs the tests compare against.
+DEFAULTS = RetargetOptions()
 GO1 = Path(__file__).parent / "robots" / "unitree_go1" / "scene.xml"
 FEET = ["FL", "FR", "RL", "RR"]
 
@@ -217,13 +218,11 @@ def test_feet_named_by_their_body_are_the_foot_spheres(anymal, go1):
 def test_a_robot_without_home_keyframe_stands_crouched(anymal, go1):
     """qpos0 of ANYmal C stands on straight legs (a singular pose); the standing pose is
     that stance crouched, feet where they were and on the ground, knees bent."""
-    from habitsim.retarget import CROUCH_HEIGHT, STRAIGHT_REACH, leg_extension
-
     assert anymal.nkey == 0
     rl = robot_legs(anymal, ANYMAL_FEET)
     assert "crouched" in rl.home_source
-    assert np.all(leg_extension(rl, anymal.qpos0) > STRAIGHT_REACH)
-    assert np.all(leg_extension(rl) < STRAIGHT_REACH - 0.05)
+    assert np.all(leg_extension(rl, anymal.qpos0) > DEFAULTS.straight_reach)
+    assert np.all(leg_extension(rl) < DEFAULTS.straight_reach - 0.05)
     d = mujoco.MjData(anymal)
     for q in (anymal.qpos0, rl.home):
         d.qpos[:] = q
@@ -233,7 +232,7 @@ def test_a_robot_without_home_keyframe_stands_crouched(anymal, go1):
             h0 = float(d.xpos[rl.legs.trunk, 2])
     bent = np.array(rl.legs.positions(d))
     np.testing.assert_allclose(bent, straight, atol=1e-4)  # feet kept where they stood
-    assert float(d.xpos[rl.legs.trunk, 2]) < h0 - 0.5 * (1 - CROUCH_HEIGHT) * rl.height
+    assert float(d.xpos[rl.legs.trunk, 2]) < h0 - 0.5 * (1 - DEFAULTS.crouch_height) * rl.height
     # the Go1 keeps its own keyframe
     assert robot_legs(go1, FEET).home_source == "keyframe 'home'"
 
@@ -375,7 +374,7 @@ def test_leg_ik_bounds_keep_knees_bent_their_own_way(anymal, tmp_path):
         mujoco.mj_kinematics(model, d)
         for i, (_, knee) in enumerate(_knee_joints(rl, d)):
             lo, hi, home = rl.lo[i], rl.hi[i], rl.home[rl.qadr[i]]
-            assert np.all(np.isfinite(lo)) and np.all(hi - lo <= 2 * HINGE_SPAN + 1e-9)
+            assert np.all(np.isfinite(lo)) and np.all(hi - lo <= 2 * DEFAULTS.hinge_span + 1e-9)
             assert np.all((lo <= home) & (home <= hi))
             k = int(np.flatnonzero(rl.qadr[i] == model.jnt_qposadr[knee])[0])
             # one bound of the knee is its straight angle: the leg is straightest there
@@ -391,6 +390,28 @@ def test_leg_ik_bounds_keep_knees_bent_their_own_way(anymal, tmp_path):
             v = q2[rl.qadr[i]]
             assert np.all((rl.lo[i] - 1e-9 <= v) & (v <= rl.hi[i] + 1e-9))
         assert np.all(leg_extension(rl, q2) > 0.98)
+
+
+def test_options_reach_the_legs_and_the_ik(anymal, go1):
+    """The knobs come from RetargetOptions: a narrower hinge span narrows the IK's
+    bounds, a lower crouch lowers the standing pose, a smaller IK step moves a joint
+    less per iteration; bad knobs are typed errors."""
+    narrow = RetargetOptions(hinge_span=0.5)
+    wide, rn = robot_legs(go1, FEET), robot_legs(go1, FEET, options=narrow)
+    for i in range(4):
+        home = rn.home[rn.qadr[i]]
+        assert np.all(rn.hi[i] - rn.lo[i] <= 2 * 0.5 + 1e-9) and np.all(rn.lo[i] <= home)
+        assert np.all(rn.hi[i] - rn.lo[i] <= wide.hi[i] - wide.lo[i] + 1e-12)
+    rl = robot_legs(anymal, ANYMAL_FEET)
+    low = robot_legs(anymal, ANYMAL_FEET, options=RetargetOptions(crouch_height=0.75))
+    assert "75%" in low.home_source and low.height < rl.height
+    g = robot_legs(go1, FEET)
+    far = g.nominal + np.array([0.0, 0.0, -1.0])  # out of reach: every step is capped
+    q1, _ = leg_ik(g, g.home, far, iterations=1, options=RetargetOptions(max_ik_step=0.01))
+    assert np.abs(q1 - g.home).max() <= 0.01 + 1e-12
+    for bad in ({"straight_reach": 1.5}, {"max_ik_step": 0.0}, {"lower_passes": -1}):
+        with pytest.raises(RetargetError):
+            RetargetOptions(**bad)
 
 
 def _with(q, adr, v):
@@ -470,7 +491,7 @@ def test_cli_finds_the_feet_without_feet(walk, tmp_path, capsys):
 @pytest.mark.slow
 def test_trunk_is_lowered_where_stance_legs_would_be_straight(anymal, go1, walk):
     """The dog trot's stance legs, scaled to ANYmal C, would stand straighter than
-    STRAIGHT_REACH (singular for the IK and the stance forces): the trunk is lowered
+    ``straight_reach`` (singular for the IK and the stance forces): the trunk is lowered
     there, smoothly, until every stance leg is bent at least that much; the Go1's walk
     needs no lowering."""
     trot = generate("dog", "trot", seed=7, duration_s=3.0)
@@ -479,5 +500,5 @@ def test_trunk_is_lowered_where_stance_legs_would_be_straight(anymal, go1, walk)
     assert clip.metadata["trunk_lowered_max_m"] > 0.002 * rl.leg_length
     for k in np.flatnonzero(clip.contacts.any(axis=1)):
         ext = leg_extension(rl, clip.qpos[k])[clip.contacts[k]]
-        assert ext.max() <= STRAIGHT_REACH + 0.002, (k, ext)
+        assert ext.max() <= DEFAULTS.straight_reach + 0.002, (k, ext)
     assert retarget(walk, go1, FEET).metadata["trunk_lowered_max_m"] == 0.0

@@ -125,7 +125,7 @@ class RealOptions:
     Attributes:
         data: folder of source clips.
         targets: target species.
-        methods: transfer methods (:func:`habitsim.evaluation.methods.method_names`).
+        methods: transfer methods (:func:`habitsim.transfer_methods.method_names`).
         species: skeleton the clips are imported onto.
         joint_map, units, up: the importer's options for every clip
             (:func:`habitsim.bvh_mapping.import_bvh`; None: its defaults).
@@ -273,8 +273,7 @@ def run_window(task: WindowTask) -> list[RealRow]:
     """
     from habitsim.gait_stats import peak_froude
     from habitsim.pipeline import run_clip, stance_toe_height, track_reference
-
-    from ..methods import MethodUnavailable
+    from habitsim.transfer_methods import MethodUnavailable
 
     src = task.motion
     f1 = _import_f1(src)
@@ -370,8 +369,7 @@ def plan(options: RealOptions) -> RealPlan:
     from habitsim.pipeline import refine_mode
     from habitsim.sim import SimulationError
     from habitsim.species import load_species
-
-    from ..methods import get_method
+    from habitsim.transfer_methods import get_method
 
     o = options
     if not (math.isfinite(o.seconds) and o.seconds > 0):

@@ -11,7 +11,13 @@ centroidal dynamics. See :func:`refine` and, for the pieces:
   :mod:`~habitsim.refine.model_facts`, :mod:`~habitsim.refine.expressions` and
   :mod:`~habitsim.refine.nlp`);
 * :mod:`~habitsim.refine.windows` — overlapping windows for long clips;
-* :mod:`~habitsim.refine.solve` — :func:`refine` itself;
+* :mod:`~habitsim.refine.solve` — :func:`refine` itself, from
+  :mod:`~habitsim.refine.options` (:class:`RefineOptions`), :mod:`~habitsim.refine.cache`
+  (the built problems of a process), :mod:`~habitsim.refine.cleaning` (the labels
+  planted), :mod:`~habitsim.refine.clearance` (the swing clearance profile),
+  :mod:`~habitsim.refine.filtering` (the jitter pre-filter),
+  :mod:`~habitsim.refine.prepare` (targets and initial guess) and
+  :mod:`~habitsim.refine.attempt` (the windows solved and checked);
 * :mod:`~habitsim.refine.verdict` — is the result worse than the input (solver guard, report);
 * :mod:`~habitsim.refine.report` — the JSON report;
 * :mod:`~habitsim.refine.artefacts` — artefact injection for tests and benchmarks.
