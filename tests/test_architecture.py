@@ -526,8 +526,6 @@ CONSTANT_MODULES: dict[str, str] = {
     "evaluation/evaluator.py": _FORMAT + " (evaluator config version)",
     "evaluation/planning.py": "the default data set of a run given none (docs/evaluation.md)",
     # being moved by another slice
-    "habitsim/refine/solve.py": _MOVING,
-    "habitsim/retarget.py": _MOVING,
     "habitsim/stance/": _MOVING,
     # tuning knobs of the synthetic generator, versioned by GENERATOR_VERSION
     "habitsim/gaits/": _PENDING + " (the synthetic generator's, versioned by its version)",
@@ -549,6 +547,8 @@ CONSTANT_NAMES: dict[tuple[str, str], str] = {
     ("habitsim/bvh_mapping/limbs.py", "MIRROR_BONE_TOLERANCE"): _PENDING + " (automatic mapping)",
     ("habitsim/mjutils.py", "FOOT_HEIGHT_SHARE"): _PENDING + " (standing feet of a model)",
     ("habitsim/render.py", "DEFAULT_COLOUR"): _FORMAT + " (an RGB colour)",
+    ("habitsim/refine/cache.py", "MAX_CACHED_PROBLEMS"): "a cache's size (memory, not results)",
+    ("habitsim/retarget/clip.py", "CLIP_VERSION"): _FORMAT + " (robot clip files)",
     ("habitsim/sim/assist.py", "ASSIST_FREQUENCY_HZ"): _PENDING + " (root assistance)",
     ("habitsim/sim/control.py", "MPC_CONTROL_HZ"): _PENDING + " (the mpc torque-layer rate)",
     ("habitsim/workers.py", "WATCHDOG_INTERVAL_S"): "a process watchdog's polling period",

@@ -70,6 +70,7 @@ from ..qpos import (
     QposTrajectory,
     motion_to_qpos,
 )
+from ..stance.labels import StanceLabels
 from .attempt import SUCCESS_STATUSES, RefineAttempt, _solve_checked
 from .cache import _species_model, clear_cache, get_problem
 from .cleaning import (
