@@ -46,7 +46,6 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "CONTACT_HEIGHT_PER_LEG",
-    "CONTACT_SPEED_PER_LEG",
     "ContactOptions",
     "FootTrack",
     "detect_contacts",
@@ -87,12 +86,6 @@ class ContactOptions:
 
     speed_per_leg: float = 0.3
     hysteresis: float = 1.5
-
-
-#: The default :attr:`ContactOptions.speed_per_leg` [hind-leg lengths per second], for
-#: :mod:`habitsim.stance.planting`'s speed limit (being reworked: it goes when that module
-#: takes a :class:`ContactOptions`).
-CONTACT_SPEED_PER_LEG = ContactOptions().speed_per_leg
 
 
 def _toe_speed(feet: np.ndarray, fps: float) -> np.ndarray:

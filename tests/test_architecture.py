@@ -500,7 +500,6 @@ _FORMAT = "format: a file or output format's version, sizes or layout"
 _METRIC = "definitions: a metric's definition (docs/metrics.md), changed only with its docs"
 _TARGET = "benchmark targets and the benchmark's own definitions (docs/benchmarks.md)"
 _DEFINES = "definitions: dimensions, modes or index layout the code is written for"
-_MOVING = "being moved: another slice of issue 46 splits this module and moves its knobs"
 _PENDING = "pending: tuning knobs not yet in an options object (issue 46, item 3)"
 
 #: Modules allowed to hold such constants, every constant of the module (path from the
@@ -525,8 +524,6 @@ CONSTANT_MODULES: dict[str, str] = {
     "evaluation/config.py": _FORMAT + "; the default run's size",
     "evaluation/evaluator.py": _FORMAT + " (evaluator config version)",
     "evaluation/planning.py": "the default data set of a run given none (docs/evaluation.md)",
-    # being moved by another slice
-    "habitsim/stance/": _MOVING,
     # tuning knobs of the synthetic generator, versioned by GENERATOR_VERSION
     "habitsim/gaits/": _PENDING + " (the synthetic generator's, versioned by its version)",
 }

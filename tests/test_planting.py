@@ -15,7 +15,7 @@ from habitsim.gaits import generate
 from habitsim.models import transfer
 from habitsim.stance.labels import stance_runs
 from habitsim.stance.ladder import plant_partly, trim_to_reach
-from habitsim.stance.planting import label_source_stance
+from habitsim.stance.planting import PlantingOptions, label_source_stance
 from habitsim.stance.policy import ConformPolicy
 
 
@@ -83,7 +83,8 @@ def test_label_source_stance_of_a_fast_gait_whose_paws_roll():
         assert st.contacts[stance_all[k], k].mean() >= 0.8, k
         mid = ~stance_all[k] & (np.abs(((tt / 0.4 + (0.0, 0.1, 0.5, 0.6)[k]) % 1.0) - 0.65) < 0.2)
         assert not st.contacts[mid, k].any()
-    assert label_source_stance(feet, fps, leg, speed_per_body=0.0).contacts.mean() < 0.05
+    alone = PlantingOptions(stance_speed_per_body=0.0)
+    assert label_source_stance(feet, fps, leg, alone).contacts.mean() < 0.05
 
 
 def test_plant_motion_plants_own_feet_and_lifts_swing():
@@ -246,7 +247,7 @@ def test_free_stance_runs_keep_their_own_toe_path_and_the_reach_test_skips_them(
 
 def test_pelvis_lowering_is_a_slow_carriage_not_a_dip_per_stance():
     from habitsim.motion import Motion
-    from habitsim.stance.planting import DROP_SMOOTH_S, plant_motion
+    from habitsim.stance.planting import plant_motion
 
     m = habitsim.generate("dog", "walk", seed=2, duration_s=3.0)
     leg = m.species_info.leg_length
@@ -259,9 +260,13 @@ def test_pelvis_lowering_is_a_slow_carriage_not_a_dip_per_stance():
     # no dip per stance: over one stride (about 0.6 s) the lowering changes by a small
     # share of its depth, and its frame-to-frame rate stays that of a slow sink
     rate = np.abs(np.diff(drop)) * m.fps
-    assert rate.max() <= drop.max() / DROP_SMOOTH_S
+    assert rate.max() <= drop.max() / PlantingOptions().drop_smooth_s
     mid = drop[len(drop) // 4 : -len(drop) // 4]
     assert np.ptp(mid) <= 0.5 * drop.max()
+    # the smoothing is the options': a short one dips, and dips faster
+    short = PlantingOptions(drop_smooth_s=0.05)
+    _, dip = plant_motion(s, m.contacts, options=short)
+    assert np.abs(np.diff(dip.pelvis_drop)).max() > np.abs(np.diff(drop)).max()
 
 
 #: The default knobs of conforming a decoded motion.
@@ -556,3 +561,16 @@ def _resting(m, labels) -> float:
     v = np.linalg.norm(np.diff(m.foot_positions(), axis=0), axis=-1) * m.fps
     on = labels[1:] & labels[:-1]
     return float((v[on] <= 0.1 * m.species_info.leg_length).mean())
+
+
+def test_planting_options_are_checked_and_shared():
+    from habitsim.refine import RefineOptions
+    from habitsim.stance.planting import PlantingOptionsError
+
+    for bad in ({"smooth_s": 0.0}, {"drop_smooth_s": math.nan}, {"floor_rise_per_leg": -0.1}):
+        with pytest.raises(PlantingOptionsError):
+            PlantingOptions(**bad)
+    with pytest.raises(PlantingOptionsError):
+        PlantingOptions(min_rest_frames=0)
+    # one default object, the same for the importer, the ladder and refinement
+    assert ConformPolicy().planting == RefineOptions().planting == PlantingOptions()

@@ -18,6 +18,7 @@ from ..species import Species, load_species
 from ..stance.labels import stance_f1
 from ..stance.planting import (
     FOOT_ANCHORS,
+    PlantingOptions,
     SourceStance,
     label_source_stance,
     plant_legs,
@@ -87,7 +88,11 @@ def _driven() -> list[tuple[str, str, tuple[str, ...], int]]:
 
 
 def retarget(
-    bvh: BVHData, mapping: JointMapping, species: str | Species, plant: bool = True
+    bvh: BVHData,
+    mapping: JointMapping,
+    species: str | Species,
+    plant: bool = True,
+    options: PlantingOptions | None = None,
 ) -> Motion:
     """Retarget a BVH motion onto a species' skeleton (see :mod:`habitsim.bvh_mapping`).
 
@@ -97,6 +102,8 @@ def retarget(
         species: the target species.
         plant: solve the legs onto the source's footholds (:mod:`habitsim.stance.planting`); when
             False the legs keep the bone directions of the source.
+        options: the knobs of labelling the source's stance and planting the legs
+            (:class:`~habitsim.stance.planting.PlantingOptions`); the defaults when None.
 
     Returns:
         The retargeted :class:`~habitsim.motion.Motion` (fps from the frame time), with
@@ -177,7 +184,7 @@ def retarget(
 
     # Stance of the source's own feet, and the ground they stand on.
     t = _Tree(bvh)
-    stance = _source_stance(bvh, t, j2s, src, mapping)
+    stance = _source_stance(bvh, t, j2s, src, mapping, options)
     # Root translation scaled by the hip-height ratio, heights above the source's ground.
     feet = [bvh.index(j2s[n]) for n in ("lf_toe", "rf_toe", "lh_toe", "rh_toe") if n in j2s]
     if not feet:
@@ -220,11 +227,16 @@ def retarget(
     )
     planted = None
     if plant:
-        feet_src = smooth_path(src[:, foot_idx], bvh.fps)
+        feet_src = smooth_path(src[:, foot_idx], bvh.fps, options)
         feet_src[..., 2] = st.heights
         target_len = np.array([sp.fore_leg_length] * 2 + [sp.hind_leg_length] * 2)
         motion, pr = plant_legs(
-            motion, feet_src, src[:, anchor_idx], st.contacts, target_len / limb_len
+            motion,
+            feet_src,
+            src[:, anchor_idx],
+            st.contacts,
+            target_len / limb_len,
+            options=options,
         )
         planted = tuple(pr.to_dict(sp.leg_length).items())
     else:
@@ -302,7 +314,12 @@ def _foot_points(t: _Tree, top: int, toe: int) -> list[int]:
 
 
 def _source_stance(
-    bvh: BVHData, t: _Tree, j2s: Mapping[str, str], src: np.ndarray, mapping: JointMapping
+    bvh: BVHData,
+    t: _Tree,
+    j2s: Mapping[str, str],
+    src: np.ndarray,
+    mapping: JointMapping,
+    options: PlantingOptions | None = None,
 ) -> tuple[SourceStance, list[int], list[int], np.ndarray, list[list[int]]] | None:
     """Stance labels of the source's own feet, its toe joints, anchors, limb lengths and
     the joints each foot's stance was found on.
@@ -337,5 +354,7 @@ def _source_stance(
     if np.any(limb_len <= 1e-6):
         mapping.notes.append("a source leg has zero length: feet not planted")
         return None
-    st = label_source_stance([src[:, pts] for pts in points], bvh.fps, float(limb_len[2:].mean()))
+    st = label_source_stance(
+        [src[:, pts] for pts in points], bvh.fps, float(limb_len[2:].mean()), options
+    )
     return st, foot_idx, anchor_idx, limb_len, points

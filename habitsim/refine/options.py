@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Final, cast
 
 import numpy as np
 
 from ..physics_constants import CONTACT_HEIGHT_PER_LEG, GRAVITY
+from ..stance.planting import PlantingOptions
 from .errors import RefineInputError
 from .problem import (
     SolverSettings,
@@ -90,6 +91,9 @@ class RefineOptions:
         exact_first_excess_rad: a window whose input leaves the joint ranges by more than
             this [rad] starts with the exact Hessian.
         verify_tol_mm: largest stance drift / penetration [mm] the MuJoCo check accepts.
+        planting: the knobs of the leg IK that plants the feet of the initial guess
+            (``plant_start``) and of ``preplant``
+            (:class:`~habitsim.stance.planting.PlantingOptions`).
     """
 
     dynamics: bool = False
@@ -130,6 +134,7 @@ class RefineOptions:
     tol: float = 1e-5
     constr_viol_tol: float = 1e-5
     verify_tol_mm: float = 0.1
+    planting: PlantingOptions = field(default_factory=PlantingOptions)
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -16,7 +16,7 @@ from ..qpos import (
     qpos_to_motion,
 )
 from ..stance.labels import StanceLabels
-from ..stance.planting import plant_motion
+from ..stance.planting import PlantingOptions, plant_motion
 from .cleaning import clean_contact_labels, cleaning_summary
 from .clearance import swing_clearance
 from .filtering import _lowpass_qpos
@@ -150,7 +150,9 @@ def _prepare(
             c, motion.fps, sp.leg_length, opts.swing_clearance, opts.swing_ramp_s
         )
     if opts.plant_start:
-        x0[:, :nv] = _planted_start(motion, model, info, q, offset, c, clearance, x0[:, :nv])
+        x0[:, :nv] = _planted_start(
+            motion, model, info, q, offset, c, clearance, x0[:, :nv], opts.planting
+        )
     return _Prepared(
         model,
         q_raw,
@@ -178,6 +180,7 @@ def _planted_start(
     contacts: np.ndarray,
     clearance: np.ndarray | None,
     x0: np.ndarray,
+    options: PlantingOptions | None = None,
 ) -> np.ndarray:
     """The initial guess of :attr:`RefineOptions.plant_start`: the (filtered, aligned)
     input with its legs planted on the labels and lifted to the clearance by leg IK.
@@ -189,7 +192,7 @@ def _planted_start(
     aligned = qpos_to_motion(model, qa, motion.species, motion.fps)
     floor = None if clearance is None else np.where(contacts, np.nan, clearance)
     try:
-        planted, _ = plant_motion(aligned, contacts, floor)
+        planted, _ = plant_motion(aligned, contacts, floor, options=options)
     except (InvalidMotionError, np.linalg.LinAlgError, ValueError):
         return x0
     qp = motion_to_qpos(planted, model).qpos
@@ -229,7 +232,7 @@ def _preplant(
         floor = swing_clearance(
             c, motion.fps, sp.leg_length, opts.swing_clearance, opts.swing_ramp_s
         )[0]
-    planted, _ = plant_motion(motion, c, floor)
+    planted, _ = plant_motion(motion, c, floor, options=opts.planting)
     fields_ = {"labels_input": labels_in, "cleaning": cleaning}
     return planted, labels, fields_
 

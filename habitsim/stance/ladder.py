@@ -77,14 +77,21 @@ def plant_decoded(
         for centre in policy.foothold_rules:
             rule = "centred" if centre else "median"
             short = stance_reach_shortfall(
-                motion, contacts, centre, policy.plant_max_drop_per_leg * leg, glob
+                motion,
+                contacts,
+                centre,
+                policy.plant_max_drop_per_leg * leg,
+                glob,
+                policy.planting,
             )
             if short > policy.plant_max_reach_per_leg * leg:  # no IK can hold these footholds
                 rep = Planting(rule, leg, None, short / leg, policy.plant_max_drop_per_leg)
                 moved = motion
             else:
                 lift = swing_lift(motion, contacts, policy)
-                moved, report = plant_motion(motion, contacts, lift, centre=centre, glob=glob)
+                moved, report = plant_motion(
+                    motion, contacts, lift, centre=centre, glob=glob, options=policy.planting
+                )
                 rep = Planting.judged(report, labels, leg, rule)
             first = rep if first is None else first
             if rep.reaches(policy):
@@ -236,7 +243,7 @@ def trim_to_reach(
     margin = policy.trim_margin_per_leg * out.species_info.leg_length
     glob = out.global_positions() if glob is None else glob
     shortest = max(2, int(round(policy.trim_min_run_s * out.fps)))
-    short = stance_run_shortfall(out, c, True, -margin, glob=glob)
+    short = stance_run_shortfall(out, c, True, -margin, glob=glob, options=policy.planting)
     # (foot, start, stop) of the runs to trim, by their original extent
     active = [
         (k, a, b)
@@ -250,7 +257,7 @@ def trim_to_reach(
     failed: set[tuple[int, int, int]] = set()
     t = len(c)
     while active:
-        short = stance_run_shortfall(out, c, True, -margin, glob=glob)
+        short = stance_run_shortfall(out, c, True, -margin, glob=glob, options=policy.planting)
         still = []
         for run in active:
             k, a, b = run
@@ -317,14 +324,15 @@ def plant_partly(
     leg = out.species_info.leg_length
     reach, low = policy.plant_max_reach_per_leg * leg, policy.plant_max_drop_per_leg * leg
     glob = out.global_positions() if glob is None else glob
-    free = _run_mask(c, stance_run_shortfall(out, c, True, low, glob=glob) > reach)
-    hang = stance_run_shortfall(out, c, True, 0.0, glob=glob) > 0.0
+    opts = policy.planting
+    free = _run_mask(c, stance_run_shortfall(out, c, True, low, glob=glob, options=opts) > reach)
+    hang = stance_run_shortfall(out, c, True, 0.0, glob=glob, options=opts) > 0.0
     width = max(1, int(round(0.1 * out.fps)))
     lift = swing_lift(out, c, policy)
     for _ in range(policy.partial_passes):
         if free.sum() >= stance:  # no run left to hold
             return None
-        moved, report = plant_motion(out, c, lift, centre=True, free=free, glob=glob)
+        moved, report = plant_motion(out, c, lift, centre=True, free=free, glob=glob, options=opts)
         held = c & ~free
         miss = held & (report.reach_error > reach)
         deep = report.pelvis_drop > low
@@ -414,7 +422,9 @@ def restep(
     )
     leg = out.species_info.leg_length
     lift = swing_lift(out, labels.array, policy)
-    moved, report = plant_motion(out, labels.array, lift, centre=True, glob=glob)
+    moved, report = plant_motion(
+        out, labels.array, lift, centre=True, glob=glob, options=policy.planting
+    )
     new_period = stride_period(labels.array)
     step = Restep((period / out.fps, (new_period or period) / out.fps), float(rate[0]), sweep / leg)
     return moved, replace(Planting.judged(report, labels, leg, "centred"), restep=step)

@@ -42,20 +42,19 @@ from scipy.ndimage import (
 )
 from scipy.signal import savgol_filter
 
-from ..contacts import (
-    CONTACT_HEIGHT_PER_LEG,
-    CONTACT_SPEED_PER_LEG,
-    contacts_from_feet,
-)
+from ..contacts import CONTACT_HEIGHT_PER_LEG, contacts_from_feet
 from ..errors import InvalidMotionError
 from ..ik import axial_frames, foot_inclination, pose_from_targets
 from ..motion import Motion
 from ..skeleton import ABDUCTION_SIGN, JOINT_NAMES, get_skeleton
 from ..species import Species, load_species
 from .labels import StanceLabels, StanceSource, stance_runs
+from .policy import PlantingOptions, PlantingOptionsError, resolve_planting
 
 __all__ = [
     "FOOT_ANCHORS",
+    "PlantingOptions",
+    "PlantingOptionsError",
     "SourceStance",
     "label_source_stance",
     "smooth_path",
@@ -77,50 +76,16 @@ _IDX = {n: i for i, n in enumerate(JOINT_NAMES)}
 _ANCHOR_IDX = [_IDX[n] for n in FOOT_ANCHORS]
 _FORE = ("scapula", "shoulder", "elbow", "wrist")
 _HIND = ("ilium", "hip", "knee", "hock")
-#: Smoothing window of the foot path before labelling [s].
-SMOOTH_S = 0.1
-#: Window of the local floor of a foot [s]: about a stride, so it holds a rest of the foot
-#: (between rests the floor is interpolated) but not the floor a second further on. With
-#: 1.5 s the Labrador's hind feet in two walkrun clips lost their last 0.8 s of stance
-#: (the capture floor sinks 2–3 cm over such a clip, and the window reached the lower
-#: part); a floor 2 cm lower after a step kept 88 % of the stance frames (test).
-FLOOR_WINDOW_S = 0.75
-#: A foot point slower than this share of the body's speed counts as at rest (when that
-#: is above the absolute rest speed of habitsim.contacts; 0 switches it off). On the
-#: Labrador's walkrun clips the absolute speed alone gave walks duty factors of
-#: 0.38–0.50 (a dog walks at 0.6 or more, docs/biomechanics.md) and left the hind feet of a run
-#: without stance for its last second; with 0.35 the walks stand 0.44–0.62 of the time,
-#: the run's every step is found, and ``habitsim bench real`` habit transfers survived
-#: whole in 118 of 125 runs instead of 100 (direct transfers 110 instead of 92) ...
-STANCE_SPEED_PER_BODY = 0.35
-#: ... the body's speed being the four feet's mean velocity over this window [s].
-BODY_SPEED_S = 0.5
-#: How far one foot's floor may sit above the lowest foot's [hind-leg lengths].
-FLOOR_SPREAD_PER_LEG = 0.1
-#: How far a foot's local floor may rise above its clip floor [hind-leg lengths].
-FLOOR_RISE_PER_LEG = 0.05
-#: Below this many resting frames a foot's floor is taken from all its frames.
-_MIN_REST_FRAMES = 3
-#: A stance run whose shoulder / hip travels this far [leg lengths] gets the foothold
-#: centred under its sweep (:func:`plant_motion` with ``centre``); shorter runs blend
-#: towards the toe path's own median.
-CENTRE_TRAVEL_PER_LEG = 0.2
-#: Where stance feet are out of reach the pelvis is lowered; the lowering is smoothed over
-#: this many seconds (Gaussian σ, after a running maximum of twice that width), so the
-#: body sinks into a lower carriage instead of dipping at every stance. A dip per stance
-#: is a bob the source does not have: with 0.05 s the frozen evaluator read a camel's
-#: planted backward walk (dips of 0.07 leg lengths) as a jump, with 0.3 s as the
-#: backward walk it is (test-split action accuracy 0.744 → 0.749 with the default-config model,
-#: 0.822 → 0.849 with the shipped ``large`` one).
-DROP_SMOOTH_S = 0.3
 
 
-def carriage_drop(short: np.ndarray, fps: float) -> np.ndarray:
+def carriage_drop(
+    short: np.ndarray, fps: float, options: PlantingOptions | None = None
+) -> np.ndarray:
     """(T,) how far to lower a body whose stance feet fall ``short`` (T,) [m] of their
-    footholds: the shortfall's running maximum over twice :data:`DROP_SMOOTH_S`, smoothed
-    by a Gaussian of that σ, and never less than the shortfall itself (a lower carriage,
-    not a dip at every stance)."""
-    sigma = max(1.0, DROP_SMOOTH_S * fps)
+    footholds: the shortfall's running maximum over twice
+    :attr:`PlantingOptions.drop_smooth_s`, smoothed by a Gaussian of that σ, and never
+    less than the shortfall itself (a lower carriage, not a dip at every stance)."""
+    sigma = max(1.0, resolve_planting(options).drop_smooth_s * fps)
     need = gaussian_filter1d(maximum_filter1d(short, size=int(2 * sigma) | 1), sigma)
     return np.maximum(need, short)
 
@@ -156,11 +121,12 @@ class SourceStance:
         return StanceLabels(self.contacts, StanceSource.IMPORTED)
 
 
-def smooth_path(x: np.ndarray, fps: float) -> np.ndarray:
-    """A path (T, ...) smoothed along time by a Savitzky–Golay filter of about 0.1 s."""
+def smooth_path(x: np.ndarray, fps: float, options: PlantingOptions | None = None) -> np.ndarray:
+    """A path (T, ...) smoothed along time by a Savitzky–Golay filter of about
+    :attr:`PlantingOptions.smooth_s` (0.1 s)."""
     x = np.asarray(x, dtype=np.float64)
     t = x.shape[0]
-    win = max(5, int(round(SMOOTH_S * fps)) | 1)  # odd
+    win = max(5, int(round(resolve_planting(options).smooth_s * fps)) | 1)  # odd
     if t < win:
         win = t if t % 2 else t - 1
     if win < 5:
@@ -172,7 +138,7 @@ def label_source_stance(
     points: Sequence[np.ndarray],
     fps: float,
     leg_length: float,
-    speed_per_body: float = STANCE_SPEED_PER_BODY,
+    options: PlantingOptions | None = None,
 ) -> SourceStance:
     """Stance labels of a source's feet from their own paths (see the module docstring).
 
@@ -184,9 +150,8 @@ def label_source_stance(
             is measured where it touches the ground.
         fps: frame rate [Hz].
         leg_length: the source's own hind-leg length [m] (thresholds scale with it).
-        speed_per_body: a foot point slower than this share of the body's speed counts
-            as at rest (above the absolute rest speed; 0 switches it off), default
-            :data:`STANCE_SPEED_PER_BODY`.
+        options: the knobs (smoothing, floors, the share of the body's speed a foot
+            point at rest may move at, the contact rule); the defaults when None.
 
     Returns:
         The :class:`SourceStance`.
@@ -196,6 +161,8 @@ def label_source_stance(
     """
     if len(points) != 4:
         raise InvalidMotionError(f"points must hold 4 feet, got {len(points)}")
+    opts = resolve_planting(options)
+    rest_speed = opts.contact.speed_per_leg * leg_length
     if not (np.isfinite(fps) and fps > 0 and np.isfinite(leg_length) and leg_length > 0):
         raise InvalidMotionError(
             f"fps and leg_length must be positive and finite, got {fps}, {leg_length}"
@@ -209,7 +176,7 @@ def label_source_stance(
         if not np.all(np.isfinite(p)):
             raise InvalidMotionError(f"foot {k} points contain NaN or inf")
         t = len(p)
-        sm = smooth_path(p, fps)
+        sm = smooth_path(p, fps, opts)
         vel = np.gradient(sm[..., :2], axis=0) * fps if t >= 2 else np.zeros_like(sm[..., :2])
         arg = np.argmin(sm[..., 2], axis=1)
         rows = np.arange(t)
@@ -217,21 +184,22 @@ def label_source_stance(
     lowest = np.stack(low, axis=1)  # (T, 4, 3): horizontal velocity, lowest height
     t = lowest.shape[0]
     speed = np.linalg.norm(lowest[..., :2], axis=-1)
-    rest = speed < 0.3 * leg_length
+    rest = speed < rest_speed
     floors = np.empty(4)
     for k in range(4):
         z = lowest[:, k, 2]
         zr = z[rest[:, k]]
-        floors[k] = np.percentile(zr, 10) if zr.size >= _MIN_REST_FRAMES else np.percentile(z, 2)
+        enough = zr.size >= opts.min_rest_frames
+        floors[k] = np.percentile(zr, 10) if enough else np.percentile(z, 2)
     # Feet stand on one ground: a foot point may sit higher than another (a marker on the
-    # wrist, a thick pad) but not by more than FLOOR_SPREAD_PER_LEG; a foot held in the air
+    # wrist, a thick pad) but not by more than floor_spread_per_leg; a foot held in the air
     # for the whole clip does not get a floor of its own.
-    floors = np.minimum(floors, floors.min() + FLOOR_SPREAD_PER_LEG * leg_length)
+    floors = np.minimum(floors, floors.min() + opts.floor_spread_per_leg * leg_length)
     # A foot rests at slightly different heights over a clip (the paw's pose, an uneven or
     # sloping capture floor): each frame's floor is the lower envelope of the foot's
-    # resting heights over about FLOOR_WINDOW_S (between rests, interpolated), but never
-    # more than FLOOR_RISE_PER_LEG above the clip floor (a paw held up stays in the air).
-    size = max(3, int(round(FLOOR_WINDOW_S * fps)) | 1)
+    # resting heights over about floor_window_s (between rests, interpolated), but never
+    # more than floor_rise_per_leg above the clip floor (a paw held up stays in the air).
+    size = max(3, int(round(opts.floor_window_s * fps)) | 1)
     resting = np.where(rest, lowest[..., 2], np.inf)
     env = minimum_filter1d(resting, size=size, axis=0, mode="nearest")
     frames = np.arange(t)
@@ -239,26 +207,26 @@ def label_source_stance(
         seen = np.isfinite(env[:, k])
         env[:, k] = np.interp(frames, frames[seen], env[seen, k]) if seen.any() else floors[k]
     env = uniform_filter1d(env, size=size, axis=0, mode="nearest")
-    local = np.clip(env, floors, floors + FLOOR_RISE_PER_LEG * leg_length)
+    local = np.clip(env, floors, floors + opts.floor_rise_per_leg * leg_length)
     heights = lowest[..., 2] - np.minimum(local, lowest[..., 2].max(axis=0))
     # The contact rule of habitsim.contacts on a path with this speed and height: a path
     # that is the running integral of the lowest point's velocity.
     path = np.zeros((t, 4, 3))
     vel = lowest[..., :2]
-    if speed_per_body > 0 and t >= 2:
+    if opts.stance_speed_per_body > 0 and t >= 2:
         # A planted paw of a fast gait rolls over its toes: its points move at a fraction
         # of the body's speed, above the absolute rest speed. The body's speed is the mean
         # of the four feet's velocities over about a stride.
-        size_b = max(3, int(round(BODY_SPEED_S * fps)) | 1)
+        size_b = max(3, int(round(opts.body_speed_s * fps)) | 1)
         body = np.linalg.norm(
             uniform_filter1d(vel.mean(axis=1), size_b, axis=0, mode="nearest"), axis=-1
         )
-        limit = np.maximum(CONTACT_SPEED_PER_LEG * leg_length, speed_per_body * body)
-        vel = vel * (CONTACT_SPEED_PER_LEG * leg_length / limit)[:, None, None]
+        limit = np.maximum(rest_speed, opts.stance_speed_per_body * body)
+        vel = vel * (rest_speed / limit)[:, None, None]
     if t >= 2:
         path[1:, :, :2] = np.cumsum(0.5 * (vel[1:] + vel[:-1]), axis=0) / fps
     path[..., 2] = heights
-    contacts = contacts_from_feet(path, fps, leg_length)
+    contacts = contacts_from_feet(path, fps, leg_length, opts.contact)
     return SourceStance(contacts, heights, floors, float(floors.min()), float(leg_length))
 
 
@@ -307,12 +275,15 @@ def _median0(x: np.ndarray) -> np.ndarray:
     return xs[n // 2] if n % 2 else 0.5 * (xs[n // 2 - 1] + xs[n // 2])
 
 
-def _centred_hold(raw: np.ndarray, anchors: np.ndarray, leg: float) -> np.ndarray:
+def _centred_hold(
+    raw: np.ndarray, anchors: np.ndarray, leg: float, travel_per_leg: float
+) -> np.ndarray:
     """Foothold (2,) of one stance run whose sweep is centred under its anchor.
 
     Args:
         raw: (n, 2) the run's toe path; anchors: (n, 2) its shoulder / hip path; leg: leg
-            length [m].
+            length [m]; travel_per_leg: the anchor's travel from which on the foothold is
+            fully centred (:attr:`PlantingOptions.centre_travel_per_leg`) [leg lengths].
 
     Along the anchor's travel over the run the foothold sits half-way between where the
     anchor starts and ends, so the leg reaches as far behind the joint at lift-off as in
@@ -324,7 +295,7 @@ def _centred_hold(raw: np.ndarray, anchors: np.ndarray, leg: float) -> np.ndarra
     hold = _median0(raw)
     travel = anchors[-1] - anchors[0]
     dist = float(np.linalg.norm(travel))
-    w = min(1.0, dist / (CENTRE_TRAVEL_PER_LEG * leg))
+    w = min(1.0, dist / (travel_per_leg * leg))
     if w <= 0.0:
         return hold
     u = travel / dist
@@ -340,6 +311,7 @@ def _planted_targets(
     anchors: np.ndarray | None = None,
     leg: float = 1.0,
     free: np.ndarray | None = None,
+    options: PlantingOptions | None = None,
 ) -> np.ndarray:
     """Toe targets (T, 4, 3): stance runs fixed on the ground, swing blended in between.
 
@@ -350,6 +322,7 @@ def _planted_targets(
     A run with a frame in ``free`` ((T, 4) bool) is not held: its toes keep their own
     path (not under the ground), and the swings around it start and end where it does.
     """
+    travel = resolve_planting(options).centre_travel_per_leg
     out = raw.copy()
     out[..., 2] = np.maximum(out[..., 2], 0.0)
     t = raw.shape[0]
@@ -361,7 +334,7 @@ def _planted_targets(
             holds = [_median0(raw[a : b + 1, k, :2]) for a, b in runs]
         else:
             holds = [
-                _centred_hold(raw[a : b + 1, k, :2], anchors[a : b + 1, k, :2], leg)
+                _centred_hold(raw[a : b + 1, k, :2], anchors[a : b + 1, k, :2], leg, travel)
                 for a, b in runs
             ]
         # where each run starts and ends (a held run: its foothold)
@@ -403,6 +376,7 @@ def plant_legs(
     contacts: np.ndarray,
     limb_scale: np.ndarray,
     iterations: int = 3,
+    options: PlantingOptions | None = None,
 ) -> tuple[Motion, PlantReport]:
     """Solve a motion's legs so its toes are planted where the source's feet were.
 
@@ -415,6 +389,7 @@ def plant_legs(
         contacts: (T, 4) bool stance labels.
         limb_scale: (4,) target limb length / source limb length per foot.
         iterations: pelvis-lowering passes for stance feet out of reach.
+        options: the knobs (the pelvis lowering's smoothing); the defaults when None.
 
     Returns:
         ``(planted motion with ``contacts`` set, report)``.
@@ -448,8 +423,10 @@ def plant_legs(
     raw[..., 2] = np.asarray(source_feet)[..., 2] * scale[..., 0]
     # The anchors move with the pelvis; their path only depends on the trunk, which the
     # lowering below shifts vertically, so the horizontal targets stay valid.
-    targets = _planted_targets(raw, c)
-    return _solve_planted(motion, targets, c, None, None, iterations, limit_abduction=True)
+    targets = _planted_targets(raw, c, options=options)
+    return _solve_planted(
+        motion, targets, c, None, None, iterations, limit_abduction=True, options=options
+    )
 
 
 def _solve_planted(
@@ -461,6 +438,7 @@ def _solve_planted(
     iterations: int,
     limit_abduction: bool = False,
     free: np.ndarray | None = None,
+    options: PlantingOptions | None = None,
 ) -> tuple[Motion, PlantReport]:
     """Leg IK onto toe targets; the pelvis lowered where a stance foot is out of reach."""
     sp: Species = load_species(motion.species)
@@ -480,7 +458,7 @@ def _solve_planted(
         solved = pose.toes
         moved = targets.copy()
         moved[..., :2] = np.where(c[..., None], solved[..., :2], targets[..., :2])
-        targets = _planted_targets(moved, c, free=free)
+        targets = _planted_targets(moved, c, free=free, options=options)
         pose = pose_from_targets(
             sp, root, rot, targets, girdle_flex, foot_inclination, limit_abduction=True
         )
@@ -491,7 +469,7 @@ def _solve_planted(
         short = np.where(c, np.maximum(toe_z - targets[..., 2], 0.0), 0.0).max(axis=1)
         if short.max() <= 0.002 * leg:
             break
-        drop += carriage_drop(short, motion.fps)
+        drop += carriage_drop(short, motion.fps, options)
         root = motion.root_positions.copy()
         root[:, 2] -= drop
         pose = pose_from_targets(
@@ -611,15 +589,16 @@ def _own_targets(
     centre: bool,
     glob: np.ndarray | None = None,
     free: np.ndarray | None = None,
+    options: PlantingOptions | None = None,
 ) -> np.ndarray:
     """:func:`plant_motion`'s toe targets (T, 4, 3) before any swing floor (``glob``: the
     motion's global joint positions, if already at hand)."""
     g = motion.global_positions() if glob is None else glob
     raw = g[:, motion.skeleton.foot_indices]
     if not centre:
-        return _planted_targets(raw, c, free=free)
+        return _planted_targets(raw, c, free=free, options=options)
     anchors = g[:, _ANCHOR_IDX]
-    return _planted_targets(raw, c, anchors, motion.species_info.leg_length, free)
+    return _planted_targets(raw, c, anchors, motion.species_info.leg_length, free, options)
 
 
 def _stretched(species: str) -> np.ndarray:
@@ -637,6 +616,7 @@ def stance_run_shortfall(
     max_drop: float = 0.0,
     free: np.ndarray | None = None,
     glob: np.ndarray | None = None,
+    options: PlantingOptions | None = None,
 ) -> np.ndarray:
     """(T, 4) how far [m] each stance frame's foothold of :func:`plant_motion` lies beyond
     the fully stretched leg, with the pelvis lowered by ``max_drop`` [m] (0 within reach,
@@ -644,7 +624,8 @@ def stance_run_shortfall(
 
     A cheap test (one forward-kinematics pass, no IK): the distance from each stance
     frame's shoulder / hip to its foothold against the upper + lower + foot segment
-    lengths.
+    lengths. ``options``: the planting's knobs (the centring's travel), the defaults when
+    None.
 
     Raises:
         InvalidMotionError: contacts that do not match the motion.
@@ -656,7 +637,7 @@ def stance_run_shortfall(
     if not c.any():
         return np.zeros((t, 4))
     glob = motion.global_positions() if glob is None else glob
-    targets = _own_targets(motion, c, centre, glob, free)
+    targets = _own_targets(motion, c, centre, glob, free, options)
     anchors = glob[:, _ANCHOR_IDX]
     d = targets - anchors
     d[..., 2] = np.minimum(d[..., 2] + max_drop, 0.0)  # the pelvis comes down to the foot
@@ -671,6 +652,7 @@ def stance_reach_shortfall(
     centre: bool = False,
     max_drop: float = 0.0,
     glob: np.ndarray | None = None,
+    options: PlantingOptions | None = None,
 ) -> float:
     """How far [m] the farthest stance foothold of :func:`plant_motion` lies beyond the
     fully stretched leg, with the pelvis lowered by ``max_drop`` [m]; 0 when every
@@ -679,7 +661,7 @@ def stance_reach_shortfall(
     Raises:
         InvalidMotionError: contacts that do not match the motion.
     """
-    short = stance_run_shortfall(motion, contacts, centre, max_drop, glob=glob)
+    short = stance_run_shortfall(motion, contacts, centre, max_drop, glob=glob, options=options)
     return float(short.max(initial=0.0))
 
 
@@ -704,6 +686,7 @@ def plant_motion(
     centre: bool = False,
     free: np.ndarray | None = None,
     glob: np.ndarray | None = None,
+    options: PlantingOptions | None = None,
 ) -> tuple[Motion, PlantReport]:
     """Plant a motion's own feet on its stance labels, by leg IK.
 
@@ -733,6 +716,8 @@ def plant_motion(
             no leg reaches (:func:`stance_run_shortfall`).
         glob: optional (T, J, 3) global joint positions of ``motion``
             (:meth:`~habitsim.motion.Motion.global_positions`), when already at hand.
+        options: the knobs (the centring's travel, the pelvis lowering's smoothing);
+            the defaults when None.
 
     Returns:
         ``(planted motion with ``contacts`` set, report)``.
@@ -746,7 +731,7 @@ def plant_motion(
     free = None if free is None else np.asarray(free, dtype=bool)
     if glob is not None:
         glob = _global_positions(motion, glob)
-    targets = _own_targets(motion, c, centre, glob, free)
+    targets = _own_targets(motion, c, centre, glob, free, options)
     if swing_floor is not None:
         fl = np.asarray(swing_floor, dtype=np.float64)
         if fl.shape != (t, 4):
@@ -762,5 +747,13 @@ def plant_motion(
                 targets[frames, k, :2] = targets[near, k, :2]
     girdle, incl = leg_pose_angles(motion)
     return _solve_planted(
-        motion, targets, c, girdle, incl, iterations, limit_abduction=True, free=free
+        motion,
+        targets,
+        c,
+        girdle,
+        incl,
+        iterations,
+        limit_abduction=True,
+        free=free,
+        options=options,
     )

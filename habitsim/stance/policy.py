@@ -1,4 +1,10 @@
-"""The knobs and switches of conforming a decoded motion, as one options object.
+"""The knobs and switches of the stance package, as options objects.
+
+:class:`PlantingOptions` holds the knobs of labelling a source's stance and planting legs
+by IK (:mod:`habitsim.stance.planting`), which the importer, the planting ladder and
+refinement share; pass one as ``options=`` (the ladder takes
+:attr:`ConformPolicy.planting`, refinement :attr:`habitsim.refine.RefineOptions.planting`).
+Why each default is what it is: ``docs/import.md``, "Why the defaults".
 
 :class:`ConformPolicy` holds every tuning value of the transfer's torch-free half: the
 footfall schedule (:mod:`habitsim.stance.schedule`), the bounds to the source
@@ -12,15 +18,102 @@ is what it is: ``docs/transfer.md``, "Why the defaults".
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 
+from ..contacts import ContactOptions
 from ..errors import HabitsimError
 
-__all__ = ["ConformPolicy", "ConformPolicyError", "resolve_policy"]
+__all__ = [
+    "ConformPolicy",
+    "ConformPolicyError",
+    "PlantingOptions",
+    "PlantingOptionsError",
+    "resolve_planting",
+    "resolve_policy",
+]
 
 
 class ConformPolicyError(HabitsimError, ValueError):
     """A :class:`ConformPolicy` field outside its valid range."""
+
+
+class PlantingOptionsError(HabitsimError, ValueError):
+    """A :class:`PlantingOptions` field outside its valid range."""
+
+
+@dataclass(frozen=True)
+class PlantingOptions:
+    """The knobs of labelling a source's stance and planting legs by IK.
+
+    Pass one as ``options`` to :func:`label_source_stance`, :func:`smooth_path`,
+    :func:`plant_legs`, :func:`plant_motion` and the reach tests; left out, the defaults
+    apply. Change a knob with :func:`dataclasses.replace`. Why each default is what it
+    is: ``docs/import.md``, "Why the defaults".
+
+    Attributes:
+        smooth_s: window of the Savitzky–Golay filter a foot path is smoothed with
+            before labelling [s] (at least 5 frames).
+        floor_window_s: window of a foot's local floor, the lower envelope of its
+            resting heights (about a stride) [s].
+        floor_spread_per_leg: how far one foot's floor may sit above the lowest foot's
+            [hind-leg lengths].
+        floor_rise_per_leg: how far a foot's local floor may rise above its clip floor
+            [hind-leg lengths].
+        min_rest_frames: below this many resting frames a foot's floor is taken from all
+            its frames [frames].
+        stance_speed_per_body: a foot point slower than this share of the body's speed
+            counts as at rest, where that is above the contact rule's absolute rest speed
+            (``contact.speed_per_leg``) [share, ≥ 0; 0 switches it off].
+        body_speed_s: window the body's speed (the four feet's mean velocity) is
+            averaged over [s].
+        centre_travel_per_leg: a stance run whose shoulder / hip travels this far gets
+            its foothold centred under its sweep (``centre``); shorter runs blend towards
+            the toe path's own median [leg lengths].
+        drop_smooth_s: the pelvis lowering for stance feet out of reach is smoothed by a
+            Gaussian of this σ, after a running maximum of twice that width
+            (:func:`carriage_drop`) [s].
+        contact: the contact rule the source's stance labels are found with
+            (:func:`habitsim.contacts.contacts_from_feet`); its speed threshold is also
+            the absolute rest speed of the floor and body-speed tests.
+    """
+
+    smooth_s: float = 0.1
+    floor_window_s: float = 0.75
+    floor_spread_per_leg: float = 0.1
+    floor_rise_per_leg: float = 0.05
+    min_rest_frames: int = 3
+    stance_speed_per_body: float = 0.35
+    body_speed_s: float = 0.5
+    centre_travel_per_leg: float = 0.2
+    drop_smooth_s: float = 0.3
+    contact: ContactOptions = field(default_factory=ContactOptions)
+
+    def __post_init__(self) -> None:
+        positive = (
+            "smooth_s",
+            "floor_window_s",
+            "body_speed_s",
+            "centre_travel_per_leg",
+            "drop_smooth_s",
+        )
+        for name in positive:
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise PlantingOptionsError(f"{name} must be finite and > 0, got {v!r}")
+        for name in ("floor_spread_per_leg", "floor_rise_per_leg", "stance_speed_per_body"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise PlantingOptionsError(f"{name} must be finite and ≥ 0, got {v!r}")
+        if self.min_rest_frames < 1:
+            raise PlantingOptionsError(f"min_rest_frames must be ≥ 1, got {self.min_rest_frames}")
+
+
+_DEFAULT_PLANTING = PlantingOptions()
+
+
+def resolve_planting(options: PlantingOptions | None) -> PlantingOptions:
+    """``options``, or the default :class:`PlantingOptions` when it is None."""
+    return _DEFAULT_PLANTING if options is None else options
 
 
 @dataclass(frozen=True)
@@ -95,6 +188,9 @@ class ConformPolicy:
         trim_margin_per_leg: a trimmed run's centred foothold must lie within the
             stretched leg with the pelvis this much higher than it is [share of leg
             length].
+        planting: the knobs of each planting the ladder tries (the foothold centring's
+            travel, the pelvis lowering's smoothing;
+            :class:`~habitsim.stance.planting.PlantingOptions`).
     """
 
     # footfall schedule
@@ -130,6 +226,7 @@ class ConformPolicy:
     trim_to_reach: bool = True
     trim_min_run_s: float = 0.1
     trim_margin_per_leg: float = 0.1
+    planting: PlantingOptions = field(default_factory=PlantingOptions)
 
     def __post_init__(self) -> None:
         for f in fields(self):
