@@ -26,7 +26,7 @@ from .base import (
     actuated_joints,
     check_reference,
 )
-from .feedforward import InverseDynamicsFeedforward
+from .feedforward import FeedforwardOptions, InverseDynamicsFeedforward
 from .gains import (
     critical_damping,
     effective_inertia,
@@ -42,6 +42,7 @@ __all__ = [
     "Controller",
     "ControllerError",
     "ControllerStats",
+    "FeedforwardOptions",
     "InverseDynamicsFeedforward",
     "JointActuatorMap",
     "PDController",

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -44,13 +45,24 @@ from habitsim.mjutils import free_dofs
 
 from .base import ControllerError, Reference, actuated_joints
 
-__all__ = ["InverseDynamicsFeedforward"]
+__all__ = ["FeedforwardOptions", "InverseDynamicsFeedforward"]
 
 _CONTACTS = ("ignore", "stance", "include")
 #: Edges of the linearised friction cone per foot (a pyramid).
 _CONE_EDGES = 4  # ±x, ±y
-#: Force regulariser of the stance distribution, relative to the squared residual scale.
-_FORCE_REG = 1e-4
+
+
+@dataclass(frozen=True)
+class FeedforwardOptions:
+    """The knobs of :class:`InverseDynamicsFeedforward`'s ``"stance"`` force distribution.
+
+    Attributes:
+        force_reg: weight of the regulariser on the cone-edge forces of the least-squares
+            problem, relative to the square of its largest free-joint coefficient
+            [unitless].
+    """
+
+    force_reg: float = 1e-4
 
 
 class InverseDynamicsFeedforward:
@@ -66,6 +78,7 @@ class InverseDynamicsFeedforward:
         feet: foot geom names (``"stance"`` mode; required there), in the order of
             ``Reference.contacts``; the contact point is the lowest point of each geom.
         mu: friction coefficient of the cone (``"stance"`` mode).
+        options: the force distribution's knobs (``"stance"`` mode).
 
     Attributes:
         residual_root_wrench: (6,) free-joint part of the last ``qfrc_inverse``
@@ -87,6 +100,7 @@ class InverseDynamicsFeedforward:
         scale: float = 1.0,
         feet: Sequence[str] | None = None,
         mu: float = 0.8,
+        options: FeedforwardOptions = FeedforwardOptions(),
     ) -> None:
         if contacts not in _CONTACTS:
             raise ControllerError(
@@ -107,6 +121,7 @@ class InverseDynamicsFeedforward:
                 raise ControllerError(f"model has no foot geom(s) {', '.join(missing)}")
             self._feet = np.array(ids, dtype=int)
         self.mu = float(mu)
+        self.options = options
         self.map = actuated_joints(model, joints)
         self.contacts = contacts
         self.scale = float(scale)
@@ -171,7 +186,7 @@ class InverseDynamicsFeedforward:
         a = np.concatenate(
             [(jt[i].T @ self._edges.T)[self._free_dofs] for i in range(len(jac))], axis=1
         )
-        reg = np.sqrt(_FORCE_REG) * max(float(np.abs(a).max()), 1e-9)
+        reg = np.sqrt(self.options.force_reg) * max(float(np.abs(a).max()), 1e-9)
         from scipy.optimize import nnls  # (scipy.optimize takes 0.1 s to import)
 
         lam, _ = nnls(

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -49,6 +50,7 @@ __all__ = [
     "known_feet",
     "find_feet",
     "standing_feet",
+    "FootSearchOptions",
     "foot_geoms",
     "foot_soles",
     "lowest_z",
@@ -256,18 +258,29 @@ def find_feet(
     return feet
 
 
-#: Legs whose lowest point stands within this share of the trunk's height above the
-#: lowest one count as standing on the ground (:func:`standing_feet`).
-FOOT_HEIGHT_SHARE = 0.05
+@dataclass(frozen=True)
+class FootSearchOptions:
+    """The knobs of finding a model's feet by geometry (:func:`standing_feet`).
+
+    Attributes:
+        height_share: legs whose lowest point stands within this share of the trunk's
+            height above the lowest leg's count as standing on the ground [unitless].
+    """
+
+    height_share: float = 0.05
 
 
-def standing_feet(model: mujoco.MjModel, qpos: np.ndarray | None = None) -> tuple[str, ...]:
+def standing_feet(
+    model: mujoco.MjModel,
+    qpos: np.ndarray | None = None,
+    options: FootSearchOptions = FootSearchOptions(),
+) -> tuple[str, ...]:
     """A quadruped's four feet in the order LF, RF, LH, RH, found by geometry at ``qpos``
     (default :func:`home_qpos`).
 
     The colliding geoms below each body hanging from the trunk (the free-joint body) are
     one leg; a leg whose lowest geom (:func:`lowest_z`) stands within
-    :data:`FOOT_HEIGHT_SHARE` of the trunk's height above the lowest leg's is a foot.
+    :attr:`FootSearchOptions.height_share` of the trunk's height above the lowest leg's is a foot.
     There must be exactly four, ordered by where they stand in the trunk's frame (the
     two furthest ahead are fore; left is +y). A foot is named by its geom, or, for an
     unnamed sphere (Menagerie's A1 and ANYmal), by its body, which :func:`resolve_feet`
@@ -297,7 +310,7 @@ def standing_feet(model: mujoco.MjModel, qpos: np.ndarray | None = None) -> tupl
             legs[leg] = (z, g)
     ground = min((z for z, _ in legs.values()), default=0.0)
     height = float(d.xpos[trunk, 2]) - ground
-    standing = [g for z, g in legs.values() if z <= ground + FOOT_HEIGHT_SHARE * height]
+    standing = [g for z, g in legs.values() if z <= ground + options.height_share * height]
     if len(standing) != 4:
         found = ", ".join(_geom_label(model, g) for g in standing) or "none"
         raise ModelLookupError(

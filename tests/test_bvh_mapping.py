@@ -15,6 +15,7 @@ from helpers import DOG, _dog_text
 import habitsim
 from habitsim.bvh import BVHData, parse_bvh, read_bvh
 from habitsim.bvh_mapping import (
+    MappingOptions,
     auto_map,
     detect_frame,
     import_bvh,
@@ -412,6 +413,16 @@ def test_anonymous_rig_finds_legs_by_mirrored_chains(walk, rig):
     assert len(points) == 4 and all(p and not nubs & set(p) for p in points)
     assert motion.contacts is not None
     assert min(stance_f1(motion.contacts, named_motion.contacts)) >= 0.95
+
+
+def test_mirror_tolerance_is_a_mapping_option(walk):
+    """The mirrored-chain tolerance reaches the automatic mapping through
+    ``MappingOptions``: with none (a negative share) no unnamed chains pair, so an
+    anonymous rig has no legs."""
+    anon = _foreign_rig(walk, anonymous=True)
+    assert auto_map(anon, MappingOptions())["lf_toe"] is not None
+    with pytest.raises(SkeletonMappingError, match="symmetric unnamed chains"):
+        import_bvh(anon, "dog", options=MappingOptions(mirror_bone_tolerance=-1.0))
 
 
 def test_inches_given_explicitly(walk, rig):

@@ -17,10 +17,10 @@ from habitsim.motion import Motion, load_motion
 from habitsim.qpos import QposTrajectory, load_species_model, qpos_to_motion, species_model
 from habitsim.sim import (
     CONTROLLERS,
-    MPC_CONTROL_HZ,
     FallDetector,
     FallOptions,
     SimulationError,
+    TrackOptions,
     servo_model,
     track,
     track_many,
@@ -211,7 +211,7 @@ def test_mpc_runs_its_torque_layer_at_its_rate_with_and_without_assistance(walk)
     held = track(walk, controller="mpc", assist=True)
     steps = walk.duration / 0.002
     # 250 Hz torque layer, assisted too: the model integrates the assist's damping
-    calls = steps * MPC_CONTROL_HZ * 0.002
+    calls = steps * TrackOptions().mpc_control_hz * 0.002
     assert free.controller_stats["calls"] == pytest.approx(calls, rel=0.05)
     assert held.controller_stats["calls"] == pytest.approx(calls, rel=0.05)
     assert not held.unstable and held.survival == 1.0

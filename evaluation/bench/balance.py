@@ -75,7 +75,7 @@ class BalanceOptions:
         seed: seed of the first clip (the next ones count up).
         mpc_hz: MPC solves per second [Hz].
         control_hz: control rate of the runner [Hz] (None: every simulation step; mpc:
-            :data:`habitsim.sim.MPC_CONTROL_HZ`).
+            :attr:`habitsim.sim.TrackOptions.mpc_control_hz`).
         refine: refine every clip first: ``A``, ``B``, or None.
     """
 
@@ -119,13 +119,13 @@ def run_one(
     """Track one clip with one controller; the figures of the run."""
     from habitsim.controllers import controller_spec, make_controller
     from habitsim.qpos import motion_to_qpos, species_model
-    from habitsim.sim import MPC_CONTROL_HZ, track
+    from habitsim.sim import TrackOptions, track
 
     spec = controller_spec(controller)
     model = species_model(species)
     options: dict[str, Any] = {}
     if control_hz is None and controller == "mpc":
-        control_hz = MPC_CONTROL_HZ  # as habitsim.sim.track runs "mpc" by name
+        control_hz = TrackOptions().mpc_control_hz  # as habitsim.sim.track runs "mpc" by name
     if control_hz is not None:
         dt = 1.0 / control_hz
         options["control_dt" if spec.planned else "dt"] = dt

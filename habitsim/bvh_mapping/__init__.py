@@ -32,7 +32,8 @@ downstream).
 Submodules, one concept each: :mod:`.names` (name cues, rig helpers), :mod:`.chains` (the
 habitsim chains filled), :mod:`.tree` (the source rig as a tree), :mod:`.limbs` (leg
 chains, mirrored pairs, leg roles), :mod:`.automap` (the automatic mapping),
-:mod:`.map_files` (explicit joint maps), :mod:`.frame` (units and axes),
+:mod:`.map_files` (explicit joint maps), :mod:`.options` (the mapping's knobs),
+:mod:`.frame` (units and axes),
 :mod:`.result` (:class:`JointMapping`), :mod:`.identity` (habitsim's own files),
 :mod:`.retargeting` (retargeting, source stance, leg confidence) and :mod:`.importing`
 (the entry points).
@@ -46,9 +47,9 @@ from .frame import UNIT_SCALES, FrameConversion, detect_frame
 from .identity import is_habitsim_bvh
 from .importing import SOURCE_SUFFIXES, describe_hierarchy, import_bvh, read_source
 from .limbs import LEG_PROPORTIONS as LEG_PROPORTIONS
-from .limbs import MIRROR_BONE_TOLERANCE as MIRROR_BONE_TOLERANCE
 from .map_files import load_joint_map, validate_joint_map
 from .names import is_helper_name, name_cues
+from .options import MappingOptions
 from .report import ImportReport, SourceStanceRecord
 from .result import CONFIDENCE_CHECKS, CONFIDENCE_WARN, JointMapping
 from .retargeting import retarget
@@ -59,6 +60,7 @@ __all__ = [
     "UNIT_SCALES",
     "FrameConversion",
     "JointMapping",
+    "MappingOptions",
     "name_cues",
     "auto_map",
     "load_joint_map",

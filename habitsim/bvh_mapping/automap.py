@@ -12,6 +12,7 @@ from .chains import _FORE_SEGS, _HIND_SEGS, _LEG_CHAINS
 from .frame import FrameConversion, detect_frame
 from .limbs import _describe_limbs, _leg_roles, _Limb, _sided_limbs, _unsided_limbs
 from .names import _fore_vote
+from .options import MappingOptions
 from .tree import _Tree
 
 
@@ -24,7 +25,7 @@ class _Analysis:
     notes: list[str]
 
 
-def _analyse(bvh: BVHData) -> _Analysis:
+def _analyse(bvh: BVHData, options: MappingOptions) -> _Analysis:
     t = _Tree(bvh)
     notes: list[str] = []
     limbs = _sided_limbs(t)
@@ -50,7 +51,7 @@ def _analyse(bvh: BVHData) -> _Analysis:
         rs = sorted(rights, key=key)
         pairs = [(ls[0], rs[0]), (ls[1], rs[1])]
     else:
-        pairs = _unsided_limbs(t)
+        pairs = _unsided_limbs(t, options)
         geometric = True
         if len(pairs) < 2:
             raise SkeletonMappingError(
@@ -189,7 +190,7 @@ def _analyse(bvh: BVHData) -> _Analysis:
     return _Analysis(joints, geo, notes)
 
 
-def auto_map(bvh: BVHData) -> dict[str, str | None]:
+def auto_map(bvh: BVHData, options: MappingOptions | None = None) -> dict[str, str | None]:
     """Automatic habitsim ← source joint mapping from names and hierarchy.
 
     Left/right comes from name cues (``Left``/``Right``/``L_``/``_R``/``.L``…); legs without
@@ -198,6 +199,7 @@ def auto_map(bvh: BVHData) -> dict[str, str | None]:
 
     Args:
         bvh: the parsed source file.
+        options: the mapping's tuning knobs (default :class:`MappingOptions`).
 
     Returns:
         Every habitsim joint name → source joint name or None.
@@ -206,7 +208,7 @@ def auto_map(bvh: BVHData) -> dict[str, str | None]:
         SkeletonMappingError: fewer than four legs, or fore and hind legs that cannot be
             told apart.
     """
-    an = _analyse(bvh)
+    an = _analyse(bvh, options or MappingOptions())
     if an.geometric_sides:
         frame = detect_frame(bvh, an.joints)
         _resolve_sides(bvh, an, frame)

@@ -16,6 +16,7 @@ from .chains import _LEG_CHAINS
 from .frame import _parse_up, detect_frame
 from .identity import _identity_import, is_habitsim_bvh
 from .map_files import load_joint_map, validate_joint_map
+from .options import MappingOptions
 from .result import JointMapping
 from .retargeting import retarget
 from .tree import _Tree
@@ -98,6 +99,7 @@ def import_bvh(
     plant: bool = True,
     animation: str | int | None = None,
     fps: float | None = None,
+    options: MappingOptions | None = None,
 ) -> tuple[Motion, JointMapping]:
     """Read a BVH file (or a glTF/GLB animation) and retarget it onto a species' skeleton.
 
@@ -113,6 +115,7 @@ def import_bvh(
         plant: plant the legs on the source's footholds (see :func:`retarget`).
         animation, fps: for a glTF/GLB file, the animation and the sampling rate
             (:func:`read_source`).
+        options: the automatic mapping's tuning knobs (default :class:`MappingOptions`).
 
     Returns:
         ``(motion, mapping)``; print ``mapping`` for the habitsim ← source lines.
@@ -123,6 +126,7 @@ def import_bvh(
         SkeletonMappingError: unmappable skeleton or invalid joint map.
     """
     sp = load_species(species)
+    options = options or MappingOptions()
     bvh = (
         path
         if isinstance(path, BVHData)
@@ -141,7 +145,7 @@ def import_bvh(
             joints = validate_joint_map({n: n for n in JOINT_NAMES}, bvh)
             method = "habitsim names, converted"
         else:
-            an = _analyse(bvh)
+            an = _analyse(bvh, options)
             joints, geometric, notes = an.joints, an.geometric_sides, an.notes
             method = "auto"
     elif isinstance(joint_map, Mapping):
@@ -150,7 +154,7 @@ def import_bvh(
     else:
         spec = load_joint_map(joint_map)
         if spec["extends"] == "auto":
-            an = _analyse(bvh)
+            an = _analyse(bvh, options)
             base = dict(an.joints)
             base.update(spec["map"])
             joints = validate_joint_map(base, bvh, where=str(joint_map))

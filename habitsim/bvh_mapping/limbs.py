@@ -10,6 +10,7 @@ import numpy as np
 
 from ..errors import SkeletonMappingError
 from .names import _NOT_LIMB, _fore_vote
+from .options import MappingOptions
 from .tree import _Tree
 
 
@@ -40,23 +41,18 @@ def _sided_limbs(t: _Tree) -> list[_Limb]:
     return out
 
 
-#: Two unnamed chains hanging from one joint are a left/right pair when each bone along
-#: them matches its mirror's length within this share of the chain's length
-#: (:func:`_unsided_limbs`): mirrored legs do, a tail and a sided tail helper do not.
-MIRROR_BONE_TOLERANCE = 0.05
-
-
-def _mirrored(t: _Tree, a: list[int], b: list[int]) -> bool:
+def _mirrored(t: _Tree, a: list[int], b: list[int], tolerance: float) -> bool:
     """True if chains a and b are left/right mirrors: as many joints, the same bone
-    lengths (the first bone, from their common parent, included)."""
+    lengths (the first bone, from their common parent, included) within ``tolerance`` of
+    the chain's length (:attr:`MappingOptions.mirror_bone_tolerance`)."""
     if len(a) != len(b):
         return False
     la, lb = t.blen[a], t.blen[b]
     scale = max(float(la.sum()), float(lb.sum()))
-    return scale > 0 and bool(np.all(np.abs(la - lb) <= MIRROR_BONE_TOLERANCE * scale))
+    return scale > 0 and bool(np.all(np.abs(la - lb) <= tolerance * scale))
 
 
-def _unsided_limbs(t: _Tree) -> list[tuple[_Limb, _Limb]]:
+def _unsided_limbs(t: _Tree, options: MappingOptions) -> list[tuple[_Limb, _Limb]]:
     """The two longest pairs of mirrored chains hanging from one joint, for skeletons
     whose names carry no side.
 
@@ -85,7 +81,7 @@ def _unsided_limbs(t: _Tree) -> list[tuple[_Limb, _Limb]]:
                 if a in used or b in used:
                     continue
                 la, lb = cands[a], cands[b]
-                if not _mirrored(t, la.chain, lb.chain):
+                if not _mirrored(t, la.chain, lb.chain, options.mirror_bone_tolerance):
                     continue
                 used |= {a, b}
                 pairs.append((t.chain_length(la.chain) + t.chain_length(lb.chain), la, lb))

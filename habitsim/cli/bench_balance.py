@@ -73,7 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         metavar="HZ",
         help="control rate of the runner (default: every simulation step; mpc: "
-        "habitsim.sim.MPC_CONTROL_HZ)",
+        "habitsim.sim.TrackOptions.mpc_control_hz)",
     )
     p.add_argument(
         "--refine",
@@ -123,7 +123,7 @@ def _bench_balance(ns: argparse.Namespace) -> int:
         summarise,
     )
     from ..evaluation.bench.machine import cpu_count, mujoco_version
-    from ..sim import MPC_CONTROL_HZ
+    from ..sim import TrackOptions
 
     controllers = list(ns.controllers)
     opts = BalanceOptions(
@@ -144,7 +144,7 @@ def _bench_balance(ns: argparse.Namespace) -> int:
             f"{ns.clips} clip(s) × {ns.duration:g} s per species and action, "
             f"MPC {ns.mpc_hz:g} Hz, control "
             + (
-                f"every step (mpc {MPC_CONTROL_HZ:g} Hz)"
+                f"every step (mpc {TrackOptions().mpc_control_hz:g} Hz)"
                 if ns.control_hz is None
                 else f"{ns.control_hz:g} Hz"
             )

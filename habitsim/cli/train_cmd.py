@@ -12,7 +12,7 @@ import json
 import time
 from pathlib import Path
 
-from ..models.config import FINETUNE_LR, FINETUNE_STEPS
+from ..models.config import FinetuneConfig
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -47,7 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="CKPT|VARIANT",
         help="fine-tune: start from this checkpoint (a folder, or 'habit' for the shipped "
         "model) with its model configuration; --config then only sets the schedule, "
-        f"by default {FINETUNE_STEPS} steps at lr {FINETUNE_LR:g}",
+        f"by default {FinetuneConfig().steps} steps at lr {FinetuneConfig().lr:g}",
     )
     p.add_argument(
         "--rehearse",
@@ -108,8 +108,8 @@ def _parse_set(items: list[str]) -> dict[str, object]:
 
 def _finetune_config(init: str, cfg):
     """The fine-tune's configuration: the checkpoint's model, ``cfg``'s schedule with
-    :data:`FINETUNE_STEPS` steps at :data:`FINETUNE_LR` (``--steps`` / ``--set`` apply on
-    top)."""
+    the :class:`~habitsim.models.config.FinetuneConfig` schedule (``--steps`` / ``--set``
+    apply on top)."""
     from ..models.checkpoint import read_checkpoint_config
     from ..models.config import Config, finetune_schedule
     from ..models.train import resolve_init

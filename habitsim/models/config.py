@@ -37,6 +37,7 @@ __all__ = [
     "TextConfig",
     "ModelConfig",
     "TrainConfig",
+    "FinetuneConfig",
     "Config",
     "preset",
 ]
@@ -507,22 +508,31 @@ def _large() -> Config:
     )
 
 
-#: Default schedule of a fine-tune (``--init``): short, at a fifth of the training rate.
-FINETUNE_STEPS = 1000
-FINETUNE_LR = 2e-4
+@dataclass(frozen=True)
+class FinetuneConfig:
+    """The schedule of a fine-tune (``--init``) that replaces a preset's
+    (:func:`finetune_schedule`): short, at a fifth of the default training rate.
+
+    Attributes:
+        steps: optimiser steps.
+        lr: AdamW learning rate (the final rate is at most a quarter of it).
+    """
+
+    steps: int = 1000
+    lr: float = 2e-4
 
 
-def finetune_schedule(t: TrainConfig) -> TrainConfig:
-    """A fine-tune's schedule made from a preset's: :data:`FINETUNE_STEPS` steps at
-    :data:`FINETUNE_LR`, the final rate no higher than a quarter of it, at most a tenth of
+def finetune_schedule(t: TrainConfig, finetune: FinetuneConfig = FinetuneConfig()) -> TrainConfig:
+    """A fine-tune's schedule made from a preset's: ``finetune.steps`` steps at
+    ``finetune.lr``, the final rate no higher than a quarter of it, at most a tenth of
     the steps of warm-up and a validation at least every 250 steps; every loss weight and
     augmentation stays the preset's."""
     return dataclasses.replace(
         t,
-        steps=FINETUNE_STEPS,
-        lr=FINETUNE_LR,
-        lr_final=min(t.lr_final, FINETUNE_LR / 4),
-        warmup_steps=min(t.warmup_steps, FINETUNE_STEPS // 10),
+        steps=finetune.steps,
+        lr=finetune.lr,
+        lr_final=min(t.lr_final, finetune.lr / 4),
+        warmup_steps=min(t.warmup_steps, finetune.steps // 10),
         val_every=min(t.val_every, 250),
     )
 

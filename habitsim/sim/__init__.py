@@ -26,7 +26,8 @@ Units: SI (m, s, rad, N, N·m); times in [s] from the clip's first frame.
 One concept per module: :mod:`~habitsim.sim.reference` (finite differences, resampling),
 :mod:`~habitsim.sim.model` (trunk, feet, touch, leg length), :mod:`~habitsim.sim.servo`
 (in-engine servos), :mod:`~habitsim.sim.control` (controller construction, control rate),
-:mod:`~habitsim.sim.assist` (root assistance gains), :mod:`~habitsim.sim.falls`,
+:mod:`~habitsim.sim.assist` (root assistance gains), :mod:`~habitsim.sim.options` (the
+runner's knobs), :mod:`~habitsim.sim.falls`,
 :mod:`~habitsim.sim.clip` (one input clip resolved), :mod:`~habitsim.sim.result`,
 :mod:`~habitsim.sim.loop` (the Python loop), :mod:`~habitsim.sim.rollout`
 (``mujoco.rollout``) and :mod:`~habitsim.sim.tracking` (:func:`track`,
@@ -38,13 +39,12 @@ from __future__ import annotations
 from ..controllers import CONTROLLERS
 from ..errors import SimulationError
 from ..qpos import species_model as species_model  # the shipped-model cache
-from .assist import ASSIST_FREQUENCY_HZ as ASSIST_FREQUENCY_HZ
 from .assist import root_assist
-from .control import MPC_CONTROL_HZ
 from .falls import FallDetector, FallOptions
 from .model import FOOT_GEOMS, foot_geoms
 from .model import TOUCH_THRESHOLD_MG as TOUCH_THRESHOLD_MG
 from .model import _species_model as _species_model
+from .options import TrackOptions
 from .reference import ReferenceTrajectory, build_reference, finite_differences
 from .result import TrackResult
 from .servo import servo_model, servo_targets
@@ -61,7 +61,7 @@ __all__ = [
     "build_reference",
     "foot_geoms",
     "FOOT_GEOMS",
-    "MPC_CONTROL_HZ",
+    "TrackOptions",
     "servo_model",
     "root_assist",
     "servo_targets",

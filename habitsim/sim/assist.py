@@ -11,12 +11,12 @@ import numpy as np
 from ..errors import SimulationError, unknown_choice
 from ..mjutils import home_qpos
 from .model import _free_body
-
-#: Natural frequency of the default root assistance [Hz].
-ASSIST_FREQUENCY_HZ = 5.0
+from .options import TrackOptions
 
 
-def root_assist(model: mujoco.MjModel, frequency_hz: float = ASSIST_FREQUENCY_HZ) -> Any:
+def root_assist(
+    model: mujoco.MjModel, frequency_hz: float = TrackOptions().assist_frequency_hz
+) -> Any:
     """:class:`~habitsim.controllers.assist.RootAssist` with gains for the WHOLE body.
 
     Translation: ``kp = M·ω²``, ``kd = 2M·ω`` (ω = 2π·frequency, M the total mass).
@@ -47,12 +47,12 @@ def root_assist(model: mujoco.MjModel, frequency_hz: float = ASSIST_FREQUENCY_HZ
     return RootAssist(model, kp=(mass * w**2, inertia * w**2), kd=(2 * mass * w, 2 * inertia * w))
 
 
-def _make_assist(assist: Any, model: mujoco.MjModel) -> Any:
+def _make_assist(assist: Any, model: mujoco.MjModel, options: TrackOptions) -> Any:
     """None, or a :class:`~habitsim.controllers.assist.RootAssist` (or the given object)."""
     if assist is False or assist is None:
         return None
     if assist is True or assist == "root":
-        return root_assist(model)
+        return root_assist(model, options.assist_frequency_hz)
     if isinstance(assist, str):
         raise SimulationError(unknown_choice("assist", assist, ("root",)))
     if not (hasattr(assist, "apply") and hasattr(assist, "report")):

@@ -51,11 +51,6 @@ def _make_controller(
         raise SimulationError(f"controller {controller!r} does not fit the model: {e}") from e
 
 
-#: Default torque-layer rate of the ``"mpc"`` controller [Hz] (MPC solves at 30 Hz);
-#: ``balance`` keeps the full rate.
-MPC_CONTROL_HZ = 250.0
-
-
 def _control_every(model: mujoco.MjModel, control_hz: float | None) -> int:
     if control_hz is None:
         return 1

@@ -16,9 +16,10 @@ from ..motion import Motion
 from ..qpos import QposTrajectory
 from .assist import _make_assist
 from .clip import _resolve
-from .control import MPC_CONTROL_HZ, _control_every, _make_controller
+from .control import _control_every, _make_controller
 from .falls import FallDetector
 from .loop import _run_python
+from .options import TrackOptions
 from .result import TrackResult, _finish
 from .rollout import _rollout_stats, _run_rollout
 from .servo import _sim_model
@@ -55,6 +56,7 @@ def track(
     contacts: np.ndarray | None = None,
     feet: Sequence[str] | None = None,
     init_noise: float = 0.0,
+    options: TrackOptions | None = None,
 ) -> TrackResult:
     """Track a reference motion in MuJoCo with a controller.
 
@@ -82,8 +84,8 @@ def track(
         model: the model (default: the species' shipped model). Named servo controllers
             configure servos on it unless it has them already.
         control_hz: control rate [Hz] (default: every simulation step; for ``"mpc"`` by
-            name :data:`MPC_CONTROL_HZ`, also with a root assist whose damping the model
-            integrates, :meth:`~habitsim.controllers.assist.RootAssist.damped_model`).
+            name :attr:`TrackOptions.mpc_control_hz`, also with a root assist whose damping
+            the model integrates, :meth:`~habitsim.controllers.assist.RootAssist.damped_model`).
         settle_s: seconds to hold the first frame (from rest) before the clip starts.
         stop_on_fall: stop at the first fall (else simulate to the end; metrics still
             use the survived part only).
@@ -111,6 +113,8 @@ def track(
             measurement's (10⁻³ rad/s) sits at its balance limit; repeating it with a few
             seeds measures how often it survives (``habitsim bench real --repeats``).
             0 (default): the reference's velocity exactly.
+        options: the runner's tuning knobs (the mpc's default control rate, the root
+            assistance's frequency; default :class:`TrackOptions`).
 
     Returns:
         The :class:`TrackResult` (metrics in :attr:`TrackResult.metrics`).
@@ -121,12 +125,13 @@ def track(
         UnknownSpeciesError: unknown species.
     """
     _check_settle(settle_s)
+    options = options or TrackOptions()
     if not (math.isfinite(init_noise) and init_noise >= 0):
         raise SimulationError(f"init_noise must be finite and >= 0 [rad/s], got {init_noise}")
     clip = _resolve(motion_or_qpos, species, model, contacts=contacts, feet=feet)
     sim_model = _sim_model(controller, clip, model)
     dv0 = _velocity_noise(sim_model, init_noise, seed)
-    asst = _make_assist(assist, sim_model)
+    asst = _make_assist(assist, sim_model, options)
     implicit = False
     if asst is not None and hasattr(asst, "damped_model"):
         # the assist's damping integrated implicitly (controllers.assist: held explicitly
@@ -138,7 +143,7 @@ def track(
         # an assist whose damping is explicit keeps the full rate: held over a control
         # period of two steps it diverged; its stiffness alone is far inside the limit
         # (ω·dt = 0.13 at 5 Hz and 250 Hz)
-        control_hz = MPC_CONTROL_HZ
+        control_hz = options.mpc_control_hz
     every = _control_every(sim_model, control_hz)
     fast = controller == "servo" and asst is None and every == 1
     if use_rollout and not fast:
@@ -165,6 +170,7 @@ def track_many(
     settle_s: float = 0.0,
     stop_on_fall: bool = True,
     threads: int | None = None,
+    options: TrackOptions | None = None,
 ) -> list[TrackResult]:
     """Track many clips in parallel threads.
 
@@ -178,7 +184,7 @@ def track_many(
         species: species of QposTrajectory inputs.
         controller: a controller name, or a factory ``model -> Controller`` called once
             per clip with the model to simulate (controllers keep state).
-        assist, control_hz, settle_s, stop_on_fall: as in :func:`track`.
+        assist, control_hz, settle_s, stop_on_fall, options: as in :func:`track`.
         threads: worker threads (default: the CPU count).
 
     Returns:
@@ -213,6 +219,7 @@ def track_many(
                 settle_s=settle_s,
                 stop_on_fall=stop_on_fall,
                 use_rollout=False,
+                options=options,
             )
 
         with ThreadPoolExecutor(max_workers=threads) as ex:
