@@ -22,6 +22,21 @@ RENAME = {
     "tail2": "TailMid",
     "tail3": "TailTip",
 }
+for _s, _S in (("l", "L"), ("r", "R")):
+    RENAME.update(
+        {
+            f"{_s}f_scapula": f"{_S}_Collar",
+            f"{_s}f_shoulder": f"{_S}_UpperArm",
+            f"{_s}f_elbow": f"{_S}_LowerArm",
+            f"{_s}f_wrist": f"{_S}_Paw",
+            f"{_s}f_toe": f"{_S}_Digits",
+            f"{_s}h_ilium": f"{_S}_Ilium",
+            f"{_s}h_hip": f"{_S}_Thigh",
+            f"{_s}h_knee": f"{_S}_Shin",
+            f"{_s}h_hock": f"{_S}_Hock",
+            f"{_s}h_toe": f"{_S}_Toes",
+        }
+    )
 
 
 CM = 100.0

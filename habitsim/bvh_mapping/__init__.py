@@ -50,7 +50,7 @@ from .limbs import MIRROR_BONE_TOLERANCE as MIRROR_BONE_TOLERANCE
 from .map_files import load_joint_map, validate_joint_map
 from .names import is_helper_name, name_cues
 from .report import ImportReport, SourceStanceRecord
-from .result import CONFIDENCE_CHECKS, CONFIDENCE_WARN, JointMapping
+from .result import CONFIDENCE_CHECKS, CONFIDENCE_WARN, JointMapping, MappingNote
 from .retargeting import retarget
 
 __all__ = [
@@ -59,6 +59,7 @@ __all__ = [
     "UNIT_SCALES",
     "FrameConversion",
     "JointMapping",
+    "MappingNote",
     "name_cues",
     "auto_map",
     "load_joint_map",
