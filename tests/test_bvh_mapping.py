@@ -15,6 +15,7 @@ from helpers import DOG, _dog_text
 import habitsim
 from habitsim.bvh import BVHData, parse_bvh, read_bvh
 from habitsim.bvh_mapping import (
+    MappingNote,
     MappingOptions,
     auto_map,
     detect_frame,
@@ -222,7 +223,7 @@ def test_unnamed_sides_are_found_by_geometry(tmp_path):
         for k, v in EXPECTED_DOG_MAP.items()
     }
     assert mapping.joints == expected
-    assert any("geometry" in n for n in mapping.notes)
+    assert MappingNote.GEOMETRIC_SIDES in mapping.note_codes
 
 
 def test_unmappable_three_joint_chain():
@@ -401,7 +402,7 @@ def test_anonymous_rig_finds_legs_by_mirrored_chains(walk, rig):
             assert mapping.joints[k] == by_index[named.joints[k]], k
     tail = {by_index[n] for n in rig.names if "TailHelper" in n}
     assert not tail & set(mapping.joints.values())
-    assert any("geometry" in n for n in mapping.notes)
+    assert MappingNote.GEOMETRIC_SIDES in mapping.note_codes
     assert named_motion.contacts is not None and motion.contacts is not None
     assert min(stance_f1(motion.contacts, named_motion.contacts)) >= 0.95
     # a nub pointing ahead (as a 3ds Max biped's finger nub does) is no foot point either

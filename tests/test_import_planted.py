@@ -12,28 +12,12 @@ import json
 
 import numpy as np
 import pytest
-from foreign_rig import RENAME, _foreign_rig
+from foreign_rig import _foreign_rig
 
 import habitsim
 from habitsim.bvh_mapping import ImportReport, import_bvh
 from habitsim.cli import main
 from habitsim.stance.labels import stance_f1
-
-for _s, _S in (("l", "L"), ("r", "R")):
-    RENAME.update(
-        {
-            f"{_s}f_scapula": f"{_S}_Collar",
-            f"{_s}f_shoulder": f"{_S}_UpperArm",
-            f"{_s}f_elbow": f"{_S}_LowerArm",
-            f"{_s}f_wrist": f"{_S}_Paw",
-            f"{_s}f_toe": f"{_S}_Digits",
-            f"{_s}h_ilium": f"{_S}_Ilium",
-            f"{_s}h_hip": f"{_S}_Thigh",
-            f"{_s}h_knee": f"{_S}_Shin",
-            f"{_s}h_hock": f"{_S}_Hock",
-            f"{_s}h_toe": f"{_S}_Toes",
-        }
-    )
 
 
 @pytest.fixture(scope="module")

@@ -12,11 +12,12 @@ import pytest
 
 import habitsim
 from habitsim.gaits import generate
-from habitsim.models import transfer
+from habitsim.models import network_transfer, transfer
 from habitsim.stance.labels import stance_runs
 from habitsim.stance.ladder import plant_partly, trim_to_reach
 from habitsim.stance.planting import PlantingOptions, label_source_stance
 from habitsim.stance.policy import ConformPolicy
+from habitsim.stance.report import PlantReason
 
 
 def test_label_source_stance_floor_and_hold():
@@ -301,10 +302,13 @@ def test_planting_out_of_reach_keeps_the_decoded_feet_and_says_why(trot) -> None
     # the horse's trot at the cat's Froude speed and the horse's cadence: strides of
     # more leg lengths than the cat's legs sweep; without restepping and partial planting
     # nothing holds the feet
-    out = transfer(trot, to="cat", method="habit", seed=0, policy=NO_FALLBACKS)
+    out, conformed = network_transfer("habit", trot, "cat", seed=0, policy=NO_FALLBACKS)
     raw = transfer(trot, to="cat", method="habit", seed=0, plant=False)
     report = out.metadata["transfer"]["planted"]
-    assert not report["kept"] and "do not reach" in report["reason"]
+    planted = conformed.planted
+    assert planted is not None and planted.to_dict() == report
+    assert not report["kept"] and planted.reason_codes[0] is PlantReason.OUT_OF_REACH
+    assert planted.reason_codes[-1] is PlantReason.DECODED_FEET_KEPT
     assert report["max_reach_error_per_leg"] > POLICY.plant_max_reach_per_leg
     np.testing.assert_array_equal(out.rotations, raw.rotations)
 
@@ -337,12 +341,13 @@ def test_planting_steps_faster_when_the_body_outruns_the_decoded_stride(walk) ->
     from habitsim.contacts import stride_period
     from habitsim.gait_stats import gait_statistics
 
-    out = transfer(walk, to="cat", method="habit", seed=0)
+    out, conformed = network_transfer("habit", walk, "cat", seed=0)
     raw = transfer(walk, to="cat", method="habit", seed=0, plant=False)
     report = out.metadata["transfer"]["planted"]
     assert report["kept"] and report["root"] == "decoded" and _reaches(report), report
     step = report["restep"]
-    assert step["rate"] > 1.2 and "step faster" in report["reason"]
+    assert conformed.planted is not None
+    assert step["rate"] > 1.2 and conformed.planted.reason_codes[-1] is PlantReason.RESTEPPED
     before, after = raw.contacts, out.contacts
     assert stride_period(after) == pytest.approx(stride_period(before) / step["rate"], rel=0.15)
     assert step["period_s"][1] < step["period_s"][0]
@@ -375,9 +380,11 @@ def test_partial_planting_holds_the_faster_steps_when_restepping_misses() -> Non
 
     walk = import_bvh(resources.files("habitsim.examples") / "dog_walk.bvh", "dog")[0]
     raw = transfer(walk, to="giraffe", method="habit", seed=0, plant=False)
-    out = transfer(walk, to="giraffe", method="habit", seed=0)
+    out, conformed = network_transfer("habit", walk, "giraffe", seed=0)
     report = out.metadata["transfer"]["planted"]
-    assert report["kept"] and "free_runs" in report and "on the faster steps" in report["reason"]
+    assert report["kept"] and "free_runs" in report and conformed.planted is not None
+    codes = conformed.planted.reason_codes
+    assert PlantReason.PARTLY_ON_RESTEP in codes and codes[-1] is PlantReason.PARTLY
     assert report["restep"]["max_pelvis_drop_per_leg"] > POLICY.plant_max_drop_per_leg
     rate = report["restep"]["rate"]
     assert rate > 1.2
@@ -398,11 +405,12 @@ def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot):
     # held for a whole stance run is out of reach with the decoded root path
     # (with the median footholds alone: the centred ones reach with the decoded root)
     carry = ConformPolicy(foothold_rules=(False,), plant_min_speed_ratio=0.2)
-    out = transfer(trot, to="tiger", method="habit", seed=0, policy=carry)
+    out, conformed = network_transfer("habit", trot, "tiger", seed=0, policy=carry)
     raw = transfer(trot, to="tiger", method="habit", seed=0, plant=False)
     report = out.metadata["transfer"]["planted"]
     assert report["kept"] and report["root"] == "carried", report
-    assert "do not reach" in report["reason"] and "carry" in report["reason"]
+    assert conformed.planted is not None
+    assert conformed.planted.reason_codes == (PlantReason.OUT_OF_REACH, PlantReason.CARRIED)
     assert _reaches(report)
     c = out.contacts
     assert _resting(out, c) >= 0.95 > _resting(raw, c)
@@ -415,9 +423,10 @@ def test_planting_out_of_reach_moves_the_body_as_far_as_its_legs_carry_it(trot):
     assert 0.2 <= report["speed_ratio"] < 0.99
     # a body its legs carry too little is not moved: the decoded feet are kept
     stiff = replace(NO_FALLBACKS, foothold_rules=(False,), plant_min_speed_ratio=0.99)
-    slow = transfer(trot, to="tiger", method="habit", seed=0, policy=stiff)
+    slow, conformed = network_transfer("habit", trot, "tiger", seed=0, policy=stiff)
     report = slow.metadata["transfer"]["planted"]
-    assert not report["kept"] and "carry the body only" in report["reason"]
+    assert conformed.planted is not None
+    assert not report["kept"] and PlantReason.CARRY_TOO_SLOW in conformed.planted.reason_codes
     np.testing.assert_array_equal(slow.root_positions, raw.root_positions)
 
 

@@ -17,6 +17,7 @@ from habitsim.motion import Motion, load_motion
 from habitsim.qpos import QposTrajectory, load_species_model, qpos_to_motion, species_model
 from habitsim.sim import (
     CONTROLLERS,
+    FallCause,
     FallDetector,
     FallOptions,
     SimulationError,
@@ -95,10 +96,11 @@ def test_fall_detector_rules(dog) -> None:
     assert det.check(1, at(q)) is None
     low = q.copy()
     low[2] *= 0.4
-    assert "height" in det.check(1, at(low))
+    assert det.fall(1, at(low)).cause is FallCause.TRUNK_LOW
+    assert det.check(1, at(low)) == det.fall(1, at(low)).text  # the same, in words
     tipped = q.copy()
     tipped[3:7] = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0]  # rolled 90°
-    assert "tilt" in det.check(1, at(tipped))
+    assert det.fall(1, at(tipped)).cause is FallCause.TILT
     # lying low with the head on the floor: allowed for 0.2 s (6 frames), then a fall
     nose = q.copy()
     nose[dog.joint("neck_pitch").qposadr[0]] = 0.5
@@ -111,14 +113,16 @@ def test_fall_detector_rules(dog) -> None:
         nose[2] -= 0.005  # lower the trunk until the head touches the floor
     assert nose[2] > 0.5 * q[2]  # still high: only the ground-contact rule can fire
     det.reset()
-    reasons = [det.check(k, at(nose)) for k in range(1, 9)]
-    assert reasons[:6] == [None] * 6
-    assert reasons[6] is not None and "head" in reasons[6]
+    falls = [det.fall(k, at(nose)) for k in range(1, 9)]
+    assert falls[:6] == [None] * 6
+    assert falls[6] is not None and falls[6].cause is FallCause.BODY_CONTACT
+    assert "head" in falls[6].bodies
     # the rule's thresholds are options: a stricter tilt limit catches a smaller roll
     strict = FallDetector(dog, np.tile(q, (40, 1)), FPS, 0.61, options=FallOptions(tilt_deg=5.0))
     rolled = q.copy()
     rolled[3:7] = [np.cos(np.pi / 36), np.sin(np.pi / 36), 0.0, 0.0]  # rolled 10°
-    assert det.check(1, at(rolled)) is None and "tilt" in strict.check(1, at(rolled))
+    assert det.check(1, at(rolled)) is None
+    assert strict.fall(1, at(rolled)).cause is FallCause.TILT
 
 
 def test_unstable_run_is_reported_not_raised(dog) -> None:

@@ -25,7 +25,8 @@ from habitsim.stance.bounds import bound_heading, bound_height, bound_speed
 from habitsim.stance.labels import stance_f1, stance_runs
 from habitsim.stance.level import level_trunk
 from habitsim.stance.policy import ConformPolicy
-from habitsim.stance.schedule import transfer_contacts, walking_stance
+from habitsim.stance.report import TransferRecord
+from habitsim.stance.schedule import ScheduleReason, transfer_contacts, walking_stance
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -176,8 +177,9 @@ def test_transfer_without_source_labels_falls_back_and_says_so(trot) -> None:
     bare.contacts = None
     for method in ("habit", "direct_relabelled"):
         out = transfer(bare, to="cat", method=method, seed=0)
-        how = out.metadata["transfer"]["contacts"]
-        assert how["method"] in ("detected", "duty") and "no stance labels" in how["reason"]
+        how = TransferRecord.from_metadata(out.metadata).contacts
+        assert how is not None and how.method in ("detected", "duty")
+        assert how.reason_code is ScheduleReason.NO_SOURCE_LABELS
         assert out.contacts is not None and out.contacts.shape == (out.num_frames, 4)
 
 

@@ -51,7 +51,7 @@ from .map_files import load_joint_map, validate_joint_map
 from .names import is_helper_name, name_cues
 from .options import MappingOptions
 from .report import ImportReport, SourceStanceRecord
-from .result import CONFIDENCE_CHECKS, CONFIDENCE_WARN, JointMapping
+from .result import CONFIDENCE_CHECKS, CONFIDENCE_WARN, JointMapping, MappingNote
 from .retargeting import retarget
 
 __all__ = [
@@ -60,6 +60,7 @@ __all__ = [
     "UNIT_SCALES",
     "FrameConversion",
     "JointMapping",
+    "MappingNote",
     "MappingOptions",
     "name_cues",
     "auto_map",

@@ -13,6 +13,7 @@ from .frame import FrameConversion, detect_frame
 from .limbs import _describe_limbs, _leg_roles, _Limb, _sided_limbs, _unsided_limbs
 from .names import _fore_vote
 from .options import MappingOptions
+from .result import MappingNote
 from .tree import _Tree
 
 
@@ -23,11 +24,18 @@ class _Analysis:
         tuple[str, str]
     ]  # leg pairs whose sides need geometry (l-prefix, r-prefix)
     notes: list[str]
+    note_codes: list[MappingNote]
 
 
 def _analyse(bvh: BVHData, options: MappingOptions) -> _Analysis:
     t = _Tree(bvh)
     notes: list[str] = []
+    codes: list[MappingNote] = []
+
+    def note(code: MappingNote, text: str) -> None:
+        codes.append(code)
+        notes.append(text)
+
     limbs = _sided_limbs(t)
 
     def rank(lb: _Limb) -> tuple[bool, float]:
@@ -62,7 +70,10 @@ def _analyse(bvh: BVHData, options: MappingOptions) -> _Analysis:
                 "(named like LeftArm/LeftUpLeg, or symmetric chains hanging from the trunk). "
                 "Give an explicit joint map with --map."
             )
-        notes.append("legs found from symmetric unnamed chains; left/right decided by geometry")
+        note(
+            MappingNote.GEOMETRIC_SIDES,
+            "legs found from symmetric unnamed chains; left/right decided by geometry",
+        )
 
     # Fore / hind: names, then hierarchy (legs hanging closer to the root are hind legs).
     attach = [t.lca([t.parents[a.root], t.parents[b.root]]) for a, b in pairs]
@@ -81,7 +92,10 @@ def _analyse(bvh: BVHData, options: MappingOptions) -> _Analysis:
         elif t.depth[attach[0]] != t.depth[attach[1]]:
             by_tree = 0 if t.depth[attach[0]] > t.depth[attach[1]] else 1
     if by_name is not None and by_tree is not None and by_name != by_tree:
-        notes.append("fore/hind from the names contradicts the hierarchy; the names were used")
+        note(
+            MappingNote.NAMES_OVER_HIERARCHY,
+            "fore/hind from the names contradicts the hierarchy; the names were used",
+        )
     fore_i = by_name if by_name is not None else by_tree
     if fore_i is None:
         raise SkeletonMappingError(
@@ -113,7 +127,7 @@ def _analyse(bvh: BVHData, options: MappingOptions) -> _Analysis:
         if len(spine) >= 3:
             joints["spine2"] = names[spine[len(spine) // 2]]
     else:
-        notes.append("fore and hind legs hang from the same joint: no spine mapped")
+        note(MappingNote.NO_SPINE, "fore and hind legs hang from the same joint: no spine mapped")
     on_path = set(t.path(hips, chest)) | set(t.ancestors(hips))
 
     # Neck and head beyond the chest (or a spine joint before it).
@@ -166,7 +180,7 @@ def _analyse(bvh: BVHData, options: MappingOptions) -> _Analysis:
                 ]
                 joints["snout"] = names[(nose or ends or [max(kids, key=lambda c: t.height[c])])[0]]
     else:
-        notes.append("no neck/head chain found beyond the chest")
+        note(MappingNote.NO_NECK, "no neck/head chain found beyond the chest")
 
     # Tail from the hips (or, if named so, from an ancestor of the hips).
     cands = free_children(hips)
@@ -184,10 +198,10 @@ def _analyse(bvh: BVHData, options: MappingOptions) -> _Analysis:
         if len(tc) >= 3:
             joints["tail2"] = names[tc[(len(tc) - 1) // 2]]
     else:
-        notes.append("no tail chain found at the hips")
+        note(MappingNote.NO_TAIL, "no tail chain found at the hips")
 
     geo = [("lf", "rf"), ("lh", "rh")] if geometric else []
-    return _Analysis(joints, geo, notes)
+    return _Analysis(joints, geo, notes, codes)
 
 
 def auto_map(bvh: BVHData, options: MappingOptions | None = None) -> dict[str, str | None]:

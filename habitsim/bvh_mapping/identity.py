@@ -13,7 +13,7 @@ from ..rotations import quat_fix_continuity
 from ..skeleton import JOINT_NAMES, PARENTS, get_skeleton
 from ..species import Species
 from .chains import _IDX
-from .result import JointMapping
+from .result import JointMapping, MappingNote
 
 
 def _habitsim_order(bvh: BVHData) -> list[int] | None:
@@ -41,18 +41,21 @@ def _identity_import(bvh: BVHData, species: Species) -> tuple[Motion, JointMappi
     root = bvh.root_translation()
     skel = get_skeleton(species)
     notes = ["habitsim-exported file: rotations and root translation copied"]
+    codes = [MappingNote.COPIED]
     off = bvh.offsets[keep]
     scale = 1.0
     if not np.allclose(off[1:], skel.offsets[1:], atol=1e-6):
         src_leg = sum(float(np.linalg.norm(off[_IDX[n]])) for n in ("lh_knee", "lh_hock", "lh_toe"))
         scale = species.hind_leg_length / src_leg if src_leg > 0 else 1.0
+        codes.append(MappingNote.ROOT_SCALED)
         notes.append(
             f"bone offsets differ from the {species.name} skeleton: root translation scaled "
             f"by the hind-leg length ratio {scale:.4g}"
         )
     joints: dict[str, str | None] = {n: n for n in JOINT_NAMES}
+    codes.append(MappingNote.OWN_TOE_STANCE)
     notes.append("stance labels detected on the file's own toes (habitsim contact rule)")
-    mapping = JointMapping(joints, "identity", None, scale, notes)
+    mapping = JointMapping(joints, "identity", None, scale, notes, note_codes=codes)
     meta = {"source": "bvh", "bvh_file": Path(bvh.source).name, "mapping": mapping.to_dict()}
     m = Motion(species.name, bvh.fps, root * scale, q, metadata=meta)
     from ..contacts import detect_contacts

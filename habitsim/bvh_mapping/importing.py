@@ -17,7 +17,7 @@ from .frame import _parse_up, detect_frame
 from .identity import _identity_import, is_habitsim_bvh
 from .map_files import load_joint_map, validate_joint_map
 from .options import MappingOptions
-from .result import JointMapping
+from .result import JointMapping, MappingNote
 from .retargeting import retarget
 from .tree import _Tree
 
@@ -139,6 +139,7 @@ def import_bvh(
         return _identity_import(bvh, sp)
 
     notes: list[str] = []
+    codes: list[MappingNote] = []
     geometric: list[tuple[str, str]] = []
     if joint_map is None:
         if is_habitsim_bvh(bvh):
@@ -146,7 +147,7 @@ def import_bvh(
             method = "habitsim names, converted"
         else:
             an = _analyse(bvh, options)
-            joints, geometric, notes = an.joints, an.geometric_sides, an.notes
+            joints, geometric, notes, codes = an.joints, an.geometric_sides, an.notes, an.note_codes
             method = "auto"
     elif isinstance(joint_map, Mapping):
         joints = validate_joint_map(joint_map, bvh)
@@ -158,6 +159,7 @@ def import_bvh(
             base = dict(an.joints)
             base.update(spec["map"])
             joints = validate_joint_map(base, bvh, where=str(joint_map))
+            codes = [*an.note_codes, MappingNote.SET_BY_HAND]
             notes = an.notes + [f"joints set by hand: {', '.join(sorted(spec['map']))}"]
             geometric = [
                 (lp, rp)
@@ -173,9 +175,9 @@ def import_bvh(
 
     frame = detect_frame(bvh, joints, units=units, up=up, species=sp)
     if geometric:
-        an2 = _Analysis(joints, geometric, notes)
+        an2 = _Analysis(joints, geometric, notes, codes)
         _resolve_sides(bvh, an2, frame)
-    mapping = JointMapping(joints, method, frame, 1.0, list(notes))
+    mapping = JointMapping(joints, method, frame, 1.0, list(notes), note_codes=list(codes))
     motion = retarget(bvh, mapping, sp, plant=plant)
     motion.metadata["mapping"] = mapping.to_dict()
     return motion, mapping

@@ -4,6 +4,7 @@ conversion, and how confident the mapping of each leg is."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 from ..skeleton import JOINT_NAMES
@@ -21,6 +22,38 @@ CONFIDENCE_CHECKS = (
 CONFIDENCE_WARN = 0.67
 
 
+class MappingNote(StrEnum):
+    """A remark of :attr:`JointMapping.notes` as a typed code (the note says the same in
+    words, with the names and figures)."""
+
+    #: the legs were found from symmetric unnamed chains; left/right decided by geometry
+    GEOMETRIC_SIDES = "geometric_sides"
+    #: fore/hind from the joint names contradicts the hierarchy; the names were used
+    NAMES_OVER_HIERARCHY = "names_over_hierarchy"
+    #: fore and hind legs hang from the same joint: no spine mapped
+    NO_SPINE = "no_spine"
+    #: no neck/head chain found beyond the chest
+    NO_NECK = "no_neck"
+    #: no tail chain found at the hips
+    NO_TAIL = "no_tail"
+    #: joints set by hand over the automatic mapping (a map file extending ``auto``)
+    SET_BY_HAND = "set_by_hand"
+    #: a habitsim-exported file: rotations and root translation copied
+    COPIED = "copied"
+    #: bone offsets differ from the species' skeleton: root translation scaled
+    ROOT_SCALED = "root_scaled"
+    #: stance labels detected on the file's own toes
+    OWN_TOE_STANCE = "own_toe_stance"
+    #: no spine/neck/head mapped: the pelvis keeps the standing orientation
+    PELVIS_STANDING = "pelvis_standing"
+    #: the source hip height is not measurable: root translation not scaled
+    ROOT_UNSCALED = "root_unscaled"
+    #: a leg has no mapped foot or upper joint: its feet not labelled or planted
+    LEG_UNPLANTED = "leg_unplanted"
+    #: a source leg has zero length: feet not planted
+    ZERO_LEG = "zero_leg"
+
+
 @dataclass
 class JointMapping:
     """Which source joint drives each habitsim joint, and how the file was converted.
@@ -33,6 +66,8 @@ class JointMapping:
         root_scale: factor applied to the source root translation (species hip height /
             source hip height) [-].
         notes: human-readable remarks (guesses made, fallbacks taken).
+        note_codes: each note as a typed code, in the same order (not written to the
+            metadata).
         confidence: per leg (``lf``, ``rf``, ``lh``, ``rh``) a score in [0, 1] that the
             chain mapped to it is that leg (:data:`CONFIDENCE_CHECKS`); empty until the
             motion has been retargeted.
@@ -47,6 +82,12 @@ class JointMapping:
     notes: list[str] = field(default_factory=list)
     confidence: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    note_codes: list[MappingNote] = field(default_factory=list)
+
+    def note(self, code: MappingNote, text: str) -> None:
+        """Add a remark: its code to :attr:`note_codes`, its words to :attr:`notes`."""
+        self.note_codes.append(code)
+        self.notes.append(text)
 
     def mapped(self) -> dict[str, str]:
         """Only the mapped habitsim joints: habitsim name → source name."""

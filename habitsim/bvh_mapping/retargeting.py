@@ -28,7 +28,7 @@ from .chains import _AXIAL, _END_POINTS, _IDX, _LEG_CHAINS, _TAIL
 from .frame import _leg_ends
 from .names import _fore_vote
 from .report import ImportReport, SourceStanceRecord
-from .result import CONFIDENCE_WARN, JointMapping
+from .result import CONFIDENCE_WARN, JointMapping, MappingNote
 from .tree import _Tree
 
 
@@ -151,7 +151,10 @@ def retarget(
         g[:, 0] = np.stack([x, y, z], axis=-1)
         q[:, 0] = matrix_to_quat(g[:, 0])
     else:
-        mapping.notes.append("no spine/neck/head mapped: pelvis keeps the standing orientation")
+        mapping.note(
+            MappingNote.PELVIS_STANDING,
+            "no spine/neck/head mapped: pelvis keeps the standing orientation",
+        )
         q[:, 0] = stand_q[0]
         g[:, 0] = quat_to_matrix(stand_q[0])
 
@@ -206,7 +209,10 @@ def retarget(
         k = h_dst / h_src
     else:
         k = 1.0
-        mapping.notes.append("source hip height not measurable: root translation not scaled")
+        mapping.note(
+            MappingNote.ROOT_UNSCALED,
+            "source hip height not measurable: root translation not scaled",
+        )
     root = hips * k
     root[:, 2] = (hips[:, 2] - ground) * k
     mapping.root_scale = k
@@ -332,9 +338,10 @@ def _source_stance(
         toe = next((j2s[n] for n in reversed(chain[2:]) if n in j2s), None)
         top = next((j2s[n] for n in reversed(chain[2:4]) if n in j2s), None)
         if toe is None or top is None or anchor not in j2s:
-            mapping.notes.append(
+            mapping.note(
+                MappingNote.LEG_UNPLANTED,
                 f"{prefix} leg has no mapped foot or {anchor.split('_')[1]} joint: feet not "
-                "labelled or planted from the source"
+                "labelled or planted from the source",
             )
             return None
         a, f = bvh.index(j2s[anchor]), bvh.index(toe)
@@ -352,7 +359,7 @@ def _source_stance(
     ]
     limb_len = np.array(lengths)
     if np.any(limb_len <= 1e-6):
-        mapping.notes.append("a source leg has zero length: feet not planted")
+        mapping.note(MappingNote.ZERO_LEG, "a source leg has zero length: feet not planted")
         return None
     st = label_source_stance(
         [src[:, pts] for pts in points], bvh.fps, float(limb_len[2:].mean()), options

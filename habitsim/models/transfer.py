@@ -54,7 +54,7 @@ import torch
 from ..errors import InvalidMotionError
 from ..motion import Motion, resample_motion
 from ..species import load_species
-from ..stance.conform import conform
+from ..stance.conform import ConformReport, conform
 from ..stance.policy import ConformPolicy
 from ..stance.schedule import transfer_contacts, walking_stance
 from ..transfer_methods import METHODS, TransferMethod, register_method, run_method
@@ -81,6 +81,7 @@ __all__ = [
     "transfer",
     "reconstruct",
     "network_method",
+    "network_transfer",
     "transfer_contacts",
     "walking_stance",
     "resolve_checkpoint",
@@ -326,20 +327,49 @@ def network_method(variant: str) -> Callable[..., Motion]:
         policy: ConformPolicy | None = None,
         **_: Any,
     ) -> Motion:
-        ck = load_model(checkpoint, variant)
-        if ck.config.model.variant != variant:
-            raise MethodNotAvailableError(
-                f"method {variant!r} needs a {variant!r} checkpoint; {ck.path} is a "
-                f"{ck.config.model.variant!r} one"
-            )
-        out, info = _run_network(
-            ck, motion, load_species(to).name, seed=seed, temperature=temperature
-        )
-        info = {"method": variant, "from": motion.species, "to": out.species, "seed": seed, **info}
-        return conform(out, motion, info, plant, policy)[0]
+        return network_transfer(
+            variant,
+            motion,
+            to,
+            seed=seed,
+            checkpoint=checkpoint,
+            temperature=temperature,
+            plant=plant,
+            policy=policy,
+        )[0]
 
     run.__name__ = f"transfer_{variant}"
     return run
+
+
+def network_transfer(
+    variant: str,
+    motion: Motion,
+    to: str,
+    *,
+    seed: int | None = 0,
+    checkpoint: str | Path | None = None,
+    temperature: float = 1.0,
+    plant: bool = True,
+    policy: ConformPolicy | None = None,
+) -> tuple[Motion, ConformReport]:
+    """The learned method ``variant``'s transfer (what :func:`network_method` runs) with
+    the typed :class:`~habitsim.stance.report.ConformReport` of its conform step (its
+    planting's :attr:`~habitsim.stance.report.PlantOutcome.reason_codes`, …), which the
+    motion's ``metadata["transfer"]`` holds only as text.
+
+    Raises:
+        MethodNotAvailableError: the checkpoint is of another variant.
+    """
+    ck = load_model(checkpoint, variant)
+    if ck.config.model.variant != variant:
+        raise MethodNotAvailableError(
+            f"method {variant!r} needs a {variant!r} checkpoint; {ck.path} is a "
+            f"{ck.config.model.variant!r} one"
+        )
+    out, info = _run_network(ck, motion, load_species(to).name, seed=seed, temperature=temperature)
+    info = {"method": variant, "from": motion.species, "to": out.species, "seed": seed, **info}
+    return conform(out, motion, info, plant, policy)
 
 
 def transfer(

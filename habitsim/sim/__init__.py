@@ -40,7 +40,7 @@ from ..controllers import CONTROLLERS
 from ..errors import SimulationError
 from ..qpos import species_model as species_model  # the shipped-model cache
 from .assist import root_assist
-from .falls import FallDetector, FallOptions
+from .falls import Fall, FallCause, FallDetector, FallOptions
 from .model import FOOT_GEOMS, foot_geoms
 from .model import TOUCH_THRESHOLD_MG as TOUCH_THRESHOLD_MG
 from .model import _species_model as _species_model
@@ -57,6 +57,8 @@ __all__ = [
     "TrackResult",
     "FallDetector",
     "FallOptions",
+    "Fall",
+    "FallCause",
     "finite_differences",
     "build_reference",
     "foot_geoms",

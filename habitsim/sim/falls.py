@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 
 import mujoco
 import numpy as np
@@ -32,6 +33,34 @@ class FallOptions:
     tilt_deg: float = 60.0
     ground_contact_s: float = 0.2
     ground_tolerance_per_leg: float = 0.01
+
+
+class FallCause(StrEnum):
+    """Which clause of the fall rule (:class:`FallDetector`) fired."""
+
+    #: the trunk is lower than its share of the reference height
+    TRUNK_LOW = "trunk_low"
+    #: the trunk is tilted from the reference's orientation beyond the limit
+    TILT = "tilt"
+    #: a non-foot body touched the ground for too long
+    BODY_CONTACT = "body_contact"
+
+
+@dataclass(frozen=True)
+class Fall:
+    """A fall found by :meth:`FallDetector.fall`.
+
+    Attributes:
+        cause: the clause of the rule that fired.
+        text: the reason in words, with the figures (what :meth:`FallDetector.check`
+            returns).
+        bodies: the non-foot bodies on the ground, sorted by name (``BODY_CONTACT``
+            only; empty otherwise).
+    """
+
+    cause: FallCause
+    text: str
+    bodies: tuple[str, ...] = ()
 
 
 class FallDetector:
@@ -109,23 +138,37 @@ class FallDetector:
         self.contact_frames = 0
 
     def check(self, k: int, data: mujoco.MjData) -> str | None:
-        """The fall reason at frame k (``data`` after mj_step/mj_forward), or None."""
+        """The fall reason at frame k (``data`` after mj_step/mj_forward), or None (the
+        text of :meth:`fall`)."""
+        fall = self.fall(k, data)
+        return None if fall is None else fall.text
+
+    def fall(self, k: int, data: mujoco.MjData) -> Fall | None:
+        """The fall at frame k (``data`` after mj_step/mj_forward), typed, or None."""
         k = min(k, len(self.ref_height) - 1)
         o = self.options
         h = data.xpos[self.trunk, 2]
         if h < o.height_ratio * self.ref_height[k]:
             ref = self.ref_height[k]
-            return f"trunk height {h:.3f} m < {o.height_ratio:.0%} of reference {ref:.3f} m"
+            return Fall(
+                FallCause.TRUNK_LOW,
+                f"trunk height {h:.3f} m < {o.height_ratio:.0%} of reference {ref:.3f} m",
+            )
         up = data.xmat[self.trunk, [2, 5, 8]]
         tilt = math.degrees(math.acos(float(np.clip(up @ self.ref_up[k], -1.0, 1.0))))
         if tilt > o.tilt_deg:
-            return f"trunk tilt {tilt:.0f} deg > {o.tilt_deg:.0f} deg"
+            return Fall(FallCause.TILT, f"trunk tilt {tilt:.0f} deg > {o.tilt_deg:.0f} deg")
         touching = self._ground_bodies(data) - self.foot_bodies - self.ref_ground[k]
         if touching:
             self.contact_frames += 1
             if self.contact_frames / self.fps > o.ground_contact_s:
-                names = ", ".join(sorted(self.model.body(b).name for b in touching))
-                return f"non-foot body on the ground > {o.ground_contact_s} s ({names})"
+                bodies = tuple(sorted(self.model.body(b).name for b in touching))
+                names = ", ".join(bodies)
+                return Fall(
+                    FallCause.BODY_CONTACT,
+                    f"non-foot body on the ground > {o.ground_contact_s} s ({names})",
+                    bodies,
+                )
         else:
             self.contact_frames = 0
         return None

@@ -20,6 +20,7 @@ from ..errors import MetadataError
 from .labels import StanceLabels, as_labels
 from .planting import PlantReport
 from .policy import ConformPolicy
+from .schedule import ScheduleReason
 
 __all__ = [
     "Restep",
@@ -454,6 +455,13 @@ class ScheduleRecord:
             tuple((k, m[k]) for k in m if k not in ("method", "walking_stance")),
             None if walking is None else WalkingRecord.from_dict(walking, f"{path}.walking_stance"),
         )
+
+    @property
+    def reason_code(self) -> ScheduleReason | None:
+        """The ``reason`` detail as its typed code (None: no reason written, or one that is
+        not :func:`~habitsim.stance.schedule.transfer_contacts`' own)."""
+        reason = dict(self.details).get("reason")
+        return next((code for code in ScheduleReason if code.text == reason), None)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form, keys in their written order."""

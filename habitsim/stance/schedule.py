@@ -8,6 +8,7 @@ to a species that walks at its speed.
 
 from __future__ import annotations
 
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -18,7 +19,25 @@ from ..species import FEET, load_species
 from .labels import EditReason, StanceLabels, StanceSource, as_labels
 from .policy import ConformPolicy, resolve_policy
 
-__all__ = ["transfer_contacts", "walking_stance"]
+__all__ = ["transfer_contacts", "walking_stance", "ScheduleReason"]
+
+
+class ScheduleReason(StrEnum):
+    """Why :func:`transfer_contacts` labelled a transfer the way it did, as a typed code:
+    its ``info["reason"]`` is :attr:`text` (read back by
+    :attr:`habitsim.stance.report.ScheduleRecord.reason_code`)."""
+
+    #: the source has no stance labels: the labels are the decoder's unchecked, detected
+    #: or by duty factor
+    NO_SOURCE_LABELS = "no_source_labels"
+
+    @property
+    def text(self) -> str:
+        """The reason in words, as written to ``metadata["transfer"]["contacts"]``."""
+        return _REASON_TEXT[self]
+
+
+_REASON_TEXT = {ScheduleReason.NO_SOURCE_LABELS: "the source has no stance labels"}
 
 
 def _gait_duty(target: str, source: Motion) -> tuple[str, float] | None:
@@ -134,7 +153,7 @@ def transfer_contacts(
         if decoded is not None
         else StanceLabels(contacts_from_feet(feet, out.fps, leg), StanceSource.DETECTED)
     )
-    why = "the source has no stance labels"
+    why = ScheduleReason.NO_SOURCE_LABELS.text
     info = {"method": "decoded" if decoded is not None else "detected", "reason": why}
     gd = _gait_duty(out.species, source)
     if gd is None or out.num_frames < 5:
