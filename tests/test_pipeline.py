@@ -4,7 +4,6 @@ cache."""
 
 from __future__ import annotations
 
-import math
 from types import SimpleNamespace
 
 import numpy as np
@@ -20,28 +19,8 @@ from habitsim.errors import InvalidMotionError
 from habitsim.gaits import generate
 from habitsim.pipeline import PipelineError, refine_mode, run_clip, stance_toe_height
 from habitsim.stance.labels import stance_runs
-from habitsim.stance.policy import ConformPolicy
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
-
-#: The default knobs of conforming a decoded motion.
-POLICY = ConformPolicy()
-#: The planting ladder without its last rungs: no restepping, no partial planting.
-NO_FALLBACKS = ConformPolicy(restep_min_period=math.inf, partial_passes=0)
-
-
-def _reaches(report: dict) -> bool:
-    """A planting report of ``metadata["transfer"]["planted"]`` within the default limits."""
-    return (
-        report["max_reach_error_per_leg"] <= POLICY.plant_max_reach_per_leg
-        and report.get("max_swing_reach_error_per_leg", 0.0) <= POLICY.plant_max_swing_reach_per_leg
-        and report["max_pelvis_drop_per_leg"] <= POLICY.plant_max_drop_per_leg
-    )
-
-
-@pytest.fixture(scope="module")
-def trot():
-    return generate("horse", "trot", seed=5, duration_s=3.0)
 
 
 @pytest.fixture(scope="module")
