@@ -500,7 +500,6 @@ _FORMAT = "format: a file or output format's version, sizes or layout"
 _METRIC = "definitions: a metric's definition (docs/metrics.md), changed only with its docs"
 _TARGET = "benchmark targets and the benchmark's own definitions (docs/benchmarks.md)"
 _DEFINES = "definitions: dimensions, modes or index layout the code is written for"
-_PENDING = "pending: tuning knobs not yet in an options object (issue 46, item 3)"
 
 #: Modules allowed to hold such constants, every constant of the module (path from the
 #: repository root; a folder ends with "/").
@@ -524,8 +523,6 @@ CONSTANT_MODULES: dict[str, str] = {
     "evaluation/config.py": _FORMAT + "; the default run's size",
     "evaluation/evaluator.py": _FORMAT + " (evaluator config version)",
     "evaluation/planning.py": "the default data set of a run given none (docs/evaluation.md)",
-    # tuning knobs of the synthetic generator, versioned by GENERATOR_VERSION
-    "habitsim/gaits/": _PENDING + " (the synthetic generator's, versioned by its version)",
 }
 
 #: Single constants allowed in other modules: (path, name) → why.
@@ -553,6 +550,10 @@ CONSTANT_NAMES: dict[tuple[str, str], str] = {
     ("mjcf_models/builder.py", "PREVIEW_SIZE"): _FORMAT + " (preview image)",
     ("mjcf_models/builder.py", "PREVIEW_DISTANCE"): _FORMAT + " (preview image)",
     ("mjcf_models/builder.py", "PREVIEW_VIEW"): _FORMAT + " (preview image)",
+    ("habitsim/gaits/generator.py", "GENERATOR_VERSION"): _FORMAT
+    + " (the synthetic generator's version, stored in its clips and data sets)",
+    ("habitsim/gaits/actions.py", "_AERIAL_DUTY"): _DEFINES + " (a gait below this duty "
+    "factor has an aerial phase: which species have the jump action, not how it is made)",
 }
 
 _UPPER = re.compile(r"_?[A-Z][A-Z0-9_]*\Z")

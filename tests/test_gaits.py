@@ -212,3 +212,22 @@ def test_like_must_come_from_the_generator() -> None:
     m.metadata.pop("params")
     with pytest.raises(GaitError, match="like"):
         generate("cat", like=m)
+
+
+def test_generator_options_default_and_override() -> None:
+    """The default options make the versioned clip; a knob changes the clip; a bad knob
+    is refused."""
+    from dataclasses import replace
+
+    from habitsim.gaits import GeneratorOptions
+
+    base = generate("dog", "trot", seed=0)
+    same = generate("dog", "trot", seed=0, options=GeneratorOptions())
+    np.testing.assert_array_equal(base.rotations, same.rotations)
+    np.testing.assert_array_equal(base.root_positions, same.root_positions)
+    other = generate("dog", "trot", seed=0, options=replace(GeneratorOptions(), swing_ramp=0.3))
+    assert not np.array_equal(base.rotations, other.rotations)
+    short = generate("dog", "idle", seed=0, options=GeneratorOptions(duration_range_s=(1.0, 1.0)))
+    assert short.num_frames == 30
+    with pytest.raises(GaitError, match="retry_shrink"):
+        GeneratorOptions(retry_shrink=0.0)

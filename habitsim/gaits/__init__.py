@@ -11,11 +11,13 @@ from __future__ import annotations
 
 from .actions import ACTIONS, LOCOMOTION_ACTIONS, action_gait, available_actions
 from .generator import GENERATOR_VERSION, generate
+from .options import GeneratorOptions
 
 __all__ = [
     "ACTIONS",
     "LOCOMOTION_ACTIONS",
     "GENERATOR_VERSION",
+    "GeneratorOptions",
     "action_gait",
     "available_actions",
     "generate",

@@ -26,19 +26,9 @@ from ..ik import (
 from ..rotations import quat_mul, rot_x, rot_y, rot_z
 from ..skeleton import JOINT_NAMES, fk, get_skeleton, standing_leg_angles
 from ..species import Species
+from .options import GeneratorOptions
 
 _J = {n: i for i, n in enumerate(JOINT_NAMES)}
-#: How much the scapula / ilium follows the leg's sweep angle (fore, hind).
-GIRDLE_SWEEP_GAIN = {"fore": 0.35, "hind": 0.0}
-#: How much the foot segment follows the leg's sweep angle (fore, hind).
-FOOT_SWEEP_GAIN = {"fore": 0.5, "hind": 0.6}
-#: Foot fold in mid-swing [rad] (toe trailing), fore and hind.
-SWING_FOOT_FOLD = {"fore": 0.6, "hind": 0.3}
-#: Stance legs keep this share of their maximal upper+lower reach in reserve.
-REACH_MARGIN = 0.03
-#: Largest turn [rad] of the foot segment that takes up a leg's reach before the trunk
-#: has to come down (or up): the compliance of the fetlock / hock in stance.
-FOOT_COMPLIANCE = 0.6
 
 
 class StandingInfo(TypedDict):
@@ -191,7 +181,12 @@ class Solved:
 
 
 def _leg_shape(
-    sp: Species, k: int, plan: LegPlan, frames: AxialFrames, swing_fold: np.ndarray
+    sp: Species,
+    k: int,
+    plan: LegPlan,
+    frames: AxialFrames,
+    swing_fold: np.ndarray,
+    options: GeneratorOptions,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Girdle flexion and foot inclination (before compliance) of leg ``k``, (T,) each."""
     geo = leg_geometry(sp, LEGS[k])
@@ -203,22 +198,29 @@ def _leg_shape(
     rel = plan.targets[:, k] - groot
     sweep = np.arctan2(np.sum(rel * fwd, -1), -rel[:, 2])
     g = plan.sweep_gain
-    gflex = geo.girdle_flex0 - g * GIRDLE_SWEEP_GAIN[geo.limb] * sweep + plan.girdle_extra[:, k]
+    o = options
+    gflex = (
+        geo.girdle_flex0
+        - g * o.limb(o.girdle_sweep_gain, geo.limb) * sweep
+        + plan.girdle_extra[:, k]
+    )
     finc = (
         geo.foot_inclination0
-        + g * FOOT_SWEEP_GAIN[geo.limb] * sweep
-        - SWING_FOOT_FOLD[geo.limb] * swing_fold[:, k]
+        + g * o.limb(o.foot_sweep_gain, geo.limb) * sweep
+        - o.limb(o.swing_foot_fold_rad, geo.limb) * swing_fold[:, k]
         + plan.foot_extra[:, k]
     )
     return gflex, finc
 
 
-def _nominal_inclination(sp: Species, k: int, plan: LegPlan, frames: AxialFrames) -> np.ndarray:
+def _nominal_inclination(
+    sp: Species, k: int, plan: LegPlan, frames: AxialFrames, options: GeneratorOptions
+) -> np.ndarray:
     """Foot inclination of leg ``k`` before the reach compliance, (T,)."""
-    return _leg_shape(sp, k, plan, frames, np.sin(np.pi * plan.swing_s))[1]
+    return _leg_shape(sp, k, plan, frames, np.sin(np.pi * plan.swing_s), options)[1]
 
 
-def solve(sp: Species, trunk: Trunk, plan: LegPlan) -> Solved:
+def solve(sp: Species, trunk: Trunk, plan: LegPlan, options: GeneratorOptions) -> Solved:
     """Leg IK on a trunk: girdle and foot modulated by each leg's sweep angle."""
     rot = trunk.rotations()
     frames = axial_frames(sp, trunk.root, rot)
@@ -228,7 +230,7 @@ def solve(sp: Species, trunk: Trunk, plan: LegPlan) -> Solved:
         groot = frames.girdle_root[:, k]
         prot = frames.parent_rotation[:, k]
         tgt = plan.targets[:, k]
-        gflex, finc = _leg_shape(sp, k, plan, frames, swing_fold)
+        gflex, finc = _leg_shape(sp, k, plan, frames, swing_fold, options)
         res = leg_ik(
             sp,
             leg,
@@ -237,8 +239,8 @@ def solve(sp: Species, trunk: Trunk, plan: LegPlan) -> Solved:
             tgt,
             gflex,
             finc,
-            distal_band=reach_band(sp, k),
-            max_inclination_change=FOOT_COMPLIANCE,
+            distal_band=reach_band(sp, k, options),
+            max_inclination_change=options.foot_compliance_rad,
         )
         q = res.quaternions()
         for n, joint in enumerate(leg_geometry(sp, leg).joints[:4]):
@@ -262,32 +264,31 @@ def upper_envelope(x: np.ndarray, window: int) -> np.ndarray:
     return uniform_filter1d(maximum_filter1d(x, w, mode="nearest"), w, mode="nearest")
 
 
-#: Stance legs keep at least this multiple of their minimal reach.
-FOLD_MARGIN = 1.15
-
-
 @functools.lru_cache(maxsize=256)
-def reach_band(sp: Species, k: int) -> tuple[float, float]:
+def reach_band(sp: Species, k: int, options: GeneratorOptions) -> tuple[float, float]:
     """(d_min, d_max) [m] proximal-to-distal distances leg ``k`` may take.
 
-    d_max = max(standing extension, (1 − REACH_MARGIN)·(upper + lower)) (below full
-    extension); d_min = FOLD_MARGIN·|upper − lower| (at most 0.9·(upper + lower)).
+    d_max = max(standing extension, (1 − reach_margin)·(upper + lower)) (below full
+    extension); d_min = fold_margin·|upper − lower| (at most 0.9·(upper + lower)), with
+    the margins of ``options``.
     """
     geo = leg_geometry(sp, LEGS[k])
     d_stand = float(standing_info(sp)["d_stand"][k])
-    dmax = min(geo.max_reach * (1 - 1e-9), max(d_stand, geo.max_reach * (1 - REACH_MARGIN)))
-    dmin = min(FOLD_MARGIN * geo.min_reach, 0.9 * geo.max_reach)
+    dmax = min(geo.max_reach * (1 - 1e-9), max(d_stand, geo.max_reach * (1 - options.reach_margin)))
+    dmin = min(options.fold_margin * geo.min_reach, 0.9 * geo.max_reach)
     return dmin, dmax
 
 
-def required_lowering(sp: Species, legs: tuple[LegIKResult, ...]) -> np.ndarray:
+def required_lowering(
+    sp: Species, legs: tuple[LegIKResult, ...], options: GeneratorOptions
+) -> np.ndarray:
     """(T, 4) how far [m] each girdle must come down so its leg keeps its reach reserve.
 
     A leg may reach d_max of :func:`reach_band`.
     """
     out = []
     for k, res in enumerate(legs):
-        dmax = reach_band(sp, k)[1]
+        dmax = reach_band(sp, k, options)[1]
         v = res.proximal - res.distal_target
         dz = v[:, 2]
         dist = np.linalg.norm(v, axis=-1)
@@ -297,11 +298,13 @@ def required_lowering(sp: Species, legs: tuple[LegIKResult, ...]) -> np.ndarray:
     return np.stack(out, axis=1)
 
 
-def required_raising(sp: Species, legs: tuple[LegIKResult, ...]) -> np.ndarray:
+def required_raising(
+    sp: Species, legs: tuple[LegIKResult, ...], options: GeneratorOptions
+) -> np.ndarray:
     """(T, 4) how far [m] each girdle must come up so its leg is not folded past its range."""
     out = []
     for k, res in enumerate(legs):
-        dmin = reach_band(sp, k)[0]
+        dmin = reach_band(sp, k, options)[0]
         v = res.proximal - res.distal_target
         dz = v[:, 2]
         dist = np.linalg.norm(v, axis=-1)
@@ -318,6 +321,8 @@ def fix_reach(
     window: int,
     iterations: int = 30,
     mask: np.ndarray | None = None,
+    *,
+    options: GeneratorOptions,
 ) -> tuple[Trunk, Solved]:
     """Lower the pelvis and withers (smoothly) until every leg keeps its reach reserve.
 
@@ -328,16 +333,17 @@ def fix_reach(
         window: smoothing window [frames] of the lowering envelope.
         iterations: maximal number of correction passes.
         mask: optional (T,) frames where the trunk may be moved (default all).
+        options: the generator's knobs (reach margins, foot compliance).
 
     Returns:
         The corrected trunk and its solved pose.
     """
     tr = trunk.copy()
     span = float(standing_info(sp)["trunk_span"])
-    sol = solve(sp, tr, plan)
+    sol = solve(sp, tr, plan, options)
     for _ in range(iterations):
-        low = required_lowering(sp, sol.legs)
-        up = required_raising(sp, sol.legs) * plan.contacts
+        low = required_lowering(sp, sol.legs, options)
+        up = required_raising(sp, sol.legs, options) * plan.contacts
         if mask is not None:
             low = low * mask[:, None]
             up = up * mask[:, None]
@@ -352,7 +358,7 @@ def fix_reach(
         dp, dw = lp - rp, lw - rw
         tr.root[:, 2] -= dp
         tr.pitch -= np.arcsin(np.clip((dw - dp) / span, -0.9, 0.9))
-        sol = solve(sp, tr, plan)
+        sol = solve(sp, tr, plan, options)
     return tr, sol
 
 
@@ -364,6 +370,8 @@ def apply_sway(
     phase: np.ndarray,
     iterations: int = 3,
     harmonics: int = 1,
+    *,
+    options: GeneratorOptions,
 ) -> Trunk:
     """Shift the trunk horizontally so the centre of mass moves toward the support polygon.
 
@@ -384,6 +392,7 @@ def apply_sway(
         phase: (T,) gait phase [cycles].
         iterations: refits (the centre of mass moves with the legs' IK).
         harmonics: number of stride-frequency harmonics.
+        options: the generator's knobs (leg shape, reach margins).
     """
     if gain <= 0:
         return trunk
@@ -411,7 +420,7 @@ def apply_sway(
     desired = None
     shift = np.zeros((phase.shape[0], 2))  # heading frame
     for _ in range(iterations):
-        sol = solve(sp, tr, plan)
+        sol = solve(sp, tr, plan, options)
         com = center_of_mass(sp, fk(skel, tr.root, sol.rotations))[:, :2]
         if desired is None:
             desired = com + gain * (cent - com)
@@ -425,10 +434,6 @@ def apply_sway(
     return tr
 
 
-#: Candidate foot-inclination offsets [rad] searched by :func:`respect_limits`.
-LIMIT_OFFSETS = np.linspace(-0.6, 0.6, 25)
-
-
 def _range_excess(sp: Species, limb: str, res: LegIKResult) -> np.ndarray:
     """(T,) summed squared excess [rad²] of a leg's flexion angles over the species' ranges."""
     out = np.zeros(res.upper_flex.shape)
@@ -438,11 +443,13 @@ def _range_excess(sp: Species, limb: str, res: LegIKResult) -> np.ndarray:
     return out
 
 
-def respect_limits(sp: Species, trunk: Trunk, plan: LegPlan, base: Solved, window: int) -> Solved:
+def respect_limits(
+    sp: Species, trunk: Trunk, plan: LegPlan, base: Solved, window: int, options: GeneratorOptions
+) -> Solved:
     """Turn each foot segment (smoothly in time) so the leg's flexion angles stay in range.
 
     The foot inclination is the leg's one free angle once the toe target is fixed: per
-    frame the offset in :data:`LIMIT_OFFSETS` with the least range excess (ties: the
+    frame the offset in ``options.limit_offsets()`` with the least range excess (ties: the
     least offset; a reach error forbids an offset) is taken, smoothed over ``window``
     frames, added to ``plan.foot_extra`` (modified in place) and the pose re-solved.
     ``base`` is the pose already solved for ``trunk`` and ``plan``.
@@ -450,7 +457,8 @@ def respect_limits(sp: Species, trunk: Trunk, plan: LegPlan, base: Solved, windo
     rot = trunk.rotations()
     frames = axial_frames(sp, trunk.root, rot)
     t = trunk.root.shape[0]
-    k_n = LIMIT_OFFSETS.size
+    offsets = options.limit_offsets()
+    k_n = offsets.size
     if all(
         float(_range_excess(sp, res_limb, res).max()) < 1e-12
         for res_limb, res in zip(("fore", "fore", "hind", "hind"), base.legs, strict=True)
@@ -468,7 +476,7 @@ def respect_limits(sp: Species, trunk: Trunk, plan: LegPlan, base: Solved, windo
             res0.foot_flex,
         )
         rep = lambda a: np.repeat(a, k_n, axis=0)  # noqa: E731
-        cand = rep(finc0) + np.tile(LIMIT_OFFSETS, t)
+        cand = rep(finc0) + np.tile(offsets, t)
         res = leg_ik(
             sp,
             leg,
@@ -481,18 +489,18 @@ def respect_limits(sp: Species, trunk: Trunk, plan: LegPlan, base: Solved, windo
         cost = (
             _range_excess(sp, geo.limb, res)
             + 1e3 * (res.reach_error / sp.leg_length) ** 2
-            + 1e-4 * np.tile(LIMIT_OFFSETS, t) ** 2
+            + 1e-4 * np.tile(offsets, t) ** 2
         ).reshape(t, k_n)
-        best = LIMIT_OFFSETS[np.argmin(cost, axis=1)]
+        best = offsets[np.argmin(cost, axis=1)]
         # the offset demanded on top of what the compliance already turned
-        turned = wrap_angle(finc0 - _nominal_inclination(sp, k, plan, frames))
+        turned = wrap_angle(finc0 - _nominal_inclination(sp, k, plan, frames, options))
         delta = best + turned
         if window > 1:
             from scipy.ndimage import uniform_filter1d
 
             delta = uniform_filter1d(delta, _odd(window), mode="nearest")
         plan.foot_extra[:, k] += delta
-    return solve(sp, trunk, plan)
+    return solve(sp, trunk, plan, options)
 
 
 def min_jerk(s: np.ndarray) -> np.ndarray:

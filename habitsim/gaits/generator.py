@@ -22,23 +22,25 @@ from ..species import FEET, Species, load_species
 from .actions import ACTIONS, LOCOMOTION_ACTIONS, action_gait
 from .jump import build_jump, min_jump_duration
 from .locomotion import build_locomotion, gait_numbers
+from .options import GeneratorOptions, resolve_generator
 from .stationary import build_idle, build_sit
 
 __all__ = ["generate", "draw_params", "GENERATOR_VERSION"]
 
-#: Bumped whenever the same inputs would produce a different clip.
+#: Bumped whenever the same inputs (with the default options) would produce a
+#: different clip.
 GENERATOR_VERSION = 5
-_MIN_DUR, _MAX_DUR = 2.0, 6.0
-#: Dimensionless turn rate ω·sqrt(h/g) range of the turn actions.
-TURN_RATE_ND = (0.08, 0.25)
 
 
-def draw_params(rng: np.random.Generator) -> dict[str, Any]:
+def draw_params(
+    rng: np.random.Generator, options: GeneratorOptions | None = None
+) -> dict[str, Any]:
     """Draw every per-clip random number (dimensionless, species-independent).
 
     The draws happen in a fixed order whatever the action, so a seed means the same
-    parameters for every species and action.
+    parameters for every species and action (``options`` sets the turn-rate range).
     """
+    opts = resolve_generator(options)
     p: dict[str, Any] = {}
     p["u_froude"] = float(rng.uniform(0.08, 0.92))
     p["u_duty_noise"] = float(rng.normal(0.0, 0.12))
@@ -46,7 +48,7 @@ def draw_params(rng: np.random.Generator) -> dict[str, Any]:
     p["start_phase"] = float(rng.uniform(0.0, 1.0))
     p["heading"] = float(rng.uniform(-math.pi, math.pi))
     p["u_duration"] = float(rng.uniform(0.0, 1.0))
-    p["turn_rate_nd"] = float(rng.uniform(*TURN_RATE_ND))
+    p["turn_rate_nd"] = float(rng.uniform(*opts.turn_rate_nd_range))
     p["neck_offset"] = float(rng.uniform(-0.1, 0.1))
     p["head_offset"] = float(rng.uniform(-0.08, 0.08))
     p["tail_offset"] = float(rng.uniform(-0.15, 0.15))
@@ -95,12 +97,6 @@ def _metadata_base(
     }
 
 
-#: A cyclic clip whose planted toes miss their footholds by more than this is redrawn.
-FEASIBLE_STANCE_ERROR_M = 5e-4
-_MAX_ATTEMPTS = 6
-_RETRY_SHRINK = 0.7
-
-
 def _build_cyclic(
     sp,
     action,
@@ -114,6 +110,7 @@ def _build_cyclic(
     turn_rate,
     direction,
     trunk_sway,
+    options,
     duty_shrink=1.0,
 ):
     """Build one cyclic clip for given speed and turn rate (validated here)."""
@@ -150,7 +147,7 @@ def _build_cyclic(
     )
     gain = sp.habits.trunk_sway if trunk_sway is None else float(trunk_sway)
     style = {k: params[k] for k in ("neck_offset", "head_offset", "tail_offset", "swing_scale")}
-    tr, sol, plan = build_locomotion(sp, gait, g, t, fps, style, gain)
+    tr, sol, plan = build_locomotion(sp, gait, g, t, fps, style, gain, options)
     return g, tr, sol, plan
 
 
@@ -166,6 +163,7 @@ def generate(
     like: Motion | None = None,
     duty_factor: float | None = None,
     trunk_sway: float | None = None,
+    options: GeneratorOptions | None = None,
 ) -> Motion:
     """Generate one synthetic clip of a species performing an action.
 
@@ -174,8 +172,8 @@ def generate(
         action: one of :data:`ACTIONS` (may be omitted with ``like``: taken from it).
         seed: integer seed of ``np.random.default_rng`` (required unless ``like``).
         fps: frame rate [Hz].
-        duration_s: clip length [s]; default drawn in [2, 6] s (longer when a jump or a
-            sit needs it).
+        duration_s: clip length [s]; default drawn in ``options.duration_range_s`` (longer
+            when a jump or a sit needs it).
         froude: Froude number v²/(g·h) for cyclic actions (jump: of the take-off
             horizontal speed); default drawn within the gait's band.
         turn_rate: yaw rate [rad/s] (left positive) for cyclic actions; default drawn
@@ -186,6 +184,8 @@ def generate(
         duty_factor: override the duty factor of a cyclic action (default: drawn within
             the band, falling with speed).
         trunk_sway: override the species' lateral trunk sway gain (0 disables it).
+        options: the generator's knobs (:class:`~habitsim.gaits.options.GeneratorOptions`);
+            default: today's values, the clips of ``GENERATOR_VERSION``.
 
     Returns:
         The :class:`~habitsim.motion.Motion`, with contacts = the planned stance and
@@ -201,6 +201,7 @@ def generate(
             was not made by this generator.
     """
     sp = load_species(species)
+    opts = resolve_generator(options)
     params: dict[str, Any]
     if like is not None:
         meta = like.metadata or {}
@@ -227,7 +228,7 @@ def generate(
             raise GaitError(f"an action is needed; valid: {', '.join(ACTIONS)}")
         if seed is None or isinstance(seed, bool) or not isinstance(seed, int | np.integer):
             raise GaitError(f"seed must be an integer, got {seed!r}")
-        params = draw_params(np.random.default_rng(int(seed)))
+        params = draw_params(np.random.default_rng(int(seed)), opts)
         n_frames = None
     gait = action_gait(sp, action)  # raises GaitError listing the available actions
     if not (isinstance(fps, int | float) and math.isfinite(fps) and fps > 0):
@@ -238,13 +239,13 @@ def generate(
             raise GaitError(f"duration_s must be positive, got {duration_s!r}")
         n_frames = max(2, int(round(duration_s * fps)))
     if n_frames is None:
-        lo = _MIN_DUR
+        lo, hi = opts.duration_range_s
         if action == "jump":
             lo = max(lo, 1.1 * min_jump_duration(sp, params))
         elif action == "sit":
             tau = math.sqrt(sp.hip_height / GRAVITY)
             lo = max(lo, 1.2 * (params["sit_start"] + params["sit_duration"]) * tau)
-        hi = max(_MAX_DUR, lo)
+        hi = max(hi, lo)
         n_frames = max(2, int(round((lo + params["u_duration"] * (hi - lo)) * fps)))
     t = np.arange(n_frames) / fps
     meta_out = _metadata_base(sp, action, gait, None if seed is None else int(seed), fps, n_frames)
@@ -254,18 +255,18 @@ def generate(
         band = sp.gaits[gait]
         direction = -1.0 if action == "walk_backward" else 1.0
         froude_drawn, turn_drawn = froude is None, turn_rate is None
-        for attempt in range(_MAX_ATTEMPTS):
+        for attempt in range(opts.max_attempts):
             # A drawn speed or turn rate that the legs cannot reach without leaving a
             # planted foot (the clip would skate) is drawn again closer to the slow end
             # of its range; explicit or paired values are kept and the error reported.
-            shrink = _RETRY_SHRINK**attempt
+            shrink = opts.retry_shrink**attempt
             if froude_drawn:
                 u = params["u_froude"] * shrink
                 if action == "walk_backward":
                     u *= 0.5  # backward walking is slow: lower half of the band
                 froude = band.froude[0] + u * (band.froude[1] - band.froude[0])
             if turn_drawn:
-                lo_nd = TURN_RATE_ND[0]
+                lo_nd = opts.turn_rate_nd_range[0]
                 w_nd = lo_nd + (params["turn_rate_nd"] - lo_nd) * shrink
                 w_nd = w_nd if action == "turn_left" else (-w_nd if action == "turn_right" else 0.0)
                 turn_rate = w_nd * math.sqrt(GRAVITY / sp.hip_height)
@@ -282,6 +283,7 @@ def generate(
                 turn_rate,
                 direction,
                 trunk_sway,
+                opts,
                 shrink,
             )
             g, tr, sol, plan = built
@@ -289,7 +291,7 @@ def generate(
             if (
                 not (froude_drawn or turn_drawn)
                 or err.size == 0
-                or err.max() <= FEASIBLE_STANCE_ERROR_M
+                or err.max() <= opts.feasible_stance_error_m
             ):
                 break
         meta_out["attempts"] = attempt + 1
@@ -322,12 +324,12 @@ def generate(
             heading=heading,
         )
         if action == "idle":
-            tr, sol, plan = build_idle(sp, t, fps, params, detail_rng)
+            tr, sol, plan = build_idle(sp, t, fps, params, detail_rng, opts)
         elif action == "sit":
-            tr, sol, plan, extra = build_sit(sp, t, fps, params, detail_rng)
+            tr, sol, plan, extra = build_sit(sp, t, fps, params, detail_rng, opts)
             meta_out.update(extra)
         else:
-            tr, sol, plan, extra = build_jump(sp, t, fps, params)
+            tr, sol, plan, extra = build_jump(sp, t, fps, params, opts)
             vx = extra["takeoff_speed_mps"][0]
             meta_out.update(
                 extra,

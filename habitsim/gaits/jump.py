@@ -32,6 +32,7 @@ from ._pose import (
     solve,
     standing_info,
 )
+from .options import GeneratorOptions
 
 
 def jump_timing(sp: Species, p: dict) -> dict[str, float]:
@@ -114,7 +115,7 @@ def _trajectory(tm: dict, t: np.ndarray, z_s: float) -> tuple[np.ndarray, np.nda
 
 
 def build_jump(
-    sp: Species, t: np.ndarray, fps: float, p: dict
+    sp: Species, t: np.ndarray, fps: float, p: dict, options: GeneratorOptions
 ) -> tuple[Trunk, Solved, LegPlan, dict]:
     """Build a jump clip (see the module docstring)."""
     n = t.shape[0]
@@ -170,8 +171,8 @@ def build_jump(
         swing = np.broadcast_to((sig * flight)[:, None], (n, 4)).copy()
         plan = LegPlan(targets=targets, contacts=contacts, swing_s=swing)
         plan.sweep_gain = 0.5
-        sol = solve(sp, tr, plan)
-        low = required_lowering(sp, sol.legs)
+        sol = solve(sp, tr, plan, options)
+        low = required_lowering(sp, sol.legs, options)
         need = float(low[~flight].max()) if (~flight).any() else 0.0
         if need < 1e-7:
             break

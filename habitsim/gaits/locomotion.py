@@ -20,6 +20,7 @@ Internal module used by :func:`habitsim.gaits.generate`. Order of construction:
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -39,6 +40,7 @@ from ._pose import (
     standing_info,
 )
 from .actions import ASYMMETRIC_GAITS
+from .options import GeneratorOptions
 
 _IDX = {f: i for i, f in enumerate(FEET)}
 
@@ -106,30 +108,29 @@ def _rotate(xy: np.ndarray, psi: np.ndarray) -> np.ndarray:
     return np.stack([c * xy[..., 0] - s * xy[..., 1], s * xy[..., 0] + c * xy[..., 1]], -1)
 
 
-#: Share of the swing over which the foot speeds up (and, at its end, slows down).
-SWING_RAMP = 0.15
 _GRID = np.linspace(0.0, 1.0, 2001)
 
 
+@functools.lru_cache(maxsize=8)
 def _profile_table(ramp: float) -> np.ndarray:
+    """The swing progress on :data:`_GRID` for a ramp share (cached per ramp; read only)."""
     vel = np.minimum(1.0, np.minimum(_GRID, 1.0 - _GRID) / ramp)
     vel = min_jerk(vel)  # smooth ramps: zero velocity and acceleration at the ends
     pos = np.concatenate([[0.0], np.cumsum(0.5 * (vel[1:] + vel[:-1]) * np.diff(_GRID))])
     return pos / pos[-1]
 
 
-_PROFILE = _profile_table(SWING_RAMP)
-
-
-def swing_profile(s: np.ndarray) -> np.ndarray:
+def swing_profile(s: np.ndarray, ramp: float) -> np.ndarray:
     """Horizontal swing progress in [0, 1] for swing phase s: the foot leaves and lands
-    with zero velocity and acceleration but reaches its cruise speed within
-    :data:`SWING_RAMP` of the swing, so it stays close to the moving body (a foot that
-    accelerates over the whole swing lags far behind the body in a fast gait)."""
-    return np.interp(np.clip(s, 0.0, 1.0), _GRID, _PROFILE)
+    with zero velocity and acceleration but reaches its cruise speed within ``ramp`` of
+    the swing (``GeneratorOptions.swing_ramp``), so it stays close to the moving body (a
+    foot that accelerates over the whole swing lags far behind the body in a fast gait)."""
+    return np.interp(np.clip(s, 0.0, 1.0), _GRID, _profile_table(ramp))
 
 
-def plan_feet(sp: Species, g: GaitNumbers, t: np.ndarray, swing_height: float) -> LegPlan:
+def plan_feet(
+    sp: Species, g: GaitNumbers, t: np.ndarray, swing_height: float, options: GeneratorOptions
+) -> LegPlan:
     """Toe targets, stance schedule and swing progress of the four feet."""
     info = standing_info(sp)
     neutral = np.asarray(info["neutral"])
@@ -154,7 +155,7 @@ def plan_feet(sp: Species, g: GaitNumbers, t: np.ndarray, swing_height: float) -
         s = np.where(stance, 0.0, (u - beta) / (1.0 - beta))
         a, b = holds[kk], holds[np.minimum(kk + 1, len(ks) - 1)]
         m = min_jerk(s)[:, None]
-        world = a + (b - a) * swing_profile(s)[:, None]
+        world = a + (b - a) * swing_profile(s, options.swing_ramp)[:, None]
         # Swing relative to the moving body: a world-frame minimum-jerk path lags far
         # behind the body early in the swing of a fast gait (beyond the leg's reach);
         # the body-frame path keeps the foot under the body. Blended with weight
@@ -184,6 +185,7 @@ def build_locomotion(
     fps: float,
     style: dict[str, float],
     sway_gain: float,
+    options: GeneratorOptions,
 ) -> tuple[Trunk, Solved, LegPlan]:
     """Build one cyclic clip.
 
@@ -196,6 +198,7 @@ def build_locomotion(
         style: per-clip carriage variations (``neck_offset``, ``head_offset``,
             ``tail_offset`` [rad], ``swing_scale``).
         sway_gain: lateral trunk sway gain (0 disables).
+        options: the generator's knobs.
 
     Returns:
         The trunk, the solved pose and the leg plan.
@@ -213,7 +216,7 @@ def build_locomotion(
     swing_h = (
         hab.swing_height * sp.leg_length * style.get("swing_scale", 1.0) * (0.8 + 0.4 * u_speed)
     )
-    plan = plan_feet(sp, g, t, swing_h)
+    plan = plan_feet(sp, g, t, swing_h, options)
 
     tr = Trunk.standing(sp, t.shape[0])
     xy, psi = _root_path(g, t)
@@ -257,7 +260,7 @@ def build_locomotion(
 
     window = max(3, int(round(0.45 * fps / f)))
     if sway_gain > 0 and g.duty_factor >= 0.5:
-        tr = apply_sway(sp, tr, plan, sway_gain, phi)
-    tr, sol = fix_reach(sp, tr, plan, window)
-    sol = respect_limits(sp, tr, plan, sol, max(3, int(round(0.1 * fps / f))))
+        tr = apply_sway(sp, tr, plan, sway_gain, phi, options=options)
+    tr, sol = fix_reach(sp, tr, plan, window, options=options)
+    sol = respect_limits(sp, tr, plan, sol, max(3, int(round(0.1 * fps / f))), options)
     return tr, sol, plan

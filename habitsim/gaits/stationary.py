@@ -18,6 +18,7 @@ from ..ik import LEGS, axial_frames, leg_geometry
 from ..physics_constants import GRAVITY
 from ..species import Species
 from ._pose import LegPlan, Solved, Trunk, fix_reach, min_jerk, smooth_noise, standing_info
+from .options import GeneratorOptions
 
 
 def _planted_plan(sp: Species, t: int, heading: float) -> LegPlan:
@@ -55,7 +56,12 @@ def _idle_motion(
 
 
 def build_idle(
-    sp: Species, t: np.ndarray, fps: float, p: dict, rng: np.random.Generator
+    sp: Species,
+    t: np.ndarray,
+    fps: float,
+    p: dict,
+    rng: np.random.Generator,
+    options: GeneratorOptions,
 ) -> tuple[Trunk, Solved, LegPlan]:
     """Standing with breathing, head and tail motion and one slow weight shift."""
     n = t.shape[0]
@@ -80,7 +86,7 @@ def build_idle(
     tr.root[:, 0] += c * fwd - s * lat
     tr.root[:, 1] += s * fwd + c * lat
     tr.root[:, :2] += 0.0
-    tr2, sol = fix_reach(sp, tr, plan, max(3, int(round(0.3 * fps))))
+    tr2, sol = fix_reach(sp, tr, plan, max(3, int(round(0.3 * fps))), options=options)
     return tr2, sol, plan
 
 
@@ -160,7 +166,12 @@ def _sit_pose(
 
 
 def build_sit(
-    sp: Species, t: np.ndarray, fps: float, p: dict, rng: np.random.Generator
+    sp: Species,
+    t: np.ndarray,
+    fps: float,
+    p: dict,
+    rng: np.random.Generator,
+    options: GeneratorOptions,
 ) -> tuple[Trunk, Solved, LegPlan, dict]:
     """Stand, lower the hind quarters (hind feet planted, fore legs straighten), hold."""
     n = t.shape[0]
@@ -198,7 +209,7 @@ def build_sit(
     _idle_motion(sp, tr, t, rng, 0.5 * hold)
     plan.foot_extra[:, 2:] = (s * (foot1 - gh.foot_inclination0))[:, None]
     plan.sweep_gain = 0.0
-    tr2, sol = fix_reach(sp, tr, plan, max(3, int(round(0.2 * fps))))
+    tr2, sol = fix_reach(sp, tr, plan, max(3, int(round(0.2 * fps))), options=options)
     extra = {"sit_start_s": t0, "sit_duration_s": dur, "sit_pitch_rad": fin["d_pitch"]}
     return tr2, sol, plan, extra
 
