@@ -1,5 +1,6 @@
 """The typed reports read back from a motion's metadata (habitsim.bvh_mapping.ImportReport,
-habitsim.stance.report.TransferRecord) and the pipeline's stage labels."""
+habitsim.stance.report.TransferRecord), a refinement report's contacts.cleaning
+(habitsim.refine.cleaning.CleaningRecord) and the pipeline's stage labels."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from habitsim.bvh_mapping import ImportReport
 from habitsim.errors import HabitsimError, MetadataError
 from habitsim.gaits import generate
 from habitsim.pipeline import Stage, run_clip
+from habitsim.refine.cleaning import CleaningRecord, clean_contact_labels, cleaning_summary
 from habitsim.stance.conform import conform
 from habitsim.stance.labels import EditReason, StanceLabels, StanceSource
 from habitsim.stance.report import ScheduleRecord, TransferRecord
@@ -150,3 +152,117 @@ def test_pipeline_stages_carry_labels_and_the_transfer_record() -> None:
     assert run.refined.labels is moved.labels and run.refined.transfer is moved.transfer
     assert run.tracked.labels is None and run.tracked.contacts_method == "none"
     assert all(isinstance(v, float | bool) for v in moved.metrics.values())
+
+
+RETRIEVAL = {
+    "neighbour": "lion",
+    "text_distance": 0.1234,
+    "morphology_distance": 0.0456,
+    "explanation": "tiger: habits of lion (nearest by description)",
+}
+
+
+def test_transfer_record_reads_retrieval_levelled_and_habit_species() -> None:
+    held_out = {
+        "habit_species": "lion",
+        "levelled": {"pitch_deg": -3.5, "fore_minus_hind_per_leg": -0.0412},
+        "method": "habit",
+        "retrieval": RETRIEVAL,
+        "contacts": {
+            "method": "duty",
+            "gait": "walk",
+            "duty_factor": 0.6,
+            "feet_by_duty": ["LF", "RF"],
+        },
+        "planted": False,
+    }
+    rec = TransferRecord.from_metadata({"transfer": held_out})
+    assert rec is not None and rec.retrieval is not None and rec.levelled is not None
+    assert (
+        rec.retrieval.neighbour == "lion" and rec.retrieval.explanation == RETRIEVAL["explanation"]
+    )
+    assert rec.levelled.pitch_deg == -3.5 and rec.levelled.fore_minus_hind_per_leg == -0.0412
+    assert rec.habit_species == "lion"
+    assert rec.contacts is not None and rec.contacts.detail("feet_by_duty") == ["LF", "RF"]
+    assert _dump(rec.to_metadata()) == _dump(held_out)  # byte-identical, key order too
+    # a training target: retrieval written None and read back as written
+    trained = {**held_out, "habit_species": "cat", "retrieval": None}
+    del trained["levelled"]
+    rec = TransferRecord.from_metadata({"transfer": trained})
+    assert rec is not None and rec.retrieval is None and rec.levelled is None
+    assert _dump(rec.to_metadata()) == _dump(trained)
+    with pytest.raises(MetadataError, match=r"transfer\.contacts\.gait"):
+        TransferRecord.from_metadata(
+            {"transfer": {"contacts": {"method": "duty"}}}
+        ).contacts.detail(  # type: ignore[union-attr]
+            "gait"
+        )
+    for field, broken in (
+        ("transfer.retrieval.explanation", {"retrieval": {**RETRIEVAL, "explanation": 3}}),
+        ("transfer.retrieval.neighbour", {"retrieval": {"explanation": "x"}}),
+        ("transfer.retrieval", {"retrieval": "lion"}),
+        ("transfer.levelled.pitch_deg", {"levelled": {"fore_minus_hind_per_leg": 0.1}}),
+        (
+            "transfer.levelled.fore_minus_hind_per_leg",
+            {"levelled": {"pitch_deg": 1.0, "fore_minus_hind_per_leg": "up"}},
+        ),
+        ("transfer.habit_species", {"habit_species": 7}),
+    ):
+        with pytest.raises(MetadataError, match=field.replace(".", r"\.")):
+            TransferRecord.from_metadata({"transfer": copy.deepcopy(broken)})
+
+
+CLEANING = {
+    "frames_changed": 3,
+    "LF": {"trimmed": 1, "filled": 1, "dropped": 0},
+    "RF": {"trimmed": 0, "filled": 0, "dropped": 0},
+    "LH": {"trimmed": 0, "filled": 0, "dropped": 1},
+    "RH": {"trimmed": 0, "filled": 0, "dropped": 0},
+}
+
+
+def test_cleaning_record_round_trip_of_a_cleaning_summary() -> None:
+    c = np.zeros((40, 4), dtype=bool)
+    c[5:20] = True
+    c[25:35] = True
+    c[21, 0] = True  # a blip of one frame: LF changed
+    c[12, 1] = False  # a gap of one frame: filled
+    toes = np.zeros((40, 4, 3))
+    labels = StanceLabels(c, StanceSource.GIVEN)
+    cleaned = clean_contact_labels(labels, toes, fps=30.0, leg_length=0.3)
+    summary = cleaning_summary(cleaned)
+    rec = CleaningRecord.from_dict(summary)
+    assert rec.frames_changed == summary["frames_changed"] > 0
+    assert [k for k, _ in rec.feet] == ["LF", "RF", "LH", "RH"]
+    assert _dump(rec.to_dict()) == _dump(summary)
+    report = {"contacts": {"source": "given", "cleaning": summary}}
+    assert CleaningRecord.from_report(report) == rec
+    assert dict(rec.feet)["RF"].filled == 1 and dict(rec.feet)["LF"].changed
+    assert all(f.to_dict() == summary[k] for k, f in rec.feet)
+    assert not dict(rec.feet)["RH"].changed
+
+
+def test_cleaning_record_absent_and_typed_errors() -> None:
+    assert CleaningRecord.from_report({}) is None
+    assert CleaningRecord.from_report({"contacts": {"cleaning": None}}) is None
+    rec = CleaningRecord.from_report({"contacts": {"cleaning": CLEANING}})
+    assert rec is not None and _dump(rec.to_dict()) == _dump(CLEANING)
+    for field, broken in (
+        (
+            "contacts.cleaning.frames_changed",
+            {k: v for k, v in CLEANING.items() if k != "frames_changed"},
+        ),
+        ("contacts.cleaning.frames_changed", {**CLEANING, "frames_changed": "3"}),
+        ("contacts.cleaning.LF.trimmed", {**CLEANING, "LF": {"filled": 1, "dropped": 0}}),
+        (
+            "contacts.cleaning.LH.dropped",
+            {**CLEANING, "LH": {"trimmed": 0, "filled": 0, "dropped": 1.5}},
+        ),
+        ("contacts.cleaning.RF", {**CLEANING, "RF": [0, 0, 0]}),
+        ("contacts.cleaning", "none"),
+    ):
+        with pytest.raises(MetadataError, match=field.replace(".", r"\.")) as err:
+            CleaningRecord.from_report({"contacts": {"cleaning": copy.deepcopy(broken)}})
+        assert isinstance(err.value, HabitsimError)
+    with pytest.raises(MetadataError, match="contacts"):
+        CleaningRecord.from_report({"contacts": "cleaned"})

@@ -35,6 +35,7 @@ from .synth_cmd import format_summary
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..motion import Motion
+    from ..stance.report import TransferRecord
 
 #: Clips per species of the demo data set.
 DEMO_CLIPS_PER_SPECIES = 4
@@ -170,6 +171,7 @@ def _pipeline(ns: argparse.Namespace) -> None:
     from ..pipeline import run_clip, track_reference
     from ..render import RenderError, render_available, render_tracking
     from ..species import load_species
+    from ..stance.report import TransferRecord
 
     out = make_dirs(Path(ns.out) / "pipeline", "--out")
     targets = [load_species(t).name for t in split_names(ns.targets)]
@@ -200,7 +202,7 @@ def _pipeline(ns: argparse.Namespace) -> None:
         run = run_clip(src, tgt, method="habit", refine="A", controller=ns.controller, seed=ns.seed)
         moved, ref = run.transferred.motion, run.refine_result
         assert moved is not None and ref is not None  # refine="A" runs every stage
-        info = moved.metadata.get("transfer", {})
+        info = TransferRecord.from_metadata(moved.metadata)
         moved.save(out / f"{name}_to_{tgt}.npz")
         ref.motion.save(out / f"{name}_to_{tgt}_refined.npz")
         plain = run.track_result
@@ -218,13 +220,14 @@ def _pipeline(ns: argparse.Namespace) -> None:
                 video = None
         pm = {} if plain is None else plain.metrics
         hm = helped.metrics
-        retrieval = info.get("retrieval") or {}
         rows.append(
             {
                 "source": name,
                 "target": tgt,
-                "habit_from": info.get("habit_species", tgt),
-                "retrieval": retrieval.get("explanation"),
+                "habit_from": _habit_from(info, tgt),
+                "retrieval": None
+                if info is None or info.retrieval is None
+                else info.retrieval.explanation,
                 "contacts": run.transferred.contacts_method,
                 "refine_status": run.refined.status,
                 "refine_check": run.refine_verdict,
@@ -257,6 +260,14 @@ def _pipeline(ns: argparse.Namespace) -> None:
         f"motions and videos in {out}/; report in {ns.out}/report.md and {html}, "
         f"table in {ns.out}/pipeline.json"
     )
+
+
+def _habit_from(info: TransferRecord | None, target: str) -> str | None:
+    """The species whose habits served ``target``: the record's ``habit_species`` as
+    written (None too), ``target`` when the method wrote none."""
+    if info is None or "habit_species" not in info.order:
+        return target
+    return info.habit_species
 
 
 def _bar(total: int, off: bool):

@@ -137,6 +137,8 @@ def _g(x: object, spec: str = ".4g") -> str:
 
 
 def _summary(rep: dict) -> str:
+    from ..refine.cleaning import CleaningRecord
+
     lines = [
         f"refine: {rep['species']}, {rep['frames']} frames, stage {rep['stage']}: "
         f"{rep['status']} in {rep['iterations']} iterations, "
@@ -160,15 +162,15 @@ def _summary(rep: dict) -> str:
         for k in keys:
             if k in before and k in after and before[k] is not None and after[k] is not None:
                 lines.append(f"  {k:26s} {_g(before[k], '9.4g'):>9s}  {_g(after[k], '9.4g'):>9s}")
-    cl = (rep.get("contacts") or {}).get("cleaning")
-    if cl and cl.get("frames_changed"):
+    cl = CleaningRecord.from_report(rep)
+    if cl is not None and cl.frames_changed:
         parts = [
             f"{foot} " + ", ".join(f"{v} {k}" for k, v in ch.items() if v)
-            for foot, ch in cl.items()
-            if isinstance(ch, dict) and any(ch.values())
+            for foot, ch in cl.feet
+            if ch.changed
         ]
         lines.append(
-            f"  contact labels cleaned: {cl['frames_changed']} frame(s) changed ("
+            f"  contact labels cleaned: {cl.frames_changed} frame(s) changed ("
             + "; ".join(parts)
             + ")"
         )

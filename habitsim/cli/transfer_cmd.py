@@ -97,6 +97,7 @@ def _transfer_outputs(ns: argparse.Namespace) -> int:
     from ..models.transfer import transfer
     from ..motion import load_motion
     from ..species import load_species
+    from ..stance.report import TransferRecord
 
     target = load_species(ns.to).name
     suffix = ns.source.suffix.lower()
@@ -128,21 +129,22 @@ def _transfer_outputs(ns: argparse.Namespace) -> int:
         checkpoint=ns.checkpoint,
         temperature=ns.temperature,
     )
-    info = out.metadata.get("transfer", {})
-    if info.get("retrieval"):
-        print(info["retrieval"]["explanation"])
-    if info.get("levelled"):
-        lv = info["levelled"]
-        dz = lv["fore_minus_hind_per_leg"]
+    rec = TransferRecord.from_metadata(out.metadata)
+    if rec is not None and rec.retrieval is not None:
+        print(rec.retrieval.explanation)
+    if rec is not None and rec.levelled is not None:
+        lv = rec.levelled
+        dz = lv.fore_minus_hind_per_leg
         print(
-            f"trunk pitched {lv['pitch_deg']:+.1f}° before planting: the decoded fore stance "
+            f"trunk pitched {lv.pitch_deg:+.1f}° before planting: the decoded fore stance "
             f"toes stood {abs(dz):.3f} leg lengths {'below' if dz < 0 else 'above'} the hind ones"
         )
-    how = info.get("contacts") or {}
-    if how.get("method") == "duty":
+    how = None if rec is None else rec.contacts
+    if how is not None and how.method == "duty":
         print(
-            f"stance labels of {', '.join(how['feet_by_duty'])} from the {target}'s "
-            f"{how['gait']} duty factor {how['duty_factor']} (those feet never rest in the output)"
+            f"stance labels of {', '.join(how.detail('feet_by_duty'))} from the {target}'s "
+            f"{how.detail('gait')} duty factor {how.detail('duty_factor')} "
+            "(those feet never rest in the output)"
         )
     out.save(ns.out)
     msg = (

@@ -3,10 +3,13 @@ the motion (:func:`clean_contact_labels`) and summarised for the report."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ..errors import MetadataError
 from ..motion import Motion
 from ..stance.labels import EditReason, StanceLabels, StanceSource, runs
 from .errors import RefineInputError
@@ -15,6 +18,8 @@ from .options import MAX_TRIM_SHARE, MIN_RUN_S, STANCE_SLIP_PER_LEG
 __all__ = [
     "clean_contact_labels",
     "cleaning_summary",
+    "FootCleaning",
+    "CleaningRecord",
     "CLEANED_BY",
     "STANCE_SLIP_PER_LEG",
     "MAX_TRIM_SHARE",
@@ -167,3 +172,108 @@ def cleaning_summary(cleaned: StanceLabels, since: int = 0) -> dict[str, Any]:
             "dropped": int(counts[2, f]),
         }
     return out
+
+
+# ------------------------------------------------ the report's contacts.cleaning, read back
+def _count(m: Mapping[str, Any], key: str, path: str) -> int:
+    """``m[key]``, checked to be a count (names ``path.key`` when it is not)."""
+    if key not in m:
+        raise MetadataError(f"report field {path}.{key} is missing")
+    v = m[key]
+    if not isinstance(v, int) or isinstance(v, bool) or v < 0:
+        raise MetadataError(f"report field {path}.{key} is malformed: {type(v).__name__} {v!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class FootCleaning:
+    """What :func:`clean_contact_labels` changed on one foot (``contacts.cleaning.LF`` …).
+
+    Attributes:
+        trimmed: stance frames at a run's ends that became swing.
+        filled: swing gaps that became stance.
+        dropped: short stance runs that became swing.
+    """
+
+    trimmed: int
+    filled: int
+    dropped: int
+
+    @classmethod
+    def from_dict(cls, d: object, path: str) -> FootCleaning:
+        """Read back from its JSON form (``path``: where it sits, for errors).
+
+        Raises:
+            MetadataError: a missing or malformed count (named).
+        """
+        if not isinstance(d, Mapping):
+            raise MetadataError(f"report field {path} is malformed: {type(d).__name__}")
+        return cls(*(_count(d, k, path) for k in ("trimmed", "filled", "dropped")))
+
+    def items(self) -> tuple[tuple[str, int], ...]:
+        """(step, count) in the report's order: ``trimmed``, ``filled``, ``dropped``."""
+        return (("trimmed", self.trimmed), ("filled", self.filled), ("dropped", self.dropped))
+
+    @property
+    def changed(self) -> bool:
+        """Whether any step changed this foot's labels."""
+        return any(v for _, v in self.items())
+
+    def to_dict(self) -> dict[str, int]:
+        """The JSON form (as :func:`cleaning_summary` writes it)."""
+        return dict(self.items())
+
+
+@dataclass(frozen=True)
+class CleaningRecord:
+    """A refinement report's ``contacts.cleaning``, typed: the one reader of what
+    :func:`cleaning_summary` wrote (the writer is unchanged).
+
+    Attributes:
+        frames_changed: labels that differ from those before the cleaning.
+        feet: (foot name, what changed on it), in the report's order (``LF`` …).
+    """
+
+    frames_changed: int
+    feet: tuple[tuple[str, FootCleaning], ...]
+
+    @classmethod
+    def from_dict(cls, d: object, path: str = "contacts.cleaning") -> CleaningRecord:
+        """Read back from its JSON form.
+
+        Raises:
+            MetadataError: a missing or malformed field (named, e.g.
+                ``contacts.cleaning.LF.trimmed``).
+        """
+        if not isinstance(d, Mapping):
+            raise MetadataError(f"report field {path} is malformed: {type(d).__name__}")
+        return cls(
+            _count(d, "frames_changed", path),
+            tuple(
+                (str(k), FootCleaning.from_dict(v, f"{path}.{k}"))
+                for k, v in d.items()
+                if k != "frames_changed"
+            ),
+        )
+
+    @classmethod
+    def from_report(cls, report: Mapping[str, Any]) -> CleaningRecord | None:
+        """The cleaning of a refinement's JSON report (:mod:`habitsim.refine.report`);
+        None when the report has no ``contacts`` or the labels were not cleaned.
+
+        Raises:
+            MetadataError: ``contacts`` is no mapping, or a missing or malformed field of
+                ``contacts.cleaning`` (named).
+        """
+        contacts = report.get("contacts")
+        if contacts is None:
+            return None
+        if not isinstance(contacts, Mapping):
+            raise MetadataError(f"report field contacts is malformed: {type(contacts).__name__}")
+        cleaning = contacts.get("cleaning")
+        return None if cleaning is None else cls.from_dict(cleaning)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form, keys in their written order (as :func:`cleaning_summary`
+        writes it)."""
+        return {"frames_changed": self.frames_changed, **{k: f.to_dict() for k, f in self.feet}}

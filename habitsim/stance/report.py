@@ -4,7 +4,8 @@ The planting ladder (:mod:`habitsim.stance.ladder`) judges each planting by thes
 values; ``to_dict`` methods write the JSON-ready, rounded form that goes into a
 transfer's ``metadata["transfer"]`` (the ``.npz`` format is unchanged).
 :class:`TransferRecord` (with :class:`ScheduleRecord`, :class:`WalkingRecord`,
-:class:`PlantedRecord`) is the one typed reader of that entry, and writes it back as read.
+:class:`PlantedRecord`, :class:`RetrievalRecord`, :class:`LevelledRecord`) is the one
+typed reader of that entry, and writes it back as read.
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ __all__ = [
     "WalkingRecord",
     "ScheduleRecord",
     "PlantedRecord",
+    "RetrievalRecord",
+    "LevelledRecord",
     "TransferRecord",
 ]
 
@@ -456,6 +459,18 @@ class ScheduleRecord:
             None if walking is None else WalkingRecord.from_dict(walking, f"{path}.walking_stance"),
         )
 
+    def detail(self, key: str, path: str = "transfer.contacts") -> Any:
+        """The detail ``key`` (e.g. ``gait``, ``duty_factor``, ``feet_by_duty`` of the
+        ``duty`` method).
+
+        Raises:
+            MetadataError: the detail was not written (names ``path.key``).
+        """
+        for k, v in self.details:
+            if k == key:
+                return v
+        raise MetadataError(f"metadata field {_where(path, key)} is missing")
+
     @property
     def reason_code(self) -> ScheduleReason | None:
         """The ``reason`` detail as its typed code (None: no reason written, or one that is
@@ -513,6 +528,86 @@ class PlantedRecord:
 
 
 @dataclass(frozen=True)
+class RetrievalRecord:
+    """Which species' habits served a held-out target (``metadata["transfer"]["retrieval"]``,
+    written by :func:`habitsim.models.transfer` for the habit method).
+
+    Attributes:
+        neighbour: the nearest training species by its habit description.
+        text_distance, morphology_distance: how far it lies, by text and by body.
+        explanation: the retrieval in words.
+    """
+
+    neighbour: str
+    text_distance: float
+    morphology_distance: float
+    explanation: str
+
+    @classmethod
+    def from_dict(cls, d: object, path: str = "transfer.retrieval") -> RetrievalRecord:
+        """Read back from its JSON form.
+
+        Raises:
+            MetadataError: a missing or malformed field (named).
+        """
+        m = _mapping(d, path)
+        return cls(
+            str(_entry(m, "neighbour", str, path)),
+            _entry(m, "text_distance", (int, float), path),
+            _entry(m, "morphology_distance", (int, float), path),
+            str(_entry(m, "explanation", str, path)),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form, keys in their written order."""
+        return {
+            "neighbour": self.neighbour,
+            "text_distance": self.text_distance,
+            "morphology_distance": self.morphology_distance,
+            "explanation": self.explanation,
+        }
+
+
+@dataclass(frozen=True)
+class LevelledRecord:
+    """How the trunk was pitched level before planting (``metadata["transfer"]["levelled"]``,
+    written by :func:`habitsim.stance.level.level_trunk`).
+
+    Attributes:
+        pitch_deg: the pitch applied [deg].
+        fore_minus_hind_per_leg: how far the decoded fore stance toes stood above the hind
+            ones (negative: below) [leg lengths].
+    """
+
+    pitch_deg: float
+    fore_minus_hind_per_leg: float
+
+    @classmethod
+    def from_dict(cls, d: object, path: str = "transfer.levelled") -> LevelledRecord:
+        """Read back from its JSON form.
+
+        Raises:
+            MetadataError: a missing or malformed field (named).
+        """
+        m = _mapping(d, path)
+        return cls(
+            _entry(m, "pitch_deg", (int, float), path),
+            _entry(m, "fore_minus_hind_per_leg", (int, float), path),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form, keys in their written order."""
+        return {
+            "pitch_deg": self.pitch_deg,
+            "fore_minus_hind_per_leg": self.fore_minus_hind_per_leg,
+        }
+
+
+#: The entries of ``metadata["transfer"]`` :class:`TransferRecord` reads into typed fields.
+_TYPED = ("contacts", "planted", "retrieval", "levelled")
+
+
+@dataclass(frozen=True)
 class TransferRecord:
     """A transferred motion's ``metadata["transfer"]``, typed: the one reader of what a
     transfer method wrote (:meth:`ConformReport.to_metadata`, the direct methods).
@@ -520,15 +615,20 @@ class TransferRecord:
     Attributes:
         contacts: how its stance labels were found (None: the method wrote none).
         planted: how its feet were planted (None: ``planted`` False or not written).
-        entries: the other entries (the method's own: ``method``, ``species``, ``seed``;
-            the bounds to the source, ``levelled``), JSON values.
+        entries: the other entries (the method's own: ``method``, ``species``, ``seed``,
+            ``habit_species``; the bounds to the source), JSON values.
         order: the keys in their written order (so the record is written back as read).
+        retrieval: which species' habits served a held-out target (None: ``retrieval``
+            None or not written).
+        levelled: how the trunk was pitched level (None: not written).
     """
 
     contacts: ScheduleRecord | None
     planted: PlantedRecord | None
     entries: tuple[tuple[str, Any], ...]
     order: tuple[str, ...]
+    retrieval: RetrievalRecord | None = None
+    levelled: LevelledRecord | None = None
 
     @classmethod
     def from_metadata(cls, metadata: Mapping[str, Any] | None) -> TransferRecord | None:
@@ -543,12 +643,25 @@ class TransferRecord:
         m = _mapping(metadata["transfer"], "transfer")
         contacts = m.get("contacts")
         planted = m.get("planted", False)
+        retrieval = m.get("retrieval")
+        levelled = m.get("levelled")
+        habit = m.get("habit_species")
+        if habit is not None and not isinstance(habit, str):
+            raise MetadataError(f"metadata field transfer.habit_species is malformed: {habit!r}")
         return cls(
             None if contacts is None else ScheduleRecord.from_dict(contacts),
             None if planted is False else PlantedRecord.from_dict(planted),
-            tuple((k, v) for k, v in m.items() if k not in ("contacts", "planted")),
+            tuple((k, v) for k, v in m.items() if k not in _TYPED),
             tuple(m),
+            None if retrieval is None else RetrievalRecord.from_dict(retrieval),
+            None if levelled is None else LevelledRecord.from_dict(levelled),
         )
+
+    @property
+    def habit_species(self) -> str | None:
+        """The species whose habits the habit method drew (None: not written, or written
+        None)."""
+        return dict(self.entries).get("habit_species")
 
     @property
     def planted_how(self) -> str:
@@ -562,4 +675,7 @@ class TransferRecord:
         if self.contacts is not None:
             parts["contacts"] = self.contacts.to_dict()
         parts["planted"] = False if self.planted is None else self.planted.to_dict()
+        # written only where read (``order``): None stands for an entry written None
+        parts["retrieval"] = None if self.retrieval is None else self.retrieval.to_dict()
+        parts["levelled"] = None if self.levelled is None else self.levelled.to_dict()
         return {k: parts[k] for k in self.order}
