@@ -27,6 +27,28 @@ from .problem import (
 )
 
 
+def _cleaned(
+    labels_in: StanceLabels,
+    toes: np.ndarray,
+    fps: float,
+    leg_length: float,
+    opts: RefineOptions,
+) -> tuple[StanceLabels, dict[str, Any]]:
+    """``labels_in`` cleaned on the toe paths ``toes`` (T, 4, 3) [m] with the options'
+    cleaning knobs, and the cleaning's report entry (:func:`cleaning_summary`)."""
+    labels = clean_contact_labels(
+        labels_in,
+        toes,
+        fps,
+        leg_length,
+        slip_per_leg=opts.stance_slip_per_leg,
+        min_run_s=opts.min_run_s,
+        trim=opts.trim_contacts,
+        max_trim_share=opts.max_trim_share,
+    )
+    return labels, cleaning_summary(labels, since=len(labels_in.edits))
+
+
 def _ground_offset(
     targets: np.ndarray, contacts: np.ndarray, fps: float, toe_idx: list[int]
 ) -> np.ndarray:
@@ -99,17 +121,7 @@ def _prepare(
     sp = motion.species_info
     cleaning = None
     if opts.clean_contacts:
-        labels = clean_contact_labels(
-            labels_in,
-            targets[:, toe_idx],
-            motion.fps,
-            sp.leg_length,
-            slip_per_leg=opts.stance_slip_per_leg,
-            min_run_s=opts.min_run_s,
-            trim=opts.trim_contacts,
-            max_trim_share=opts.max_trim_share,
-        )
-        cleaning = cleaning_summary(labels, since=len(labels_in.edits))
+        labels, cleaning = _cleaned(labels_in, targets[:, toe_idx], motion.fps, sp.leg_length, opts)
         c = labels.array
         if cleaning["frames_changed"] and f_c is not None:  # corners moved: filter again
             q = _lowpass_qpos(q_raw, info, motion.fps, f_c, c)
@@ -215,17 +227,9 @@ def _preplant(
     sp = motion.species_info
     labels, cleaning = labels_in, None
     if opts.clean_contacts:
-        labels = clean_contact_labels(
-            labels_in,
-            motion.foot_positions(),
-            motion.fps,
-            sp.leg_length,
-            slip_per_leg=opts.stance_slip_per_leg,
-            min_run_s=opts.min_run_s,
-            trim=opts.trim_contacts,
-            max_trim_share=opts.max_trim_share,
+        labels, cleaning = _cleaned(
+            labels_in, motion.foot_positions(), motion.fps, sp.leg_length, opts
         )
-        cleaning = cleaning_summary(labels, since=len(labels_in.edits))
     c = labels.array
     floor = None
     if opts.swing_clearance is not None:
