@@ -11,7 +11,7 @@ typed reader of that entry, and writes it back as read.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from enum import StrEnum
 from typing import Any
 
@@ -560,12 +560,7 @@ class RetrievalRecord:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form, keys in their written order."""
-        return {
-            "neighbour": self.neighbour,
-            "text_distance": self.text_distance,
-            "morphology_distance": self.morphology_distance,
-            "explanation": self.explanation,
-        }
+        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -597,10 +592,7 @@ class LevelledRecord:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form, keys in their written order."""
-        return {
-            "pitch_deg": self.pitch_deg,
-            "fore_minus_hind_per_leg": self.fore_minus_hind_per_leg,
-        }
+        return asdict(self)
 
 
 #: The entries of ``metadata["transfer"]`` :class:`TransferRecord` reads into typed fields.
