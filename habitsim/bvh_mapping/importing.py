@@ -17,9 +17,13 @@ from .frame import _parse_up, detect_frame
 from .identity import _identity_import, is_habitsim_bvh
 from .map_files import load_joint_map, validate_joint_map
 from .options import MappingOptions
+from .inplace import InPlaceOptions, recover_in_place
+from .loops import LoopOptions
 from .result import JointMapping, MappingNote
 from .retargeting import retarget
 from .tree import _Tree
+
+_JOINT = {n: i for i, n in enumerate(JOINT_NAMES)}
 
 
 def describe_hierarchy(bvh: BVHData, mapping: JointMapping | None = None) -> str:
@@ -89,6 +93,19 @@ def read_source(
     )
 
 
+def _in_place(motion: Motion, options: InPlaceOptions | None) -> bool:
+    """Whether a copied (identity-imported) motion is an in-place clip, which is then
+    imported through the retargeting that recovers its travel."""
+    pos = motion.global_positions()
+    feet = []
+    for prefix, top in zip(("lf", "rf", "lh", "rh"), ("wrist", "wrist", "hock", "hock"), strict=True):
+        feet.append(pos[:, [_JOINT[f"{prefix}_{top}"], _JOINT[f"{prefix}_toe"]]])
+    forward = pos[:, _JOINT["spine3"]] - pos[:, 0]
+    leg = motion.species_info.hind_leg_length
+    fit = recover_in_place(feet, pos[:, 0], forward, motion.fps, leg, options=options)
+    return fit.detected
+
+
 def import_bvh(
     path: str | Path | BVHData,
     species: str | Species,
@@ -100,6 +117,8 @@ def import_bvh(
     animation: str | int | None = None,
     fps: float | None = None,
     options: MappingOptions | None = None,
+    inplace: InPlaceOptions | None = None,
+    loops: LoopOptions | None = None,
 ) -> tuple[Motion, JointMapping]:
     """Read a BVH file (or a glTF/GLB animation) and retarget it onto a species' skeleton.
 
@@ -116,6 +135,11 @@ def import_bvh(
         animation, fps: for a glTF/GLB file, the animation and the sampling rate
             (:func:`read_source`).
         options: the automatic mapping's tuning knobs (default :class:`MappingOptions`).
+        inplace: the knobs of detecting an in-place clip and recovering its root travel
+            from its stance feet (default :class:`~habitsim.bvh_mapping.inplace.
+            InPlaceOptions`); ``metadata["import"]["in_place"]`` says what was found.
+        loops: the knobs of telling a loop (default :class:`~habitsim.bvh_mapping.loops.
+            LoopOptions`).
 
     Returns:
         ``(motion, mapping)``; print ``mapping`` for the habitsim ← source lines.
@@ -136,7 +160,9 @@ def import_bvh(
         up is None or _parse_up(up) == "+z"
     )
     if joint_map is None and is_habitsim_bvh(bvh) and plain:
-        return _identity_import(bvh, sp)
+        copied = _identity_import(bvh, sp)
+        if not _in_place(copied[0], inplace):
+            return copied
 
     notes: list[str] = []
     codes: list[MappingNote] = []
@@ -178,6 +204,6 @@ def import_bvh(
         an2 = _Analysis(joints, geometric, notes, codes)
         _resolve_sides(bvh, an2, frame)
     mapping = JointMapping(joints, method, frame, 1.0, list(notes), note_codes=list(codes))
-    motion = retarget(bvh, mapping, sp, plant=plant)
+    motion = retarget(bvh, mapping, sp, plant=plant, inplace=inplace, loops=loops)
     motion.metadata["mapping"] = mapping.to_dict()
     return motion, mapping

@@ -14,7 +14,7 @@ from typing import Any
 from ..errors import MetadataError
 from ..stance.labels import StanceSource
 
-__all__ = ["SourceStanceRecord", "ImportReport"]
+__all__ = ["SourceStanceRecord", "InPlaceRecord", "ImportReport"]
 
 
 def _get(d: Mapping[str, Any], key: str, path: str) -> Any:
@@ -109,6 +109,111 @@ class SourceStanceRecord:
 
 
 @dataclass(frozen=True)
+class InPlaceRecord:
+    """Whether the source was an in-place clip or a loop, and what was done
+    (``metadata["import"]["in_place"]``; :mod:`habitsim.bvh_mapping.inplace`,
+    :mod:`habitsim.bvh_mapping.loops`).
+
+    Attributes:
+        detected: the clip was in place and its root travel was recovered from its
+            stance feet.
+        recovered_m: path length of the recovered travel, in the source's size [m] (0
+            when not detected).
+        heading_deg: direction of the recovered travel in the habitsim frame (0 = +x,
+            90 = +y) [deg]; None when not detected.
+        root_travel_m: the evidence: the trunk's horizontal path in the clip as given [m],
+        foot_sweep_m: ... the feet's backward sweep relative to the trunk while low [m],
+        backward_share: ... how straight back the low feet move (1 = straight back).
+        reason: one line saying why the clip is or is not in place.
+        loop: ``"closed"`` (last frame = first), ``"open"`` (last frame runs on into the
+            first) or ``"no"``.
+        loop_mismatch: distance of the last pose from the first [leg lengths].
+        cycles: how many times the clip was played (1: as it came).
+    """
+
+    detected: bool
+    recovered_m: float
+    heading_deg: float | None
+    root_travel_m: float
+    foot_sweep_m: float
+    backward_share: float
+    reason: str
+    loop: str
+    loop_mismatch: float
+    cycles: int = 1
+
+    @classmethod
+    def from_dict(cls, d: object, path: str = "import.in_place") -> InPlaceRecord:
+        """Read back from its JSON form.
+
+        Raises:
+            MetadataError: a missing or malformed field (named).
+        """
+        m = _mapping(d, path)
+        detected = _get(m, "detected", path)
+        reason = _get(m, "reason", path)
+        loop = _get(m, "loop", path)
+        heading = _get(m, "heading_deg", path)
+        cycles = _get(m, "cycles", path)
+        if not isinstance(detected, bool):
+            raise MetadataError(f"metadata field {path}.detected is malformed: {detected!r}")
+        if not isinstance(reason, str):
+            raise MetadataError(f"metadata field {path}.reason is malformed: {reason!r}")
+        if loop not in ("closed", "open", "no"):
+            raise MetadataError(f"metadata field {path}.loop is malformed: {loop!r}")
+        if not isinstance(cycles, int) or isinstance(cycles, bool) or cycles < 1:
+            raise MetadataError(f"metadata field {path}.cycles is malformed: {cycles!r}")
+        return cls(
+            detected,
+            _number(_get(m, "recovered_m", path), f"{path}.recovered_m"),
+            None if heading is None else _number(heading, f"{path}.heading_deg"),
+            _number(_get(m, "root_travel_m", path), f"{path}.root_travel_m"),
+            _number(_get(m, "foot_sweep_m", path), f"{path}.foot_sweep_m"),
+            _number(_get(m, "backward_share", path), f"{path}.backward_share"),
+            reason,
+            loop,
+            _number(_get(m, "loop_mismatch", path), f"{path}.loop_mismatch"),
+            cycles,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form, in its written order."""
+        return {
+            "detected": self.detected,
+            "recovered_m": self.recovered_m,
+            "heading_deg": self.heading_deg,
+            "root_travel_m": self.root_travel_m,
+            "foot_sweep_m": self.foot_sweep_m,
+            "backward_share": self.backward_share,
+            "reason": self.reason,
+            "loop": self.loop,
+            "loop_mismatch": self.loop_mismatch,
+            "cycles": self.cycles,
+        }
+
+    def lines(self) -> list[str]:
+        """What was done, as printed by the command line (one item a line)."""
+        out = []
+        if self.detected:
+            out.append(
+                f"in place: yes; root travel recovered from the stance feet: "
+                f"{self.recovered_m:.2f} m, heading {self.heading_deg:.0f} deg "
+                f"(trunk moved {self.root_travel_m:.3f} m while the feet swept "
+                f"{self.foot_sweep_m:.2f} m back, backward share {self.backward_share:.2f})"
+            )
+        else:
+            out.append(f"in place: no ({self.reason})")
+        if self.loop == "no":
+            out.append(f"loop: no (last pose {self.loop_mismatch:.3f} leg lengths from the first)")
+        else:
+            out.append(
+                f"loop: yes, {self.loop} (last pose {self.loop_mismatch:.3f} leg lengths from "
+                f"the first); played {self.cycles} time{'s' if self.cycles != 1 else ''}"
+            )
+        return out
+
+
+@dataclass(frozen=True)
 class ImportReport:
     """What the importer found (``metadata["import"]``).
 
@@ -122,6 +227,8 @@ class ImportReport:
         confidence: per leg (``lf``, ``rf``, ``lh``, ``rh``) the mapping's confidence
             [0–1].
         warnings: the mapping's warnings.
+        in_place: whether the clip was in place (its travel recovered) or a loop, and
+            how often it was played (None: not looked for, e.g. a file written before).
     """
 
     contacts: SourceStanceRecord
@@ -129,6 +236,7 @@ class ImportReport:
     confidence: tuple[tuple[str, float], ...]
     warnings: tuple[str, ...]
     planted: tuple[tuple[str, Any], ...] | None = None
+    in_place: InPlaceRecord | None = None
 
     @classmethod
     def from_metadata(cls, metadata: Mapping[str, Any] | None) -> ImportReport | None:
@@ -150,6 +258,7 @@ class ImportReport:
             tuple((str(k), _checked_number(v, f"{path}.confidence.{k}")) for k, v in conf.items()),
             _list(_get(m, "warnings", path), f"{path}.warnings", str),
             None if planted is None else tuple(_mapping(planted, f"{path}.planted").items()),
+            None if m.get("in_place") is None else InPlaceRecord.from_dict(m["in_place"]),
         )
 
     @property
@@ -165,4 +274,6 @@ class ImportReport:
         d["contact_f1"] = list(self.contact_f1)
         d["confidence"] = dict(self.confidence)
         d["warnings"] = list(self.warnings)
+        if self.in_place is not None:
+            d["in_place"] = self.in_place.to_dict()
         return d

@@ -4,6 +4,7 @@ planted, and each leg's mapping confidence (:func:`retarget`)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -26,8 +27,10 @@ from ..stance.planting import (
 )
 from .chains import _AXIAL, _END_POINTS, _IDX, _LEG_CHAINS, _TAIL
 from .frame import _leg_ends
+from .inplace import InPlaceFit, InPlaceOptions, recover_in_place
+from .loops import LoopFit, LoopOptions, detect_loop
 from .names import _fore_vote
-from .report import ImportReport, SourceStanceRecord
+from .report import ImportReport, InPlaceRecord, SourceStanceRecord
 from .result import CONFIDENCE_WARN, JointMapping, MappingNote
 from .tree import _Tree
 
@@ -93,6 +96,8 @@ def retarget(
     species: str | Species,
     plant: bool = True,
     options: PlantingOptions | None = None,
+    inplace: InPlaceOptions | None = None,
+    loops: LoopOptions | None = None,
 ) -> Motion:
     """Retarget a BVH motion onto a species' skeleton (see :mod:`habitsim.bvh_mapping`).
 
@@ -104,6 +109,10 @@ def retarget(
             False the legs keep the bone directions of the source.
         options: the knobs of labelling the source's stance and planting the legs
             (:class:`~habitsim.stance.planting.PlantingOptions`); the defaults when None.
+        inplace: the knobs of detecting an in-place clip and recovering its travel
+            (:class:`~habitsim.bvh_mapping.inplace.InPlaceOptions`); defaults when None.
+        loops: the knobs of telling a loop (:class:`~habitsim.bvh_mapping.loops.
+            LoopOptions`); defaults when None.
 
     Returns:
         The retargeted :class:`~habitsim.motion.Motion` (fps from the frame time), with
@@ -185,9 +194,15 @@ def retarget(
             q[:, j] = stand_q[j]
         g[:, j] = g[:, p] @ quat_to_matrix(q[:, j])
 
-    # Stance of the source's own feet, and the ground they stand on.
+    # An in-place clip gets the travel its stance feet show; then the stance of the
+    # source's own feet, and the ground they stand on.
     t = _Tree(bvh)
-    stance = _source_stance(bvh, t, j2s, src, mapping, options)
+    feet_found = _source_feet(bvh, t, j2s, src, mapping)
+    fit, loop = None, None
+    if feet_found is not None:
+        src, fit, loop = _recovered(src, feet_found, bvh.fps, inplace, loops)
+        hips = s("pelvis")
+    stance = _source_stance(bvh.fps, feet_found, src, options)
     # Root translation scaled by the hip-height ratio, heights above the source's ground.
     feet = [bvh.index(j2s[n]) for n in ("lf_toe", "rf_toe", "lh_toe", "rh_toe") if n in j2s]
     if not feet:
@@ -255,6 +270,7 @@ def retarget(
         tuple(mapping.confidence.items()),
         tuple(mapping.warnings),
         planted,
+        None if fit is None or loop is None else _in_place_record(fit, loop),
     )
     motion.metadata["import"] = report.to_metadata()
     motion.metadata["mapping"] = mapping.to_dict()
@@ -319,16 +335,61 @@ def _foot_points(t: _Tree, top: int, toe: int) -> list[int]:
     return out
 
 
-def _source_stance(
+def _in_place_record(fit: InPlaceFit, loop: LoopFit) -> InPlaceRecord:
+    """The report's record of an in-place recovery and a loop test."""
+    return InPlaceRecord(
+        fit.detected,
+        round(fit.recovered_m, 4),
+        None if fit.heading_deg is None else round(fit.heading_deg, 2),
+        round(fit.root_travel_m, 4),
+        round(fit.foot_sweep_m, 4),
+        round(fit.backward_share, 3),
+        fit.reason,
+        loop.kind or "no",
+        round(loop.mismatch, 4) if math.isfinite(loop.mismatch) else 99.0,
+    )
+
+
+_Feet = tuple[list[int], list[int], np.ndarray, list[list[int]]]
+
+
+def _recovered(
+    src: np.ndarray,
+    feet: _Feet,
+    fps: float,
+    inplace: InPlaceOptions | None,
+    loops: LoopOptions | None,
+) -> tuple[np.ndarray, InPlaceFit, LoopFit]:
+    """The source positions with an in-place clip's travel added, what the recovery
+    found and whether the clip is a loop (its poses relative to the trunk)."""
+    _, anchor_idx, limb_len, points = feet
+    leg = float(limb_len[2:].mean())
+    trunk = src[:, anchor_idx].mean(axis=1)
+    loop = detect_loop(src - trunk[:, None, :], leg, loops)
+    forward = src[:, anchor_idx[:2]].mean(axis=1) - src[:, anchor_idx[2:]].mean(axis=1)
+    fit = recover_in_place(
+        [src[:, pts] for pts in points],
+        trunk,
+        forward,
+        fps,
+        leg,
+        cyclic=loop.kind is not None,
+        options=inplace,
+    )
+    if fit.detected:
+        src = src + fit.travel[:, None, :]
+    return src, fit, loop
+
+
+def _source_feet(
     bvh: BVHData,
     t: _Tree,
     j2s: Mapping[str, str],
     src: np.ndarray,
     mapping: JointMapping,
-    options: PlantingOptions | None = None,
-) -> tuple[SourceStance, list[int], list[int], np.ndarray, list[list[int]]] | None:
-    """Stance labels of the source's own feet, its toe joints, anchors, limb lengths and
-    the joints each foot's stance was found on.
+) -> _Feet | None:
+    """The source's toe joints, anchors, limb lengths and the joints each foot's stance
+    is found on.
 
     None (with a note) when a leg lacks a mapped foot or shoulder / hip joint.
     """
@@ -361,7 +422,21 @@ def _source_stance(
     if np.any(limb_len <= 1e-6):
         mapping.note(MappingNote.ZERO_LEG, "a source leg has zero length: feet not planted")
         return None
+    return foot_idx, anchor_idx, limb_len, points
+
+
+def _source_stance(
+    fps: float,
+    feet: _Feet | None,
+    src: np.ndarray,
+    options: PlantingOptions | None = None,
+) -> tuple[SourceStance, list[int], list[int], np.ndarray, list[list[int]]] | None:
+    """Stance labels of the source's own feet (None without ``feet``), with the feet's
+    toe joints, anchors, limb lengths and points."""
+    if feet is None:
+        return None
+    foot_idx, anchor_idx, limb_len, points = feet
     st = label_source_stance(
-        [src[:, pts] for pts in points], bvh.fps, float(limb_len[2:].mean()), options
+        [src[:, pts] for pts in points], fps, float(limb_len[2:].mean()), options
     )
     return st, foot_idx, anchor_idx, limb_len, points

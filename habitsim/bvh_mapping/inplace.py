@@ -1,0 +1,264 @@
+"""In-place clips: a root that stays put while the stance feet sweep backwards, and the
+root's travel recovered from those feet (:func:`recover_in_place`).
+
+Game-engine animation is usually made *in place*: the character walks on the spot and
+the engine moves it. Imported as it is, its stance feet slide backwards under a still
+body, so no foot ever rests and the stance labels are nearly empty. A foot in stance is
+fixed in the world, so the body moves by the negative of its sweep: the body's velocity
+in each frame is minus the velocity of the feet that are on the ground, and integrating
+it gives the travel the clip left out. The stance labelling and the planting then run on
+the clip with that travel added, as on any captured clip.
+
+Detection asks three things of the clip (each an evidence figure of :class:`InPlaceFit`):
+the trunk's horizontal travel is a small share of the feet's backward sweep (a moving
+clip's trunk travels about as far as its feet sweep back under it); the low feet move
+backwards relative to the trunk's facing (a walk, not a dance on the spot); and they
+sweep far enough to be a gait (an idle clip's feet barely move). The knobs are the
+fields of :class:`InPlaceOptions`; why each default: ``docs/import.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.ndimage import uniform_filter1d
+from scipy.signal import savgol_filter
+
+from ..errors import HabitsimError
+
+__all__ = ["InPlaceOptions", "InPlaceOptionsError", "InPlaceFit", "recover_in_place"]
+
+
+class InPlaceOptionsError(HabitsimError, ValueError):
+    """An :class:`InPlaceOptions` field outside its valid range."""
+
+
+@dataclass(frozen=True)
+class InPlaceOptions:
+    """The knobs of detecting an in-place clip and recovering its travel.
+
+    Attributes:
+        enabled: look for an in-place clip at all (False: every clip is imported as it
+            is).
+        max_root_share: the clip is in place when the trunk's horizontal path is below
+            this share of the feet's backward sweep [unitless].
+        min_backward_share: ... and the low feet's motion relative to the trunk points
+            backwards by at least this share (the mean of −u·forward / |u| over low frames
+            of all feet; 1 = straight back) [unitless].
+        min_sweep_per_leg: ... and the feet sweep back at least this far (the mean over the
+            four feet) [hind-leg lengths].
+        low_per_leg: a foot is low (a stance candidate) while its lowest point is below
+            this height above its floor [hind-leg lengths].
+        agree_share: a low foot is in stance in a frame when its velocity is within this
+            share of the body's first estimate of the negative body velocity (stance
+            feet move together) [unitless].
+        trunk_window_s: the trunk's travel is measured on its position averaged over
+            this window (its sway within a stride and marker noise left out) [s].
+        smooth_s: window of the Savitzky–Golay filters on the foot paths and on the
+            recovered body velocity [s].
+    """
+
+    enabled: bool = True
+    max_root_share: float = 0.5
+    min_backward_share: float = 0.5
+    min_sweep_per_leg: float = 0.3
+    low_per_leg: float = 0.05
+    agree_share: float = 0.5
+    trunk_window_s: float = 0.5
+    smooth_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in ("max_root_share", "min_sweep_per_leg", "low_per_leg", "agree_share"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise InPlaceOptionsError(f"InPlaceOptions.{name} must be > 0, got {v!r}")
+        for name in ("smooth_s", "trunk_window_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise InPlaceOptionsError(f"InPlaceOptions.{name} must be > 0, got {v!r}")
+        if not -1.0 <= self.min_backward_share <= 1.0:
+            raise InPlaceOptionsError(
+                f"InPlaceOptions.min_backward_share must be in [-1, 1], "
+                f"got {self.min_backward_share!r}"
+            )
+
+
+@dataclass(frozen=True)
+class InPlaceFit:
+    """What :func:`recover_in_place` found.
+
+    Attributes:
+        detected: the clip is in place (its travel was recovered).
+        travel: (T, 3) the horizontal travel to add to every joint [m] (zeros when not
+            detected; z always 0).
+        root_travel_m: the trunk's horizontal path length in the clip as given [m].
+        foot_sweep_m: the feet's backward sweep relative to the trunk while low, the
+            mean over the four feet [m].
+        backward_share: how much the low feet's motion relative to the trunk points
+            backwards (1 = straight back, 0 = sideways or mixed) [unitless].
+        recovered_m: the recovered travel's path length [m] (0 when not detected).
+        heading_deg: direction of the recovered travel's net displacement in the
+            habitsim frame (0 = +x, 90 = +y) [deg]; None when not detected.
+        stance_share: the share of foot-frames the recovery took as stance [0–1].
+        reason: one line saying why the clip is or is not in place.
+    """
+
+    detected: bool
+    travel: np.ndarray = field(repr=False)
+    root_travel_m: float
+    foot_sweep_m: float
+    backward_share: float
+    recovered_m: float
+    heading_deg: float | None
+    stance_share: float
+    reason: str
+
+
+def _smooth(x: np.ndarray, fps: float, smooth_s: float, cyclic: bool) -> np.ndarray:
+    """``x`` (T, ...) smoothed along time by a quadratic Savitzky–Golay filter."""
+    t = x.shape[0]
+    win = max(5, int(round(smooth_s * fps)) | 1)
+    if t < win:
+        win = t if t % 2 else t - 1
+    if win < 5:
+        return x.copy()
+    return savgol_filter(x, win, 2, axis=0, mode="wrap" if cyclic else "interp")
+
+
+def _velocity(x: np.ndarray, fps: float, cyclic: bool) -> np.ndarray:
+    """Time derivative of ``x`` (T, ...) [per s]; central differences, around the loop's
+    seam when ``cyclic``."""
+    if x.shape[0] < 2:
+        return np.zeros_like(x)
+    if cyclic and x.shape[0] >= 3:
+        return (np.roll(x, -1, axis=0) - np.roll(x, 1, axis=0)) * (0.5 * fps)
+    return np.gradient(x, axis=0) * fps
+
+
+def _path_length(xy: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(xy, axis=0), axis=-1).sum()) if len(xy) > 1 else 0.0
+
+
+def _fill(v: np.ndarray, known: np.ndarray, cyclic: bool) -> np.ndarray:
+    """(T, 2) ``v`` with the frames not ``known`` interpolated from the known ones."""
+    t = np.arange(len(v))
+    if not known.any():
+        return np.zeros_like(v)
+    out = v.copy()
+    for c in range(v.shape[1]):
+        out[:, c] = np.interp(t, t[known], v[known, c], period=len(v) if cyclic else None)
+    return out
+
+
+def recover_in_place(
+    feet: Sequence[np.ndarray],
+    trunk: np.ndarray,
+    forward: np.ndarray,
+    fps: float,
+    leg_length: float,
+    cyclic: bool = False,
+    options: InPlaceOptions | None = None,
+) -> InPlaceFit:
+    """Detect an in-place clip and recover its root travel from the stance feet.
+
+    Args:
+        feet: four arrays (T, P, 3), one per foot (LF, RF, LH, RH): the positions of the
+            foot's points in metres, z up (each frame's lowest point is the foot's sole).
+        trunk: (T, 3) the trunk (pelvis) position [m].
+        forward: (T, 3) the trunk's facing direction (any length; only x, y are used).
+        fps: frame rate [Hz].
+        leg_length: the source's hind-leg length [m].
+        cyclic: the clip is a loop (its last frame runs on into its first): filters and
+            derivatives wrap around the seam.
+        options: the knobs (defaults when None).
+
+    Returns:
+        The :class:`InPlaceFit`; its ``travel`` is added to every joint of the clip.
+    """
+    opts = options or InPlaceOptions()
+    trunk = np.asarray(trunk, dtype=np.float64)
+    t = trunk.shape[0]
+    zero = np.zeros((t, 3))
+    if t < 5 or len(feet) != 4:
+        return InPlaceFit(False, zero, 0.0, 0.0, 0.0, 0.0, None, 0.0, "too short to tell")
+    fwd = np.asarray(forward, dtype=np.float64)[:, :2]
+    n = np.linalg.norm(fwd, axis=-1, keepdims=True)
+    fwd = np.where(n > 1e-9, fwd / np.maximum(n, 1e-9), np.array([1.0, 0.0]))
+
+    # Each foot's lowest point: its height above the foot's floor and its velocity.
+    vel = np.empty((t, 4, 2))
+    height = np.empty((t, 4))
+    rows = np.arange(t)
+    for k, p in enumerate(feet):
+        sm = _smooth(np.asarray(p, dtype=np.float64), fps, opts.smooth_s, cyclic)
+        arg = np.argmin(sm[..., 2], axis=1)
+        vel[:, k] = _velocity(sm[..., :2], fps, cyclic)[rows, arg]
+        z = sm[rows, arg, 2]
+        height[:, k] = z - np.percentile(z, 2)
+    trunk_xy = _smooth(trunk[:, :2], fps, opts.smooth_s, cyclic)
+    rel = vel - _velocity(trunk_xy, fps, cyclic)[:, None, :]
+    size = min(t, max(1, int(round(opts.trunk_window_s * fps))))
+    trunk_mean = uniform_filter1d(trunk[:, :2], size, axis=0, mode="wrap" if cyclic else "nearest")
+    low = height < opts.low_per_leg * leg_length
+
+    # Evidence: the feet's backward sweep while low, and how straight back it points.
+    back = -np.einsum("tkc,tc->tk", rel, fwd)
+    speed = np.linalg.norm(rel, axis=-1)
+    sweep = float((np.clip(back, 0.0, None) * low).sum(axis=0).mean() / fps)
+    moving = low & (speed > 1e-9)
+    share = float(back[moving].sum() / speed[moving].sum()) if moving.any() else 0.0
+    root = _path_length(trunk_mean)
+    ratio = root / sweep if sweep > 1e-9 else math.inf
+    why_not = []
+    if sweep < opts.min_sweep_per_leg * leg_length:
+        why_not.append(
+            f"feet sweep {sweep / leg_length:.2f} leg lengths "
+            f"(a gait sweeps >= {opts.min_sweep_per_leg:g})"
+        )
+    if share < opts.min_backward_share:
+        why_not.append(
+            f"low feet move backwards by {share:.2f} (a gait >= {opts.min_backward_share:g})"
+        )
+    if ratio > opts.max_root_share:
+        why_not.append(
+            f"trunk travels {min(ratio, 99.0):.2f} of the feet's sweep "
+            f"(in place <= {opts.max_root_share:g})"
+        )
+    if not opts.enabled or why_not:
+        reason = "detection off" if not opts.enabled else "; ".join(why_not)
+        return InPlaceFit(False, zero, root, sweep, share, 0.0, None, 0.0, reason)
+
+    # The body's velocity: minus the velocity of the feet in stance. A first estimate
+    # from the low feet sweeping backwards, then the low feet that move with it.
+    cand = low & (back > 0.0)
+    first = _fill(
+        -(vel * cand[..., None]).sum(axis=1) / np.maximum(cand.sum(axis=1), 1)[:, None],
+        cand.any(axis=1),
+        cyclic,
+    )
+    ref = np.maximum(np.linalg.norm(first, axis=-1), 1e-6)[:, None]
+    stance = low & (np.linalg.norm(vel + first[:, None, :], axis=-1) < opts.agree_share * ref)
+    body = -(vel * stance[..., None]).sum(axis=1) / np.maximum(stance.sum(axis=1), 1)[:, None]
+    body = _smooth(_fill(body, stance.any(axis=1), cyclic), fps, opts.smooth_s, cyclic)
+    travel = np.zeros((t, 3))
+    travel[1:, :2] = np.cumsum(0.5 * (body[1:] + body[:-1]), axis=0) / fps
+    net = travel[-1, :2]
+    heading = math.degrees(math.atan2(net[1], net[0]))
+    reason = (
+        f"trunk travels {ratio:.2f} of the feet's sweep "
+        f"({root:.3f} m against {sweep:.3f} m), low feet move backwards by {share:.2f}"
+    )
+    return InPlaceFit(
+        True,
+        travel,
+        root,
+        sweep,
+        share,
+        _path_length(travel[:, :2]),
+        heading,
+        float(stance.mean()),
+        reason,
+    )
