@@ -28,8 +28,15 @@ from scipy.ndimage import uniform_filter1d
 from scipy.signal import savgol_filter
 
 from ..errors import HabitsimError
+from ..stance.labels import EditReason, StanceLabels
 
-__all__ = ["InPlaceOptions", "InPlaceOptionsError", "InPlaceFit", "recover_in_place"]
+__all__ = [
+    "InPlaceOptions",
+    "InPlaceOptionsError",
+    "InPlaceFit",
+    "recover_in_place",
+    "sweep_labels",
+]
 
 
 class InPlaceOptionsError(HabitsimError, ValueError):
@@ -59,19 +66,34 @@ class InPlaceOptions:
             this window (its sway within a stride and marker noise left out) [s].
         smooth_s: window of the Savitzky–Golay filters on the foot paths and on the
             recovered body velocity [s].
+        sweep_low_per_leg: a foot sweeps in stance (:attr:`InPlaceFit.sweep`) while it
+            moves backwards relative to the trunk below this height above its floor
+            [hind-leg lengths]; a keyframed foot rolls and lifts within its stance.
+        relabel_share: a foot of an in-place clip whose stance share (labelled on the
+            recovered clip) is under this share of its sweep share takes its sweeps as
+            stance (:func:`sweep_labels`) [unitless].
     """
 
     enabled: bool = True
     max_root_share: float = 0.5
     min_backward_share: float = 0.5
     min_sweep_per_leg: float = 0.3
-    low_per_leg: float = 0.05
-    agree_share: float = 0.5
+    low_per_leg: float = 0.03
+    agree_share: float = 0.25
     trunk_window_s: float = 0.5
-    smooth_s: float = 0.1
+    smooth_s: float = 0.2
+    sweep_low_per_leg: float = 0.1
+    relabel_share: float = 0.8
 
     def __post_init__(self) -> None:
-        for name in ("max_root_share", "min_sweep_per_leg", "low_per_leg", "agree_share"):
+        for name in (
+            "max_root_share",
+            "min_sweep_per_leg",
+            "low_per_leg",
+            "agree_share",
+            "sweep_low_per_leg",
+            "relabel_share",
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
                 raise InPlaceOptionsError(f"InPlaceOptions.{name} must be > 0, got {v!r}")
@@ -104,6 +126,9 @@ class InPlaceFit:
             habitsim frame (0 = +x, 90 = +y) [deg]; None when not detected.
         stance_share: the share of foot-frames the recovery took as stance [0–1].
         reason: one line saying why the clip is or is not in place.
+        sweep: (T, 4) where each foot sweeps backwards relative to the trunk while low
+            (below :attr:`InPlaceOptions.sweep_low_per_leg`): the stance of an in-place
+            loop read from its phases (all False when not detected).
     """
 
     detected: bool
@@ -115,6 +140,7 @@ class InPlaceFit:
     heading_deg: float | None
     stance_share: float
     reason: str
+    sweep: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), bool), repr=False)
 
 
 def _smooth(x: np.ndarray, fps: float, smooth_s: float, cyclic: bool) -> np.ndarray:
@@ -251,6 +277,7 @@ def recover_in_place(
         f"trunk travels {ratio:.2f} of the feet's sweep "
         f"({root:.3f} m against {sweep:.3f} m), low feet move backwards by {share:.2f}"
     )
+    swept = (back > 0.0) & (height < opts.sweep_low_per_leg * leg_length)
     return InPlaceFit(
         True,
         travel,
@@ -261,4 +288,32 @@ def recover_in_place(
         heading,
         float(stance.mean()),
         reason,
+        swept,
     )
+
+
+def sweep_labels(
+    labels: StanceLabels, fit: InPlaceFit, options: InPlaceOptions | None = None
+) -> tuple[StanceLabels, tuple[int, ...]]:
+    """Stance labels of an in-place clip with each foot that stands much less than it
+    sweeps (:attr:`InPlaceOptions.relabel_share`) given its sweeps as stance.
+
+    A captured clip made in place keeps the labels found on its recovered path (its feet
+    rest where they stood); a keyframed loop's feet roll and lift inside their stance, so
+    the rest test misses most of it, and the backward sweeps are its stance.
+
+    Returns:
+        The labels (edited under :attr:`EditReason.IN_PLACE_SWEEP`, or as they came) and
+        the feet that took their sweeps.
+    """
+    opts = options or InPlaceOptions()
+    if not fit.detected or fit.sweep.shape != labels.array.shape:
+        return labels, ()
+    have = labels.array.mean(axis=0)
+    want = fit.sweep.mean(axis=0)
+    feet = tuple(int(k) for k in np.flatnonzero(have < opts.relabel_share * want))
+    if not feet:
+        return labels, ()
+    new = labels.array.copy()
+    new[:, feet] = fit.sweep[:, feet]
+    return labels.edited(new, by="bvh_mapping.inplace", reason=EditReason.IN_PLACE_SWEEP), feet

@@ -128,6 +128,8 @@ class InPlaceRecord:
         loop: ``"closed"`` (last frame = first), ``"open"`` (last frame runs on into the
             first) or ``"no"``.
         loop_mismatch: distance of the last pose from the first [leg lengths].
+        swept_feet: the feet (``lf``, ``rf``, ``lh``, ``rh``) whose stance labels are
+            their backward sweeps (a keyframed foot that rolls within its stance).
         cycles: how many times the clip was played (1: as it came).
     """
 
@@ -140,6 +142,7 @@ class InPlaceRecord:
     reason: str
     loop: str
     loop_mismatch: float
+    swept_feet: tuple[str, ...] = ()
     cycles: int = 1
 
     @classmethod
@@ -173,6 +176,7 @@ class InPlaceRecord:
             reason,
             loop,
             _number(_get(m, "loop_mismatch", path), f"{path}.loop_mismatch"),
+            _list(_get(m, "swept_feet", path), f"{path}.swept_feet", str),
             cycles,
         )
 
@@ -188,6 +192,7 @@ class InPlaceRecord:
             "reason": self.reason,
             "loop": self.loop,
             "loop_mismatch": self.loop_mismatch,
+            "swept_feet": list(self.swept_feet),
             "cycles": self.cycles,
         }
 
@@ -201,6 +206,11 @@ class InPlaceRecord:
                 f"(trunk moved {self.root_travel_m:.3f} m while the feet swept "
                 f"{self.foot_sweep_m:.2f} m back, backward share {self.backward_share:.2f})"
             )
+            if self.swept_feet:
+                out.append(
+                    f"in place: stance of {', '.join(self.swept_feet)} taken from the "
+                    "feet's backward sweeps (they roll or lift within their stance)"
+                )
         else:
             out.append(f"in place: no ({self.reason})")
         if self.loop == "no":

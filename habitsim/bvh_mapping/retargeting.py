@@ -4,6 +4,7 @@ planted, and each leg's mapping confidence (:func:`retarget`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -27,7 +28,7 @@ from ..stance.planting import (
 )
 from .chains import _AXIAL, _END_POINTS, _IDX, _LEG_CHAINS, _TAIL
 from .frame import _leg_ends
-from .inplace import InPlaceFit, InPlaceOptions, recover_in_place
+from .inplace import InPlaceFit, InPlaceOptions, recover_in_place, sweep_labels
 from .loops import LoopFit, LoopOptions, detect_loop
 from .names import _fore_vote
 from .report import ImportReport, InPlaceRecord, SourceStanceRecord
@@ -238,6 +239,10 @@ def retarget(
     if stance is None:
         return motion
     st, foot_idx, anchor_idx, limb_len, points = stance
+    swept: tuple[int, ...] = ()
+    if fit is not None and fit.detected:
+        labels, swept = sweep_labels(st.labels, fit, inplace)
+        st = dataclasses.replace(st, contacts=np.asarray(labels))
     found = SourceStanceRecord(
         "source foot path",
         tuple(bvh.names[i] for i in foot_idx),
@@ -270,7 +275,7 @@ def retarget(
         tuple(mapping.confidence.items()),
         tuple(mapping.warnings),
         planted,
-        None if fit is None or loop is None else _in_place_record(fit, loop),
+        None if fit is None or loop is None else _in_place_record(fit, loop, swept),
     )
     motion.metadata["import"] = report.to_metadata()
     motion.metadata["mapping"] = mapping.to_dict()
@@ -335,7 +340,7 @@ def _foot_points(t: _Tree, top: int, toe: int) -> list[int]:
     return out
 
 
-def _in_place_record(fit: InPlaceFit, loop: LoopFit) -> InPlaceRecord:
+def _in_place_record(fit: InPlaceFit, loop: LoopFit, swept: tuple[int, ...]) -> InPlaceRecord:
     """The report's record of an in-place recovery and a loop test."""
     return InPlaceRecord(
         fit.detected,
@@ -347,6 +352,7 @@ def _in_place_record(fit: InPlaceFit, loop: LoopFit) -> InPlaceRecord:
         fit.reason,
         loop.kind or "no",
         round(loop.mismatch, 4) if math.isfinite(loop.mismatch) else 99.0,
+        tuple(("lf", "rf", "lh", "rh")[k] for k in swept),
     )
 
 

@@ -116,6 +116,10 @@ class EditReason(StrEnum):
     #: Out-of-reach stance runs shortened at both ends to the legs' reach (the planting
     #: ladder's trim).
     TRIM = "trim"
+    #: An in-place clip's foot whose stance share on its recovered path is well under
+    #: its share of backward sweeps took its sweeps as stance (a keyframed foot that
+    #: rolls and lifts within its stance; :mod:`habitsim.bvh_mapping.inplace`).
+    IN_PLACE_SWEEP = "in_place_sweep"
 
 
 @dataclass(frozen=True)
