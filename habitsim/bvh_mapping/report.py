@@ -14,7 +14,7 @@ from typing import Any
 from ..errors import MetadataError
 from ..stance.labels import StanceSource
 
-__all__ = ["SourceStanceRecord", "InPlaceRecord", "ImportReport"]
+__all__ = ["SourceStanceRecord", "InPlaceRecord", "ImportReport", "in_place_note"]
 
 
 def _get(d: Mapping[str, Any], key: str, path: str) -> Any:
@@ -287,3 +287,21 @@ class ImportReport:
         if self.in_place is not None:
             d["in_place"] = self.in_place.to_dict()
         return d
+
+
+def in_place_note(metadata: Mapping[str, Any] | None) -> str | None:
+    """A one-line note for a motion imported from an in-place clip (None otherwise):
+    what the commands that read a clip print.
+
+    Raises:
+        MetadataError: a malformed ``metadata["import"]``.
+    """
+    report = ImportReport.from_metadata(metadata)
+    ip = None if report is None else report.in_place
+    if ip is None or not ip.detected:
+        return None
+    return (
+        f"note: the input clip was in place (its root stays put while the feet sweep); its "
+        f"travel, {ip.recovered_m:.2f} m at heading {ip.heading_deg:.0f} deg, was recovered "
+        "from its stance feet"
+    )

@@ -9,10 +9,14 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import MotionFileError
 from ..fileio import check_writable
 from .conventions import add_frame_options
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..motion import Motion
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -155,6 +159,16 @@ def _animation(value: str | None) -> str | int | None:
         return value
 
 
+def _print_in_place(motion: Motion) -> None:
+    """The import report's lines on in-place clips and loops."""
+    from ..bvh_mapping import ImportReport
+
+    report = ImportReport.from_metadata(motion.metadata)
+    if report is not None and report.in_place is not None:
+        for line in report.in_place.lines():
+            print(line)
+
+
 def _inspect(ns: argparse.Namespace) -> int:
     import json
 
@@ -181,6 +195,7 @@ def _inspect(ns: argparse.Namespace) -> int:
             + "; foot joints "
             + ", ".join(c["foot_joints"])
         )
+    _print_in_place(motion)
     template = {"extends": "auto", "map": mapping.mapped()}
     print()
     print("joint map to edit (save as map.json, pass --map map.json; null unmaps a joint):")
@@ -215,6 +230,7 @@ def _import(ns: argparse.Namespace) -> int:
         fps=ns.fps,
     )
     print(mapping)
+    _print_in_place(motion)
     for w in mapping.warnings:
         print(f"warning: {w}", file=sys.stderr)
     motion.save(ns.out)

@@ -110,6 +110,10 @@ def _transfer_outputs(ns: argparse.Namespace) -> int:
 
         motion, mapping = import_bvh(ns.source, load_species(ns.from_species))
         print(mapping)
+        from ..bvh_mapping.report import in_place_note
+
+        if (note := in_place_note(motion.metadata)) is not None:
+            print(note)
     elif suffix == ".npz":
         motion = load_motion(ns.source)
     else:
