@@ -1,0 +1,129 @@
+"""In-place clips (habitsim.bvh_mapping.inplace) and loops (habitsim.bvh_mapping.loops):
+detection, the travel recovered from the stance feet, the report, seamless repeats."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from habitsim.bvh import write_bvh
+from habitsim.bvh_mapping import ImportReport, import_bvh
+from habitsim.bvh_mapping.inplace import InPlaceOptions, InPlaceOptionsError
+from habitsim.bvh_mapping.loops import LoopError, detect_loop, repeat_loop
+from habitsim.bvh_mapping.report import in_place_note
+from habitsim.errors import HabitsimError
+from habitsim.evaluation.bench.inplace import (
+    HEADING_DEG,
+    PATH_SHARE,
+    STANCE_F1,
+    recovery_row,
+    synthetic_walk,
+)
+from habitsim.motion import Motion
+
+
+@pytest.fixture(scope="module")
+def walks(tmp_path_factory: pytest.TempPathFactory) -> tuple[Motion, Motion]:
+    """The import of a synthetic walk loop and of the same walk made in place (the moving
+    one retargeted like any rig, ``units=1.0``, rather than copied)."""
+    d = tmp_path_factory.mktemp("inplace")
+    walk = write_bvh(synthetic_walk(3, in_place=False), d / "w.bvh")
+    moving, _ = import_bvh(walk, "dog", units=1.0)
+    still, _ = import_bvh(write_bvh(synthetic_walk(3, in_place=True), d / "s.bvh"), "dog")
+    return moving, still
+
+
+def test_in_place_walk_is_detected_and_its_travel_recovered(walks) -> None:
+    moving, still = walks
+    rep = ImportReport.from_metadata(still.metadata)
+    assert rep is not None and rep.in_place is not None
+    assert rep.in_place.detected
+    assert rep.in_place.root_travel_m < 0.05 * rep.in_place.foot_sweep_m
+    row = recovery_row("w", moving, still)
+    assert row.detected
+    assert row.path_share <= PATH_SHARE
+    assert row.heading_error_deg <= HEADING_DEG
+    assert row.stance_f1 >= STANCE_F1
+    # the heading reported is the moving walk's own direction of travel
+    d = moving.root_positions[-1, :2] - moving.root_positions[0, :2]
+    want = math.degrees(math.atan2(d[1], d[0]))
+    assert abs((rep.in_place.heading_deg - want + 180) % 360 - 180) <= HEADING_DEG
+    note = in_place_note(still.metadata)
+    assert note is not None and "in place" in note
+
+
+def test_moving_clip_is_not_flagged(walks) -> None:
+    moving, _ = walks
+    rep = ImportReport.from_metadata(moving.metadata)
+    assert rep is not None and rep.in_place is not None
+    assert not rep.in_place.detected
+    assert "trunk travels" in rep.in_place.reason
+    assert in_place_note(moving.metadata) is None
+
+
+def test_detection_can_be_switched_off(tmp_path: Path) -> None:
+    p = write_bvh(synthetic_walk(3, in_place=True), tmp_path / "s.bvh")
+    m, _ = import_bvh(p, "dog", inplace=InPlaceOptions(enabled=False))
+    rep = ImportReport.from_metadata(m.metadata)
+    # the copied file keeps its still root: no travel added
+    assert np.ptp(m.root_positions[:, 0]) < 0.02
+    assert rep is None or rep.in_place is None or not rep.in_place.detected
+    with pytest.raises(InPlaceOptionsError):
+        InPlaceOptions(max_root_share=0.0)
+
+
+def test_report_round_trip(walks) -> None:
+    _, still = walks
+    rep = ImportReport.from_metadata(still.metadata)
+    assert rep is not None
+    assert ImportReport.from_metadata({"import": rep.to_metadata()}) == rep
+
+
+def _jump(m: Motion) -> np.ndarray:
+    """(T-1,) per-frame displacement of every joint, largest over joints [m]."""
+    pos = m.global_positions()
+    return np.linalg.norm(np.diff(pos, axis=0), axis=-1).max(axis=1)
+
+
+def test_loop_repeated_seamlessly() -> None:
+    loop = synthetic_walk(3, seconds=1.0, in_place=False)
+    fit = detect_loop(
+        loop.global_positions() - loop.root_positions[:, None], loop.species_info.leg_length
+    )
+    assert fit.kind == "closed"
+    period = loop.num_frames - 1
+    n = 3
+    rep = repeat_loop(loop, cycles=n)
+    assert rep.num_frames == n * period + 1
+    assert math.isclose(rep.duration - 1 / rep.fps, n * (loop.duration - 1 / loop.fps))
+    step = _jump(loop)
+    seams = _jump(rep)[[period - 1, 2 * period - 1]]
+    assert seams.max() <= 1.5 * step.max()
+    # travel accumulated: each cycle moves on by the loop's own displacement
+    d = loop.root_positions[-1, :2] - loop.root_positions[0, :2]
+    assert np.allclose(rep.root_positions[-1, :2] - rep.root_positions[0, :2], n * d, atol=1e-9)
+    longer = repeat_loop(loop, seconds=2.5)
+    assert longer.num_frames == round(2.5 * loop.fps)
+
+
+def test_repeated_import_records_its_cycles(walks) -> None:
+    _, still = walks
+    rep = repeat_loop(still, cycles=2)
+    rec = ImportReport.from_metadata(rep.metadata)
+    assert rec is not None and rec.in_place is not None and rec.in_place.cycles == 2
+
+
+def test_not_a_loop_is_refused() -> None:
+    loop = synthetic_walk(3, seconds=1.0, in_place=False)
+    half = loop.slice(0, loop.num_frames // 2 + 3)
+    with pytest.raises(LoopError, match="not a loop") as e:
+        repeat_loop(half, cycles=2)
+    assert isinstance(e.value, HabitsimError)
+    assert "first and last poses match" in str(e.value) or "cut the clip" in str(e.value)
+    with pytest.raises(LoopError, match="cycles or as seconds"):
+        repeat_loop(loop)
+    with pytest.raises(LoopError, match="cycles must be"):
+        repeat_loop(loop, cycles=0)
