@@ -35,7 +35,9 @@ chains, mirrored pairs, leg roles), :mod:`.automap` (the automatic mapping),
 :mod:`.map_files` (explicit joint maps), :mod:`.options` (the mapping's knobs),
 :mod:`.frame` (units and axes),
 :mod:`.result` (:class:`JointMapping`), :mod:`.identity` (habitsim's own files),
-:mod:`.retargeting` (retargeting, source stance, leg confidence) and :mod:`.importing`
+:mod:`.retargeting` (retargeting, source stance, leg confidence), :mod:`.inplace` (in-place
+clips, their travel recovered from the stance feet), :mod:`.loops` (loops and their
+repeats) and :mod:`.importing`
 (the entry points).
 """
 
@@ -46,16 +48,29 @@ from .frame import DETECTED_UNITS as DETECTED_UNITS
 from .frame import UNIT_SCALES, FrameConversion, detect_frame
 from .identity import is_habitsim_bvh
 from .importing import SOURCE_SUFFIXES, describe_hierarchy, import_bvh, read_source
+from .inplace import InPlaceFit, InPlaceOptions, InPlaceOptionsError, recover_in_place
 from .limbs import LEG_PROPORTIONS as LEG_PROPORTIONS
+from .loops import LoopError, LoopFit, LoopOptions, detect_loop, repeat_loop
 from .map_files import load_joint_map, validate_joint_map
 from .names import is_helper_name, name_cues
 from .options import MappingOptions
-from .report import ImportReport, SourceStanceRecord
+from .report import ImportReport, InPlaceRecord, SourceStanceRecord, in_place_note
 from .result import CONFIDENCE_CHECKS, CONFIDENCE_WARN, JointMapping, MappingNote
 from .retargeting import retarget
 
 __all__ = [
     "ImportReport",
+    "InPlaceRecord",
+    "in_place_note",
+    "InPlaceFit",
+    "InPlaceOptions",
+    "InPlaceOptionsError",
+    "recover_in_place",
+    "LoopError",
+    "LoopFit",
+    "LoopOptions",
+    "detect_loop",
+    "repeat_loop",
     "SourceStanceRecord",
     "UNIT_SCALES",
     "FrameConversion",

@@ -98,7 +98,9 @@ def _in_place(motion: Motion, options: InPlaceOptions | None) -> bool:
     imported through the retargeting that recovers its travel."""
     pos = motion.global_positions()
     feet = []
-    for prefix, top in zip(("lf", "rf", "lh", "rh"), ("wrist", "wrist", "hock", "hock"), strict=True):
+    for prefix, top in zip(
+        ("lf", "rf", "lh", "rh"), ("wrist", "wrist", "hock", "hock"), strict=True
+    ):
         feet.append(pos[:, [_JOINT[f"{prefix}_{top}"], _JOINT[f"{prefix}_toe"]]])
     forward = pos[:, _JOINT["spine3"]] - pos[:, 0]
     leg = motion.species_info.hind_leg_length

@@ -210,6 +210,4 @@ def repeat_loop(
     if report is not None and report.in_place is not None:
         done = dataclasses.replace(report.in_place, cycles=n_cycles)
         meta["import"] = dataclasses.replace(report, in_place=done).to_metadata()
-    return Motion(
-        motion.species, motion.fps, new_root, motion.rotations[f].copy(), contacts, meta
-    )
+    return Motion(motion.species, motion.fps, new_root, motion.rotations[f].copy(), contacts, meta)

@@ -58,7 +58,9 @@ def _bench_inplace(ns: argparse.Namespace) -> int:
         InPlaceBenchOptions(dev_dir=ns.dev_dir, gltf=tuple(ns.gltf), species=ns.species)
     )
     print("recovery (clip made in place against the clip as it was):")
-    print(f"  {'clip':28s} {'in place':>8s} {'dist m':>7s} {'path %':>7s} {'head °':>7s} {'F1':>6s}")
+    print(
+        f"  {'clip':28s} {'in place':>8s} {'dist m':>7s} {'path %':>7s} {'head °':>7s} {'F1':>6s}"
+    )
     for r in res.recovery:
         print(
             f"  {r.clip:28s} {('yes' if r.detected else 'NO'):>8s} {r.distance_m:7.2f} "
