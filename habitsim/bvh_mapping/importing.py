@@ -15,10 +15,10 @@ from .automap import _analyse, _Analysis, _resolve_sides
 from .chains import _LEG_CHAINS
 from .frame import _parse_up, detect_frame
 from .identity import _identity_import, is_habitsim_bvh
-from .map_files import load_joint_map, validate_joint_map
-from .options import MappingOptions
 from .inplace import InPlaceOptions, recover_in_place
 from .loops import LoopOptions
+from .map_files import load_joint_map, validate_joint_map
+from .options import MappingOptions
 from .result import JointMapping, MappingNote
 from .retargeting import retarget
 from .tree import _Tree
