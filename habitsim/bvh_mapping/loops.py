@@ -192,7 +192,11 @@ def repeat_loop(
     period = fit.period(t)
     if period < 2:
         raise LoopError(f"{name} has {t} frames: too short to repeat")
-    need = int(cycles) * period if cycles is not None else int(round(float(seconds) * motion.fps))
+    if cycles is not None:
+        need = int(cycles) * period
+    else:
+        assert seconds is not None
+        need = max(1, int(round(float(seconds) * motion.fps)))
     n_cycles = max(1, math.ceil(need / period))
     root = motion.root_positions
     shift = np.zeros(3)
