@@ -127,3 +127,34 @@ def test_not_a_loop_is_refused() -> None:
         repeat_loop(loop)
     with pytest.raises(LoopError, match="cycles must be"):
         repeat_loop(loop, cycles=0)
+
+
+def test_source_options_loop(tmp_path: Path) -> None:
+    from habitsim.source import SourceOptions, Span, load_clip
+
+    loop = synthetic_walk(3, seconds=1.0, in_place=False)
+    p = loop.save(tmp_path / "loop.npz")
+    clip = load_clip(p, SourceOptions(loop=2))
+    assert clip.motion.num_frames == 2 * (loop.num_frames - 1) + 1
+    assert clip.looped() and not clip.cut
+    assert SourceOptions(loop_seconds=1.5).shape(loop).num_frames == round(1.5 * loop.fps)
+    with pytest.raises(LoopError, match="not a loop"):
+        load_clip(p, SourceOptions(loop=2, span=Span(0.0, 0.5 * loop.duration)))
+
+
+def test_cli_loop_flags(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from habitsim.cli import main
+    from habitsim.motion import load_motion
+
+    src = write_bvh(synthetic_walk(3, seconds=1.0, in_place=True), tmp_path / "s.bvh")
+    out = tmp_path / "s.npz"
+    code = main(
+        ["data", "import-bvh", str(src), "--species", "dog", "--out", str(out), "--loop", "3"]
+    )
+    text = capsys.readouterr().out
+    assert code == 0
+    assert "in place: yes" in text and "played 3 times" in text
+    m = load_motion(out)
+    rep = ImportReport.from_metadata(m.metadata)
+    assert rep is not None and rep.in_place is not None and rep.in_place.cycles == 3
+    assert np.ptp(m.root_positions[:, 0]) > 1.0  # the recovered travel, carried on

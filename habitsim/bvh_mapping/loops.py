@@ -117,8 +117,11 @@ def _relative(motion: Motion) -> np.ndarray:
     return motion.global_positions() - motion.root_positions[:, None, :]
 
 
-def _best_cut(rel: np.ndarray, fps: float, leg: float, opts: LoopOptions) -> tuple[int, int, float]:
-    """The pair of frames (i, j), at least a cycle apart, whose poses match best."""
+def _best_cut(
+    rel: np.ndarray, fps: float, leg: float, limit: float, opts: LoopOptions
+) -> tuple[int, int, float]:
+    """The pair of frames (i, j), at least a cycle apart, that make the longest loop (poses
+    within ``limit``), else the pair whose poses match best."""
     t = rel.shape[0]
     stride = max(1, math.ceil(t / 600))
     idx = np.arange(0, t, stride)
@@ -128,7 +131,12 @@ def _best_cut(rel: np.ndarray, fps: float, leg: float, opts: LoopOptions) -> tup
     d[gap < max(2, opts.min_cycle_s * fps)] = np.inf
     if not np.isfinite(d).any():
         return 0, t - 1, math.inf
-    i, j = np.unravel_index(int(np.argmin(d)), d.shape)
+    ok = d <= limit
+    if ok.any():
+        score = np.where(ok, gap - d, -np.inf)  # the longest span; the closer match on a tie
+        i, j = np.unravel_index(int(np.argmax(score)), d.shape)
+    else:
+        i, j = np.unravel_index(int(np.argmin(d)), d.shape)
     return int(idx[i]), int(idx[j]), float(d[i, j])
 
 
@@ -143,7 +151,8 @@ def repeat_loop(
     Each cycle starts where the previous one's travel ended (the root's horizontal
     displacement over a cycle is carried on); rotations, heights and stance labels repeat
     as they are. A closed loop's duplicate last frame is played once, at the very end.
-    An imported motion's report (``metadata["import"]``) records the cycles.
+    An imported motion's report (``metadata["import"]``) records the cycles and the loop
+    as found on the motion.
 
     Args:
         motion: the clip.
@@ -177,11 +186,11 @@ def repeat_loop(
             f"first (a loop's ends are within {fit.limit:.3f}, {opts.seam_steps:g} of its "
             f"frame steps)"
         )
-        i, j, d = _best_cut(rel, motion.fps, leg, opts)
-        if d <= fit.limit:
+        i, j, d = _best_cut(rel, motion.fps, leg, opts.tolerance_per_leg, opts)
+        if d <= opts.tolerance_per_leg:
             why += (
-                f"; frames {i} and {j} ({i / motion.fps:.2f} s and {j / motion.fps:.2f} s) "
-                f"match within {d:.3f}: cut the clip there (--start/--end) to make a loop"
+                f"; frames {i} and {j} match within {d:.3f}: keep frames {i}–{j} to make a "
+                f"loop (--start {i / motion.fps:.4f} --end {(j + 1) / motion.fps:.4f})"
             )
         else:
             why += (
@@ -212,6 +221,8 @@ def repeat_loop(
     meta = dict(motion.metadata)
     report = ImportReport.from_metadata(meta)
     if report is not None and report.in_place is not None:
-        done = dataclasses.replace(report.in_place, cycles=n_cycles)
+        done = dataclasses.replace(
+            report.in_place, loop=fit.kind, loop_mismatch=round(fit.mismatch, 4), cycles=n_cycles
+        )
         meta["import"] = dataclasses.replace(report, in_place=done).to_metadata()
     return Motion(motion.species, motion.fps, new_root, motion.rotations[f].copy(), contacts, meta)

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from .conventions import add_list_option
+from .conventions import add_list_option, add_source_options, source_options
 
 #: Controllers ``--track`` can use (the torque-based ones; a robot's servos are driven
 #: as torques).
@@ -36,6 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--from",
+        "--species",
         dest="from_species",
         metavar="SPECIES",
         help=(
@@ -43,6 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "its own feet, feet planted; `habitsim data import-bvh` does the same alone)"
         ),
     )
+    add_source_options(p, of="the source")
     p.add_argument(
         "--robot",
         type=Path,
@@ -97,7 +99,6 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     import mujoco
 
     from ..fileio import atomic_write_text, json_safe
-    from ..motion import load_motion
     from ..retarget import (
         RetargetError,
         drawable,
@@ -105,6 +106,7 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         retarget,
         track_clip,
     )
+    from ..source import load_clip
 
     suffix = ns.source.suffix.lower()
     if suffix not in (".npz", ".bvh", ".glb", ".gltf"):
@@ -120,15 +122,12 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     if (ns.report or ns.video) and not ns.track:
         raise RetargetError("--report and --video describe the tracked run: add --track")
     robot = load_robot(ns.robot)
-    if suffix == ".npz":
-        motion = load_motion(ns.source)
-    else:
-        from ..bvh_mapping import import_bvh
-        from ..species import load_species
-
-        motion, mapping = import_bvh(ns.source, load_species(ns.from_species))
-        if not ns.json:
-            print(mapping)
+    loaded = load_clip(ns.source, source_options(ns, ns.from_species if suffix != ".npz" else None))
+    if loaded.mapping is not None and not ns.json:
+        print(loaded.mapping)
+    if loaded.cut and not ns.json:
+        print(f"source span: {loaded.kept()}")
+    motion = loaded.motion
     if ns.track and not any(robot.geom_bodyid == 0):
         raise RetargetError(
             f"{str(ns.robot)!r} has no floor (no geom on the world body): "
