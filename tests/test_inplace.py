@@ -158,3 +158,15 @@ def test_cli_loop_flags(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     rep = ImportReport.from_metadata(m.metadata)
     assert rep is not None and rep.in_place is not None and rep.in_place.cycles == 3
     assert np.ptp(m.root_positions[:, 0]) > 1.0  # the recovered travel, carried on
+
+
+def test_malformed_in_place_record_is_named(walks) -> None:
+    from habitsim.errors import MetadataError
+
+    _, still = walks
+    meta = ImportReport.from_metadata(still.metadata)
+    assert meta is not None
+    bad = meta.to_metadata()
+    bad["in_place"] = dict(bad["in_place"], loop="sometimes")
+    with pytest.raises(MetadataError, match="import.in_place.loop"):
+        ImportReport.from_metadata({"import": bad})
