@@ -80,7 +80,7 @@ class InPlaceOptions:
     min_sweep_per_leg: float = 0.3
     low_per_leg: float = 0.03
     agree_share: float = 0.25
-    trunk_window_s: float = 0.5
+    trunk_window_s: float = 1.0
     smooth_s: float = 0.2
     sweep_low_per_leg: float = 0.1
     relabel_share: float = 0.8
