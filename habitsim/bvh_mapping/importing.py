@@ -173,11 +173,14 @@ def import_bvh(
         units = units if units is not None else spec["units"]
         up = up if up is not None else spec["up"]
 
-    frame = detect_frame(bvh, joints, units=units, up=up, species=sp)
+    frame = detect_frame(bvh, joints, units=units, up=up, species=sp, options=options)
     if geometric:
         an2 = _Analysis(joints, geometric, notes, codes)
         _resolve_sides(bvh, an2, frame)
     mapping = JointMapping(joints, method, frame, 1.0, list(notes), note_codes=list(codes))
+    ev = frame.up_evidence
+    if ev is not None and ev.source != "given":
+        mapping.note(MappingNote.UP_UNSURE if ev.unsure else MappingNote.UP_FROM_FEET, ev.describe())
     motion = retarget(bvh, mapping, sp, plant=plant)
     motion.metadata["mapping"] = mapping.to_dict()
     return motion, mapping
