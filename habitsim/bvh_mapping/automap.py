@@ -212,6 +212,9 @@ def _analyse(bvh: BVHData, options: MappingOptions) -> _Analysis:
     if head_chain:
         non_end = [c for c in head_chain if not bvh.is_end_site[c]]
         head = next((c for c in non_end if any(w in t.cues[c][1] for w in ("head", "skull"))), None)
+        if head is None and head_start in skulls:
+            # the joint that carries the skull (jaw, ears, nose hang from it)
+            head = next(c for c in reversed(non_end) if len(t.kids[c]) >= 2)
         if head is None and len(non_end) >= 2:
             head = non_end[-1]
         neck = next((c for c in head_chain if "neck" in t.cues[c][1]), None)
@@ -406,6 +409,7 @@ def _note_leg_choice(
             o
             for o in limbs
             if o not in chosen
+            and o.side == lb.side
             and not o.control
             and _duplicates(t, o, lb, options.duplicate_share)
         ]
