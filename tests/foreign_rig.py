@@ -198,8 +198,10 @@ def _posed_rig(motion, nodes, axes, unit: float, source: str) -> BVHData:
             gl = np.broadcast_to(gl[0], gl.shape).copy()
             tl = np.broadcast_to(tl[0], tl.shape).copy()
             g = gl if parent is None else frame[parent][0] @ gl
-            p = tl if parent is None else frame[parent][1] + np.einsum(
-                "fab,fb->fa", frame[parent][0], tl
+            p = (
+                tl
+                if parent is None
+                else frame[parent][1] + np.einsum("fab,fb->fa", frame[parent][0], tl)
             )
         frame[name], local[name] = (g, p), (gl, tl)
 
@@ -279,7 +281,9 @@ def pet_rig(motion, deforming: bool = True, floating: bool = True) -> BVHData:
             nodes.append((f"{S}_Leg_A_{k}", prev, f"{s}f_{seg}", "anim"))
             prev = f"{S}_Leg_A_{k}"
         nodes.append(("End", prev, _TOE_TIP, None))
-        nodes.append((f"{S}_Leg_A_1_twist", f"{S}_Leg_A_1", (f"{s}f_shoulder", f"{s}f_elbow"), "anim"))
+        nodes.append(
+            (f"{S}_Leg_A_1_twist", f"{S}_Leg_A_1", (f"{s}f_shoulder", f"{s}f_elbow"), "anim")
+        )
         copies = [("legIKshow", ("lift", 0.35))] if floating else []
         copies += [("legIK", "anim")]
         if deforming:

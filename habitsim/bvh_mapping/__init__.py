@@ -17,8 +17,9 @@ Pipeline of :func:`import_bvh`:
    beyond the chest, and the tail behind the hips.
 4. Detect the file's frame (:func:`detect_frame`): units (cm / m / mm, from the hind-leg
    length against the species'), up axis (from where the feet are over the clip,
-   checked against the rest pose: :func:`find_up`) and forward axis (from the hips toward the chest in the first frame, snapped to
-   a coordinate axis), giving a proper rotation to habitsim's frame (z up, x forward, y left).
+   checked against the rest pose: :func:`find_up`) and forward axis (from the hips toward
+   the chest in the first frame, snapped to a coordinate axis), giving a proper rotation
+   to habitsim's frame (z up, x forward, y left).
 5. Retarget (:func:`retarget`): the source's global joint positions are converted to
    habitsim's frame; the pelvis takes the source hips' frame (heading along hips → chest,
    up from the world up); then, root to leaf, every habitsim joint that drives a bone of

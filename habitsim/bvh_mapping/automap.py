@@ -23,7 +23,6 @@ from .limbs import (
     _sided_limbs,
     _unsided_limbs,
 )
-from .names import _fore_vote
 from .options import MappingOptions
 from .result import MappingNote
 from .tree import _Tree
@@ -385,7 +384,7 @@ def _mark_grounded(
     ev = find_up(pos, t.bvh.fk(rest=True), feet, [lb.root for lb in picks], leg, options=options)
     up = axis_vector(ev.axis)
     pct = options.low_percentile
-    ground = float(np.median(low_heights(pos, feet, up, pct)))
+    ground = float(low_heights(pos, feet, up, pct).min())
     tips = low_heights(pos, [lb.chain[-1] for lb in limbs], up, pct)
     for lb, low in zip(limbs, tips, strict=True):
         lb.grounded = bool(low <= ground + options.ground_share * t.chain_length(lb.chain))
@@ -452,9 +451,10 @@ def auto_map(bvh: BVHData, options: MappingOptions | None = None) -> dict[str, s
         SkeletonMappingError: fewer than four legs, or fore and hind legs that cannot be
             told apart.
     """
-    an = _analyse(bvh, options or MappingOptions())
+    options = options or MappingOptions()
+    an = _analyse(bvh, options)
     if an.geometric_sides:
-        frame = detect_frame(bvh, an.joints)
+        frame = detect_frame(bvh, an.joints, options=options)
         _resolve_sides(bvh, an, frame)
     return an.joints
 

@@ -334,9 +334,7 @@ def detect_frame(
             v = rest[0, hips] - rest[0, feet].mean(axis=0)
         names_axis = _axis_name(v) if np.linalg.norm(v) >= 1e-9 else None
         roots = _leg_roots(joints, bvh)
-        leg_len = float(
-            np.mean([t.path_length(r, f) for r, f in zip(roots, feet, strict=True)])
-        )
+        leg_len = float(np.mean([t.path_length(r, f) for r, f in zip(roots, feet, strict=True)]))
         if leg_len <= 0:
             raise SkeletonMappingError("cannot detect the up axis (legs of zero length); pass up=")
         evidence = find_up(pos, rest, feet, roots, leg_len, names_axis, options)

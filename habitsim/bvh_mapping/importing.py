@@ -180,7 +180,8 @@ def import_bvh(
     mapping = JointMapping(joints, method, frame, 1.0, list(notes), note_codes=list(codes))
     ev = frame.up_evidence
     if ev is not None and ev.source != "given":
-        mapping.note(MappingNote.UP_UNSURE if ev.unsure else MappingNote.UP_FROM_FEET, ev.describe())
+        code = MappingNote.UP_UNSURE if ev.unsure else MappingNote.UP_FROM_FEET
+        mapping.note(code, ev.describe())
     motion = retarget(bvh, mapping, sp, plant=plant)
     motion.metadata["mapping"] = mapping.to_dict()
     return motion, mapping
