@@ -26,7 +26,9 @@ def describe_hierarchy(bvh: BVHData, mapping: JointMapping | None = None) -> str
     """The source hierarchy as an indented tree, each joint with its proposed habitsim joint.
 
     Each line: the joint, its bone length in file units, ``[helper]`` for rig helpers that
-    are never limbs, ``[end]`` for End Sites, and ``-> habitsim_joint`` where mapped.
+    are never limbs, ``[control]`` for control bones (IK, pole, target, twist, roll,
+    MCH/ORG: limbs only where they are the chain that animates), ``[end]`` for End Sites,
+    and ``-> habitsim_joint`` where mapped.
     """
     inv = {v: k for k, v in mapping.mapped().items()} if mapping is not None else {}
     t = _Tree(bvh)
@@ -35,8 +37,10 @@ def describe_hierarchy(bvh: BVHData, mapping: JointMapping | None = None) -> str
         tags = []
         if bvh.is_end_site[j]:
             tags.append("[end]")
-        elif t.helper[j]:
+        elif t.never[j]:
             tags.append("[helper]")
+        elif t.control[j]:
+            tags.append("[control]")
         text = f"{'  ' * t.depth[j]}{name}  ({t.blen[j]:.4g})"
         if tags:
             text += " " + " ".join(tags)
