@@ -152,7 +152,7 @@ Y_UP = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]).T
 BLENDER_Z_UP = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]).T
 
 
-def _posed_rig(motion, nodes, axes, unit: float, source: str) -> BVHData:
+def _posed_rig(motion, nodes, axes, unit: float, source: str, in_place: bool = False) -> BVHData:
     """A rig of any hierarchy posed by a habitsim motion, every joint with 6 channels.
 
     ``nodes``: ``(name, parent, follow, mode)`` in file order, parents first. ``follow``
@@ -163,12 +163,17 @@ def _posed_rig(motion, nodes, axes, unit: float, source: str) -> BVHData:
     raised by ``d`` metres (a display copy off the ground). A node named ``"End"`` is an
     End Site whose ``follow`` is its offset in metres along the parent's habitsim axes.
     ``axes``: (3, 3) matrix taking habitsim (forward, left, up) vectors to file axes;
-    ``unit``: metres per file unit.
+    ``unit``: metres per file unit; ``in_place``: the pelvis's travel over the ground
+    taken out (a game loop's root motion stripped).
     """
     from habitsim.rotations import matrix_to_quat, quat_to_euler
     from habitsim.skeleton import JOINT_NAMES, fk
 
     pos_h, rot_h = fk(motion.skeleton, motion.root_positions, motion.rotations, True)
+    if in_place:
+        travel = motion.root_positions - motion.root_positions[0]
+        travel[:, 2] = 0.0
+        pos_h = pos_h - travel[:, None]
     idx = {n: i for i, n in enumerate(JOINT_NAMES)}
     f = motion.num_frames
     frame: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # name -> (G (F,3,3), P (F,3)) file
@@ -242,14 +247,21 @@ def _posed_rig(motion, nodes, axes, unit: float, source: str) -> BVHData:
 _TOE_TIP = (0.03, 0.0, 0.0)
 
 
-def pet_rig(motion, deforming: bool = True, floating: bool = True) -> BVHData:
+def pet_rig(
+    motion,
+    deforming: bool = True,
+    floating: bool = True,
+    skull: bool = True,
+    in_place: bool = False,
+) -> BVHData:
     """A stylised pet's rig (y up, cm): the rig roots at the chest, so the hind legs hang
     deeper than the fore legs; both leg pairs are named ``*Leg*`` (no fore/hind cue); the
     animated hind legs are ``L_legIK_1…4``, beside a static deforming copy ``L_leg_1…4``
     (``deforming``), an animated display copy lifted off the ground ``L_legIKshow_1…4``
     (``floating``), a static pole and an animated IK target; the fore legs carry twist
     bones; the head chain is named ``Pet_Tail_F_*`` and carries ears and a jaw, and the
-    tail is named ``Pet_Head_B_*``.
+    tail is named ``Pet_Head_B_*``. Without ``skull`` the head has no jaw and no ears;
+    ``in_place`` strips the root's travel.
 
     :data:`PET_EXPECTED` is the mapping it should get.
     """
@@ -267,14 +279,18 @@ def pet_rig(motion, deforming: bool = True, floating: bool = True) -> BVHData:
         ("Pet_Tail_F_2", "Pet_Tail_F_1", "head", "anim"),
         ("Pet_Tail_F_Nose", "Pet_Tail_F_2", "snout", "anim"),
         ("End", "Pet_Tail_F_Nose", (0.02, 0.0, 0.0), None),
-        ("Pet_Jaw", "Pet_Tail_F_2", ("head", "snout"), "anim"),
-        ("End", "Pet_Jaw", (0.05, 0.0, -0.02), None),
     ]
-    for s, S in (("l", "L"), ("r", "R")):
+    if skull:
         nodes += [
-            (f"Pet_Ear.{S}", "Pet_Tail_F_2", "head", "anim"),
-            ("End", f"Pet_Ear.{S}", (0.0, 0.03 if s == "l" else -0.03, 0.06), None),
+            ("Pet_Jaw", "Pet_Tail_F_2", ("head", "snout"), "anim"),
+            ("End", "Pet_Jaw", (0.05, 0.0, -0.02), None),
         ]
+    for s, S in (("l", "L"), ("r", "R")):
+        if skull:
+            nodes += [
+                (f"Pet_Ear.{S}", "Pet_Tail_F_2", "head", "anim"),
+                ("End", f"Pet_Ear.{S}", (0.0, 0.03 if s == "l" else -0.03, 0.06), None),
+            ]
         segs = ("scapula", "shoulder", "elbow", "wrist", "toe")
         prev = "Pet_Body"
         for k, seg in enumerate(segs):
@@ -298,7 +314,7 @@ def pet_rig(motion, deforming: bool = True, floating: bool = True) -> BVHData:
             (f"{S}_legIK_pole", "Pet_Hip", f"{s}h_knee", "static"),
             (f"{S}_legIK_target", "Pet_Root", f"{s}h_toe", "point"),
         ]
-    return _posed_rig(motion, nodes, Y_UP, 0.01, "pet_rig.bvh")
+    return _posed_rig(motion, nodes, Y_UP, 0.01, "pet_rig.bvh", in_place)
 
 
 PET_EXPECTED = {

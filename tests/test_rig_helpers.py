@@ -4,6 +4,8 @@ head/tail from the clip's geometry, and the up axis from where the feet are."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from foreign_rig import (
@@ -161,3 +163,24 @@ def test_given_up_axis_is_not_noted(walk):
     _, mapping = import_bvh(pet_rig(walk), "dog", up="y")
     assert mapping.frame.up == "+y"
     assert MappingNote.UP_FROM_FEET not in mapping.note_codes
+
+
+@pytest.mark.parametrize("in_place", [False, True])
+def test_without_a_skull_the_travel_tells_fore_from_hind(walk, in_place):
+    """A head with no jaw or ears, names with no fore/hind cue and a hierarchy rooted at
+    the chest: the stance feet's sweep (the same in a travelling clip and an in-place
+    loop) says which end goes first. Backward, it says the opposite."""
+    motion, mapping = import_bvh(pet_rig(walk, skull=False, in_place=in_place), "dog")
+    _check_mapping(mapping, {k: v for k, v in PET_EXPECTED.items() if k != "head"})
+    assert MappingNote.FORE_FROM_TRAVEL in mapping.note_codes
+    assert MappingNote.FORE_FROM_HEAD not in mapping.note_codes
+    backward = pet_rig(walk, skull=False, in_place=in_place)
+    backward = dataclasses.replace(backward, frames=backward.frames[::-1].copy())
+    _, mapping = import_bvh(backward, "dog")
+    assert mapping.joints["lf_shoulder"] == "L_legIK_1"  # swapped: the clip runs backward
+    # with the skull back, the head's end decides, and the travel is noted as disagreeing
+    backward = pet_rig(walk, in_place=in_place)
+    backward = dataclasses.replace(backward, frames=backward.frames[::-1].copy())
+    _, mapping = import_bvh(backward, "dog")
+    _check_mapping(mapping, PET_EXPECTED)
+    assert MappingNote.TRAVEL_DISAGREES in mapping.note_codes

@@ -201,11 +201,13 @@ def _analyse(bvh: BVHData, options: MappingOptions) -> _Analysis:
     skulls = [c for c in geo.ends[fore_i] if geo.skull[c]]
     if skulls and head_start not in skulls:
         # the chain at the fore end that carries the skull is the head, whatever the names
+        by_names = head_start
         head_start = _best_named(t, skulls, ("neck", "head", "skull"))
         note(
             MappingNote.HEAD_TAIL_FROM_GEOMETRY,
-            f"head chain {names[head_start]} chosen by geometry (at the fore end, carries "
-            "the skull) over the names",
+            f"head chain {names[head_start]} found by geometry (at the fore end, carries "
+            "the skull)"
+            + ("" if by_names is None else f", not {names[by_names]} as the names say"),
         )
     head_chain = t.deepest_path(head_start) if head_start is not None else []
     if head_chain:
@@ -244,11 +246,12 @@ def _analyse(bvh: BVHData, options: MappingOptions) -> _Analysis:
     behind = [c for c in geo.ends[1 - fore_i] if geo.behind[c] and c != head_start]
     if behind and tail_start not in behind:
         # the tail lies behind the hind legs, whatever the names
+        by_names = tail_start
         tail_start = _best_named(t, behind, ("tail",))
         note(
             MappingNote.HEAD_TAIL_FROM_GEOMETRY,
-            f"tail chain {names[tail_start]} chosen by geometry (behind the hind legs) over "
-            "the names",
+            f"tail chain {names[tail_start]} found by geometry (behind the hind legs)"
+            + ("" if by_names is None else f", not {names[by_names]} as the names say"),
         )
     if tail_start is not None:
         tc = t.deepest_path(tail_start)
@@ -365,7 +368,7 @@ def _trunk_geometry(
         leg,
         t.bvh.fps,
         options.low_percentile,
-        options.ground_share,
+        options.down_share,
     )
     by_travel = None if abs(travel) < options.travel_speed else int(travel > 0)
     return _TrunkGeometry(ends, skull, behind, by_head, head_chain, travel, by_travel)

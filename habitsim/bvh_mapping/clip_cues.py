@@ -66,7 +66,7 @@ def body_travel(
     leg: float,
     fps: float,
     pct: float,
-    ground_share: float,
+    down_share: float,
 ) -> float:
     """The body's speed toward ``ends[1]`` from ``ends[0]`` [leg lengths / s], from the
     stance feet's sweep: a foot at rest on the ground moves backward under the body as
@@ -80,7 +80,7 @@ def body_travel(
         leg: the leg length [file units].
         fps: frames per second.
         pct: the percentile taken as a foot's resting height.
-        ground_share: a foot within this share of ``leg`` of its resting height is down.
+        down_share: a foot within this share of ``leg`` of its resting height is down.
     """
     if pos.shape[0] < 3:
         return 0.0
@@ -94,7 +94,7 @@ def body_travel(
     sweeps = []
     for f in feet:
         h = pos[:, f] @ up
-        down = h <= np.percentile(h, pct) + ground_share * leg
+        down = h <= np.percentile(h, pct) + down_share * leg
         rel = np.sum((pos[:, f] - mid) * d, axis=-1)
         v = np.gradient(rel) * fps
         if down.sum() >= 2:

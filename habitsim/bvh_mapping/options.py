@@ -38,6 +38,9 @@ class MappingOptions:
         travel_speed: the body's motion along its trunk (the stance feet's sweep, which
             an in-place loop shows as well as a travelling clip) tells which end leads
             when it is at least this fast [leg lengths / s].
+        down_share: for that sweep, a foot is down while it is within this share of the
+            leg's length of its resting height [unitless]: a foot in stance, not one
+            skimming the ground in swing.
     """
 
     mirror_bone_tolerance: float = 0.05
@@ -47,4 +50,5 @@ class MappingOptions:
     low_percentile: float = 5.0
     up_margin: float = 0.25
     standing_score: float = 0.5
-    travel_speed: float = 0.1
+    travel_speed: float = 0.25
+    down_share: float = 0.05
