@@ -152,7 +152,9 @@ Y_UP = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]).T
 BLENDER_Z_UP = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]).T
 
 
-def _posed_rig(motion, nodes, axes, unit: float, source: str, in_place: bool = False) -> BVHData:
+def _posed_rig(
+    motion, nodes, axes, unit: float, source: str, in_place: bool = False, shape=(1.0, 1.0)
+) -> BVHData:
     """A rig of any hierarchy posed by a habitsim motion, every joint with 6 channels.
 
     ``nodes``: ``(name, parent, follow, mode)`` in file order, parents first. ``follow``
@@ -164,7 +166,9 @@ def _posed_rig(motion, nodes, axes, unit: float, source: str, in_place: bool = F
     End Site whose ``follow`` is its offset in metres along the parent's habitsim axes.
     ``axes``: (3, 3) matrix taking habitsim (forward, left, up) vectors to file axes;
     ``unit``: metres per file unit; ``in_place``: the pelvis's travel over the ground
-    taken out (a game loop's root motion stripped).
+    taken out (a game loop's root motion stripped); ``shape``: every position stretched
+    by these factors along habitsim's forward and up (a stylised body: ``(1.6, 0.4)`` is
+    long and low on short legs; the joints' translation channels take it).
     """
     from habitsim.rotations import matrix_to_quat, quat_to_euler
     from habitsim.skeleton import JOINT_NAMES, fk
@@ -174,6 +178,7 @@ def _posed_rig(motion, nodes, axes, unit: float, source: str, in_place: bool = F
         travel = motion.root_positions - motion.root_positions[0]
         travel[:, 2] = 0.0
         pos_h = pos_h - travel[:, None]
+    pos_h = pos_h * np.array([shape[0], 1.0, shape[1]])
     idx = {n: i for i, n in enumerate(JOINT_NAMES)}
     f = motion.num_frames
     frame: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # name -> (G (F,3,3), P (F,3)) file
@@ -253,6 +258,7 @@ def pet_rig(
     floating: bool = True,
     skull: bool = True,
     in_place: bool = False,
+    shape=(1.0, 1.0),
 ) -> BVHData:
     """A stylised pet's rig (y up, cm): the rig roots at the chest, so the hind legs hang
     deeper than the fore legs; both leg pairs are named ``*Leg*`` (no fore/hind cue); the
@@ -261,7 +267,8 @@ def pet_rig(
     (``floating``), a static pole and an animated IK target; the fore legs carry twist
     bones; the head chain is named ``Pet_Tail_F_*`` and carries ears and a jaw, and the
     tail is named ``Pet_Head_B_*``. Without ``skull`` the head has no jaw and no ears;
-    ``in_place`` strips the root's travel.
+    ``in_place`` strips the root's travel; ``shape`` stretches the body (see
+    :func:`_posed_rig`).
 
     :data:`PET_EXPECTED` is the mapping it should get.
     """
@@ -314,7 +321,7 @@ def pet_rig(
             (f"{S}_legIK_pole", "Pet_Hip", f"{s}h_knee", "static"),
             (f"{S}_legIK_target", "Pet_Root", f"{s}h_toe", "point"),
         ]
-    return _posed_rig(motion, nodes, Y_UP, 0.01, "pet_rig.bvh", in_place)
+    return _posed_rig(motion, nodes, Y_UP, 0.01, "pet_rig.bvh", in_place, shape)
 
 
 PET_EXPECTED = {

@@ -184,3 +184,23 @@ def test_without_a_skull_the_travel_tells_fore_from_hind(walk, in_place):
     _, mapping = import_bvh(backward, "dog")
     _check_mapping(mapping, PET_EXPECTED)
     assert MappingNote.TRAVEL_DISAGREES in mapping.note_codes
+
+
+def test_long_low_pet_gets_its_up_axis(walk):
+    """A body stretched long and low on short legs (y up): from the feet to the pelvis
+    the direction leans backward more than up, and the feet on one ground still say +y;
+    legs, fore/hind, head and tail as in the plain pet."""
+    rig = pet_rig(walk, shape=(1.6, 0.4))
+    motion, mapping = import_bvh(rig, "dog")
+    assert mapping.frame.up == "+y" and MappingNote.UP_FROM_FEET in mapping.note_codes
+    hips = rig.fk()[:, rig.index("Pet_Hip")]
+    tips = [f"{S}_{leg}_4" for S in "LR" for leg in ("Leg_A", "legIK")]
+    feet = rig.fk()[:, [rig.index(n) for n in tips]].mean(axis=1)
+    lean = np.abs((hips - feet).mean(axis=0))
+    assert lean[2] > lean[1]  # the pelvis sits farther behind the feet than above them
+    j = mapping.joints
+    for s, S in (("l", "L"), ("r", "R")):
+        assert j[f"{s}f_toe"] == f"{S}_Leg_A_4" and j[f"{s}h_toe"] == f"{S}_legIK_4"
+        assert all(j[f"{s}f_{g}"].startswith(f"{S}_Leg_A_") for g in ("elbow", "wrist"))
+        assert all(j[f"{s}h_{g}"] == f"{S}_legIK_{k}" for k, g in ((1, "hip"), (2, "knee")))
+    assert (j["neck"], j["tail1"]) == ("Pet_Tail_F_1", "Pet_Head_B_1")
