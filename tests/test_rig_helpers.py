@@ -203,4 +203,5 @@ def test_long_low_pet_gets_its_up_axis(walk):
         assert j[f"{s}f_toe"] == f"{S}_Leg_A_4" and j[f"{s}h_toe"] == f"{S}_legIK_4"
         assert all(j[f"{s}f_{g}"].startswith(f"{S}_Leg_A_") for g in ("elbow", "wrist"))
         assert all(j[f"{s}h_{g}"] == f"{S}_legIK_{k}" for k, g in ((1, "hip"), (2, "knee")))
+    assert j["lf_shoulder"][-1] == j["rf_shoulder"][-1]  # one girdle split for both sides
     assert (j["neck"], j["tail1"]) == ("Pet_Tail_F_1", "Pet_Head_B_1")

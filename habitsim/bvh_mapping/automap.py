@@ -150,10 +150,11 @@ def _analyse(bvh: BVHData, options: MappingOptions) -> _Analysis:
     joints["pelvis"] = names[hips]
     for pair, limb in ((fore, "f"), (hind, "h")):
         segs = _FORE_SEGS if limb == "f" else _HIND_SEGS
-        for lb, side in zip(pair, ("l", "r"), strict=True):
+        for lb, side, other in zip(pair, ("l", "r"), pair[::-1], strict=True):
             if lb.side is not None:
                 side = lb.side
-            for seg, src in zip(segs, _leg_roles(t, lb.chain, limb == "f"), strict=True):
+            roles = _leg_roles(t, lb.chain, limb == "f", other.chain)
+            for seg, src in zip(segs, roles, strict=True):
                 joints[f"{side}{limb}_{seg}"] = None if src is None else names[src]
 
     # Spine: hips → chest.

@@ -207,9 +207,12 @@ def _digits_trimmed(t: _Tree, real: list[int]) -> list[int]:
     return real
 
 
-def _leg_roles(t: _Tree, chain: list[int], fore: bool) -> list[int | None]:
+def _leg_roles(
+    t: _Tree, chain: list[int], fore: bool, partner: list[int] | None = None
+) -> list[int | None]:
     """Source joints for (girdle, upper, lower, foot, toe) along a leg chain (twist and
-    roll segments in series spanned)."""
+    roll segments in series spanned). Where the proportions decide the girdle, they are
+    those of the chain and its left/right ``partner`` together (one choice for both)."""
     spanned = [c for c in chain if not t.segment[c]]
     if len(spanned) >= 3:
         chain = spanned
@@ -238,7 +241,15 @@ def _leg_roles(t: _Tree, chain: list[int], fore: bool) -> list[int | None]:
         elif len(real) >= 5:
             # names say nothing (``FL_1``, ``J012``): the girdle joint or not, whichever
             # gives upper : lower : foot bones nearer the quadrupeds' own proportions
-            u = min((0, 1), key=lambda k: _proportion_misfit(t, real, k, fore))
+            both = [real]
+            if partner is not None:
+                other = [c for c in partner if not t.segment[c] and not t.bvh.is_end_site[c]]
+                other = _digits_trimmed(t, other)
+                if len(other) == len(real):
+                    both.append(other)
+            u = min(
+                (0, 1), key=lambda k: sum(_proportion_misfit(t, r, k, fore) for r in both)
+            )
         else:
             u = 0
     if len(chain) < u + 3:
