@@ -205,3 +205,16 @@ def test_long_low_pet_gets_its_up_axis(walk):
         assert all(j[f"{s}h_{g}"] == f"{S}_legIK_{k}" for k, g in ((1, "hip"), (2, "knee")))
     assert j["lf_shoulder"][-1] == j["rf_shoulder"][-1]  # one girdle split for both sides
     assert (j["neck"], j["tail1"]) == ("Pet_Tail_F_1", "Pet_Head_B_1")
+
+
+def test_inspection_tags_control_bones(walk):
+    from habitsim.bvh_mapping import describe_hierarchy
+
+    rig = pet_rig(walk)
+    _, mapping = import_bvh(rig, "dog")
+    lines = describe_hierarchy(rig, mapping).splitlines()
+    line = {ln.split()[0]: ln for ln in lines if not ln.strip().endswith("[end]")}
+    assert "[control]" in line["L_legIK_1"] and "-> lh_hip" in line["L_legIK_1"]
+    assert "[control]" in line["L_legIK_pole"] and "->" not in line["L_legIK_pole"]
+    assert "-> neck" in line["Pet_Tail_F_1"]  # named "tail", mapped by where it is
+    assert "[" not in line["L_leg_1"]
