@@ -247,9 +247,7 @@ def _leg_roles(
                 other = _digits_trimmed(t, other)
                 if len(other) == len(real):
                     both.append(other)
-            u = min(
-                (0, 1), key=lambda k: sum(_proportion_misfit(t, r, k, fore) for r in both)
-            )
+            u = min((0, 1), key=lambda k: sum(_proportion_misfit(t, r, k, fore) for r in both))
         else:
             u = 0
     if len(chain) < u + 3:
