@@ -44,7 +44,7 @@ class MappingOptions:
     """
 
     mirror_bone_tolerance: float = 0.05
-    animated_share: float = 0.05
+    animated_share: float = 0.005
     duplicate_share: float = 0.25
     ground_share: float = 0.15
     low_percentile: float = 5.0
