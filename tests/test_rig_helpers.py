@@ -27,6 +27,7 @@ from habitsim.bvh_mapping import (
     is_never_limb_name,
     name_cues,
 )
+from habitsim.errors import SkeletonMappingError
 
 
 @pytest.fixture(scope="module")
@@ -218,3 +219,17 @@ def test_inspection_tags_control_bones(walk):
     assert "[control]" in line["L_legIK_pole"] and "->" not in line["L_legIK_pole"]
     assert "-> neck" in line["Pet_Tail_F_1"]  # named "tail", mapped by where it is
     assert "[" not in line["L_leg_1"]
+
+
+def test_a_leg_no_chain_animates_is_an_error(walk):
+    """Hind legs driven by IK targets that were never baked: every hind chain of the rig
+    keeps one pose while the fore legs walk. The import stops and says why."""
+    rig = pet_rig(walk, floating=False)
+    frozen = rig.frames.copy()
+    for j, name in enumerate(rig.names):
+        if "legIK_" in name and not name.endswith(("pole", "target")) and not rig.is_end_site[j]:
+            cols = slice(rig.channel_start[j], rig.channel_start[j] + 6)
+            frozen[:, cols] = frozen[0, cols]
+    rig = dataclasses.replace(rig, frames=frozen)
+    with pytest.raises(SkeletonMappingError, match="no chain of this rig animates 2 of its legs"):
+        import_bvh(rig, "dog")

@@ -402,7 +402,12 @@ def _note_leg_choice(
     options: MappingOptions,
     note: Callable[[MappingNote, str], None],
 ) -> None:
-    """Notes on control chains taken as legs and on legs that do not animate."""
+    """Notes on control chains taken as legs and on legs that hardly animate.
+
+    Raises:
+        SkeletonMappingError: a leg chosen keeps one pose while other legs move: no chain
+            of the rig animates it.
+    """
     names = t.bvh.names
     chosen = [lb for pair in pairs for lb in pair]
     for lb in chosen:
@@ -427,14 +432,26 @@ def _note_leg_choice(
             f"it animates{why}",
         )
     moving = [lb for lb in chosen if lb.motion > options.animated_share]
-    if moving:
-        for lb in chosen:
-            if lb.motion <= options.animated_share:
-                note(
-                    MappingNote.LEG_STATIC,
-                    f"leg chain {names[lb.root]} does not animate while other legs do; "
-                    "check the mapping with inspect-bvh",
-                )
+    if not moving:
+        return
+    # a tip moving less than a millionth of its chain is the arithmetic, not motion
+    frozen = [lb for lb in chosen if lb.motion <= 1e-6]
+    if frozen:
+        chains = "; ".join(" > ".join(names[c] for c in lb.chain) for lb in frozen)
+        raise SkeletonMappingError(
+            f"{t.bvh.source}: no chain of this rig animates {len(frozen)} of its legs "
+            f"({chains} keep one pose while the other legs move); the clip may drive them "
+            "by IK targets that were not baked into the joints. Export the clip with the "
+            "leg joints baked, or map the animated chains with --map "
+            "(habitsim data inspect-bvh lists the rig's chains)"
+        )
+    for lb in chosen:
+        if lb.motion <= options.animated_share:
+            note(
+                MappingNote.LEG_STATIC,
+                f"leg chain {names[lb.root]} hardly animates while other legs do; "
+                "check the mapping with inspect-bvh",
+            )
 
 
 def auto_map(bvh: BVHData, options: MappingOptions | None = None) -> dict[str, str | None]:
