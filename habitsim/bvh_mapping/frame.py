@@ -13,6 +13,8 @@ from ..bvh import BVHData
 from ..errors import SkeletonMappingError
 from ..species import Species, load_species
 from .chains import _LEG_CHAINS
+from .clip_cues import up_scores
+from .options import MappingOptions
 from .tree import _Tree
 
 #: Known length units of BVH files and their size in metres.
@@ -35,6 +37,109 @@ def _axis_name(v: np.ndarray) -> str:
 
 
 @dataclass(frozen=True)
+class UpEvidence:
+    """What decided a file's up axis (:func:`find_up`).
+
+    Attributes:
+        axis: the up axis chosen, ``"+y"`` style.
+        source: ``"given"`` (by the caller), ``"feet"`` (the feet over the clip),
+            ``"rest pose"`` or ``"names"`` (tie-breakers where the clip was unsure).
+        margin: the chosen axis's score lead over the best other axis on the clip [leg
+            lengths] (0 when given).
+        unsure: the clip's evidence was weak (lead below
+            :attr:`MappingOptions.up_margin`).
+        runner_up: the best other axis on the clip.
+        rest_axis: the best axis of the rest pose, None where the rest pose is no
+            evidence (not a standing pose, :attr:`MappingOptions.standing_score`, or
+            its own lead below the margin).
+    """
+
+    axis: str
+    source: str = "given"
+    margin: float = 0.0
+    unsure: bool = False
+    runner_up: str | None = None
+    rest_axis: str | None = None
+
+    def describe(self) -> str:
+        """The evidence in words, for the mapping's notes."""
+        if self.source == "given":
+            return f"up {self.axis} given"
+        if self.unsure:
+            text = (
+                f"up axis unsure: {self.axis} leads {self.runner_up} by only "
+                f"{self.margin:.2f} leg lengths on the feet over the clip; {self.axis} taken "
+                f"from the {'feet' if self.source == 'feet' else self.source}; "
+                "check it and pass --up if wrong"
+            )
+        else:
+            text = (
+                f"up {self.axis} from the feet over the clip (lead {self.margin:.2f} leg "
+                f"lengths over {self.runner_up})"
+            )
+        if self.rest_axis is not None and self.rest_axis != self.axis:
+            text += f"; the rest pose suggests {self.rest_axis}"
+        elif self.rest_axis == self.axis and self.source != "rest pose":
+            text += "; the rest pose agrees"
+        return text
+
+
+def find_up(
+    pos: np.ndarray,
+    rest: np.ndarray,
+    feet: list[int],
+    body: list[int],
+    leg: float,
+    names_axis: str | None = None,
+    options: MappingOptions | None = None,
+) -> UpEvidence:
+    """The up axis from where the feet are over the clip, checked against the rest pose.
+
+    Each signed axis is scored by :func:`~habitsim.bvh_mapping.clip_cues.up_scores`
+    (the body above the feet, the feet's low heights on one plane). The best axis wins
+    when it leads every other by :attr:`MappingOptions.up_margin`; otherwise, among the
+    axes within that margin of the best, the rest pose's best axis, then ``names_axis``
+    (the pelvis above the feet the names mapped), then the clip's best is taken, and the
+    evidence is marked unsure.
+
+    Args:
+        pos: (F, J, 3) joint positions over the clip [file units].
+        rest: (1, J, 3) the rest pose.
+        feet: the feet's joints (the leg chains' tips).
+        body: the joints the legs hang from.
+        leg: the leg length [file units].
+        names_axis: the tie-breaker from the names, if any.
+        options: the mapping's knobs.
+    """
+    opt = options or MappingOptions()
+    scale = max(leg, 1e-9)
+    clip = up_scores(pos, feet, body, scale, opt.low_percentile)
+    ranked = sorted(clip, key=lambda a: -clip[a])
+    best, second = ranked[0], ranked[1]
+    margin = clip[best] - clip[second]
+    rest_s = up_scores(rest, feet, body, scale, opt.low_percentile)
+    r_ranked = sorted(rest_s, key=lambda a: -rest_s[a])
+    rest_axis = (
+        r_ranked[0]
+        if rest_s[r_ranked[0]] >= opt.standing_score
+        and rest_s[r_ranked[0]] - rest_s[r_ranked[1]] >= opt.up_margin
+        else None
+    )
+    if margin >= opt.up_margin:
+        return UpEvidence(best, "feet", round(margin, 3), False, second, rest_axis)
+    near = [a for a in ranked if clip[best] - clip[a] < opt.up_margin]
+    if rest_axis in near:
+        axis, source = rest_axis, "rest pose"
+    elif names_axis in near:
+        axis, source = names_axis, "names"
+    else:
+        axis, source = best, "feet"
+    other = next(a for a in ranked if a != axis)
+    lead = clip[axis] - clip[other]
+    return UpEvidence(axis, source, round(lead, 3), True, other, rest_axis)
+
+
+@dataclass(frozen=True)
 class FrameConversion:
     """Conversion of file coordinates to habitsim's frame (z up, x forward, metres).
 
@@ -45,6 +150,7 @@ class FrameConversion:
         forward: the file's forward axis (perpendicular to ``up``).
         matrix: (3, 3) rotation whose rows are the file's forward, left and up axes, so
             habitsim = scale · matrix @ file.
+        up_evidence: what decided the up axis (:class:`UpEvidence`).
     """
 
     scale: float
@@ -52,14 +158,22 @@ class FrameConversion:
     up: str
     forward: str
     matrix: np.ndarray
+    up_evidence: UpEvidence | None = None
 
     @classmethod
-    def from_axes(cls, scale: float, units: str, up: str, forward: str) -> FrameConversion:
+    def from_axes(
+        cls,
+        scale: float,
+        units: str,
+        up: str,
+        forward: str,
+        up_evidence: UpEvidence | None = None,
+    ) -> FrameConversion:
         u, f = _axis_vector(up), _axis_vector(forward)
         if abs(float(u @ f)) > 1e-9:
             raise SkeletonMappingError(f"forward axis {forward} is not perpendicular to up {up}")
         left = np.cross(u, f)
-        return cls(scale, units, up, forward, np.stack([f, left, u]))
+        return cls(scale, units, up, forward, np.stack([f, left, u]), up_evidence)
 
     @property
     def left(self) -> str:
@@ -110,6 +224,16 @@ def _leg_ends(joints: Mapping[str, str | None], bvh: BVHData) -> list[int]:
     return out
 
 
+def _leg_roots(joints: Mapping[str, str | None], bvh: BVHData) -> list[int]:
+    """The first mapped joint of each leg chain that has one (as :func:`_leg_ends`)."""
+    out = []
+    for chain in _LEG_CHAINS.values():
+        src = [s for n in chain if (s := joints.get(n))]
+        if src:
+            out.append(bvh.index(src[0]))
+    return out
+
+
 def _forward_joint(joints: Mapping[str, str | None]) -> str | None:
     for n in ("spine3", "spine2", "spine1", "neck", "head", "snout"):
         if joints.get(n):
@@ -123,6 +247,7 @@ def detect_frame(
     units: str | float | None = None,
     up: str | None = None,
     species: str | Species | None = None,
+    options: MappingOptions | None = None,
 ) -> FrameConversion:
     """Units, up and forward axis of a BVH file, as a conversion to habitsim's frame.
 
@@ -130,8 +255,9 @@ def detect_frame(
       length (hip joint to toe along the bones) a plausible animal leg (0.02–4 m); if
       several or none are plausible, the one closest (in log scale) to the species' leg
       length (default: 0.5 m).
-    * up: explicit, else the coordinate axis closest to the mean direction from the feet
-      (most distal mapped leg joints) to the hips over the clip.
+    * up: explicit, else from where the feet (most distal mapped leg joints) are over
+      the whole clip, checked against the rest pose (:func:`find_up`); the direction
+      from the feet to the hips (what the names mapped) breaks a tie.
     * forward: the coordinate axis perpendicular to up closest to the hips → chest
       direction in the first frame (rest pose as a fallback).
 
@@ -142,6 +268,7 @@ def detect_frame(
         units: ``"m"``, ``"cm"``, ``"mm"``, a scale in metres per unit, or None to detect.
         up: ``"y"``, ``"z"``, ``"-y"``… or None to detect.
         species: target species (for unit detection).
+        options: the mapping's knobs (the up axis's margin).
 
     Returns:
         The :class:`FrameConversion`.
@@ -196,6 +323,7 @@ def detect_frame(
     # Up.
     if up is not None:
         up_ax = _parse_up(up)
+        evidence = UpEvidence(up_ax)
     else:
         if not feet:
             raise SkeletonMappingError(
@@ -204,9 +332,13 @@ def detect_frame(
         v = (pos[:, hips] - pos[:, feet].mean(axis=1)).mean(axis=0)
         if np.linalg.norm(v) < 1e-9:
             v = rest[0, hips] - rest[0, feet].mean(axis=0)
-        if np.linalg.norm(v) < 1e-9:
-            raise SkeletonMappingError("cannot detect the up axis (feet at hip level); pass up=")
-        up_ax = _axis_name(v)
+        names_axis = _axis_name(v) if np.linalg.norm(v) >= 1e-9 else None
+        roots = _leg_roots(joints, bvh)
+        leg_len = float(np.mean([t.path_length(r, f) for r, f in zip(roots, feet, strict=True)]))
+        if leg_len <= 0:
+            raise SkeletonMappingError("cannot detect the up axis (legs of zero length); pass up=")
+        evidence = find_up(pos, rest, feet, roots, leg_len, names_axis, options)
+        up_ax = evidence.axis
     u_vec = _axis_vector(up_ax)
 
     # Forward.
@@ -231,4 +363,4 @@ def detect_frame(
         )
     fwd_vec = fwd_vec.copy()
     fwd_vec[int(np.argmax(np.abs(u_vec)))] = 0.0
-    return FrameConversion.from_axes(scale, uname, up_ax, _axis_name(fwd_vec))
+    return FrameConversion.from_axes(scale, uname, up_ax, _axis_name(fwd_vec), evidence)

@@ -30,7 +30,9 @@ def describe_hierarchy(bvh: BVHData, mapping: JointMapping | None = None) -> str
     """The source hierarchy as an indented tree, each joint with its proposed habitsim joint.
 
     Each line: the joint, its bone length in file units, ``[helper]`` for rig helpers that
-    are never limbs, ``[end]`` for End Sites, and ``-> habitsim_joint`` where mapped.
+    are never limbs, ``[control]`` for control bones (IK, pole, target, twist, roll,
+    MCH/ORG: limbs only where they are the chain that animates), ``[end]`` for End Sites,
+    and ``-> habitsim_joint`` where mapped.
     """
     inv = {v: k for k, v in mapping.mapped().items()} if mapping is not None else {}
     t = _Tree(bvh)
@@ -39,8 +41,10 @@ def describe_hierarchy(bvh: BVHData, mapping: JointMapping | None = None) -> str
         tags = []
         if bvh.is_end_site[j]:
             tags.append("[end]")
-        elif t.helper[j]:
+        elif t.never[j]:
             tags.append("[helper]")
+        elif t.control[j]:
+            tags.append("[control]")
         text = f"{'  ' * t.depth[j]}{name}  ({t.blen[j]:.4g})"
         if tags:
             text += " " + " ".join(tags)
@@ -201,11 +205,15 @@ def import_bvh(
         units = units if units is not None else spec["units"]
         up = up if up is not None else spec["up"]
 
-    frame = detect_frame(bvh, joints, units=units, up=up, species=sp)
+    frame = detect_frame(bvh, joints, units=units, up=up, species=sp, options=options)
     if geometric:
         an2 = _Analysis(joints, geometric, notes, codes)
         _resolve_sides(bvh, an2, frame)
     mapping = JointMapping(joints, method, frame, 1.0, list(notes), note_codes=list(codes))
+    ev = frame.up_evidence
+    if ev is not None and ev.source != "given":
+        code = MappingNote.UP_UNSURE if ev.unsure else MappingNote.UP_FROM_FEET
+        mapping.note(code, ev.describe())
     motion = retarget(bvh, mapping, sp, plant=plant, inplace=inplace, loops=loops)
     motion.metadata["mapping"] = mapping.to_dict()
     return motion, mapping

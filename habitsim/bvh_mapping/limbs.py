@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SkeletonMappingError
+from .clip_cues import chain_motion
 from .names import _NOT_LIMB, _fore_vote
 from .options import MappingOptions
 from .tree import _Tree
@@ -20,6 +21,53 @@ class _Limb:
     chain: list[int]
     side: str | None  # from the name, None if unnamed
     vote: int  # >0 fore-like names, <0 hind-like names
+    motion: float = 0.0  # how far its tip moves, in chain lengths (clip_cues.chain_motion)
+    control: bool = False  # a control-layer chain (IK, MCH, ORG...), twist segments aside
+    grounded: bool = True  # its tip reaches the feet's ground
+
+
+def _is_control_chain(t: _Tree, chain: list[int]) -> bool:
+    return any(t.control[c] and not t.segment[c] for c in chain if not t.bvh.is_end_site[c])
+
+
+def _named(t: _Tree, lb: _Limb) -> bool:
+    return any(_fore_vote(t.cues[c][1]) != 0 for c in lb.chain)
+
+
+def _duplicates(t: _Tree, a: _Limb, b: _Limb, share: float) -> bool:
+    """True if two chains are one leg drawn twice (a deforming chain and its IK or control
+    copy): their first joints lie within ``share`` of the shorter chain's length, on
+    average over the clip (:attr:`MappingOptions.duplicate_share`)."""
+    pos, _ = t.fk()
+    gap = float(np.linalg.norm(pos[:, a.root] - pos[:, b.root], axis=-1).mean())
+    return gap < share * min(t.chain_length(a.chain), t.chain_length(b.chain))
+
+
+def _pick_legs(t: _Tree, cands: list[_Limb], options: MappingOptions) -> list[_Limb]:
+    """One side's leg chains, best first, one chain per leg.
+
+    The order: chains that animate (:attr:`MappingOptions.animated_share`) before static
+    ones, then chains whose tip reaches the ground, then deforming chains before control
+    chains (IK, MCH, ORG…), then chains named like limbs, then the longest. A chain that
+    duplicates one already taken (:func:`_duplicates`) is left out, so a static
+    deforming leg gives way to its animated IK copy, and an IK copy that animates like
+    the deforming leg gives way to it.
+    """
+
+    def key(lb: _Limb) -> tuple[bool, bool, bool, bool, float]:
+        return (
+            lb.motion <= options.animated_share,
+            not lb.grounded,
+            lb.control,
+            not _named(t, lb),
+            -t.chain_length(lb.chain),
+        )
+
+    out: list[_Limb] = []
+    for lb in sorted(cands, key=key):
+        if not any(_duplicates(t, lb, o, options.duplicate_share) for o in out):
+            out.append(lb)
+    return out
 
 
 def _sided_limbs(t: _Tree) -> list[_Limb]:
@@ -31,13 +79,13 @@ def _sided_limbs(t: _Tree) -> list[_Limb]:
         p = t.parents[j]
         if p >= 0 and t.cues[p][0] is not None:
             continue
-        if any(w in core for w in _NOT_LIMB) or t.helper[j]:
+        if any(w in core for w in _NOT_LIMB) or t.never[j]:
             continue
         chain = t.leg_path(j)
         if len(chain) < 3:
             continue
         vote = sum(_fore_vote(t.cues[c][1]) for c in chain if not t.bvh.is_end_site[c])
-        out.append(_Limb(j, chain, side, vote))
+        out.append(_Limb(j, chain, side, vote, chain_motion(t, chain), _is_control_chain(t, chain)))
     return out
 
 
@@ -67,14 +115,17 @@ def _unsided_limbs(t: _Tree, options: MappingOptions) -> list[tuple[_Limb, _Limb
         cands = []
         for c in t.kids[p]:
             core = t.cues[c][1]
-            if t.bvh.is_end_site[c] or t.helper[c] or t.height[c] < 2:
+            if t.bvh.is_end_site[c] or t.never[c] or t.height[c] < 2:
                 continue
             if any(w in core for w in ("tail", "neck", "head", "spine", "chest") + _NOT_LIMB):
                 continue
             chain = t.leg_path(c)
             if len(chain) < 3:
                 continue
-            cands.append(_Limb(c, chain, None, sum(_fore_vote(t.cues[k][1]) for k in chain)))
+            vote = sum(_fore_vote(t.cues[k][1]) for k in chain)
+            cands.append(
+                _Limb(c, chain, None, vote, chain_motion(t, chain), _is_control_chain(t, chain))
+            )
         used: set[int] = set()
         for a in range(len(cands)):
             for b in range(a + 1, len(cands)):
@@ -85,7 +136,14 @@ def _unsided_limbs(t: _Tree, options: MappingOptions) -> list[tuple[_Limb, _Limb
                     continue
                 used |= {a, b}
                 pairs.append((t.chain_length(la.chain) + t.chain_length(lb.chain), la, lb))
-    pairs.sort(key=lambda x: -x[0])
+
+    def key(x: tuple[float, _Limb, _Limb]) -> tuple[bool, bool, float]:
+        # pairs that animate first, deforming before control chains, then the longest
+        _, la, lb = x
+        still = min(la.motion, lb.motion) <= options.animated_share
+        return (still, la.control or lb.control, -x[0])
+
+    pairs.sort(key=key)
     return [(a, b) for _, a, b in pairs[:2]]
 
 
@@ -149,8 +207,15 @@ def _digits_trimmed(t: _Tree, real: list[int]) -> list[int]:
     return real
 
 
-def _leg_roles(t: _Tree, chain: list[int], fore: bool) -> list[int | None]:
-    """Source joints for (girdle, upper, lower, foot, toe) along a leg chain."""
+def _leg_roles(
+    t: _Tree, chain: list[int], fore: bool, partner: list[int] | None = None
+) -> list[int | None]:
+    """Source joints for (girdle, upper, lower, foot, toe) along a leg chain (twist and
+    roll segments in series spanned). Where the proportions decide the girdle, they are
+    those of the chain and its left/right ``partner`` together (one choice for both)."""
+    spanned = [c for c in chain if not t.segment[c]]
+    if len(spanned) >= 3:
+        chain = spanned
     cores = [t.cues[c][1] for c in chain]
     if fore:
 
@@ -176,7 +241,13 @@ def _leg_roles(t: _Tree, chain: list[int], fore: bool) -> list[int | None]:
         elif len(real) >= 5:
             # names say nothing (``FL_1``, ``J012``): the girdle joint or not, whichever
             # gives upper : lower : foot bones nearer the quadrupeds' own proportions
-            u = min((0, 1), key=lambda k: _proportion_misfit(t, real, k, fore))
+            both = [real]
+            if partner is not None:
+                other = [c for c in partner if not t.segment[c] and not t.bvh.is_end_site[c]]
+                other = _digits_trimmed(t, other)
+                if len(other) == len(real):
+                    both.append(other)
+            u = min((0, 1), key=lambda k: sum(_proportion_misfit(t, r, k, fore) for r in both))
         else:
             u = 0
     if len(chain) < u + 3:

@@ -52,7 +52,7 @@ _HIND_WORDS = (
     "toe",
 )
 #: Name tokens of rig helpers that are never part of a limb: tails, armour plates, 3ds Max
-#: biped nubs and footstep trackers, IK poles and targets, twist and roll bones.
+#: biped nubs and footstep trackers, props.
 _HELPER_TOKENS = frozenset(
     {
         "tail",
@@ -62,18 +62,34 @@ _HELPER_TOKENS = frozenset(
         "footstep",
         "footsteps",
         "helper",
+        "dummy",
+        "prop",
+        "weapon",
+    }
+)
+#: Name tokens of a rig's control layer: IK chains, poles and targets, controls, twist and
+#: roll bones, and Blender's mechanism (``MCH-``) and original (``ORG-``) layers. Such a
+#: chain is a leg only where it is the one that animates (:mod:`.limbs`): a name alone
+#: never drops a chain whose joints move.
+_CONTROL_TOKENS = frozenset(
+    {
         "ik",
         "pole",
         "target",
         "twist",
         "roll",
-        "dummy",
         "ctrl",
         "control",
-        "prop",
-        "weapon",
+        "mch",
+        "org",
     }
 )
+#: Control tokens of bones that lie along a limb bone (a twist or roll segment in series
+#: with the thigh): a leg chain spans them.
+_SEGMENT_TOKENS = frozenset({"twist", "roll"})
+#: Blender's layer prefixes (``DEF-thigh.L``, ``MCH-shin_ik.L``, ``ORG-foot.L``): not part of
+#: the bone's name core.
+_LAYER_TOKENS = frozenset({"def", "mch", "org"})
 _NOT_LIMB = (
     "ear",
     "eye",
@@ -117,23 +133,56 @@ def name_cues(name: str) -> tuple[str | None, str]:
         elif side is None and low in _QUADRANT:
             side, girdle = _QUADRANT[low]
             rest.append(girdle)
+        elif low in _LAYER_TOKENS and t.isupper():
+            continue
         else:
             rest.append(low)
     return side, "".join(rest)
 
 
-def is_helper_name(name: str) -> bool:
-    """True if a joint name marks a rig helper that is never a limb bone.
+def _tokens(name: str) -> list[str]:
+    return [t.lower() for t in _TOKEN_RE.findall(name)]
 
-    Tails, armour plates, biped nubs and footstep trackers, IK poles and targets, twist
-    and roll bones (:data:`_HELPER_TOKENS`): ``Dog_LeftTail001``, ``Bip01_L_Toe0Nub``,
-    ``Bip01_Footsteps``, ``LeftLegIKTarget``, ``forearm_twist.L``.
+
+def is_helper_name(name: str) -> bool:
+    """True if a joint name marks a rig helper or a control bone.
+
+    Helpers that are never a limb (:data:`_HELPER_TOKENS`: ``Dog_LeftTail001``,
+    ``Bip01_L_Toe0Nub``, ``Bip01_Footsteps``) and control bones (:func:`is_control_name`:
+    ``LeftLegIKTarget``, ``forearm_twist.L``).
     """
-    toks = [t.lower() for t in _TOKEN_RE.findall(name)]
+    return is_never_limb_name(name) or is_control_name(name)
+
+
+def is_never_limb_name(name: str) -> bool:
+    """True if a joint name marks a helper that is never part of a limb: tails, armour
+    plates, biped nubs and footstep trackers, props (:data:`_HELPER_TOKENS`)."""
+    toks = _tokens(name)
     if any(t in _HELPER_TOKENS for t in toks):
         return True
     low = name.lower()
     return any(w in low for w in _HELPER_TOKENS if len(w) >= 5) or "tail" in low
+
+
+def is_control_name(name: str) -> bool:
+    """True if a joint name marks a bone of a rig's control layer: IK chains, poles and
+    targets, controls, twist and roll bones, Blender's ``MCH-`` and ``ORG-`` layers
+    (:data:`_CONTROL_TOKENS`): ``L_legIK_knee``, ``thigh_twist_01_l``, ``MCH-shin_ik.L``.
+
+    Such a bone is not dropped for its name: the mapping takes a control chain as a leg
+    when it is the chain that animates (see ``docs/import.md``, helper rigs).
+    """
+    toks = _tokens(name)
+    low = name.lower()
+    return any(t in _CONTROL_TOKENS for t in toks) or any(
+        w in low for w in ("twist", "target", "control")
+    )
+
+
+def is_segment_name(name: str) -> bool:
+    """True for a twist or roll bone, which lies along a limb bone (:data:`_SEGMENT_TOKENS`)."""
+    low = name.lower()
+    return any(t in _SEGMENT_TOKENS for t in _tokens(name)) or "twist" in low
 
 
 def _fore_vote(core: str) -> int:

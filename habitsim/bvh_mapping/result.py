@@ -52,6 +52,25 @@ class MappingNote(StrEnum):
     LEG_UNPLANTED = "leg_unplanted"
     #: a source leg has zero length: feet not planted
     ZERO_LEG = "zero_leg"
+    #: the up axis found from the feet over the clip (what decided it, and the rest pose)
+    UP_FROM_FEET = "up_from_feet"
+    #: the up axis evidence was weak: a tie-breaker (rest pose, names) chose; check it
+    UP_UNSURE = "up_unsure"
+    #: a control-named chain (IK, pole, target, twist, MCH/ORG) is used as a leg: it is
+    #: the one that animates
+    CONTROL_LEG = "control_leg"
+    #: a mapped leg does not animate while other legs do
+    LEG_STATIC = "leg_static"
+    #: fore/hind decided by the end of the trunk that carries the head (skull), over the
+    #: names or the hierarchy
+    FORE_FROM_HEAD = "fore_from_head"
+    #: fore/hind decided by which way the body goes over the clip (the stance feet's sweep)
+    FORE_FROM_TRAVEL = "fore_from_travel"
+    #: the clip's direction of travel disagrees with the fore/hind chosen (a backward walk,
+    #: or a wrong guess)
+    TRAVEL_DISAGREES = "travel_disagrees"
+    #: head or tail chain chosen by geometry over the names
+    HEAD_TAIL_FROM_GEOMETRY = "head_tail_from_geometry"
 
 
 @dataclass

@@ -324,8 +324,9 @@ def _limb_confidence(
 def _foot_points(t: _Tree, top: int, toe: int) -> list[int]:
     """The foot's joints: ``top`` (wrist / hock) and every real joint below it.
 
-    Rig helpers are skipped, and so is a point that sinks far below the foot's others
-    (an unnamed helper pointing into the ground). Below the mapped ``toe`` only its End
+    Rig helpers are skipped (control bones too, below a joint that is not one), and so
+    is a point that sinks far below the foot's others (an unnamed helper pointing into
+    the ground). Below the mapped ``toe`` only its End
     Site tips count: a joint there is a marker the mapping left out (an unnamed nub,
     :func:`_digits_trimmed`).
     """
@@ -333,7 +334,7 @@ def _foot_points(t: _Tree, top: int, toe: int) -> list[int]:
     while todo:
         j = todo.pop()
         out.append(j)
-        kids = [c for c in t.kids[j] if not t.helper[c]]
+        kids = [c for c in t.kids[j] if not t.never[c] and (t.control[j] or not t.control[c])]
         if j == toe:
             kids = [c for c in kids if t.bvh.is_end_site[c]]
         todo += kids

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..bvh import BVHData
-from .names import is_helper_name, name_cues
+from .names import is_control_name, is_helper_name, is_never_limb_name, is_segment_name, name_cues
 
 
 class _Tree:
@@ -27,7 +27,30 @@ class _Tree:
             self.depth[j] = 0 if p < 0 else self.depth[p] + 1
         self.cues = [name_cues(n) for n in bvh.names]
         self.blen = np.linalg.norm(bvh.offsets, axis=1)
+        #: any helper or control bone (never a foot point, tagged in the hierarchy)
         self.helper = [is_helper_name(n) for n in bvh.names]
+        #: helpers that are never part of a limb (tails, armour, nubs)
+        self.never = [is_never_limb_name(n) for n in bvh.names]
+        #: control bones (IK, pole, target, twist, roll, MCH/ORG): limbs only if they animate
+        self.control = [is_control_name(n) and not self.never[j] for j, n in enumerate(bvh.names)]
+        #: twist and roll bones, which lie along a limb bone
+        self.segment = [is_segment_name(n) and not self.never[j] for j, n in enumerate(bvh.names)]
+        self._fk: tuple[np.ndarray, np.ndarray] | None = None
+
+    def fk(self) -> tuple[np.ndarray, np.ndarray]:
+        """The clip's joint positions (F, J, 3) and rotations (F, J, 3, 3), computed once."""
+        if self._fk is None:
+            self._fk = self.bvh.fk(return_rotations=True)
+        return self._fk
+
+    def _limb_kids(self, j: int) -> list[int]:
+        """Children of j a limb may continue through: never helpers, and control bones
+        only where j has no other child (a chain of control bones is followed whole)."""
+        kids = [c for c in self.kids[j] if not self.never[c]]
+        if self.control[j]:
+            return kids
+        plain = [c for c in kids if not self.control[c]]
+        return plain or [c for c in kids if self.segment[c]]
 
     def ancestors(self, j: int) -> list[int]:
         out = []
@@ -50,7 +73,7 @@ class _Tree:
     def is_pure(self, j: int) -> bool:
         """True if the subtree of j is one chain (rig helpers hanging off it aside)."""
         while True:
-            kids = [c for c in self.kids[j] if not self.helper[c]]
+            kids = self._limb_kids(j)
             if not kids:
                 return True
             if len(kids) > 1:
@@ -65,7 +88,7 @@ class _Tree:
         """
         out = [j]
         while True:
-            kids = [c for c in self.kids[j] if not self.helper[c]]
+            kids = self._limb_kids(j)
             real = [c for c in kids if not self.bvh.is_end_site[c]]
             if real:
                 j = max(real, key=lambda c: self.height[c])  # first on ties
