@@ -89,55 +89,22 @@ def read_source(
     )
 
 
-def import_bvh(
-    path: str | Path | BVHData,
+def map_joints(
+    bvh: BVHData,
     species: str | Species,
     joint_map: str | Path | Mapping[str, str] | None = None,
     units: str | float | None = None,
     up: str | None = None,
-    strict: bool = True,
-    plant: bool = True,
-    animation: str | int | None = None,
-    fps: float | None = None,
     options: MappingOptions | None = None,
-) -> tuple[Motion, JointMapping]:
-    """Read a BVH file (or a glTF/GLB animation) and retarget it onto a species' skeleton.
-
-    Args:
-        path: the ``.bvh`` file (or an already parsed :class:`~habitsim.bvh.BVHData`).
-        species: target catalog species.
-        joint_map: None for the automatic mapping, a joint-map TOML path
-            (:func:`load_joint_map`) or a dict habitsim joint → source joint.
-        units: source length unit (``"m"``, ``"cm"``, ``"mm"`` or metres per unit);
-            None = detect (a TOML's ``units`` applies when this is None).
-        up: source up axis (``"y"``, ``"z"``, ``"-y"``…); None = detect.
-        strict: see :func:`habitsim.bvh.parse_bvh`.
-        plant: plant the legs on the source's footholds (see :func:`retarget`).
-        animation, fps: for a glTF/GLB file, the animation and the sampling rate
-            (:func:`read_source`).
-        options: the automatic mapping's tuning knobs (default :class:`MappingOptions`).
-
-    Returns:
-        ``(motion, mapping)``; print ``mapping`` for the habitsim ← source lines.
+) -> JointMapping:
+    """The joint mapping and frame conversion :func:`import_bvh` uses for a source
+    skeleton, without retargeting its motion (arguments as :func:`import_bvh`'s).
 
     Raises:
-        UnknownSpeciesError: unknown species (lists the known ones).
-        BVHParseError: unreadable / malformed file.
         SkeletonMappingError: unmappable skeleton or invalid joint map.
     """
     sp = load_species(species)
     options = options or MappingOptions()
-    bvh = (
-        path
-        if isinstance(path, BVHData)
-        else read_source(path, animation=animation, fps=fps, strict=strict)
-    )
-    plain = (units is None or (isinstance(units, str) and units.lower() == "m")) and (
-        up is None or _parse_up(up) == "+z"
-    )
-    if joint_map is None and is_habitsim_bvh(bvh) and plain:
-        return _identity_import(bvh, sp)
-
     notes: list[str] = []
     codes: list[MappingNote] = []
     geometric: list[tuple[str, str]] = []
@@ -178,6 +145,57 @@ def import_bvh(
         an2 = _Analysis(joints, geometric, notes, codes)
         _resolve_sides(bvh, an2, frame)
     mapping = JointMapping(joints, method, frame, 1.0, list(notes), note_codes=list(codes))
+    return mapping
+
+
+def import_bvh(
+    path: str | Path | BVHData,
+    species: str | Species,
+    joint_map: str | Path | Mapping[str, str] | None = None,
+    units: str | float | None = None,
+    up: str | None = None,
+    strict: bool = True,
+    plant: bool = True,
+    animation: str | int | None = None,
+    fps: float | None = None,
+    options: MappingOptions | None = None,
+) -> tuple[Motion, JointMapping]:
+    """Read a BVH file (or a glTF/GLB animation) and retarget it onto a species' skeleton.
+
+    Args:
+        path: the ``.bvh`` file (or an already parsed :class:`~habitsim.bvh.BVHData`).
+        species: target catalog species.
+        joint_map: None for the automatic mapping, a joint-map TOML path
+            (:func:`load_joint_map`) or a dict habitsim joint → source joint.
+        units: source length unit (``"m"``, ``"cm"``, ``"mm"`` or metres per unit);
+            None = detect (a TOML's ``units`` applies when this is None).
+        up: source up axis (``"y"``, ``"z"``, ``"-y"``…); None = detect.
+        strict: see :func:`habitsim.bvh.parse_bvh`.
+        plant: plant the legs on the source's footholds (see :func:`retarget`).
+        animation, fps: for a glTF/GLB file, the animation and the sampling rate
+            (:func:`read_source`).
+        options: the automatic mapping's tuning knobs (default :class:`MappingOptions`).
+
+    Returns:
+        ``(motion, mapping)``; print ``mapping`` for the habitsim ← source lines.
+
+    Raises:
+        UnknownSpeciesError: unknown species (lists the known ones).
+        BVHParseError: unreadable / malformed file.
+        SkeletonMappingError: unmappable skeleton or invalid joint map.
+    """
+    sp = load_species(species)
+    bvh = (
+        path
+        if isinstance(path, BVHData)
+        else read_source(path, animation=animation, fps=fps, strict=strict)
+    )
+    plain = (units is None or (isinstance(units, str) and units.lower() == "m")) and (
+        up is None or _parse_up(up) == "+z"
+    )
+    if joint_map is None and is_habitsim_bvh(bvh) and plain:
+        return _identity_import(bvh, sp)
+    mapping = map_joints(bvh, sp, joint_map=joint_map, units=units, up=up, options=options)
     motion = retarget(bvh, mapping, sp, plant=plant)
     motion.metadata["mapping"] = mapping.to_dict()
     return motion, mapping
