@@ -247,6 +247,8 @@ class _Solver:
                 continue
             d = _unit(sum(_unit(pos[:, jn[c]] - pos[:, jn[j]]) for j, c in bones))
             v = g0[ra].T @ (p0[rb] - p0[ra])
+            if np.linalg.norm(v) < 1e-9:
+                continue  # a zero-length span has no direction to aim
             ref = _frame(v, g0[ra].T @ side0)
             glob[:, ra] = _frame(d, rot[:, jn[a]] @ _Y) @ ref.T
             solved[ra] = True
@@ -311,23 +313,34 @@ class _Solver:
             out += self.glob[:, self.rig.parents[j]] @ self.tr0[j]
         return out
 
-    def _chest_twist(self, idx: Mapping[str, int], lateral: np.ndarray, passes: int = 6) -> None:
+    def _chest_twist(self, idx: Mapping[str, int], lateral: np.ndarray, passes: int = 12) -> None:
         """Turn the chest about its bone until the rig's shoulder line, the lateral axis
-        the import gives the chest, lies along the motion's chest ``lateral`` (F, 3)."""
+        the import gives the chest, lies along the motion's chest ``lateral`` (F, 3): a
+        secant search per frame on the angle between the two."""
         from scipy.spatial.transform import Rotation
 
         c = idx["spine3"]
-        for _ in range(passes):
-            d = _unit(self._rel(c, idx["neck"]) if "neck" in idx else self.glob[:, c, :, 0])
-            side = self._rel(c, idx["lf_shoulder"]) - self._rel(c, idx["rf_shoulder"])
-            a = _unit(side - np.sum(side * d, -1, keepdims=True) * d)
-            b = _unit(lateral - np.sum(lateral * d, -1, keepdims=True) * d)
-            ang = np.arctan2(np.sum(np.cross(a, b) * d, -1), np.sum(a * b, -1))
-            if np.abs(ang).max() < 1e-10:
-                break
-            turn = Rotation.from_rotvec(d * ang[:, None]).as_matrix()
-            self.glob[:, c] = turn @ self.glob[:, c]
+        base = self.glob[:, c].copy()
+        d = _unit(self._rel(c, idx["neck"]) if "neck" in idx else base[:, :, 0])
+        b = _unit(lateral - np.sum(lateral * d, -1, keepdims=True) * d)
+
+        def miss(theta: np.ndarray) -> np.ndarray:
+            self.glob[:, c] = Rotation.from_rotvec(d * theta[:, None]).as_matrix() @ base
             self._propagate()
+            side = self._rel(c, idx["lf_shoulder"]) - self._rel(c, idx["rf_shoulder"])
+            a = side - np.sum(side * d, -1, keepdims=True) * d
+            return np.arctan2(np.sum(np.cross(a, b) * d, -1), np.sum(a * b, -1))
+
+        t0 = np.zeros(self.n_f)
+        f0 = miss(t0)
+        t1 = f0.copy()
+        for _ in range(passes):
+            f1 = miss(t1)
+            if np.abs(f1).max() < 1e-12:
+                break
+            slope = np.where(np.abs(f1 - f0) > 1e-15, (t1 - t0) / np.where(f1 == f0, 1.0, f1 - f0), -1.0)
+            t0, f0, t1 = t1, f1, t1 - f1 * np.clip(slope, -10.0, -0.1)
+        miss(t1)
 
     def bvh(self, scale: float, lift: float) -> BVHData:
         """The rig's frames with the root's travel divided by ``scale`` and lifted by

@@ -44,6 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "it gives the stance labels of the result the target's duty factor where its feet slide",
     )
     p.add_argument("--bvh", type=Path, metavar="OUT.bvh", help="also write the result as BVH")
+    from .bvh_cmd import add_rig_options
+
+    add_rig_options(p, prefix="rig-")  # --bvh onto the user's rig (--rig, --rig-map, …)
     p.add_argument(
         "--method", default="habit", help="transfer method (default: habit; see --list-methods)"
     )
@@ -85,6 +88,8 @@ def _transfer(ns: argparse.Namespace) -> int:
         raise MotionFileError(f"--out must end in .npz, got {ns.out.name!r}")
     if ns.bvh is not None and ns.bvh.suffix.lower() != ".bvh":
         raise MotionFileError(f"--bvh must end in .bvh, got {ns.bvh.name!r}")
+    if ns.rig is not None and ns.bvh is None:
+        raise MotionFileError("--rig needs --bvh OUT.bvh (the file written on the rig)")
     from ..fileio import output_transaction
 
     # both destinations checked before the transfer; written together or not at all
@@ -153,8 +158,12 @@ def _transfer_outputs(ns: argparse.Namespace) -> int:
     )
     if ns.bvh is not None:
         from ..bvh import write_bvh
+        from .bvh_cmd import write_on_rig
 
-        write_bvh(out, ns.bvh)
-        msg += f", {ns.bvh}"
+        if ns.rig is not None:
+            msg += f", {ns.bvh} on {write_on_rig(out, ns.bvh, ns)}"
+        else:
+            write_bvh(out, ns.bvh)
+            msg += f", {ns.bvh}"
     print(msg)
     return 0
