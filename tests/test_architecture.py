@@ -300,6 +300,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.bvh",
             "habitsim.gltf",
             "habitsim.bvh_mapping",
+            "habitsim.bvh_mapping.export",
             "habitsim.render",
             "habitsim.workers",
         ),

@@ -9,7 +9,7 @@ from helpers import DOG, run_cli
 
 import habitsim
 from habitsim.bvh import read_bvh
-from habitsim.bvh_mapping import import_bvh, read_source
+from habitsim.bvh_mapping import import_bvh
 from habitsim.bvh_mapping.export import export_to_rig, round_trip
 from habitsim.errors import HabitsimError, RigExportError
 from habitsim.skeleton import JOINT_NAMES

@@ -35,17 +35,19 @@ chains, mirrored pairs, leg roles), :mod:`.automap` (the automatic mapping),
 :mod:`.map_files` (explicit joint maps), :mod:`.options` (the mapping's knobs),
 :mod:`.frame` (units and axes),
 :mod:`.result` (:class:`JointMapping`), :mod:`.identity` (habitsim's own files),
-:mod:`.retargeting` (retargeting, source stance, leg confidence) and :mod:`.importing`
-(the entry points).
+:mod:`.retargeting` (retargeting, source stance, leg confidence), :mod:`.importing`
+(the entry points) and :mod:`.export` (a habitsim motion back onto a user's rig, the
+import's inverse).
 """
 
 from __future__ import annotations
 
 from .automap import auto_map
+from .export import RigExport, RoundTrip, check_rig, export_to_rig, round_trip
 from .frame import DETECTED_UNITS as DETECTED_UNITS
 from .frame import UNIT_SCALES, FrameConversion, detect_frame
 from .identity import is_habitsim_bvh
-from .importing import SOURCE_SUFFIXES, describe_hierarchy, import_bvh, read_source
+from .importing import SOURCE_SUFFIXES, describe_hierarchy, import_bvh, map_joints, read_source
 from .limbs import LEG_PROPORTIONS as LEG_PROPORTIONS
 from .map_files import load_joint_map, validate_joint_map
 from .names import is_helper_name, name_cues
@@ -70,6 +72,12 @@ __all__ = [
     "is_habitsim_bvh",
     "retarget",
     "import_bvh",
+    "map_joints",
+    "export_to_rig",
+    "check_rig",
+    "round_trip",
+    "RigExport",
+    "RoundTrip",
     "read_source",
     "SOURCE_SUFFIXES",
     "CONFIDENCE_CHECKS",

@@ -192,6 +192,7 @@ def export_to_rig(
         if done:
             break
     out = solver.bvh(scale, 0.0)
+    assert mapping.frame is not None  # map_joints always sets it
     # The rig's lowest resting foot on its floor (the import reads heights from it).
     st = _source_stance(
         out,
@@ -245,7 +246,7 @@ class _Solver:
             ra, rb = idx[a], idx[b]
             if _path(par, ra, rb) is None:
                 continue
-            d = _unit(sum(_unit(pos[:, jn[c]] - pos[:, jn[j]]) for j, c in bones))
+            d = _unit(np.sum([_unit(pos[:, jn[c]] - pos[:, jn[j]]) for j, c in bones], axis=0))
             v = g0[ra].T @ (p0[rb] - p0[ra])
             if np.linalg.norm(v) < 1e-9:
                 continue  # a zero-length span has no direction to aim
@@ -274,9 +275,10 @@ class _Solver:
 
         self.glob, self.solved = glob, solved
         self._propagate()
-        if all(n in j2s for n in ("spine3", "lf_shoulder", "rf_shoulder")) and solved[
-            idx["spine3"]
-        ]:
+        if (
+            all(n in j2s for n in ("spine3", "lf_shoulder", "rf_shoulder"))
+            and solved[idx["spine3"]]
+        ):
             self._chest_twist(idx, rot[:, jn["spine3"]] @ _Y)
         self.hips = rh
         self.root_m = motion.root_positions
@@ -338,7 +340,9 @@ class _Solver:
             f1 = miss(t1)
             if np.abs(f1).max() < 1e-12:
                 break
-            slope = np.where(np.abs(f1 - f0) > 1e-15, (t1 - t0) / np.where(f1 == f0, 1.0, f1 - f0), -1.0)
+            slope = np.where(
+                np.abs(f1 - f0) > 1e-15, (t1 - t0) / np.where(f1 == f0, 1.0, f1 - f0), -1.0
+            )
             t0, f0, t1 = t1, f1, t1 - f1 * np.clip(slope, -10.0, -0.1)
         miss(t1)
 
@@ -357,7 +361,11 @@ class _Solver:
         trans = np.broadcast_to(tr0, (n_f, *tr0.shape)).copy()
         for j in chain[::-1]:
             p = par[j]
-            pos[:, j] = trans[:, j] if p < 0 else pos[:, p] + np.einsum("fab,fb->fa", glob[:, p], trans[:, j])
+            pos[:, j] = (
+                trans[:, j]
+                if p < 0
+                else pos[:, p] + np.einsum("fab,fb->fa", glob[:, p], trans[:, j])
+            )
         shift = target - pos[:, self.hips]
         carrier = self.carrier
         if par[carrier] < 0:
@@ -373,7 +381,7 @@ class _Solver:
         quat = quat_fix_continuity(matrix_to_quat(local_f), axis=0)
         frames0 = rig.frames[0]
         frames = np.broadcast_to(frames0, (n_f, frames0.shape[0])).copy()
-        for j, chans, start in zip(range(rig.num_joints), rig.channels, rig.channel_start):
+        for j, (chans, start) in enumerate(zip(rig.channels, rig.channel_start, strict=True)):
             rots = [c for c in chans if c in ROTATION_CHANNELS]
             if len(rots) == 3:
                 order = "".join(c[0] for c in rots)
@@ -393,7 +401,6 @@ class _Solver:
             frames,
             rig.source,
         )
-
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,103 @@
+"""``habitsim bench export``: a motion onto a user's rig and back.
+
+For each rig file and each motion (the species' synthetic walk and trot, and the rig's own
+clip imported without planting), :func:`habitsim.bvh_mapping.export_to_rig` writes the
+motion onto the rig and :func:`habitsim.bvh_mapping.round_trip` imports it back: the
+distance of every joint the rig maps from the motion's, as it comes back and with the
+import's constant root-height offset removed (the pose), in millimetres.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .targets import TargetCheck, verdict
+
+__all__ = ["ExportCase", "ExportResult", "run_export", "export_checks", "TARGET_POSE_MM"]
+
+#: import(export(m, rig)) equals m within this on every joint the rig maps [mm].
+TARGET_POSE_MM = 1.0
+#: The synthetic motions exported onto every rig.
+DEFAULT_ACTIONS = ("walk", "trot")
+
+
+@dataclass(frozen=True)
+class ExportCase:
+    """One rig and motion: where it came from and what came back (:meth:`RoundTrip.summary
+    <habitsim.bvh_mapping.RoundTrip.summary>` figures, the import's root scale, seconds)."""
+
+    rig: str
+    motion: str
+    joints: int
+    figures: dict[str, float]
+    root_scale: float
+    seconds: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "rig": self.rig,
+            "motion": self.motion,
+            "joints": self.joints,
+            **self.figures,
+            "root_scale": self.root_scale,
+            "seconds": self.seconds,
+        }
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    cases: tuple[ExportCase, ...]
+
+
+def run_export(
+    rigs: list[Path],
+    species: str = "dog",
+    duration_s: float = 4.0,
+    seed: int = 0,
+    own_seconds: float | None = 20.0,
+) -> ExportResult:
+    """Export the species' synthetic walk and trot and each rig's own clip (its first
+    ``own_seconds``, imported without planting) onto each rig and back."""
+    from habitsim.bvh_mapping import export_to_rig, import_bvh, read_source, round_trip
+    from habitsim.gaits import generate
+
+    cases = []
+    made = {a: generate(species, a, seed=seed, duration_s=duration_s) for a in DEFAULT_ACTIONS}
+    for path in rigs:
+        rig = read_source(path)
+        own, _ = import_bvh(rig, species, plant=False)
+        if own_seconds is not None:
+            own = own.slice(0, max(2, int(round(own_seconds * own.fps))))
+        for label, motion in [*made.items(), ("own clip", own)]:
+            t0 = time.perf_counter()
+            ex = export_to_rig(motion, rig)
+            rt = round_trip(ex, motion)
+            cases.append(
+                ExportCase(
+                    path.name,
+                    label,
+                    len(rt.joints),
+                    rt.summary(),
+                    ex.root_scale,
+                    time.perf_counter() - t0,
+                )
+            )
+    return ExportResult(tuple(cases))
+
+
+def export_checks(res: ExportResult) -> list[TargetCheck]:
+    """The target: the pose (joints the rig maps, the import's height offset removed)
+    within :data:`TARGET_POSE_MM` on every case."""
+    worst = max((c.figures["pose_max_mm"] for c in res.cases), default=None)
+    return [
+        TargetCheck(
+            "round-trip pose error, max over rigs and motions [mm]",
+            worst,
+            "-" if worst is None else f"{worst:.3f}",
+            f"≤ {TARGET_POSE_MM:g}",
+            verdict(None if worst is None else worst <= TARGET_POSE_MM),
+        )
+    ]
