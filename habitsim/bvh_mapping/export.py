@@ -41,6 +41,7 @@ from ..motion import Motion
 from ..rotations import matrix_to_quat, quat_fix_continuity, quat_to_euler, quat_to_matrix
 from ..skeleton import JOINT_NAMES, fk
 from ..species import load_species
+from ..stance.planting import stance_slip
 from .chains import _LEG_CHAINS
 from .importing import map_joints, read_source
 from .options import MappingOptions
@@ -50,6 +51,26 @@ from .tree import _Tree
 
 _FORWARD = ("spine3", "spine2", "spine1", "neck", "head")
 _X, _Y, _Z = np.eye(3)
+
+
+#: How the rig's root travels (:attr:`RigExportOptions.travel`).
+TRAVEL_MODES: tuple[str, ...] = ("round-trip", "feet")
+
+
+@dataclass(frozen=True)
+class RigExportOptions:
+    """The knobs of :func:`export_to_rig`.
+
+    Attributes:
+        travel: ``"round-trip"``: the root's travel is the motion's divided by the scale
+            the import finds for the rig, so importing the result gives the motion back;
+            ``"feet"``: then each frame step loses the mean step of the rig's stance toes
+            (the motion's stance labels), so the rig's own feet stay put where its
+            proportions or its hip height differ from the species' (the round trip then
+            travels as far as the rig's legs carry it).
+    """
+
+    travel: str = "round-trip"
 
 
 @dataclass(frozen=True)
@@ -157,6 +178,7 @@ def export_to_rig(
     up: str | None = None,
     animation: str | int | None = None,
     options: MappingOptions | None = None,
+    export: RigExportOptions | None = None,
 ) -> RigExport:
     """Write a habitsim motion onto a rig the mapping can map (see the module docstring).
 
@@ -168,6 +190,7 @@ def export_to_rig(
         joint_map, units, up, options: how to map the rig, as for
             :func:`~habitsim.bvh_mapping.import_bvh`.
         animation: glTF/GLB rig: the animation whose first frame is the reference pose.
+        export: how the root travels (:class:`RigExportOptions`; default: the round trip).
 
     Returns:
         The :class:`RigExport` (its :meth:`~RigExport.write` writes the BVH file).
@@ -177,6 +200,9 @@ def export_to_rig(
             turn lacks rotation channels, or no joint can carry the root's travel.
         SkeletonMappingError, BVHParseError, GLTFError: an unmappable or unreadable rig.
     """
+    export = export or RigExportOptions()
+    if export.travel not in TRAVEL_MODES:
+        raise RigExportError(f"unknown travel {export.travel!r}; valid: {', '.join(TRAVEL_MODES)}")
     src = rig if isinstance(rig, BVHData) else read_source(rig, animation=animation)
     sp = load_species(motion.species)
     mapping = map_joints(src, sp, joint_map=joint_map, units=units, up=up, options=options)
@@ -201,8 +227,19 @@ def export_to_rig(
         mapping.frame.apply(out.fk()),
         JointMapping(dict(mapping.joints), mapping.method, mapping.frame),
     )
-    if st is not None:
-        out = solver.bvh(scale, -st[0].ground)
+    lift = 0.0 if st is None else -st[0].ground
+    out = solver.bvh(scale, lift)
+    if export.travel == "feet":
+        contacts = motion.contacts if motion.contacts is not None else motion.detect_contacts()
+        j2s = mapping.mapped()
+        toes = [  # each leg's lowest mapped joint
+            out.index(next(j2s[n] for n in reversed(_LEG_CHAINS[p]) if n in j2s))
+            for p in ("lf", "rf", "lh", "rh")
+        ]
+        pos = mapping.frame.apply(out.fk()[:, toes])
+        step = np.zeros((motion.num_frames, 2))
+        step[1:] = np.cumsum(stance_slip(pos[..., :2], contacts), axis=0)
+        out = solver.bvh(scale, lift, step)
     return RigExport(out, mapping, scale, src.source)
 
 
@@ -346,13 +383,15 @@ class _Solver:
             t0, f0, t1 = t1, f1, t1 - f1 * np.clip(slope, -10.0, -0.1)
         miss(t1)
 
-    def bvh(self, scale: float, lift: float) -> BVHData:
-        """The rig's frames with the root's travel divided by ``scale`` and lifted by
-        ``lift`` [m]."""
+    def bvh(self, scale: float, lift: float, back: np.ndarray | None = None) -> BVHData:
+        """The rig's frames with the root's travel divided by ``scale``, lifted by
+        ``lift`` [m] and moved back horizontally by ``back`` ((F, 2) [m], if given)."""
         rig, glob, tr0 = self.rig, self.glob, self.tr0
         par, n_f = rig.parents, self.n_f
         target = self.root_m / scale
         target[:, 2] += lift
+        if back is not None:
+            target[:, :2] -= back
         # Positions of the hips' parent chain (the travel's carrier and above).
         pos = np.empty((n_f, rig.num_joints, 3))
         chain = [self.hips]

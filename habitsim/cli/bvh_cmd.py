@@ -175,6 +175,14 @@ def add_rig_options(p: argparse.ArgumentParser, prefix: str = "") -> None:
         help="up axis of the rig (default: detect)",
     )
     p.add_argument(
+        f"--{prefix}travel",
+        choices=("round-trip", "feet"),
+        default="round-trip",
+        dest="rig_travel",
+        help="how the rig's root travels: round-trip (default: importing the file gives the "
+        "motion back) or feet (the rig's stance feet stay put where its proportions differ)",
+    )
+    p.add_argument(
         f"--{prefix}animation",
         default=None,
         dest="rig_animation",
@@ -185,7 +193,7 @@ def add_rig_options(p: argparse.ArgumentParser, prefix: str = "") -> None:
 
 def write_on_rig(motion, out: Path, ns: argparse.Namespace) -> str:
     """Write ``motion`` onto ``ns.rig`` as BVH at ``out``; the line to print."""
-    from ..bvh_mapping.export import export_to_rig
+    from ..bvh_mapping.export import RigExportOptions, export_to_rig
 
     ex = export_to_rig(
         motion,
@@ -194,6 +202,7 @@ def write_on_rig(motion, out: Path, ns: argparse.Namespace) -> str:
         units=ns.rig_units,
         up=ns.rig_up,
         animation=_animation(ns.rig_animation),
+        export=RigExportOptions(travel=ns.rig_travel),
     )
     ex.write(out)
     fr = ex.mapping.frame
@@ -344,6 +353,7 @@ def _export(ns: argparse.Namespace) -> int:
         return 0
     given = [f for f, v in (("--map", ns.rig_map), ("--units", ns.rig_units)) if v is not None]
     given += [f for f, v in (("--up", ns.rig_up), ("--animation", ns.rig_animation)) if v]
+    given += ["--travel"] if ns.rig_travel != "round-trip" else []
     if given:
         raise MotionFileError(f"{', '.join(given)} describe a rig: give it with --rig RIG")
     write_bvh(motion, ns.out, order=ns.order)
