@@ -129,3 +129,33 @@ def test_export_bvh_rig_command_writes_the_rigs_joints(rig, trot, tmp_path, caps
     # rig options without a rig are an error
     code, err = run_cli(["data", "export-bvh", motion, "--out", out, "--up", "y"], capsys)
     assert code != 0 and "--rig" in err
+
+
+def _stance_slide(ex, motion) -> float:
+    """Median horizontal travel of the rig's toes over the motion's stance runs [m]."""
+    from habitsim.stance.labels import stance_runs
+
+    pos = ex.mapping.frame.apply(ex.bvh.fk())
+    toes = [ex.bvh.index(ex.mapping.joints[f"{p}_toe"]) for p in ("lf", "rf", "lh", "rh")]
+    runs = stance_runs(motion.detect_contacts())
+    out = [
+        np.linalg.norm(pos[b - 1, toes[k], :2] - pos[a, toes[k], :2])
+        for k, segs in enumerate(runs)
+        for a, b in segs
+        if b - a >= 3
+    ]
+    return float(np.median(out))
+
+
+def test_feet_travel_keeps_a_rig_of_other_proportions_on_its_feet(trot):
+    from habitsim.bvh_mapping.export import RigExportOptions
+
+    horse = _foreign_rig(habitsim.generate("horse", "walk", seed=2, duration_s=1.0))
+    walk = habitsim.generate("dog", "walk", seed=4, duration_s=2.0)
+    trip = export_to_rig(walk, horse)
+    feet = export_to_rig(walk, horse, export=RigExportOptions(travel="feet"))
+    assert _stance_slide(feet, walk) < 0.8 * _stance_slide(trip, walk)
+    # the pose is the same either way; only the root's horizontal path differs
+    assert np.allclose(feet.bvh.local_rotations()[:, 3:], trip.bvh.local_rotations()[:, 3:])
+    with pytest.raises(RigExportError, match="travel"):
+        export_to_rig(walk, horse, export=RigExportOptions(travel="skate"))
