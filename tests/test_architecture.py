@@ -299,6 +299,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.transfer_methods",
             "habitsim.bvh",
             "habitsim.gltf",
+            "habitsim.gltf_export",
             "habitsim.bvh_mapping",
             "habitsim.bvh_mapping.export",
             "habitsim.render",

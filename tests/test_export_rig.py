@@ -159,3 +159,27 @@ def test_feet_travel_keeps_a_rig_of_other_proportions_on_its_feet(trot):
     assert np.allclose(feet.bvh.local_rotations()[:, 3:], trip.bvh.local_rotations()[:, 3:])
     with pytest.raises(RigExportError, match="travel"):
         export_to_rig(walk, horse, export=RigExportOptions(travel="skate"))
+
+
+def test_fox_gltf_rig_round_trip_and_glb_copy(tmp_path):
+    from importlib import resources
+
+    import pygltflib
+
+    from habitsim.gltf import list_gltf_animations, read_gltf
+
+    fox = resources.files("habitsim.examples") / "Fox.glb"
+    own, _ = import_bvh(read_gltf(fox, "Walk"), "dog", plant=False)
+    ex = export_to_rig(own, fox, animation="Walk")
+    assert round_trip(ex, own).error.max() <= 1e-3
+    out = ex.write(tmp_path / "fox_habitsim.glb")
+    names = [a.name for a in list_gltf_animations(out)]
+    assert names == ["Survey", "Walk", "Run", "habitsim"]
+    back = read_gltf(out, "habitsim", fps=own.fps)
+    assert back.names == ex.bvh.names
+    np.testing.assert_allclose(back.fk(), ex.bvh.fk(), atol=1e-3)  # float32 keys, cm
+    a, b = pygltflib.GLTF2().load(str(fox)), pygltflib.GLTF2().load(str(out))
+    assert len(a.meshes) == len(b.meshes) and len(a.skins) == len(b.skins)
+    # a glTF output needs a glTF rig
+    with pytest.raises(RigExportError, match="glTF"):
+        export_to_rig(own, read_bvh(DOG)).write(tmp_path / "x.glb")

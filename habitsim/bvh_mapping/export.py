@@ -37,6 +37,7 @@ import numpy as np
 from ..bvh import POSITION_CHANNELS, ROTATION_CHANNELS, BVHData
 from ..errors import RigExportError
 from ..fileio import atomic_write
+from ..gltf_export import GLTF_SUFFIXES, add_gltf_animation
 from ..motion import Motion
 from ..rotations import matrix_to_quat, quat_fix_continuity, quat_to_euler, quat_to_matrix
 from ..skeleton import JOINT_NAMES, fk
@@ -89,14 +90,33 @@ class RigExport:
     mapping: JointMapping
     root_scale: float
     rig: str
+    animation: str | int | None = None
 
     def text(self) -> str:
         """The BVH file's text."""
         return self.bvh.to_text()
 
     def write(self, path: str | Path) -> Path:
-        """Write the BVH file atomically (nothing is left on a failure)."""
+        """Write the result atomically (nothing is left on a failure): a ``.bvh`` file, or
+        for a glTF/GLB rig a ``.glb`` / ``.gltf`` copy of the rig's model with the motion
+        added as the animation ``habitsim`` (:func:`habitsim.gltf_export.add_gltf_animation`).
+
+        Raises:
+            RigExportError: a glTF output for a rig that is not a glTF file, or another type.
+        """
         p = Path(path)
+        kind = p.suffix.lower()
+        if kind in GLTF_SUFFIXES:
+            if Path(self.rig).suffix.lower() not in GLTF_SUFFIXES:
+                raise RigExportError(
+                    f"{p.name}: a glTF output needs a glTF/GLB rig (the rig is "
+                    f"{Path(self.rig).name}); write a .bvh"
+                )
+            return add_gltf_animation(self.rig, self.bvh, p, animation=self.animation)
+        if kind != ".bvh":
+            raise RigExportError(
+                f"{p.name}: unknown output type; valid: .bvh, or .glb / .gltf for a glTF rig"
+            )
         with atomic_write(p, "w") as fh:
             fh.write(self.text())
         return p
@@ -240,7 +260,7 @@ def export_to_rig(
         step = np.zeros((motion.num_frames, 2))
         step[1:] = np.cumsum(stance_slip(pos[..., :2], contacts), axis=0)
         out = solver.bvh(scale, lift, step)
-    return RigExport(out, mapping, scale, src.source)
+    return RigExport(out, mapping, scale, src.source, animation)
 
 
 class _Solver:

@@ -132,7 +132,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     e.add_argument("motion", type=Path, help="input motion file (.npz)")
-    e.add_argument("--out", required=True, type=Path, help="output .bvh file")
+    e.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        help="output .bvh file (with a glTF/GLB --rig also .glb / .gltf: a copy of the model "
+        "with the motion added as the animation 'habitsim')",
+    )
     e.add_argument(
         "--order",
         default="ZXY",
@@ -343,8 +349,9 @@ def _export(ns: argparse.Namespace) -> int:
     from ..bvh import write_bvh
     from ..motion import load_motion
 
-    if ns.out.suffix.lower() != ".bvh":
-        raise MotionFileError(f"--out must end in .bvh, got {ns.out.name!r}")
+    kinds = (".bvh", ".glb", ".gltf") if ns.rig is not None else (".bvh",)
+    if ns.out.suffix.lower() not in kinds:
+        raise MotionFileError(f"--out must end in {' or '.join(kinds)}, got {ns.out.name!r}")
     check_writable(ns.out, "--out")
     motion = load_motion(ns.motion)
     if ns.rig is not None:
