@@ -41,7 +41,7 @@ from ..gltf_export import GLTF_SUFFIXES, add_gltf_animation
 from ..motion import Motion
 from ..rotations import matrix_to_quat, quat_fix_continuity, quat_to_euler, quat_to_matrix
 from ..skeleton import JOINT_NAMES, fk
-from ..species import load_species
+from ..species import Species, load_species
 from ..stance.planting import stance_slip
 from .chains import _LEG_CHAINS
 from .importing import map_joints, read_source
@@ -228,15 +228,7 @@ def export_to_rig(
     mapping = map_joints(src, sp, joint_map=joint_map, units=units, up=up, options=options)
     check_rig(mapping, Path(src.source).name)
     solver = _Solver(motion, src, mapping)
-    scale = 1.0
-    for _ in range(4):  # the import's root scale hardly depends on the travel's scale
-        out = solver.bvh(scale, 0.0)
-        probe = JointMapping(dict(mapping.joints), mapping.method, mapping.frame)
-        retarget(out, probe, sp, plant=False)
-        done = abs(probe.root_scale - scale) <= 1e-9 * scale
-        scale = probe.root_scale
-        if done:
-            break
+    scale = _root_scale(solver, mapping, sp)
     out = solver.bvh(scale, 0.0)
     assert mapping.frame is not None  # map_joints always sets it
     # The rig's lowest resting foot on its floor (the import reads heights from it).
@@ -261,6 +253,37 @@ def export_to_rig(
         step[1:] = np.cumsum(stance_slip(pos[..., :2], contacts), axis=0)
         out = solver.bvh(scale, lift, step)
     return RigExport(out, mapping, scale, src.source, animation)
+
+
+def _root_scale(solver: _Solver, mapping: JointMapping, sp: Species) -> float:
+    """The travel scale ``c`` at which the import finds root scale ``k(c) = c`` for the
+    rig: fixed-point passes (``k`` hardly depends on ``c``), then, where the stance the
+    import finds on the rig's feet changes with ``c`` and ``k`` jumps across ``c``, a
+    bisection onto the jump (the ``c`` with the smallest ``|k(c) - c|`` is kept)."""
+
+    def k(c: float) -> float:
+        probe = JointMapping(dict(mapping.joints), mapping.method, mapping.frame)
+        retarget(solver.bvh(c, 0.0), probe, sp, plant=False)
+        return probe.root_scale
+
+    seen: dict[float, float] = {}
+    c = 1.0
+    for _ in range(6):
+        seen[c] = k(c)
+        if abs(seen[c] - c) <= 1e-9 * c:
+            return c
+        c = seen[c]
+    below = [x for x, y in seen.items() if y > x]
+    above = [x for x, y in seen.items() if y < x]
+    if below and above:
+        lo, hi = max(below), min(above)
+        for _ in range(30):
+            if hi - lo <= 1e-9 * hi:
+                break
+            mid = 0.5 * (lo + hi)
+            seen[mid] = k(mid)
+            lo, hi = (mid, hi) if seen[mid] > mid else (lo, mid)
+    return min(seen, key=lambda x: abs(seen[x] - x))
 
 
 class _Solver:
