@@ -183,3 +183,13 @@ def test_fox_gltf_rig_round_trip_and_glb_copy(tmp_path):
     # a glTF output needs a glTF rig
     with pytest.raises(RigExportError, match="glTF"):
         export_to_rig(own, read_bvh(DOG)).write(tmp_path / "x.glb")
+
+
+def test_habitsim_rig_of_another_species_round_trips(trot, tmp_path):
+    from habitsim.bvh import write_bvh
+
+    horse = tmp_path / "horse.bvh"
+    write_bvh(habitsim.generate("horse", "walk", seed=1, duration_s=1.0), horse)
+    ex = export_to_rig(trot, horse)
+    assert ex.mapping.method == "identity" and ex.root_scale != 1.0
+    assert round_trip(ex, trot).error.max() <= 1e-3

@@ -16,7 +16,14 @@ from typing import Any
 
 from .targets import TargetCheck, verdict
 
-__all__ = ["ExportCase", "ExportResult", "run_export", "export_checks", "TARGET_POSE_MM"]
+__all__ = [
+    "ExportCase",
+    "ExportResult",
+    "run_export",
+    "export_checks",
+    "rig_stance_slide",
+    "TARGET_POSE_MM",
+]
 
 #: import(export(m, rig)) equals m within this on every joint the rig maps [mm].
 TARGET_POSE_MM = 1.0
@@ -35,6 +42,8 @@ class ExportCase:
     figures: dict[str, float]
     root_scale: float
     seconds: float
+    slide_mm: float
+    slide_feet_mm: float
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -44,7 +53,33 @@ class ExportCase:
             **self.figures,
             "root_scale": self.root_scale,
             "seconds": self.seconds,
+            "slide_mm": self.slide_mm,
+            "slide_feet_mm": self.slide_feet_mm,
         }
+
+
+def rig_stance_slide(export: Any, motion: Any) -> float:
+    """Median horizontal travel [mm] of the rig's feet (each leg's lowest mapped joint)
+    over the motion's stance runs of at least 3 frames; NaN without such runs."""
+    import numpy as np
+
+    from habitsim.bvh_mapping.chains import _LEG_CHAINS
+    from habitsim.stance.labels import stance_runs
+
+    j2s = export.mapping.mapped()
+    feet = [
+        export.bvh.index(next(j2s[n] for n in reversed(_LEG_CHAINS[p]) if n in j2s))
+        for p in ("lf", "rf", "lh", "rh")
+    ]
+    pos = export.mapping.frame.apply(export.bvh.fk()[:, feet])
+    contacts = motion.contacts if motion.contacts is not None else motion.detect_contacts()
+    moved = [
+        float(np.linalg.norm(pos[b - 1, k, :2] - pos[a, k, :2]))
+        for k, runs in enumerate(stance_runs(contacts))
+        for a, b in runs
+        if b - a >= 3
+    ]
+    return float(np.median(moved)) * 1e3 if moved else float("nan")
 
 
 @dataclass(frozen=True)
@@ -62,6 +97,7 @@ def run_export(
     """Export the species' synthetic walk and trot and each rig's own clip (its first
     ``own_seconds``, imported without planting) onto each rig and back."""
     from habitsim.bvh_mapping import export_to_rig, import_bvh, read_source, round_trip
+    from habitsim.bvh_mapping.export import RigExportOptions
     from habitsim.gaits import generate
 
     cases = []
@@ -75,6 +111,8 @@ def run_export(
             t0 = time.perf_counter()
             ex = export_to_rig(motion, rig)
             rt = round_trip(ex, motion)
+            seconds = time.perf_counter() - t0
+            feet = export_to_rig(motion, rig, export=RigExportOptions(travel="feet"))
             cases.append(
                 ExportCase(
                     path.name,
@@ -82,7 +120,9 @@ def run_export(
                     len(rt.joints),
                     rt.summary(),
                     ex.root_scale,
-                    time.perf_counter() - t0,
+                    seconds,
+                    rig_stance_slide(ex, motion),
+                    rig_stance_slide(feet, motion),
                 )
             )
     return ExportResult(tuple(cases))

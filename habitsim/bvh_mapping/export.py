@@ -44,6 +44,8 @@ from ..skeleton import JOINT_NAMES, fk
 from ..species import Species, load_species
 from ..stance.planting import stance_slip
 from .chains import _LEG_CHAINS
+from .frame import FrameConversion, _parse_up
+from .identity import _habitsim_order, identity_root_scale, is_habitsim_bvh
 from .importing import map_joints, read_source
 from .options import MappingOptions
 from .result import JointMapping
@@ -160,7 +162,8 @@ def check_rig(mapping: JointMapping, where: str) -> None:
     j2s = mapping.mapped()
     spans = _spans(j2s)
     fix = (
-        "map it with a joint-map file (--map; 'habitsim data inspect-bvh RIG' prints one to "
+        "map it with a joint-map file (--map, for transfer --rig-map; "
+        "'habitsim data inspect-bvh RIG' prints one to "
         "edit), or give a rig with that chain"
     )
     if not any(n in j2s for n in _FORWARD):
@@ -225,6 +228,11 @@ def export_to_rig(
         raise RigExportError(f"unknown travel {export.travel!r}; valid: {', '.join(TRAVEL_MODES)}")
     src = rig if isinstance(rig, BVHData) else read_source(rig, animation=animation)
     sp = load_species(motion.species)
+    plain = (units is None or (isinstance(units, str) and units.lower() == "m")) and (
+        up is None or _parse_up(up) == "+z"
+    )
+    if joint_map is None and plain and is_habitsim_bvh(src):
+        return _identity_export(motion, src, sp)
     mapping = map_joints(src, sp, joint_map=joint_map, units=units, up=up, options=options)
     check_rig(mapping, Path(src.source).name)
     solver = _Solver(motion, src, mapping)
@@ -253,6 +261,48 @@ def export_to_rig(
         step[1:] = np.cumsum(stance_slip(pos[..., :2], contacts), axis=0)
         out = solver.bvh(scale, lift, step)
     return RigExport(out, mapping, scale, src.source, animation)
+
+
+def _identity_export(motion: Motion, rig: BVHData, sp: Species) -> RigExport:
+    """A habitsim file as the rig: the import copies its rotations and root translation
+    (the root scaled when its offsets are not the species'), so the motion's go in."""
+    keep = _habitsim_order(rig)
+    assert keep is not None
+    scale = identity_root_scale(rig, sp)
+    frames = np.broadcast_to(rig.frames[0], (motion.num_frames, rig.num_channels)).copy()
+    starts = rig.channel_start
+    for h, j in enumerate(keep):
+        chans = rig.channels[j]
+        rots = [c for c in chans if c in ROTATION_CHANNELS]
+        if len(rots) != 3:
+            raise RigExportError(
+                f"{Path(rig.source).name}: joint {rig.names[j]!r} has channels "
+                f"{' '.join(chans) or '(none)'}; a habitsim rig needs three rotation channels"
+            )
+        euler = np.degrees(quat_to_euler(motion.rotations[:, h], "".join(c[0] for c in rots)))
+        for k, c in enumerate(rots):
+            frames[:, starts[j] + chans.index(c)] = euler[:, k]
+    root = keep[0]
+    if not all(c in rig.channels[root] for c in POSITION_CHANNELS):
+        raise RigExportError(
+            f"{Path(rig.source).name}: the root {rig.names[root]!r} has no Xposition "
+            "Yposition Zposition channels to carry the motion's travel"
+        )
+    for k, c in enumerate(POSITION_CHANNELS):
+        frames[:, starts[root] + rig.channels[root].index(c)] = motion.root_positions[:, k] / scale
+    out = BVHData(
+        rig.names,
+        rig.parents,
+        rig.offsets,
+        rig.channels,
+        rig.is_end_site,
+        1.0 / motion.fps,
+        frames,
+        rig.source,
+    )
+    frame = FrameConversion.from_axes(1.0, "m", "+z", "+x")
+    mapping = JointMapping({n: n for n in JOINT_NAMES}, "identity", frame, scale)
+    return RigExport(out, mapping, scale, rig.source)
 
 
 def _root_scale(solver: _Solver, mapping: JointMapping, sp: Species) -> float:
@@ -544,8 +594,9 @@ def round_trip(
     again, mapping = import_bvh(
         back, motion.species, joint_map=joint_map, units=units, up=up, plant=plant
     )
-    assert mapping.frame is not None and export.mapping.frame is not None
-    turn = export.mapping.frame.matrix @ mapping.frame.matrix.T  # re-import -> motion axes
+    turn = np.eye(3)  # re-import -> motion axes (an identity import keeps habitsim's)
+    if mapping.frame is not None and export.mapping.frame is not None:
+        turn = export.mapping.frame.matrix @ mapping.frame.matrix.T
     joints = tuple(n for n in JOINT_NAMES if n in export.mapping.mapped())
     jx = [JOINT_NAMES.index(n) for n in joints]
     got = again.global_positions()[:, jx] @ turn.T

@@ -1,7 +1,8 @@
 """``habitsim bench export``: a motion onto a user's rig and back (the benchmark is
 :mod:`habitsim.evaluation.bench.export`). Prints, per rig and motion, the round trip's
 max / median error on the joints the rig maps, the same with the import's root-height
-offset removed (the pose), the offset and the import's root scale; ``--json`` prints one
+offset removed (the pose), the offset, the import's root scale, and the median slide of the
+rig's stance feet with the default travel and with ``--travel feet``; ``--json`` prints one
 object per case."""
 
 from __future__ import annotations
@@ -57,14 +58,16 @@ def _bench_export(ns: argparse.Namespace) -> int:
     else:
         print(
             f"{'rig':<28} {'motion':<9} {'joints':>6} {'max':>8} {'median':>8} "
-            f"{'pose max':>9} {'pose med':>9} {'height':>8} {'scale':>7}  (mm)"
+            f"{'pose max':>9} {'pose med':>9} {'height':>8} {'scale':>7} {'slide':>6} "
+            f"{'feet':>6}  (mm)"
         )
         for c in res.cases:
             f = c.figures
             print(
                 f"{c.rig[:28]:<28} {c.motion:<9} {c.joints:>6} {f['max_mm']:8.3f} "
                 f"{f['median_mm']:8.3f} {f['pose_max_mm']:9.3f} {f['pose_median_mm']:9.3f} "
-                f"{f['height_offset_mm']:8.2f} {c.root_scale:7.4f}"
+                f"{f['height_offset_mm']:8.2f} {c.root_scale:7.4f} {c.slide_mm:6.1f} "
+                f"{c.slide_feet_mm:6.1f}"
             )
     checks = export_checks(res)
     for t in checks:
