@@ -28,7 +28,7 @@ as a constant height offset). See docs/import.md, "Back onto your rig".
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -260,7 +260,31 @@ def export_to_rig(
         step = np.zeros((motion.num_frames, 2))
         step[1:] = np.cumsum(stance_slip(pos[..., :2], contacts), axis=0)
         out = solver.bvh(scale, lift, step)
+    else:
+        out = _centred(solver, out, scale, lift, lambda b: _import_scale(b, mapping, sp))
     return RigExport(out, mapping, scale, src.source, animation)
+
+
+def _import_scale(bvh: BVHData, mapping: JointMapping, sp: Species) -> float:
+    """The root scale the import finds for ``bvh`` (retargeted without planting)."""
+    probe = JointMapping(dict(mapping.joints), mapping.method, mapping.frame)
+    retarget(bvh, probe, sp, plant=False)
+    return probe.root_scale
+
+
+def _centred(solver: _Solver, out: BVHData, scale: float, lift: float, k: Callable) -> BVHData:
+    """Where the import's root scale ``k`` of the result still differs from ``scale`` (the
+    stance it finds jumps there), shift the travel so the import's error is centred on the
+    clip's horizontal extent instead of growing from the origin (a shift does not change
+    the stance the import finds, so ``k`` stays)."""
+    k_out = k(out)
+    if abs(k_out - scale) <= 1e-9 * scale:
+        return out
+    root = solver.root_m[:, :2]
+    mid = 0.5 * (root.min(axis=0) + root.max(axis=0))
+    shift = mid * (1.0 / k_out - 1.0 / scale)
+    moved = solver.bvh(scale, lift, np.broadcast_to(-shift, root.shape))
+    return moved if abs(k(moved) - k_out) <= 1e-9 * scale else out
 
 
 def _identity_export(motion: Motion, rig: BVHData, sp: Species) -> RigExport:
@@ -312,9 +336,7 @@ def _root_scale(solver: _Solver, mapping: JointMapping, sp: Species) -> float:
     bisection onto the jump (the ``c`` with the smallest ``|k(c) - c|`` is kept)."""
 
     def k(c: float) -> float:
-        probe = JointMapping(dict(mapping.joints), mapping.method, mapping.frame)
-        retarget(solver.bvh(c, 0.0), probe, sp, plant=False)
-        return probe.root_scale
+        return _import_scale(solver.bvh(c, 0.0), mapping, sp)
 
     seen: dict[float, float] = {}
     c = 1.0
