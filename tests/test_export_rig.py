@@ -193,3 +193,27 @@ def test_habitsim_rig_of_another_species_round_trips(trot, tmp_path):
     ex = export_to_rig(trot, horse)
     assert ex.mapping.method == "identity" and ex.root_scale != 1.0
     assert round_trip(ex, trot).error.max() <= 1e-3
+
+
+@pytest.mark.slow  # the transfer stage's imports and planting: tens of seconds
+def test_transfer_onto_a_rig_in_one_step(trot, tmp_path, capsys):
+    motion = tmp_path / "trot.npz"
+    trot.save(motion)
+    cat_rig = _foreign_rig(habitsim.generate("cat", "walk", seed=1, duration_s=1.0))
+    rig = tmp_path / "cat_rig.bvh"
+    rig.write_text(cat_rig.to_text())
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = ["transfer", motion, "--to", "cat", "--method", "direct", "--out", out / "cat.npz"]
+    code, _ = run_cli([*argv, "--bvh", out / "cat.bvh", "--rig", rig], capsys)
+    assert code == 0
+    assert read_bvh(out / "cat.bvh").names == cat_rig.names
+    # a rig map that leaves the fore legs out: refused, nothing written
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"map": {"pelvis": "Hips_jnt", "spine3": "Chest", "lh_hip": "L_Thigh"}}')
+    code, err = run_cli(
+        [*argv[:-1], out / "b.npz", "--bvh", out / "b.bvh", "--rig", rig, "--rig-map", bad],
+        capsys,
+    )
+    assert code == 2 and "leg is not animatable" in err
+    assert sorted(p.name for p in out.iterdir()) == ["cat.bvh", "cat.npz"]
