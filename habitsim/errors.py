@@ -50,6 +50,12 @@ class SkeletonMappingError(HabitsimError, ValueError):
     """A source skeleton that cannot be mapped onto the habitsim quadruped topology."""
 
 
+class RigExportError(HabitsimError, ValueError):
+    """A rig that cannot take a habitsim motion: a leg or the trunk the mapping leaves
+    unanimated, a joint without the channels its rotation needs, no joint to carry the
+    root's travel."""
+
+
 class IKError(HabitsimError, ValueError):
     """An inverse-kinematics request with invalid input."""
 

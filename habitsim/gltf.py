@@ -453,6 +453,34 @@ def _joint_names(f: _File, order: list[int]) -> list[str]:
     return names
 
 
+def _rig_nodes(f: _File, ai: int) -> tuple[list[int], int, list[int], list[int], set[int]]:
+    """The nodes :func:`read_gltf` makes joints of for animation ``ai``: every node's
+    parent, the root, the joints in depth-first order (children in node order), the nodes
+    above the root (top first) and the joint set."""
+    doc = f.doc
+    targets = _target_nodes(doc.animations[ai])
+    skin_i = max(
+        range(len(doc.skins)), key=lambda s: (len(targets & set(doc.skins[s].joints or [])), -s)
+    )
+    par = _parents(f)
+    root, keep = _joint_set(f, skin_i, par)
+    keep_set = set(keep)
+    order: list[int] = []
+    stack = [root]
+    while stack:
+        j = stack.pop()
+        order.append(j)
+        kids = [c for c in (doc.nodes[j].children or []) if c in keep_set]
+        stack.extend(reversed(kids))
+    above = []
+    j = par[root]
+    while j >= 0:
+        above.append(j)
+        j = par[j]
+    above.reverse()
+    return par, root, order, above, keep_set
+
+
 def read_gltf(path: str | Path, animation: str | int | None = None, fps: float = 30.0) -> BVHData:
     """Read one skinned animation of a glTF 2.0 file as BVH data (see the module docstring).
 
@@ -482,28 +510,7 @@ def read_gltf(path: str | Path, animation: str | int | None = None, fps: float =
         raise f.error("no skin in the file: read_gltf needs a skinned (rigged) model with joints")
     ai = _select_animation(f, animation)
     anim = doc.animations[ai]
-    targets = _target_nodes(anim)
-    skin_i = max(
-        range(len(doc.skins)), key=lambda s: (len(targets & set(doc.skins[s].joints or [])), -s)
-    )
-    par = _parents(f)
-    root, keep = _joint_set(f, skin_i, par)
-    keep_set = set(keep)
-
-    # Depth-first order from the root, children in node order.
-    order: list[int] = []
-    stack = [root]
-    while stack:
-        j = stack.pop()
-        order.append(j)
-        kids = [c for c in (doc.nodes[j].children or []) if c in keep_set]
-        stack.extend(reversed(kids))
-    above = []  # nodes above the root, top first
-    j = par[root]
-    while j >= 0:
-        above.append(j)
-        j = par[j]
-    above.reverse()
+    par, root, order, above, keep_set = _rig_nodes(f, ai)
 
     # Sample every node that matters.
     lo, hi = _times(f, anim, ai)

@@ -15,6 +15,7 @@ from habitsim.cli.conventions import ListAction, check_exit, split_names
 _SINGLE = {
     ("bench real", "--species"),
     ("bench inplace", "--species"),
+    ("bench export", "--species"),
     ("data import-bvh", "--species"),
     ("data inspect-bvh", "--species"),
     # the one skeleton a motion-capture source is imported onto (also --from)

@@ -41,17 +41,18 @@ chains, mirrored pairs, leg roles), :mod:`.automap` (the automatic mapping),
 :mod:`.result` (:class:`JointMapping`), :mod:`.identity` (habitsim's own files),
 :mod:`.retargeting` (retargeting, source stance, leg confidence), :mod:`.inplace` (in-place
 clips, their travel recovered from the stance feet), :mod:`.loops` (loops and their
-repeats) and :mod:`.importing`
-(the entry points).
+repeats), :mod:`.importing` (the entry points) and :mod:`.export` (a habitsim motion back
+onto a user's rig, the import's inverse).
 """
 
 from __future__ import annotations
 
 from .automap import auto_map
+from .export import RigExport, RoundTrip, check_rig, export_to_rig, round_trip
 from .frame import DETECTED_UNITS as DETECTED_UNITS
 from .frame import UNIT_SCALES, FrameConversion, UpEvidence, detect_frame, find_up
 from .identity import is_habitsim_bvh
-from .importing import SOURCE_SUFFIXES, describe_hierarchy, import_bvh, read_source
+from .importing import SOURCE_SUFFIXES, describe_hierarchy, import_bvh, map_joints, read_source
 from .inplace import InPlaceFit, InPlaceOptions, InPlaceOptionsError, recover_in_place
 from .limbs import LEG_PROPORTIONS as LEG_PROPORTIONS
 from .loops import LoopError, LoopFit, LoopOptions, detect_loop, repeat_loop
@@ -91,6 +92,12 @@ __all__ = [
     "is_habitsim_bvh",
     "retarget",
     "import_bvh",
+    "map_joints",
+    "export_to_rig",
+    "check_rig",
+    "round_trip",
+    "RigExport",
+    "RoundTrip",
     "read_source",
     "SOURCE_SUFFIXES",
     "CONFIDENCE_CHECKS",

@@ -34,6 +34,18 @@ def is_habitsim_bvh(bvh: BVHData) -> bool:
     return _habitsim_order(bvh) is not None
 
 
+def identity_root_scale(bvh: BVHData, species: Species) -> float:
+    """The factor the identity import applies to a habitsim file's root translation: 1
+    when its offsets are the species' skeleton's, else the hind-leg length ratio."""
+    keep = _habitsim_order(bvh)
+    assert keep is not None
+    off = bvh.offsets[keep]
+    if np.allclose(off[1:], get_skeleton(species).offsets[1:], atol=1e-6):
+        return 1.0
+    src_leg = sum(float(np.linalg.norm(off[_IDX[n]])) for n in ("lh_knee", "lh_hock", "lh_toe"))
+    return species.hind_leg_length / src_leg if src_leg > 0 else 1.0
+
+
 def _identity_import(bvh: BVHData, species: Species) -> tuple[Motion, JointMapping]:
     keep = _habitsim_order(bvh)
     assert keep is not None
@@ -42,11 +54,8 @@ def _identity_import(bvh: BVHData, species: Species) -> tuple[Motion, JointMappi
     skel = get_skeleton(species)
     notes = ["habitsim-exported file: rotations and root translation copied"]
     codes = [MappingNote.COPIED]
-    off = bvh.offsets[keep]
-    scale = 1.0
-    if not np.allclose(off[1:], skel.offsets[1:], atol=1e-6):
-        src_leg = sum(float(np.linalg.norm(off[_IDX[n]])) for n in ("lh_knee", "lh_hock", "lh_toe"))
-        scale = species.hind_leg_length / src_leg if src_leg > 0 else 1.0
+    scale = identity_root_scale(bvh, species)
+    if not np.allclose(bvh.offsets[keep][1:], skel.offsets[1:], atol=1e-6):
         codes.append(MappingNote.ROOT_SCALED)
         notes.append(
             f"bone offsets differ from the {species.name} skeleton: root translation scaled "

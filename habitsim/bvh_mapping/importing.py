@@ -112,6 +112,69 @@ def _in_place(motion: Motion, options: InPlaceOptions | None) -> bool:
     return fit.detected
 
 
+def map_joints(
+    bvh: BVHData,
+    species: str | Species,
+    joint_map: str | Path | Mapping[str, str] | None = None,
+    units: str | float | None = None,
+    up: str | None = None,
+    options: MappingOptions | None = None,
+) -> JointMapping:
+    """The joint mapping and frame conversion :func:`import_bvh` uses for a source
+    skeleton, without retargeting its motion (arguments as :func:`import_bvh`'s).
+
+    Raises:
+        SkeletonMappingError: unmappable skeleton or invalid joint map.
+    """
+    sp = load_species(species)
+    options = options or MappingOptions()
+    notes: list[str] = []
+    codes: list[MappingNote] = []
+    geometric: list[tuple[str, str]] = []
+    if joint_map is None:
+        if is_habitsim_bvh(bvh):
+            joints = validate_joint_map({n: n for n in JOINT_NAMES}, bvh)
+            method = "habitsim names, converted"
+        else:
+            an = _analyse(bvh, options)
+            joints, geometric, notes, codes = an.joints, an.geometric_sides, an.notes, an.note_codes
+            method = "auto"
+    elif isinstance(joint_map, Mapping):
+        joints = validate_joint_map(joint_map, bvh)
+        method = "explicit"
+    else:
+        spec = load_joint_map(joint_map)
+        if spec["extends"] == "auto":
+            an = _analyse(bvh, options)
+            base = dict(an.joints)
+            base.update(spec["map"])
+            joints = validate_joint_map(base, bvh, where=str(joint_map))
+            codes = [*an.note_codes, MappingNote.SET_BY_HAND]
+            notes = an.notes + [f"joints set by hand: {', '.join(sorted(spec['map']))}"]
+            geometric = [
+                (lp, rp)
+                for lp, rp in an.geometric_sides
+                if not any(n in spec["map"] for n in _LEG_CHAINS[lp] + _LEG_CHAINS[rp])
+            ]
+            method = f"auto, overridden by map file {joint_map}"
+        else:
+            joints = validate_joint_map(spec["map"], bvh, where=str(joint_map))
+            method = f"map file {joint_map}"
+        units = units if units is not None else spec["units"]
+        up = up if up is not None else spec["up"]
+
+    frame = detect_frame(bvh, joints, units=units, up=up, species=sp, options=options)
+    if geometric:
+        an2 = _Analysis(joints, geometric, notes, codes)
+        _resolve_sides(bvh, an2, frame)
+    mapping = JointMapping(joints, method, frame, 1.0, list(notes), note_codes=list(codes))
+    ev = frame.up_evidence
+    if ev is not None and ev.source != "given":
+        code = MappingNote.UP_UNSURE if ev.unsure else MappingNote.UP_FROM_FEET
+        mapping.note(code, ev.describe())
+    return mapping
+
+
 def import_bvh(
     path: str | Path | BVHData,
     species: str | Species,
@@ -170,50 +233,7 @@ def import_bvh(
         if not _in_place(copied[0], inplace):
             return copied
 
-    notes: list[str] = []
-    codes: list[MappingNote] = []
-    geometric: list[tuple[str, str]] = []
-    if joint_map is None:
-        if is_habitsim_bvh(bvh):
-            joints = validate_joint_map({n: n for n in JOINT_NAMES}, bvh)
-            method = "habitsim names, converted"
-        else:
-            an = _analyse(bvh, options)
-            joints, geometric, notes, codes = an.joints, an.geometric_sides, an.notes, an.note_codes
-            method = "auto"
-    elif isinstance(joint_map, Mapping):
-        joints = validate_joint_map(joint_map, bvh)
-        method = "explicit"
-    else:
-        spec = load_joint_map(joint_map)
-        if spec["extends"] == "auto":
-            an = _analyse(bvh, options)
-            base = dict(an.joints)
-            base.update(spec["map"])
-            joints = validate_joint_map(base, bvh, where=str(joint_map))
-            codes = [*an.note_codes, MappingNote.SET_BY_HAND]
-            notes = an.notes + [f"joints set by hand: {', '.join(sorted(spec['map']))}"]
-            geometric = [
-                (lp, rp)
-                for lp, rp in an.geometric_sides
-                if not any(n in spec["map"] for n in _LEG_CHAINS[lp] + _LEG_CHAINS[rp])
-            ]
-            method = f"auto, overridden by map file {joint_map}"
-        else:
-            joints = validate_joint_map(spec["map"], bvh, where=str(joint_map))
-            method = f"map file {joint_map}"
-        units = units if units is not None else spec["units"]
-        up = up if up is not None else spec["up"]
-
-    frame = detect_frame(bvh, joints, units=units, up=up, species=sp, options=options)
-    if geometric:
-        an2 = _Analysis(joints, geometric, notes, codes)
-        _resolve_sides(bvh, an2, frame)
-    mapping = JointMapping(joints, method, frame, 1.0, list(notes), note_codes=list(codes))
-    ev = frame.up_evidence
-    if ev is not None and ev.source != "given":
-        code = MappingNote.UP_UNSURE if ev.unsure else MappingNote.UP_FROM_FEET
-        mapping.note(code, ev.describe())
+    mapping = map_joints(bvh, sp, joint_map=joint_map, units=units, up=up, options=options)
     motion = retarget(bvh, mapping, sp, plant=plant, inplace=inplace, loops=loops)
     motion.metadata["mapping"] = mapping.to_dict()
     return motion, mapping

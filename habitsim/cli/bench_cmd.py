@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 from ..evaluation.bench.data import DEFAULT_CLIPS, TARGET_BUILD_S
 from . import (
     bench_balance,
+    bench_export,
     bench_inplace,
     bench_model,
     bench_real,
@@ -40,6 +41,7 @@ _EXTRA = (
     bench_train,
     bench_model,
     bench_real,
+    bench_export,
     bench_inplace,
 )
 

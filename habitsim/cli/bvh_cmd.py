@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 from ..errors import MotionFileError
 from ..fileio import check_writable
-from .conventions import add_source_options, source_options
+from .conventions import UNIT_CHOICES, UP_CHOICES, add_source_options, source_options
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..motion import Motion
@@ -107,16 +107,112 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     e = sub.add_parser(
         "export-bvh",
-        help="export a motion .npz to BVH",
+        help="export a motion .npz to BVH (habitsim's rig, or your own with --rig)",
         description=(
             "Write a habitsim motion as BVH in habitsim's frame (z up, x forward, metres) with "
-            "habitsim joint names; import-bvh reads it back as an identity mapping."
+            "habitsim joint names; import-bvh reads it back as an identity mapping. With --rig "
+            "the motion goes onto your own rig (a .bvh, .glb or .gltf, mapped as import-bvh "
+            "maps it): its hierarchy, joint names, channel orders, units and up axis, its rest "
+            "offsets, and its unmapped joints (ears, toes, helpers) in their first-frame pose."
         ),
     )
     e.add_argument("motion", type=Path, help="input motion file (.npz)")
-    e.add_argument("--out", required=True, type=Path, help="output .bvh file")
-    e.add_argument("--order", default="ZXY", help="rotation channel order (default ZXY)")
+    e.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        help="output .bvh file (with a glTF/GLB --rig also .glb / .gltf: a copy of the model "
+        "with the motion added as the animation 'habitsim')",
+    )
+    e.add_argument(
+        "--order",
+        default="ZXY",
+        help="rotation channel order of habitsim's rig (default ZXY; with --rig the rig's own)",
+    )
+    add_rig_options(e)
     e.set_defaults(func=_export)
+
+
+def add_rig_options(p: argparse.ArgumentParser, prefix: str = "") -> None:
+    """``--rig`` and how to map it (``--map``, ``--units``, ``--up``, ``--animation``; with
+    ``prefix="rig-"`` as ``--rig-map`` … for commands whose ``--map`` is the source's)."""
+    p.add_argument(
+        "--rig",
+        type=Path,
+        default=None,
+        metavar="RIG",
+        help="write the motion onto this rig (.bvh, .glb or .gltf) instead of habitsim's",
+    )
+    p.add_argument(
+        f"--{prefix}map",
+        type=Path,
+        default=None,
+        dest="rig_map",
+        metavar="MAP",
+        help="joint-map JSON or TOML of the rig (as import-bvh --map; default: automatic)",
+    )
+    p.add_argument(
+        f"--{prefix}units",
+        choices=UNIT_CHOICES,
+        default=None,
+        dest="rig_units",
+        help="length unit of the rig (default: detect)",
+    )
+    p.add_argument(
+        f"--{prefix}up",
+        choices=UP_CHOICES,
+        default=None,
+        dest="rig_up",
+        help="up axis of the rig (default: detect)",
+    )
+    p.add_argument(
+        f"--{prefix}travel",
+        choices=("round-trip", "feet"),
+        default="round-trip",
+        dest="rig_travel",
+        help="how the rig's root travels: round-trip (default: importing the file gives the "
+        "motion back) or feet (the rig's stance feet stay put where its proportions differ)",
+    )
+    p.add_argument(
+        f"--{prefix}animation",
+        default=None,
+        dest="rig_animation",
+        metavar="NAME|INDEX",
+        help="glTF/GLB rig: the animation whose first frame is the rig's pose (default: first)",
+    )
+
+
+def _animation(value: str | None) -> str | int | None:
+    """A glTF animation given on the command line: its index when a number, else its name."""
+    if value is None:
+        return None
+    try:
+        return int(value)
+    except ValueError:
+        return value
+
+
+def write_on_rig(motion: Motion, out: Path, ns: argparse.Namespace) -> str:
+    """Write ``motion`` onto ``ns.rig`` as BVH at ``out``; the line to print."""
+    from ..bvh_mapping.export import RigExportOptions, export_to_rig
+
+    ex = export_to_rig(
+        motion,
+        ns.rig,
+        joint_map=ns.rig_map,
+        units=ns.rig_units,
+        up=ns.rig_up,
+        animation=_animation(ns.rig_animation),
+        export=RigExportOptions(travel=ns.rig_travel),
+    )
+    ex.write(out)
+    fr = ex.mapping.frame
+    assert fr is not None
+    mapped = len(ex.mapping.mapped())
+    return (
+        f"{ns.rig.name}: {mapped} joints mapped ({ex.mapping.method}), {ex.bvh.num_joints} "
+        f"written; units {fr.units}, up {fr.up}; root travel / {ex.root_scale:.4g}"
+    )
 
 
 def _print_in_place(motion: Motion) -> None:
@@ -258,10 +354,20 @@ def _export(ns: argparse.Namespace) -> int:
     from ..bvh import write_bvh
     from ..motion import load_motion
 
-    if ns.out.suffix.lower() != ".bvh":
-        raise MotionFileError(f"--out must end in .bvh, got {ns.out.name!r}")
+    kinds = (".bvh", ".glb", ".gltf") if ns.rig is not None else (".bvh",)
+    if ns.out.suffix.lower() not in kinds:
+        raise MotionFileError(f"--out must end in {' or '.join(kinds)}, got {ns.out.name!r}")
     check_writable(ns.out, "--out")
     motion = load_motion(ns.motion)
+    if ns.rig is not None:
+        line = write_on_rig(motion, ns.out, ns)
+        print(f"exported {motion.num_frames} frames of {motion.species} to {ns.out} on {line}")
+        return 0
+    given = [f for f, v in (("--map", ns.rig_map), ("--units", ns.rig_units)) if v is not None]
+    given += [f for f, v in (("--up", ns.rig_up), ("--animation", ns.rig_animation)) if v]
+    given += ["--travel"] if ns.rig_travel != "round-trip" else []
+    if given:
+        raise MotionFileError(f"{', '.join(given)} describe a rig: give it with --rig RIG")
     write_bvh(motion, ns.out, order=ns.order)
     print(f"exported {motion.num_frames} frames of {motion.species} to {ns.out} (z up, metres)")
     return 0

@@ -52,7 +52,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the source's action (walk, trot, …) when its file does not say (a .bvh): "
         "it gives the stance labels of the result the target's duty factor where its feet slide",
     )
-    p.add_argument("--bvh", type=Path, metavar="OUT.bvh", help="also write the result as BVH")
+    p.add_argument(
+        "--bvh",
+        type=Path,
+        metavar="OUT.bvh",
+        help="also write the result as BVH (with a glTF --rig also .glb / .gltf)",
+    )
+    from .bvh_cmd import add_rig_options
+
+    add_rig_options(p, prefix="rig-")  # --bvh onto the user's rig (--rig, --rig-map, …)
     p.add_argument(
         "--method", default="habit", help="transfer method (default: habit; see --list-methods)"
     )
@@ -92,8 +100,11 @@ def _transfer(ns: argparse.Namespace) -> int:
     METHODS[ns.method]  # UnknownMethodError listing the registered ones
     if ns.out.suffix != ".npz":
         raise MotionFileError(f"--out must end in .npz, got {ns.out.name!r}")
-    if ns.bvh is not None and ns.bvh.suffix.lower() != ".bvh":
-        raise MotionFileError(f"--bvh must end in .bvh, got {ns.bvh.name!r}")
+    kinds = (".bvh", ".glb", ".gltf") if ns.rig is not None else (".bvh",)
+    if ns.bvh is not None and ns.bvh.suffix.lower() not in kinds:
+        raise MotionFileError(f"--bvh must end in {' or '.join(kinds)}, got {ns.bvh.name!r}")
+    if ns.rig is not None and ns.bvh is None:
+        raise MotionFileError("--rig needs --bvh OUT.bvh (the file written on the rig)")
     from ..fileio import output_transaction
 
     # both destinations checked before the transfer; written together or not at all
@@ -162,8 +173,12 @@ def _transfer_outputs(ns: argparse.Namespace) -> int:
     )
     if ns.bvh is not None:
         from ..bvh import write_bvh
+        from .bvh_cmd import write_on_rig
 
-        write_bvh(out, ns.bvh)
-        msg += f", {ns.bvh}"
+        if ns.rig is not None:
+            msg += f", {ns.bvh} on {write_on_rig(out, ns.bvh, ns)}"
+        else:
+            write_bvh(out, ns.bvh)
+            msg += f", {ns.bvh}"
     print(msg)
     return 0

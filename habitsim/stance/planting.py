@@ -66,6 +66,7 @@ __all__ = [
     "stance_run_shortfall",
     "stance_sweep_limit",
     "stance_driven_root",
+    "stance_slip",
     "leg_pose_angles",
 ]
 
@@ -539,6 +540,16 @@ def _global_positions(motion: Motion, glob: np.ndarray | None) -> np.ndarray:
     return glob
 
 
+def stance_slip(toes: np.ndarray, contacts: np.ndarray) -> np.ndarray:
+    """(T-1, 2) the mean horizontal step of the toes in stance on both frames of each
+    frame step (zero where none is): what a body's path loses so its stance feet stay
+    put. ``toes``: (T, 4, 2) horizontal toe positions; ``contacts``: (T, 4) bool."""
+    c = np.asarray(contacts, dtype=bool)
+    on = (c[1:] & c[:-1]).astype(np.float64)  # (T-1, 4)
+    n = on.sum(axis=1, keepdims=True)
+    return (np.diff(toes, axis=0) * on[..., None]).sum(axis=1) / np.maximum(n, 1.0)
+
+
 def stance_driven_root(
     motion: Motion, contacts: np.ndarray, glob: np.ndarray | None = None
 ) -> tuple[Motion, float]:
@@ -569,12 +580,8 @@ def stance_driven_root(
     if t < 2:
         return motion, 1.0
     g = _global_positions(motion, glob)
-    toes = g[:, motion.skeleton.foot_indices, :2]
-    on = (c[1:] & c[:-1]).astype(np.float64)  # (T-1, 4)
-    n = on.sum(axis=1, keepdims=True)
-    slip = (np.diff(toes, axis=0) * on[..., None]).sum(axis=1) / np.maximum(n, 1.0)
     root = np.array(motion.root_positions, dtype=np.float64)
-    root[1:, :2] -= np.cumsum(slip, axis=0)
+    root[1:, :2] -= np.cumsum(stance_slip(g[:, motion.skeleton.foot_indices, :2], c), axis=0)
     old = np.linalg.norm(np.diff(motion.root_positions[:, :2], axis=0), axis=1).sum()
     new = np.linalg.norm(np.diff(root[:, :2], axis=0), axis=1).sum()
     out = Motion(
