@@ -49,7 +49,7 @@ from .identity import _habitsim_order, identity_root_scale, is_habitsim_bvh
 from .importing import map_joints, read_source
 from .options import MappingOptions
 from .result import JointMapping
-from .retargeting import _driven, _source_stance, retarget
+from .retargeting import _driven, _source_feet, _source_stance, retarget
 from .tree import _Tree
 
 _FORWARD = ("spine3", "spine2", "spine1", "neck", "head")
@@ -240,13 +240,15 @@ def export_to_rig(
     out = solver.bvh(scale, 0.0)
     assert mapping.frame is not None  # map_joints always sets it
     # The rig's lowest resting foot on its floor (the import reads heights from it).
-    st = _source_stance(
+    rig_pos = mapping.frame.apply(out.fk())
+    feet = _source_feet(
         out,
         _Tree(out),
         mapping.mapped(),
-        mapping.frame.apply(out.fk()),
+        rig_pos,
         JointMapping(dict(mapping.joints), mapping.method, mapping.frame),
     )
+    st = _source_stance(out.fps, feet, rig_pos)
     lift = 0.0 if st is None else -st[0].ground
     out = solver.bvh(scale, lift)
     if export.travel == "feet":

@@ -336,7 +336,11 @@ def detect_frame(
         roots = _leg_roots(joints, bvh)
         leg_len = float(np.mean([t.path_length(r, f) for r, f in zip(roots, feet, strict=True)]))
         if leg_len <= 0:
-            raise SkeletonMappingError("cannot detect the up axis (legs of zero length); pass up=")
+            raise SkeletonMappingError(
+                "cannot detect the up axis: no mapped leg reaches from its hip or shoulder "
+                "to a lower joint (a leg needs at least two mapped joints); map them, or pass "
+                "up='y' or 'z' (--up)"
+            )
         evidence = find_up(pos, rest, feet, roots, leg_len, names_axis, options)
         up_ax = evidence.axis
     u_vec = _axis_vector(up_ax)
