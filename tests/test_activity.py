@@ -145,3 +145,18 @@ def test_options_change_the_answer() -> None:
     opts = ActivityOptions(moving_speed_per_leg=50.0, stepping_share=1.0)
     tl = timeline(_clip("walk"), opts)
     assert Activity.LOCOMOTION not in [s.activity for s in tl.segments]
+
+
+def test_inspect_bvh_prints_the_timeline(tmp_path, capsys) -> None:
+    from habitsim.bvh import write_bvh
+    from habitsim.cli import main
+
+    p = tmp_path / "lie_walk.bvh"
+    write_bvh(with_lying_start(_clip("walk"), lying_s=2.0, rise_s=1.0), p)
+    assert main(["data", "inspect-bvh", str(p)]) == 0
+    out = capsys.readouterr().out
+    lines = out[out.index("activity on the dog") :].splitlines()
+    assert "lying (trunk on the ground)" in lines[1]
+    assert lines[1].split()[0] == "0.00–"
+    assert any("locomotion (walk)" in x for x in lines[2:5])
+    assert "default span: from" in out and "lying start is left out" in out

@@ -9,10 +9,14 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import MotionFileError
 from ..fileio import check_writable
 from .conventions import add_frame_options
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..motion import Motion
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -102,7 +106,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             "Print the source hierarchy (bone lengths in file units, rig helpers marked) with "
             "the habitsim joint proposed for each source joint, the detected units and axes, "
             "each leg's mapping confidence and warnings, the stance found on the source's "
-            "own feet, and a JSON joint map to edit and pass to import-bvh --map."
+            "own feet, the clip's activity timeline (lying, sitting, standing, locomotion "
+            "with gait and speed, transitions) and a JSON joint map to edit and pass to "
+            "import-bvh --map."
         ),
     )
     i.add_argument("file", type=Path, help="the .bvh, .glb or .gltf file")
@@ -181,11 +187,36 @@ def _inspect(ns: argparse.Namespace) -> int:
             + "; foot joints "
             + ", ".join(c["foot_joints"])
         )
+    print()
+    _print_timeline(motion)
     template = {"extends": "auto", "map": mapping.mapped()}
     print()
     print("joint map to edit (save as map.json, pass --map map.json; null unmaps a joint):")
     print(json.dumps(template, indent=1))
     return 0
+
+
+def _print_timeline(motion: Motion) -> None:
+    """The clip's activity timeline (:func:`habitsim.activity.timeline`) and the part a
+    command runs by default."""
+    from ..activity import ActivityError, default_span, timeline
+
+    tl = timeline(motion)
+    print(
+        f"activity on the {motion.species}'s skeleton (start–end, activity, speed, trunk height):"
+    )
+    print(tl.describe())
+    try:
+        start, _ = default_span(tl)
+    except ActivityError as e:
+        print(f"default span: none ({e})")
+        return
+    if start > 0:
+        first = tl.segments[0]
+        print(
+            f"default span: from {start / tl.fps:.2f} s (the {first.activity.value} start "
+            "is left out by retarget and bench real)"
+        )
 
 
 def _import(ns: argparse.Namespace) -> int:
