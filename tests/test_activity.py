@@ -4,6 +4,8 @@ a benchmark cuts from it (habitsim.activity), on synthetic clips the project mak
 from __future__ import annotations
 
 import functools
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -160,3 +162,56 @@ def test_inspect_bvh_prints_the_timeline(tmp_path, capsys) -> None:
     assert lines[1].split()[0] == "0.00–"
     assert any("locomotion (walk)" in x for x in lines[2:5])
     assert "default span: from" in out and "lying start is left out" in out
+
+
+GO2 = Path(__file__).parent / "robots" / "unitree_go2" / "scene.xml"
+
+
+def _retarget_lying_start(tmp_path: Path, capsys, *extra: str) -> dict:
+    from habitsim.cli import main
+
+    src = tmp_path / "lie_walk.npz"
+    with_lying_start(_clip("walk"), lying_s=2.0, rise_s=1.0).save(src)
+    out = tmp_path / "q.npz"
+    assert (
+        main(["retarget", str(src), "--robot", str(GO2), "--out", str(out), "--json", *extra]) == 0
+    )
+    return json.loads(capsys.readouterr().out)
+
+
+def test_retarget_leaves_a_lying_start_out(tmp_path: Path, capsys) -> None:
+    from habitsim.retarget import load_robot_clip
+
+    summary = _retarget_lying_start(tmp_path, capsys)
+    assert "start left out: the clip begins lying 0.00–" in summary["trimmed_start"]
+    clip = load_robot_clip(tmp_path / "q.npz")
+    walk = _clip("walk").num_frames
+    assert walk <= len(clip.qpos) <= walk + 15  # the lying second and the rise are gone
+    # a clip that starts on its legs is retargeted whole, and says nothing
+    src = tmp_path / "walk.npz"
+    _clip("walk").save(src)
+    from habitsim.cli import main
+
+    out = tmp_path / "w.npz"
+    assert main(["retarget", str(src), "--robot", str(GO2), "--out", str(out), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["trimmed_start"] is None
+    assert len(load_robot_clip(out).qpos) == walk
+
+
+@pytest.mark.slow
+def test_a_lying_start_never_makes_a_robot_run_fail(tmp_path: Path, capsys) -> None:
+    summary = _retarget_lying_start(tmp_path, capsys, "--track")
+    assert summary["trimmed_start"]
+    assert not summary["track"]["fell"] and summary["track"]["survival"] == 1.0
+
+
+def test_a_clip_lying_throughout_is_a_typed_error(tmp_path: Path, capsys) -> None:
+    from habitsim.cli import main
+
+    root, quats = lying_pose("dog")
+    src = tmp_path / "lie.npz"
+    Motion("dog", 30.0, np.tile(root, (60, 1)), np.tile(quats, (60, 1, 1))).save(src)
+    out = tmp_path / "q.npz"
+    assert main(["retarget", str(src), "--robot", str(GO2), "--out", str(out)]) == 2
+    assert "no standing or locomotion segment" in capsys.readouterr().err
+    assert not out.exists()

@@ -5,8 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .conventions import add_list_option
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..motion import Motion
 
 #: Controllers ``--track`` can use (the torque-based ones; a robot's servos are driven
 #: as torques).
@@ -25,7 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             "by the ratio of leg lengths, trunk orientation kept, leg IK on the robot's joints "
             "(damped least squares on MuJoCo Jacobians, joint ranges respected). Writes the "
             "robot's qpos, fps, contact labels and foot names to OUT.npz (atomically); "
-            "--track then simulates it (default controller mpc; no assistance)."
+            "--track then simulates it (default controller mpc; no assistance). A clip "
+            "that starts lying or sitting is retargeted from its first standing or "
+            "locomotion segment (said in the output)."
         ),
     )
     p.add_argument(
@@ -93,6 +99,29 @@ def _retarget(ns: argparse.Namespace) -> int:
         return _retarget_outputs(ns)
 
 
+def _default_span(motion: Motion) -> tuple[Motion, str]:
+    """The clip from its first standing or locomotion segment on
+    (:func:`habitsim.activity.default_span`) and what was left out, in words ("" when
+    nothing was).
+
+    Raises:
+        ActivityError: the clip never stands or moves on its legs.
+    """
+    from ..activity import default_span, timeline
+
+    tl = timeline(motion)
+    start, stop = default_span(tl)
+    if start == 0 and stop == motion.num_frames:
+        return motion, ""
+    left = [s for s in tl.segments if s.start < start]
+    what = ", ".join(f"{s.activity.value} {s.start_s:.2f}–{s.end_s:.2f} s" for s in left)
+    return motion.slice(start, stop), (
+        f"start left out: the clip begins {what} (the trunk on the ground, not a gait a "
+        f"robot can take up); retargeting {start / tl.fps:.2f}–{stop / tl.fps:.2f} s "
+        "(`habitsim data inspect-bvh` prints the whole timeline)"
+    )
+
+
 def _retarget_outputs(ns: argparse.Namespace) -> int:
     import mujoco
 
@@ -129,6 +158,9 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         motion, mapping = import_bvh(ns.source, load_species(ns.from_species))
         if not ns.json:
             print(mapping)
+    motion, trimmed = _default_span(motion)
+    if trimmed and not ns.json:
+        print(trimmed)
     if ns.track and not any(robot.geom_bodyid == 0):
         raise RetargetError(
             f"{str(ns.robot)!r} has no floor (no geom on the world body): "
@@ -144,6 +176,7 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     clip.save(ns.out)
     summary: dict = {
         "out": str(ns.out),
+        "trimmed_start": trimmed or None,
         "frames": len(clip.qpos),
         "fps": clip.fps,
         "duration_s": clip.duration,
