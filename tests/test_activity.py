@@ -215,3 +215,37 @@ def test_a_clip_lying_throughout_is_a_typed_error(tmp_path: Path, capsys) -> Non
     assert main(["retarget", str(src), "--robot", str(GO2), "--out", str(out)]) == 2
     assert "no standing or locomotion segment" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_lying_reference_is_never_a_fall_of_the_controller() -> None:
+    """The fall rule's clauses at a frame where the reference lies are recorded as the
+    reference resting, not a fall; the same body state under a standing reference, or
+    with the resting rule off, is a fall."""
+    import mujoco
+
+    from habitsim.qpos import motion_to_qpos, species_model
+    from habitsim.rotations import rot_x
+    from habitsim.sim import FallCause, FallDetector, FallOptions
+
+    model = species_model("dog")
+    root, quats = lying_pose("dog")
+    lie = Motion("dog", 30.0, np.tile(root, (3, 1)), np.tile(quats, (3, 1, 1)))
+    q_lie = motion_to_qpos(lie, model).qpos
+    q_stand = motion_to_qpos(_clip("idle").slice(0, 3), model).qpos
+    data = mujoco.MjData(model)
+    data.qpos[:] = q_lie[0]
+    data.qpos[3:7] = rot_x(1.5)  # rolled onto its side
+    mujoco.mj_forward(model, data)
+    leg = lie.species_info.leg_length
+    det = FallDetector(model, q_lie, 30.0, leg)
+    assert det.ref_resting.all()
+    assert det.fall(1, data) is None
+    assert det.resting is not None and det.resting.frame == 1
+    assert det.resting.cause is FallCause.TILT and det.resting.trunk_ratio < 0.3
+    assert "reference lying at 0.03 s" in det.resting.describe(30.0)
+    standing = FallDetector(model, q_stand, 30.0, leg)
+    assert not standing.ref_resting.any()
+    assert standing.fall(1, data) is not None and standing.resting is None
+    off = FallDetector(model, q_lie, 30.0, leg, options=FallOptions(rest_height_ratio=0.0))
+    fall = off.fall(1, data)
+    assert fall is not None and fall.cause is FallCause.TILT

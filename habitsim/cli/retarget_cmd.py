@@ -185,7 +185,10 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     if ns.track:
         res = track_clip(clip, robot, controller=ns.controller)
         rep = res.report()
-        summary["track"] = {k: rep[k] for k in ("controller", "fell", "fall_time_s", "fall_reason")}
+        summary["track"] = {
+            k: rep[k]
+            for k in ("controller", "fell", "fall_time_s", "fall_reason", "reference_resting")
+        }
         summary["track"].update(
             {
                 k: rep["metrics"][k]
@@ -223,6 +226,8 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         if t["mpc_median_ms"] is not None:
             line += f", MPC {t['mpc_median_ms']:.2f} ms"
         print(line)
+        if t["reference_resting"]:
+            print(t["reference_resting"])
         if t["fell"]:
             print(f"fell at {t['fall_time_s']:.2f} s: {t['fall_reason']}")
     return 0
