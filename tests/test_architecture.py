@@ -301,6 +301,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.bvh",
             "habitsim.gltf",
             "habitsim.bvh_mapping",
+            "habitsim.source",
             "habitsim.render",
             "habitsim.workers",
         ),

@@ -16,6 +16,9 @@ _SINGLE = {
     ("bench real", "--species"),
     ("data import-bvh", "--species"),
     ("data inspect-bvh", "--species"),
+    # the one skeleton a motion-capture source is imported onto (also --from)
+    ("transfer", "--species"),
+    ("retarget", "--species"),
 }
 _LIST_FLAGS = ("--species", "--targets", "--sources", "--methods")
 

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 from ..errors import MotionFileError
 from ..fileio import check_writable
-from .conventions import add_frame_options
+from .conventions import add_source_options, source_options
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..motion import Motion
@@ -74,18 +74,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--overwrite", action="store_true", help="with --dir: replace a data set already in --out"
     )
-    p.add_argument(
-        "--map",
-        type=Path,
-        default=None,
-        dest="joint_map",
-        help=(
-            'joint-map JSON or TOML: {"map": {"habitsim_joint": "SourceJoint"}}; with '
-            '"extends": "auto" it overrides only the joints it names (see inspect-bvh)'
-        ),
-    )
-    add_frame_options(p)
-    _gltf_options(p)
+    add_source_options(p)
     p.add_argument(
         "--no-plant",
         action="store_true",
@@ -115,15 +104,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     i.add_argument(
         "--species", default="dog", help="species to size the detection against (default dog)"
     )
-    i.add_argument(
-        "--map",
-        type=Path,
-        default=None,
-        dest="joint_map",
-        help="a joint-map file to check instead of the automatic mapping",
-    )
-    add_frame_options(i)
-    _gltf_options(i)
+    add_source_options(i)
     i.set_defaults(func=_inspect)
 
     e = sub.add_parser(
@@ -140,38 +121,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.set_defaults(func=_export)
 
 
-def _gltf_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--animation",
-        default=None,
-        metavar="NAME|INDEX",
-        help="glTF/GLB: the animation to import (default: the first)",
-    )
-    p.add_argument(
-        "--fps", type=float, default=None, help="glTF/GLB: sampling rate in Hz (default 30)"
-    )
-
-
-def _animation(value: str | None) -> str | int | None:
-    if value is None:
-        return None
-    try:
-        return int(value)
-    except ValueError:
-        return value
-
-
 def _inspect(ns: argparse.Namespace) -> int:
     import json
 
     from ..bvh_mapping import describe_hierarchy, import_bvh, read_source
+    from ..source import cut_source
     from ..species import load_species
 
     sp = load_species(ns.species)
-    src = read_source(ns.file, animation=_animation(ns.animation), fps=ns.fps)
-    print(f"{ns.file.name}: {src.num_joints} joints, {src.num_frames} frames at {src.fps:g} fps")
+    o = source_options(ns, sp.name)
+    whole = read_source(ns.file, animation=o.animation, fps=o.fps)
+    src, first = cut_source(whole, o.span)
+    line = f"{ns.file.name}: {src.num_joints} joints, {whole.num_frames} frames at {src.fps:g} fps"
+    if src is not whole:
+        t0 = first / src.fps
+        line += f"; inspecting {t0:.2f}–{t0 + src.num_frames / src.fps:.2f} s"
+    print(line)
     try:
-        motion, mapping = import_bvh(src, sp, joint_map=ns.joint_map, units=ns.units, up=ns.up)
+        motion, mapping = import_bvh(src, sp, joint_map=o.joint_map, units=o.units, up=o.up)
     except Exception:
         print(describe_hierarchy(src))
         raise
@@ -220,7 +187,8 @@ def _print_timeline(motion: Motion) -> None:
 
 
 def _import(ns: argparse.Namespace) -> int:
-    from ..bvh_mapping import import_bvh
+    from ..bvh_mapping import SOURCE_SUFFIXES
+    from ..source import load_clip
     from ..species import load_species
 
     sp = load_species(ns.species)  # fail fast with the list of known species
@@ -234,24 +202,25 @@ def _import(ns: argparse.Namespace) -> int:
     if ns.out.suffix != ".npz":
         raise MotionFileError(f"--out must end in .npz, got {ns.out.name!r}")
     check_writable(ns.out, "--out")  # before the import, not after it
-    motion, mapping = import_bvh(
-        ns.file,
-        sp,
-        joint_map=ns.joint_map,
-        units=ns.units,
-        up=ns.up,
-        strict=not ns.lenient,
-        plant=not ns.no_plant,
-        animation=_animation(ns.animation),
-        fps=ns.fps,
+    if ns.file.suffix.lower() not in SOURCE_SUFFIXES:
+        raise MotionFileError(
+            f"{ns.file.name}: import-bvh reads motion capture ({', '.join(SOURCE_SUFFIXES)}), "
+            f"got {ns.file.suffix!r}"
+        )
+    clip = load_clip(
+        ns.file, source_options(ns, sp.name, strict=not ns.lenient, plant=not ns.no_plant)
     )
+    mapping = clip.mapping
+    assert mapping is not None  # a motion-capture source always has one
     print(mapping)
     for w in mapping.warnings:
         print(f"warning: {w}", file=sys.stderr)
+    motion = clip.motion
     motion.save(ns.out)
+    kept = f"; kept {clip.kept()}" if clip.cut else ""
     print(
         f"imported {ns.file.name}: {motion.num_frames} frames at {motion.fps:g} fps "
-        f"({motion.duration:.2f} s) onto {motion.species} -> {ns.out}"
+        f"({motion.duration:.2f} s{kept}) onto {motion.species} -> {ns.out}"
     )
     return 0
 
@@ -259,8 +228,16 @@ def _import(ns: argparse.Namespace) -> int:
 def _import_dir(ns: argparse.Namespace) -> int:
     from ..dataset_import import import_folder
 
-    if ns.animation is not None or ns.fps is not None or ns.lenient:
-        raise MotionFileError("--animation, --fps and --lenient apply to one file, not --dir")
+    one_file = (
+        ("--animation", ns.animation),
+        ("--fps", ns.fps),
+        ("--lenient", ns.lenient),
+        ("--start", ns.start),
+        ("--end", ns.end),
+    )
+    given = [flag for flag, v in one_file if v not in (None, False)]
+    if given:
+        raise MotionFileError(f"{', '.join(given)} apply to one file, not --dir")
     build = import_folder(
         ns.src_dir,
         ns.out,

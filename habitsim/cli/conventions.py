@@ -5,8 +5,10 @@
   comma-separated, space-separated or both: ``--species cat,dog``, ``--species cat dog``
   and ``--species cat,dog horse`` all give ``["cat", "dog"(, "horse")]``. The parsed value
   is a list of str (or the option's default when it is not given).
-* **Source frames.** A command that imports motion capture takes ``--units`` and
-  ``--up`` as the importer does (:func:`add_frame_options`).
+* **Clips.** A command that reads a clip file takes the same options for it
+  (:func:`add_source_options`): ``--map``, ``--units``, ``--up``, ``--animation`` and
+  ``--fps`` for motion capture, ``--start`` and ``--end`` for any clip, read into one
+  :class:`habitsim.source.SourceOptions` by :func:`source_options`.
 * **Tables.** A printed table is followed by a legend of its columns
   (:func:`format_legend`).
 * **Targets.** Every benchmark prints its targets with the verdict ``met`` or
@@ -22,13 +24,19 @@ import argparse
 import sys
 import textwrap
 from collections.abc import Callable, Iterable, Sequence
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ..source import SourceOptions
 
 __all__ = [
     "CHECK_HELP",
     "ListAction",
     "add_list_option",
     "add_frame_options",
+    "add_source_options",
+    "source_options",
     "split_names",
     "add_check_option",
     "check_exit",
@@ -116,6 +124,92 @@ def add_frame_options(p: argparse.ArgumentParser, of: str = "the file") -> None:
     )
     p.add_argument(
         "--up", choices=UP_CHOICES, default=None, help=f"up axis of {of} (default: detect)"
+    )
+
+
+def add_source_options(
+    p: argparse.ArgumentParser,
+    of: str = "the file",
+    motion_capture: bool = True,
+    span: bool = True,
+) -> None:
+    """The options of a clip file, as :class:`habitsim.source.SourceOptions` holds them.
+
+    Args:
+        p: the (sub)command's parser.
+        of: what the options describe, for the help (e.g. "every clip").
+        motion_capture: add ``--map``, ``--units``, ``--up``, ``--animation``, ``--fps``
+            (the import of a BVH/glTF source).
+        span: add ``--start`` and ``--end`` (seconds of the clip kept).
+    """
+    if motion_capture:
+        p.add_argument(
+            "--map",
+            type=Path,
+            default=None,
+            dest="joint_map",
+            metavar="MAP",
+            help=(
+                f"joint-map JSON or TOML for {of} (motion capture): "
+                '{"map": {"habitsim_joint": "SourceJoint"}}; with "extends": "auto" it '
+                "overrides only the joints it names (see 'habitsim data inspect-bvh')"
+            ),
+        )
+        add_frame_options(p, of)
+        p.add_argument(
+            "--animation",
+            default=None,
+            metavar="NAME|INDEX",
+            help=f"glTF/GLB: the animation of {of} to read (default: the first)",
+        )
+        p.add_argument(
+            "--fps", type=float, default=None, help="glTF/GLB: sampling rate in Hz (default 30)"
+        )
+    if span:
+        p.add_argument(
+            "--start",
+            type=float,
+            default=None,
+            metavar="S",
+            help=f"first second of {of} kept (default: its start)",
+        )
+        p.add_argument(
+            "--end",
+            type=float,
+            default=None,
+            metavar="S",
+            help=f"second {of} is cut at (default: its end)",
+        )
+
+
+def source_options(
+    ns: argparse.Namespace, species: str | None = None, **fields: Any
+) -> SourceOptions:
+    """The :class:`habitsim.source.SourceOptions` of a command's parsed
+    :func:`add_source_options` (options it did not add keep their defaults).
+
+    Args:
+        ns: the parsed namespace.
+        species: the species a BVH/glTF source is imported onto.
+        fields: other fields of the options (e.g. ``plant=False``).
+    """
+    from ..source import SourceOptions, Span
+
+    animation = getattr(ns, "animation", None)
+    if animation is not None:
+        try:
+            animation = int(animation)
+        except ValueError:
+            pass
+    return SourceOptions(
+        species=species,
+        joint_map=getattr(ns, "joint_map", None),
+        units=getattr(ns, "units", None),
+        up=getattr(ns, "up", None),
+        animation=animation,
+        fps=getattr(ns, "fps", None),
+        span=Span(getattr(ns, "start", None), getattr(ns, "end", None)),
+        **fields,
     )
 
 

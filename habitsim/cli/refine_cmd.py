@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MotionFileError
+from .conventions import add_source_options, source_options
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -59,6 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("input", metavar="IN.npz", help="motion file")
+    add_source_options(p, of="the motion", motion_capture=False)
     p.add_argument("--out", required=True, metavar="OUT.npz", help="refined motion file")
     p.add_argument("--report", metavar="R.json", help="write the JSON report here")
     p.add_argument("--qpos", metavar="Q.npz", help="write the refined qpos trajectory here")
@@ -211,7 +213,7 @@ def _refine_outputs(ns: argparse.Namespace) -> int:
     from ..qpos import species_model
     from ..refine import RefineOptions, refine
 
-    motion = load_motion(ns.input)
+    motion = source_options(ns).span.cut(load_motion(ns.input), what=str(ns.input))
     contacts = motion.detect_contacts() if ns.detect_contacts else None
     opts = RefineOptions(
         dynamics=ns.dynamics,

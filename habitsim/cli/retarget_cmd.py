@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .conventions import add_list_option
+from .conventions import add_list_option, add_source_options, source_options
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..motion import Motion
@@ -42,6 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--from",
+        "--species",
         dest="from_species",
         metavar="SPECIES",
         help=(
@@ -49,6 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "its own feet, feet planted; `habitsim data import-bvh` does the same alone)"
         ),
     )
+    add_source_options(p, of="the source")
     p.add_argument(
         "--robot",
         type=Path,
@@ -118,7 +120,7 @@ def _default_span(motion: Motion) -> tuple[Motion, str]:
     return motion.slice(start, stop), (
         f"start left out: the clip begins {what} (the trunk on the ground, not a gait a "
         f"robot can take up); retargeting {start / tl.fps:.2f}–{stop / tl.fps:.2f} s "
-        "(`habitsim data inspect-bvh` prints the whole timeline)"
+        "(--start 0 keeps it; `habitsim data inspect-bvh` prints the whole timeline)"
     )
 
 
@@ -126,7 +128,6 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     import mujoco
 
     from ..fileio import atomic_write_text, json_safe
-    from ..motion import load_motion
     from ..retarget import (
         RetargetError,
         drawable,
@@ -134,6 +135,7 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         retarget,
         track_clip,
     )
+    from ..source import load_clip
 
     suffix = ns.source.suffix.lower()
     if suffix not in (".npz", ".bvh", ".glb", ".gltf"):
@@ -149,16 +151,14 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     if (ns.report or ns.video) and not ns.track:
         raise RetargetError("--report and --video describe the tracked run: add --track")
     robot = load_robot(ns.robot)
-    if suffix == ".npz":
-        motion = load_motion(ns.source)
-    else:
-        from ..bvh_mapping import import_bvh
-        from ..species import load_species
-
-        motion, mapping = import_bvh(ns.source, load_species(ns.from_species))
-        if not ns.json:
-            print(mapping)
-    motion, trimmed = _default_span(motion)
+    loaded = load_clip(ns.source, source_options(ns, ns.from_species if suffix != ".npz" else None))
+    if loaded.mapping is not None and not ns.json:
+        print(loaded.mapping)
+    if loaded.cut and not ns.json:
+        print(f"source span: {loaded.kept()}")
+    motion, trimmed = loaded.motion, ""
+    if ns.start is None and ns.end is None:  # a span the user gives is taken as given
+        motion, trimmed = _default_span(motion)
     if trimmed and not ns.json:
         print(trimmed)
     if ns.track and not any(robot.geom_bodyid == 0):

@@ -41,6 +41,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+from .conventions import add_source_options, source_options
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the top-level ``track`` command."""
@@ -55,6 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("input", metavar="IN.npz", help="motion file")
+    add_source_options(p, of="the motion", motion_capture=False)
     p.add_argument("--out", metavar="SIM.npz", help="write the simulated motion here")
     p.add_argument("--report", metavar="R.json", help="write the JSON report here")
     p.add_argument(
@@ -110,7 +113,7 @@ def track_report(ns: argparse.Namespace) -> tuple[dict[str, Any], Any]:
     from ..motion import load_motion
     from ..sim import track
 
-    motion = load_motion(ns.input)
+    motion = source_options(ns).span.cut(load_motion(ns.input), what=str(ns.input))
     result = track(
         motion,
         controller=ns.controller,

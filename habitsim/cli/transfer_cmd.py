@@ -1,9 +1,11 @@
-"""``habitsim transfer``: transfer a motion file (.npz or .bvh) to another species."""
+"""``habitsim transfer``: transfer a motion file (.npz, .bvh, .glb, .gltf) to another species."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+
+from .conventions import add_source_options, source_options
 
 
 def _description() -> str:
@@ -11,7 +13,8 @@ def _description() -> str:
     from ..transfer_methods import METHODS
 
     return (
-        "Re-express a motion (.npz, or .bvh with --from) on another species' skeleton. "
+        "Re-express a motion (.npz, or .bvh/.glb/.gltf imported with --from) on another "
+        "species' skeleton. "
         "Held-out target species borrow the habit latent of the nearest training species "
         "in text-embedding space; the choice is printed. Methods: "
         + "; ".join(f"{m.name}: {m.description}" for m in METHODS.values())
@@ -26,16 +29,22 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=_description(),
     )
     p.add_argument(
-        "source", type=Path, nargs="?", metavar="SRC", help="source motion (.npz or .bvh)"
+        "source",
+        type=Path,
+        nargs="?",
+        metavar="SRC",
+        help="source motion (.npz) or motion capture (.bvh, .glb, .gltf)",
     )
     p.add_argument("--to", metavar="SPECIES", help="target species")
     p.add_argument(
         "--from",
+        "--species",
         dest="from_species",
         metavar="SPECIES",
-        help="source species (required for .bvh: the skeleton to import onto; "
+        help="source species (required for .bvh/.glb/.gltf: the skeleton to import onto; "
         "for .npz it relabels the motion)",
     )
+    add_source_options(p, of="the source")
     p.add_argument("--out", type=Path, metavar="OUT.npz", help="output motion file")
     p.add_argument(
         "--action",
@@ -95,25 +104,19 @@ def _transfer(ns: argparse.Namespace) -> int:
 def _transfer_outputs(ns: argparse.Namespace) -> int:
     from ..errors import MotionFileError
     from ..models.transfer import transfer
-    from ..motion import load_motion
+    from ..source import load_clip
     from ..species import load_species
     from ..stance.report import TransferRecord
 
     target = load_species(ns.to).name
     suffix = ns.source.suffix.lower()
-    if suffix in (".bvh", ".glb", ".gltf"):
-        if ns.from_species is None:
-            raise MotionFileError(
-                f"a {suffix} source needs --from SPECIES (the skeleton to import it onto)"
-            )
-        from ..bvh_mapping import import_bvh
-
-        motion, mapping = import_bvh(ns.source, load_species(ns.from_species))
-        print(mapping)
-    elif suffix == ".npz":
-        motion = load_motion(ns.source)
-    else:
-        raise MotionFileError(f"{ns.source}: source must be .npz, .bvh, .glb or .gltf")
+    species = ns.from_species if suffix != ".npz" else None
+    clip = load_clip(ns.source, source_options(ns, species))
+    if clip.mapping is not None:
+        print(clip.mapping)
+    if clip.cut:
+        print(f"source span: {clip.kept()}")
+    motion = clip.motion
     if ns.action is not None:
         from ..gaits import ACTIONS
 
