@@ -187,6 +187,10 @@ def test_retarget_leaves_a_lying_start_out(tmp_path: Path, capsys) -> None:
     clip = load_robot_clip(tmp_path / "q.npz")
     walk = _clip("walk").num_frames
     assert walk <= len(clip.qpos) <= walk + 15  # the lying second and the rise are gone
+    # a span the user gives is taken as given
+    summary = _retarget_lying_start(tmp_path, capsys, "--start", "0")
+    assert summary["trimmed_start"] is None
+    assert len(load_robot_clip(tmp_path / "q.npz").qpos) == walk + 90
     # a clip that starts on its legs is retargeted whole, and says nothing
     src = tmp_path / "walk.npz"
     _clip("walk").save(src)
