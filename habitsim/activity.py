@@ -10,7 +10,8 @@ and transition segments, on the clip's own skeleton (no transfer).
   reads the same;
 * **root speed**: the pelvis' horizontal speed in leg lengths per second;
 * **stepping**: the share of feet in swing under the motion's stance labels
-  (:mod:`habitsim.stance.labels`; detected from the feet when the motion has none).
+  (:mod:`habitsim.stance.labels`; detected from the feet when the motion has none),
+  averaged over twice the smoothing window.
 
 The features are smoothed with :func:`scipy.ndimage.median_filter` and
 :func:`scipy.ndimage.uniform_filter1d` over :attr:`ActivityOptions.smooth_s`, then each
@@ -367,7 +368,7 @@ def timeline(motion: Motion, options: ActivityOptions = ActivityOptions()) -> Ti
     vel = uniform_filter1d(vel, size=win, axis=0, mode="nearest")
     speed = np.linalg.norm(vel, axis=1) / leg
     contacts = _contacts(motion)
-    swing = uniform_filter1d((~contacts).mean(axis=1), size=max(win, int(round(fps))))
+    swing = uniform_filter1d((~contacts).mean(axis=1), size=2 * win, mode="nearest")
     moving = (speed > o.moving_speed_per_leg) | (swing > o.stepping_share)
     level = uniform_filter1d(np.stack([hind, fore], 1), size=2 * win, axis=0, mode="nearest")
     rate = np.abs(np.gradient(level, axis=0)).max(axis=1) * fps if n > 1 else np.zeros(n)
@@ -460,15 +461,21 @@ class Window:
 
 
 def choose_windows(
-    tl: Timeline, frames: int, max_windows: int, min_frames: int = 1
+    tl: Timeline,
+    frames: int,
+    max_windows: int,
+    min_frames: int = 1,
+    options: ActivityOptions = ActivityOptions(),
 ) -> list[Window]:
     """Windows of ``frames`` frames from the clip's locomotion.
 
     The clip splits into upright stretches (consecutive standing, locomotion and
     transition segments between the resting ones); lying and sitting segments, and a
     transition touching them, are kept out. In each stretch with locomotion, consecutive
-    windows start at its first locomotion frame (moved back so the window fits the
-    stretch when it would run past its end), up to ``max_windows`` in all. When no
+    windows start at its first locomotion segment that travels (mean speed above
+    :attr:`ActivityOptions.moving_speed_per_leg`; else its first locomotion segment),
+    moved back so the window fits the stretch when it would run past its end, up to
+    ``max_windows`` in all. When no
     stretch holds a whole window, the longest stretch with locomotion (else the longest
     upright one) of at least ``min_frames`` frames is one shorter window (``short``).
 
@@ -503,7 +510,8 @@ def choose_windows(
         loco = [s for s in st if s.activity is Activity.LOCOMOTION]
         if not loco or b - a < frames:
             continue
-        first = min(loco[0].start, b - frames)
+        travels = [s for s in loco if s.speed_per_leg > options.moving_speed_per_leg]
+        first = min((travels or loco)[0].start, b - frames)
         at = first
         while at + frames <= b and len(out) < max_windows:
             out.append(Window(at, at + frames))
