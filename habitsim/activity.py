@@ -428,17 +428,22 @@ def timeline(motion: Motion, options: ActivityOptions = ActivityOptions()) -> Ti
 # ---------------------------------------------------------------------------- spans
 
 
-def default_span(tl: Timeline) -> tuple[int, int]:
-    """Frames ``[start, stop)`` a command runs by default: from the first standing or
-    locomotion segment to the end of the clip (a lying or sitting start, and the
-    transition out of it, are left out).
+def default_span(tl: Timeline, options: ActivityOptions = ActivityOptions()) -> tuple[int, int]:
+    """Frames ``[start, stop)`` a command runs by default: the whole clip when it starts
+    standing or moving; else from :attr:`ActivityOptions.smooth_s` into its first
+    standing or locomotion segment (the smoothing blurs a segment's edge by that much:
+    the body has settled there) to the end of the clip. A lying or sitting start, and
+    the transition out of it, are left out.
 
     Raises:
         ActivityError: the clip never stands or moves on its legs.
     """
     for s in tl.segments:
         if s.activity.upright:
-            return s.start, tl.n_frames
+            if s.start == 0:
+                return 0, tl.n_frames
+            settle = int(round(options.smooth_s * tl.fps))
+            return min(s.start + settle, s.stop - 1), tl.n_frames
     raise ActivityError(
         f"no standing or locomotion segment in the clip ({tl.duration:.2f} s: "
         + ", ".join(f"{s.activity.value} {s.start_s:.2f}–{s.end_s:.2f} s" for s in tl.segments)
@@ -475,7 +480,8 @@ def choose_windows(
     windows start at its first locomotion segment that travels (mean speed above
     :attr:`ActivityOptions.moving_speed_per_leg`; else its first locomotion segment),
     moved back so the window fits the stretch when it would run past its end, up to
-    ``max_windows`` in all. When no
+    ``max_windows`` in all. A stretch after a resting segment begins
+    :attr:`ActivityOptions.smooth_s` into it, where :func:`default_span` begins. When no
     stretch holds a whole window, the longest stretch with locomotion (else the longest
     upright one) of at least ``min_frames`` frames is one shorter window (``short``).
 
@@ -505,13 +511,19 @@ def choose_windows(
         stretches[-1].append(s)
     stretches = [st for st in stretches if st]
     out: list[Window] = []
-    for st in stretches:
+    settle = int(round(options.smooth_s * tl.fps))
+
+    def bounds(st: list[Segment]) -> tuple[int, int]:
         a, b = st[0].start, st[-1].stop
+        return (min(a + settle, b) if a > 0 else a), b
+
+    for st in stretches:
+        a, b = bounds(st)  # after a resting segment: where the body has settled
         loco = [s for s in st if s.activity is Activity.LOCOMOTION]
         if not loco or b - a < frames:
             continue
         travels = [s for s in loco if s.speed_per_leg > options.moving_speed_per_leg]
-        first = min((travels or loco)[0].start, b - frames)
+        first = min(max((travels or loco)[0].start, a), b - frames)
         at = first
         while at + frames <= b and len(out) < max_windows:
             out.append(Window(at, at + frames))
@@ -519,14 +531,11 @@ def choose_windows(
     if out:
         return out
 
-    def span(st: list[Segment]) -> int:
-        return st[-1].stop - st[0].start
-
     moving = [st for st in stretches if any(s.activity is Activity.LOCOMOTION for s in st)]
-    pool = moving or stretches
+    pool = [bounds(st) for st in (moving or stretches)]
     if not pool:
         return []
-    best = max(pool, key=span)
-    if span(best) < min_frames:
+    a, b = max(pool, key=lambda ab: ab[1] - ab[0])
+    if b - a < min_frames:
         return []
-    return [Window(best[0].start, best[-1].stop, short=True)]
+    return [Window(a, b, short=True)]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -101,10 +102,10 @@ def _retarget(ns: argparse.Namespace) -> int:
         return _retarget_outputs(ns)
 
 
-def _default_span(motion: Motion) -> tuple[Motion, str]:
-    """The clip from its first standing or locomotion segment on
-    (:func:`habitsim.activity.default_span`) and what was left out, in words ("" when
-    nothing was).
+def _default_start(motion: Motion) -> tuple[float, str]:
+    """Where the clip's default span starts [s] (its first standing or locomotion
+    segment, :func:`habitsim.activity.default_span`) and what it leaves out, in words
+    ("" when it starts at the first frame).
 
     Raises:
         ActivityError: the clip never stands or moves on its legs.
@@ -112,15 +113,15 @@ def _default_span(motion: Motion) -> tuple[Motion, str]:
     from ..activity import default_span, timeline
 
     tl = timeline(motion)
-    start, stop = default_span(tl)
-    if start == 0 and stop == motion.num_frames:
-        return motion, ""
+    start, _ = default_span(tl)
+    if start == 0:
+        return 0.0, ""
     left = [s for s in tl.segments if s.start < start]
     what = ", ".join(f"{s.activity.value} {s.start_s:.2f}–{s.end_s:.2f} s" for s in left)
-    return motion.slice(start, stop), (
+    return start / tl.fps, (
         f"start left out: the clip begins {what} (the trunk on the ground, not a gait a "
-        f"robot can take up); retargeting {start / tl.fps:.2f}–{stop / tl.fps:.2f} s "
-        "(--start 0 keeps it; `habitsim data inspect-bvh` prints the whole timeline)"
+        f"robot can take up); retargeting from {start / tl.fps:.2f} s (--start 0 keeps it; "
+        "`habitsim data inspect-bvh` prints the whole timeline)"
     )
 
 
@@ -135,7 +136,7 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         retarget,
         track_clip,
     )
-    from ..source import load_clip
+    from ..source import Span, load_clip
 
     suffix = ns.source.suffix.lower()
     if suffix not in (".npz", ".bvh", ".glb", ".gltf"):
@@ -151,16 +152,20 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     if (ns.report or ns.video) and not ns.track:
         raise RetargetError("--report and --video describe the tracked run: add --track")
     robot = load_robot(ns.robot)
-    loaded = load_clip(ns.source, source_options(ns, ns.from_species if suffix != ".npz" else None))
+    opts = source_options(ns, ns.from_species if suffix != ".npz" else None)
+    loaded = load_clip(ns.source, opts)
+    trimmed = ""
+    if ns.start is None and ns.end is None:  # a span the user gives is taken as given
+        start_s, trimmed = _default_start(loaded.motion)
+        if trimmed:  # cut before the import, as --start does
+            loaded = load_clip(ns.source, dataclasses.replace(opts, span=Span(start_s)))
     if loaded.mapping is not None and not ns.json:
         print(loaded.mapping)
-    if loaded.cut and not ns.json:
-        print(f"source span: {loaded.kept()}")
-    motion, trimmed = loaded.motion, ""
-    if ns.start is None and ns.end is None:  # a span the user gives is taken as given
-        motion, trimmed = _default_span(motion)
     if trimmed and not ns.json:
         print(trimmed)
+    if loaded.cut and not ns.json:
+        print(f"source span: {loaded.kept()}")
+    motion = loaded.motion
     if ns.track and not any(robot.geom_bodyid == 0):
         raise RetargetError(
             f"{str(ns.robot)!r} has no floor (no geom on the world body): "
