@@ -295,6 +295,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.ik",
             "habitsim.stance",
             "habitsim.gait_stats",
+            "habitsim.activity",
             "habitsim.gaits",
             "habitsim.transfer_methods",
             "habitsim.bvh",

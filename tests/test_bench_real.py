@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from habitsim.bvh import write_bvh
@@ -21,6 +22,8 @@ from habitsim.evaluation.bench.real import (
 from habitsim.evaluation.bench.real_report import LEGEND, format_row, format_summary
 from habitsim.gait_stats import GALLOP_FROUDE, PEAK_SPAN_S
 from habitsim.gaits import generate
+from habitsim.gaits.lying import lying_pose, with_lying_start
+from habitsim.motion import Motion
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -244,9 +247,15 @@ def test_bad_input(folder: Path, tmp_path: Path, capsys) -> None:
     base = ["bench", "real", "--workers", "1", "--json", str(out)]
     assert main([*base, "--data", str(empty)]) == 2
     assert "no source clips" in capsys.readouterr().err
-    assert main([*base, "--data", str(folder), "--seconds", "10"]) == 2
+    lying = tmp_path / "lying"
+    lying.mkdir()
+    root, quats = lying_pose("dog")
+    write_bvh(
+        Motion("dog", 30.0, np.tile(root, (60, 1)), np.tile(quats, (60, 1, 1))), lying / "l.bvh"
+    )
+    assert main([*base, "--data", str(lying)]) == 2
     err = capsys.readouterr().err
-    assert "walk.bvh" in err and "shorter than one 10 s window" in err
+    assert "l.bvh: skipped, no stretch of 1 s or more" in err and "lying 0.00–2.00 s" in err
     assert main([*base, "--data", str(folder), "--targets", "cat,hores"]) == 2
     assert "unknown species 'hores'" in capsys.readouterr().err
     assert main([*base, "--data", str(folder), "--methods", "nope"]) == 2
@@ -270,7 +279,7 @@ def test_windows_per_clip_all_plans_every_whole_window(tmp_path: Path, capsys) -
     a count at most that many; anything else is a usage error naming what is valid."""
     from habitsim.cli import build_parser
     from habitsim.cli.bench_real import options
-    from habitsim.evaluation.bench.real import plan, window_starts
+    from habitsim.evaluation.bench.real import clip_windows, plan
     from habitsim.motion import resample_motion
 
     d = tmp_path / "clips"
@@ -280,7 +289,7 @@ def test_windows_per_clip_all_plans_every_whole_window(tmp_path: Path, capsys) -
     argv += ["--methods", "direct"]
     parser = build_parser()
     motion = resample_motion(read_clip(d / "walk.bvh", "dog"), 30)
-    every = window_starts(motion, 60, motion.num_frames)
+    every = [w.start for w in clip_windows(motion, 60, motion.num_frames, 30)[0]]
     assert len(every) >= 4
     tasks = plan(options(parser.parse_args([*argv, "--windows-per-clip", "all"]))).tasks
     assert [round(t.start_s * 30) for t in tasks] == every
@@ -292,3 +301,43 @@ def test_windows_per_clip_all_plans_every_whole_window(tmp_path: Path, capsys) -
     assert "valid: a count >= 1 or 'all'" in capsys.readouterr().err
     assert main([*argv, "--windows-per-clip", "0"]) == 2
     assert "must be >= 1 or 'all'" in capsys.readouterr().err
+
+
+def test_short_clips_run_as_one_short_window_and_lying_is_kept_out(tmp_path: Path) -> None:
+    """A clip shorter than a window is one shorter window (marked short, never skipped);
+    a lying start is named in a note and no window holds a frame of it."""
+    from habitsim.cli import build_parser
+    from habitsim.cli.bench_real import options
+    from habitsim.evaluation.bench.real import plan
+
+    d = tmp_path / "clips"
+    d.mkdir()
+    write_bvh(generate("dog", "trot", seed=1, duration_s=2.5), d / "run.bvh")
+    walk = generate("dog", "walk", seed=3, duration_s=5.0)
+    write_bvh(with_lying_start(walk, lying_s=2.0, rise_s=1.0), d / "lie_walk.bvh")
+    argv = ["bench", "real", "--data", str(d), "--targets", "cat", "--methods", "direct"]
+    planned = plan(options(build_parser().parse_args([*argv, "--windows-per-clip", "all"])))
+    by_clip: dict[str, list] = {}
+    for t in planned.tasks:
+        by_clip.setdefault(t.clip, []).append(t)
+    assert set(by_clip) == {"run.bvh", "lie_walk.bvh"}
+    (short,) = by_clip["run.bvh"]
+    assert short.short and short.start_s == 0.0 and short.motion.num_frames == 75
+    assert "locomotion (trot)" in short.activity
+    assert any(
+        "run.bvh: the clip is shorter than one 4 s window: runs as one 2.50 s" in n
+        for n in planned.notes
+    )
+    assert any(n.startswith("lie_walk.bvh: lying 0.00–") and "kept out" in n for n in planned.notes)
+    (lie,) = by_clip["lie_walk.bvh"]
+    assert not lie.short and lie.start_s >= 2.0 and lie.motion.num_frames == 120
+    row = {
+        "clip": "run.bvh",
+        "start_s": 0.0,
+        "target": "cat",
+        "method": "direct",
+        "status": "ok",
+        "short_window": True,
+        "window_s": 2.5,
+    }
+    assert "short window 2.50 s" in format_row(row)

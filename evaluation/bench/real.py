@@ -4,9 +4,15 @@ Every clip of a folder (:data:`habitsim.bvh_mapping.SOURCE_SUFFIXES`: BVH, glTF/
 imported onto ``species`` (default dog) with :func:`habitsim.bvh_mapping.import_bvh`
 (which reads it with :func:`habitsim.bvh_mapping.read_source`), resampled to ``fps``
 (default 30 Hz, the rate the shipped model and the refinement are built for) and cut into
-windows of ``seconds`` (default 4 s): consecutive windows from the first frame where the
-pelvis moves, at most ``windows_per_clip`` (default 1; ``all``: every whole window) per
-clip; a clip shorter than one window is skipped with a note. Each window × target
+windows of ``seconds`` (default 4 s) chosen from its activity timeline
+(:func:`habitsim.activity.timeline`, :func:`habitsim.activity.choose_windows`):
+consecutive windows from the first locomotion frame of each stretch where the animal
+stands or moves on its legs, at most ``windows_per_clip`` (default 1; ``all``: every
+whole window) per clip. A segment whose trunk rests on the ground (lying, sitting) is
+kept out of the windows and named in a note. A clip (or upright stretch) shorter than one
+window runs as one shorter window (``short_window`` in its rows, marked in the table), of
+at least ``min_seconds``; only a clip without such a stretch (lying throughout) is left
+out, with a note. Each window × target
 (default cat, horse, camel, tiger, elephant) × method (default habit, direct) runs through
 :func:`habitsim.pipeline.run_clip` (transfer → refine stage A → unassisted ``mpc``
 tracking, with the refinement check), in an executor of the evaluation
@@ -65,6 +71,7 @@ from ..rows import finite_or_none, run_row
 from .targets import TargetCheck, exit_code, verdict
 
 if TYPE_CHECKING:  # pragma: no cover
+    from habitsim.activity import Timeline, Window
     from habitsim.motion import Motion
 
 __all__ = [
@@ -80,7 +87,7 @@ __all__ = [
     "run_window",
     "source_files",
     "survival_runs",
-    "window_starts",
+    "clip_windows",
 ]
 
 #: Default target species.
@@ -100,13 +107,12 @@ MPJPE_PER_LEG = 0.15
 SECONDS_PER_4S_CLIP = 10.0
 #: Initial joint-velocity noise [rad/s] of the repeated runs.
 PERTURB_QVEL = 1e-3
-#: A window starts at the first frame whose pelvis speed (0.5 s moving average) exceeds
-#: this many leg lengths per second (frame 0 when the animal never does).
-MOVING_SPEED_PER_LEG = 0.25
 
 #: A row of ``bench real`` (one window × target × method), a JSON object: the window
-#: (``clip``, ``start_s`` [s], ``frames``, ``fps`` [Hz], ``species``, ``target``, the
-#: import's figures), ``method``, ``status`` (``ok``, ``unavailable``, ``error``) and
+#: (``clip``, ``start_s`` [s], ``frames``, ``fps`` [Hz], ``window_s`` [s],
+#: ``short_window`` (a clip shorter than a window, run as one shorter window),
+#: ``activity`` (its segments, e.g. ``locomotion (walk, trot)``), ``species``, ``target``,
+#: the import's figures), ``method``, ``status`` (``ok``, ``unavailable``, ``error``) and
 #: ``note``, then on ``ok`` the columns of :meth:`habitsim.evaluation.rows.RunRow.real_columns`,
 #: the tracking runs (``survival_runs``, ``whole_runs``, ``time_repeats_s`` [s]) and
 #: :meth:`~habitsim.evaluation.rows.RunRow.real_tail_columns`, and ``time_total_s`` [s].
@@ -130,6 +136,8 @@ class RealOptions:
         joint_map, units, up: the importer's options for every clip
             (:func:`habitsim.bvh_mapping.import_bvh`; None: its defaults).
         seconds: window length [s].
+        min_seconds: a clip shorter than one window runs as one shorter window of at
+            least this length [s].
         windows_per_clip: consecutive windows per clip, or ``"all"``.
         fps: frame rate the clips are resampled to [Hz] (0 keeps theirs).
         refine: refinement stage (``none``, ``A``, ``B``).
@@ -150,6 +158,7 @@ class RealOptions:
     units: str | None = None
     up: str | None = None
     seconds: float = 4.0
+    min_seconds: float = 1.0
     windows_per_clip: int | Literal["all"] = 1
     fps: float = 30.0
     refine: str = "A"
@@ -207,25 +216,27 @@ def source_files(folder: str | Path) -> list[Path]:
     return files
 
 
-def window_starts(motion: Motion, frames: int, max_windows: int) -> list[int]:
-    """Start frames of up to ``max_windows`` consecutive ``frames``-long windows, from the
-    first frame where the pelvis moves (:data:`MOVING_SPEED_PER_LEG`); [] when the clip is
-    shorter than one window."""
-    n = motion.num_frames
-    if n < frames:
-        return []
-    root = motion.root_positions[:, :2]
-    speed = np.zeros(n)
-    if n > 1:
-        step = np.linalg.norm(np.diff(root, axis=0), axis=1) * motion.fps
-        speed[1:] = step
-        speed[0] = step[0]
-    k = max(1, int(round(0.5 * motion.fps)))
-    smooth = np.convolve(speed, np.ones(k) / k, mode="same")
-    moving = np.flatnonzero(smooth > MOVING_SPEED_PER_LEG * motion.species_info.leg_length)
-    first = int(moving[0]) if moving.size else 0
-    first = min(first, n - frames)
-    return [first + i * frames for i in range(max_windows) if first + (i + 1) * frames <= n]
+def clip_windows(
+    motion: Motion, frames: int, max_windows: int, min_frames: int
+) -> tuple[list[Window], Timeline]:
+    """The windows of one clip (:func:`habitsim.activity.choose_windows` on its
+    :func:`~habitsim.activity.timeline`) and the timeline."""
+    from habitsim.activity import choose_windows, timeline
+
+    tl = timeline(motion)
+    return choose_windows(tl, frames, max_windows, min_frames), tl
+
+
+def _window_activity(tl: Timeline, start: int, stop: int) -> str:
+    """The activities of the segments a window overlaps, e.g. ``locomotion (walk, trot),
+    standing``."""
+    parts: dict[str, list[str]] = {}
+    for s in tl.segments:
+        if s.stop > start and s.start < stop:
+            gaits = parts.setdefault(s.activity.value, [])
+            if s.gait and s.gait not in gaits:
+                gaits.append(s.gait)
+    return ", ".join(f"{a} ({', '.join(g)})" if g else a for a, g in parts.items())
 
 
 # ---------------------------------------------------------------------------- tasks
@@ -247,6 +258,8 @@ class WindowTask:
     seed: int
     repeats: int = 1
     perturb: float = PERTURB_QVEL
+    short: bool = False
+    activity: str = ""
 
 
 def _import_f1(motion: Motion) -> list[float] | None:
@@ -282,6 +295,9 @@ def run_window(task: WindowTask) -> list[RealRow]:
         "start_s": task.start_s,
         "frames": src.num_frames,
         "fps": src.fps,
+        "window_s": src.num_frames / src.fps,
+        "short_window": task.short,
+        "activity": task.activity,
         "species": src.species,
         "target": task.target,
         "import_contact_f1": f1,
@@ -351,18 +367,20 @@ def run_window(task: WindowTask) -> list[RealRow]:
 
 @dataclass(frozen=True)
 class RealPlan:
-    """The tasks of a run (grouped by target) and the notes on skipped clips."""
+    """The tasks of a run (grouped by target) and the notes on its clips (resting
+    segments kept out, short windows, skipped clips)."""
 
     tasks: tuple[WindowTask, ...]
     notes: tuple[str, ...]
 
 
 def plan(options: RealOptions) -> RealPlan:
-    """The tasks of a run and the notes on skipped clips (every input checked first).
+    """The tasks of a run and the notes on its clips: resting segments kept out, short
+    windows, skipped clips (every input checked first).
 
     Raises:
         BenchRealError / UnknownSpeciesError / UnknownMethodError / SimulationError: bad
-            options, a folder without a clip long enough for one window.
+            options, a folder in which no clip stands or moves on its legs.
     """
     from habitsim.controllers import CONTROLLERS
     from habitsim.motion import resample_motion
@@ -374,6 +392,10 @@ def plan(options: RealOptions) -> RealPlan:
     o = options
     if not (math.isfinite(o.seconds) and o.seconds > 0):
         raise BenchRealError(f"--seconds must be > 0, got {o.seconds}")
+    if not (math.isfinite(o.min_seconds) and 0 < o.min_seconds <= o.seconds):
+        raise BenchRealError(
+            f"min_seconds must be > 0 and at most --seconds ({o.seconds:g}), got {o.min_seconds}"
+        )
     every = o.windows_per_clip == "all"
     if not every and not (isinstance(o.windows_per_clip, int) and o.windows_per_clip >= 1):
         raise BenchRealError(
@@ -406,7 +428,7 @@ def plan(options: RealOptions) -> RealPlan:
 
         load_joint_map(o.joint_map)  # a bad map file fails here, not once per clip
     notes: list[str] = []
-    windows: list[tuple[str, float, Any]] = []
+    windows: list[tuple[str, float, Any, bool, str]] = []
     for f in files:
         try:
             m = read_clip(f, species, joint_map=o.joint_map, units=o.units, up=o.up)
@@ -417,18 +439,49 @@ def plan(options: RealOptions) -> RealPlan:
             m = resample_motion(m, o.fps)
         frames = int(round(o.seconds * m.fps))
         max_windows = m.num_frames if o.windows_per_clip == "all" else o.windows_per_clip
-        starts = window_starts(m, frames, max_windows)
-        if not starts:
+        min_frames = max(2, int(round(o.min_seconds * m.fps)))
+        chosen, tl = clip_windows(m, frames, max_windows, min_frames)
+        for seg in tl.segments:
+            if seg.trunk_on_ground:
+                notes.append(
+                    f"{f.name}: {seg.activity.value} {seg.start_s:.2f}–{seg.end_s:.2f} s "
+                    "(trunk on the ground): kept out of the windows"
+                )
+        if not chosen:
             notes.append(
-                f"{f.name}: skipped, {m.num_frames} frames ({m.duration:.2f} s) is "
-                f"shorter than one {o.seconds:g} s window ({frames} frames)"
+                f"{f.name}: skipped, no stretch of {o.min_seconds:g} s or more in which the "
+                "animal stands or moves on its legs ("
+                + ", ".join(
+                    f"{s.activity.value} {s.start_s:.2f}–{s.end_s:.2f} s" for s in tl.segments
+                )
+                + ")"
             )
             continue
-        for s in starts:
-            windows.append((f.name, round(s / m.fps, 3), m.slice(s, s + frames)))
+        for w in chosen:
+            if w.short:
+                sec = w.frames / m.fps
+                what = (
+                    "the clip"
+                    if w.frames == m.num_frames
+                    else f"its longest stretch on its legs ({sec:.2f} s of {m.duration:.2f} s)"
+                )
+                notes.append(
+                    f"{f.name}: {what} is shorter than one {o.seconds:g} s window: runs as "
+                    f"one {sec:.2f} s window"
+                )
+            windows.append(
+                (
+                    f.name,
+                    round(w.start / m.fps, 3),
+                    m.slice(w.start, w.stop),
+                    w.short,
+                    _window_activity(tl, w.start, w.stop),
+                )
+            )
     if not windows:
         raise BenchRealError(
-            f"--data {o.data}: no clip gives a {o.seconds:g} s window; " + "; ".join(notes)
+            f"--data {o.data}: no clip gives a window (every clip lies or sits throughout, "
+            "or failed to import); " + "; ".join(notes)
         )
     tasks = [
         WindowTask(
@@ -444,9 +497,11 @@ def plan(options: RealOptions) -> RealPlan:
             o.seed,
             repeats,
             perturb,
+            short,
+            activity,
         )
         for t in targets  # grouped by target: a process keeps few built refinement problems
-        for clip, start, w in windows
+        for clip, start, w, short, activity in windows
     ]
     return RealPlan(tuple(tasks), tuple(notes))
 

@@ -41,7 +41,8 @@ LEGEND = (
     "Fr: the source window's peak Froude number over 0.5 s (above 2.5 a gallop); "
     "resid: residual root force [m·g] the tracked reference needs beyond what its stance "
     "feet can push, docs/metrics.md's root_residual_mg; whole k/K runs: with --repeats, "
-    "the runs of the window tracked whole, and their mean survival)"
+    "the runs of the window tracked whole, and their mean survival; short window: a clip "
+    "shorter than --seconds, run as one shorter window)"
 )
 
 
@@ -49,11 +50,12 @@ def format_row(r: RealRow) -> str:
     """One printed line of a row."""
     name = f"{Path(r['clip']).stem}@{r['start_s']:g}"
     lead = f"{name[:24]:24s} {r['target']:9s} {r['method']:6s}"
+    short = f"  short window {r['window_s']:.2f} s" if r.get("short_window") else ""
     if r["status"] != "ok":
-        return f"{lead} {r['status']}: {r['note']}"
+        return f"{lead} {r['status']}: {r['note']}{short}"
     toe = r.get("stance_toe_height_import")
     runs = survival_runs(r)
-    tail = ""
+    tail = short
     if r.get("source_froude_peak") is not None:
         tail += f"  Fr {r['source_froude_peak']:.1f}"
     if r.get("reference_residual_mg") is not None:

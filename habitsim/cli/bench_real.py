@@ -25,7 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="real motion capture (BVH or glTF/GLB clips) through transfer → refine → track",
         description=(
             "Import every BVH or glTF/GLB clip (its first animation) of DIR onto --species, "
-            "cut it into windows of --seconds, and run each window × target × method "
+            "cut it into windows of --seconds chosen from its locomotion (a lying or "
+            "sitting segment is kept out; a clip shorter than a window runs as one shorter "
+            "window), and run each window × target × method "
             "through the pipeline (transfer, refinement stage A, unassisted tracking); "
             "print one line per run, a summary and the issue's targets. Exit code 1 when "
             "a target is MISSED, 2 on bad input."
@@ -72,8 +74,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1,
         metavar="N",
         help=(
-            "consecutive windows per clip, from where the animal moves (default 1; all: "
-            "every whole window)"
+            "consecutive windows per clip, from where the animal first moves on its legs "
+            "(default 1; all: every whole window)"
         ),
     )
     p.add_argument(
@@ -177,10 +179,13 @@ def _bench_real(ns: argparse.Namespace) -> int:
     tasks, notes = planned.tasks, planned.notes
     clips = len({t.clip for t in tasks})
     wins = len({(t.clip, t.start_s) for t in tasks})
+    shorts = len({(t.clip, t.start_s) for t in tasks if t.short})
     targets = list(dict.fromkeys(t.target for t in tasks))
     methods = list(tasks[0].methods)
     print(
-        f"bench real: {wins} window(s) of {ns.seconds:g} s from {clips} clip(s) of {ns.data} "
+        f"bench real: {wins} window(s) of {ns.seconds:g} s"
+        + (f" ({shorts} shorter: clips shorter than a window)" if shorts else "")
+        + f" from {clips} clip(s) of {ns.data} "
         f"(imported onto {ns.species}, {ns.fps:g} fps) × {', '.join(targets)} × "
         f"{', '.join(methods)}; refine {tasks[0].refine}; "
         + (f"tracking unassisted ({ns.controller})" if not ns.no_track else "no tracking")

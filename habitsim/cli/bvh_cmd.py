@@ -18,6 +18,9 @@ from .conventions import UNIT_CHOICES, UP_CHOICES, add_source_options, source_op
 if TYPE_CHECKING:  # pragma: no cover
     from ..motion import Motion
 
+if TYPE_CHECKING:  # pragma: no cover
+    from ..motion import Motion
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``import-bvh`` and ``export-bvh`` commands to the ``data`` group."""
@@ -95,7 +98,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             "Print the source hierarchy (bone lengths in file units, rig helpers marked) with "
             "the habitsim joint proposed for each source joint, the detected units and axes, "
             "each leg's mapping confidence and warnings, the stance found on the source's "
-            "own feet, and a JSON joint map to edit and pass to import-bvh --map."
+            "own feet, the clip's activity timeline (lying, sitting, standing, locomotion "
+            "with gait and speed, transitions) and a JSON joint map to edit and pass to "
+            "import-bvh --map."
         ),
     )
     i.add_argument("file", type=Path, help="the .bvh, .glb or .gltf file")
@@ -259,11 +264,36 @@ def _inspect(ns: argparse.Namespace) -> int:
             + ", ".join(c["foot_joints"])
         )
     _print_in_place(motion)
+    print()
+    _print_timeline(motion)
     template = {"extends": "auto", "map": mapping.mapped()}
     print()
     print("joint map to edit (save as map.json, pass --map map.json; null unmaps a joint):")
     print(json.dumps(template, indent=1))
     return 0
+
+
+def _print_timeline(motion: Motion) -> None:
+    """The clip's activity timeline (:func:`habitsim.activity.timeline`) and the part a
+    command runs by default."""
+    from ..activity import ActivityError, default_span, timeline
+
+    tl = timeline(motion)
+    print(
+        f"activity on the {motion.species}'s skeleton (start–end, activity, speed, trunk height):"
+    )
+    print(tl.describe())
+    try:
+        start, _ = default_span(tl)
+    except ActivityError as e:
+        print(f"default span: none ({e})")
+        return
+    if start > 0:
+        first = tl.segments[0]
+        print(
+            f"default span: from {start / tl.fps:.2f} s (the {first.activity.value} start "
+            "is left out by retarget and bench real)"
+        )
 
 
 def _import(ns: argparse.Namespace) -> int:

@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .conventions import add_list_option, add_source_options, source_options
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..motion import Motion
 
 #: Controllers ``--track`` can use (the torque-based ones; a robot's servos are driven
 #: as torques).
@@ -25,7 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             "by the ratio of leg lengths, trunk orientation kept, leg IK on the robot's joints "
             "(damped least squares on MuJoCo Jacobians, joint ranges respected). Writes the "
             "robot's qpos, fps, contact labels and foot names to OUT.npz (atomically); "
-            "--track then simulates it (default controller mpc; no assistance)."
+            "--track then simulates it (default controller mpc; no assistance). A clip "
+            "that starts lying or sitting is retargeted from its first standing or "
+            "locomotion segment (said in the output)."
         ),
     )
     p.add_argument(
@@ -95,6 +102,29 @@ def _retarget(ns: argparse.Namespace) -> int:
         return _retarget_outputs(ns)
 
 
+def _default_start(motion: Motion) -> tuple[float, str]:
+    """Where the clip's default span starts [s] (its first standing or locomotion
+    segment, :func:`habitsim.activity.default_span`) and what it leaves out, in words
+    ("" when it starts at the first frame).
+
+    Raises:
+        ActivityError: the clip never stands or moves on its legs.
+    """
+    from ..activity import default_span, timeline
+
+    tl = timeline(motion)
+    start, _ = default_span(tl)
+    if start == 0:
+        return 0.0, ""
+    left = [s for s in tl.segments if s.start < start]
+    what = ", ".join(f"{s.activity.value} {s.start_s:.2f}–{s.end_s:.2f} s" for s in left)
+    return start / tl.fps, (
+        f"start left out: the clip begins {what} (the trunk on the ground, not a gait a "
+        f"robot can take up); retargeting from {start / tl.fps:.2f} s (--start 0 keeps it; "
+        "`habitsim data inspect-bvh` prints the whole timeline)"
+    )
+
+
 def _retarget_outputs(ns: argparse.Namespace) -> int:
     import mujoco
 
@@ -106,7 +136,7 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         retarget,
         track_clip,
     )
-    from ..source import load_clip
+    from ..source import Span, load_clip
 
     suffix = ns.source.suffix.lower()
     if suffix not in (".npz", ".bvh", ".glb", ".gltf"):
@@ -122,9 +152,17 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     if (ns.report or ns.video) and not ns.track:
         raise RetargetError("--report and --video describe the tracked run: add --track")
     robot = load_robot(ns.robot)
-    loaded = load_clip(ns.source, source_options(ns, ns.from_species if suffix != ".npz" else None))
+    opts = source_options(ns, ns.from_species if suffix != ".npz" else None)
+    loaded = load_clip(ns.source, opts)
+    trimmed = ""
+    if ns.start is None and ns.end is None:  # a span the user gives is taken as given
+        start_s, trimmed = _default_start(loaded.motion)
+        if trimmed:  # cut before the import, as --start does
+            loaded = load_clip(ns.source, dataclasses.replace(opts, span=Span(start_s)))
     if loaded.mapping is not None and not ns.json:
         print(loaded.mapping)
+    if trimmed and not ns.json:
+        print(trimmed)
     if loaded.cut and not ns.json:
         print(f"source span: {loaded.kept()}")
     motion = loaded.motion
@@ -143,6 +181,7 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     clip.save(ns.out)
     summary: dict = {
         "out": str(ns.out),
+        "trimmed_start": trimmed or None,
         "frames": len(clip.qpos),
         "fps": clip.fps,
         "duration_s": clip.duration,
@@ -151,7 +190,10 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     if ns.track:
         res = track_clip(clip, robot, controller=ns.controller)
         rep = res.report()
-        summary["track"] = {k: rep[k] for k in ("controller", "fell", "fall_time_s", "fall_reason")}
+        summary["track"] = {
+            k: rep[k]
+            for k in ("controller", "fell", "fall_time_s", "fall_reason", "reference_resting")
+        }
         summary["track"].update(
             {
                 k: rep["metrics"][k]
@@ -189,6 +231,8 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         if t["mpc_median_ms"] is not None:
             line += f", MPC {t['mpc_median_ms']:.2f} ms"
         print(line)
+        if t["reference_resting"]:
+            print(t["reference_resting"])
         if t["fell"]:
             print(f"fell at {t['fall_time_s']:.2f} s: {t['fall_reason']}")
     return 0

@@ -40,7 +40,7 @@ from ..controllers import CONTROLLERS
 from ..errors import SimulationError
 from ..qpos import species_model as species_model  # the shipped-model cache
 from .assist import root_assist
-from .falls import Fall, FallCause, FallDetector, FallOptions
+from .falls import Fall, FallCause, FallDetector, FallOptions, ReferenceResting
 from .model import FOOT_GEOMS, foot_geoms
 from .model import TOUCH_THRESHOLD_MG as TOUCH_THRESHOLD_MG
 from .model import _species_model as _species_model
@@ -59,6 +59,7 @@ __all__ = [
     "FallOptions",
     "Fall",
     "FallCause",
+    "ReferenceResting",
     "finite_differences",
     "build_reference",
     "foot_geoms",

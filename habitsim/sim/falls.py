@@ -1,4 +1,11 @@
-"""docs/metrics.md's fall rule (:class:`FallDetector`), checked at every reference frame."""
+"""docs/metrics.md's fall rule (:class:`FallDetector`), checked at every reference frame.
+
+A reference that itself rests its trunk on the ground (lying, sitting: its trunk lower
+than :attr:`FallOptions.rest_height_ratio` of the model's standing height) asks the body
+to be down: a clause that fires at such a frame is not a fall of the controller. It is
+recorded as :class:`ReferenceResting` (:attr:`FallDetector.resting`) and the run goes on;
+a body still down when the reference stands up again falls then.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +17,7 @@ from enum import StrEnum
 import mujoco
 import numpy as np
 
-from ..mjutils import lowest_z
+from ..mjutils import home_qpos, lowest_z
 from .model import _free_body, foot_geoms
 from .reference import _check_qpos
 
@@ -27,12 +34,16 @@ class FallOptions:
         ground_contact_s: … or a non-foot body touches the ground for longer than this [s].
         ground_tolerance_per_leg: a reference body counts as resting on the ground within
             this share of leg length [unitless] (such bodies may touch it).
+        rest_height_ratio: the reference rests its trunk on the ground (lies or sits) at
+            a frame whose trunk is lower than this share of the model's standing trunk
+            height (its ``home`` keyframe) [unitless]; no clause is a fall there.
     """
 
     height_ratio: float = 0.5
     tilt_deg: float = 60.0
     ground_contact_s: float = 0.2
     ground_tolerance_per_leg: float = 0.01
+    rest_height_ratio: float = 0.6
 
 
 class FallCause(StrEnum):
@@ -44,6 +55,30 @@ class FallCause(StrEnum):
     TILT = "tilt"
     #: a non-foot body touched the ground for too long
     BODY_CONTACT = "body_contact"
+
+
+@dataclass(frozen=True)
+class ReferenceResting:
+    """A clause of the fall rule that fired while the reference itself rested its trunk
+    on the ground (:attr:`FallOptions.rest_height_ratio`): not a fall of the controller.
+
+    Attributes:
+        frame: the first reference frame it fired at.
+        cause: the clause.
+        text: the clause's reason in words, with the figures.
+        trunk_ratio: the reference's trunk height at that frame / the standing height.
+    """
+
+    frame: int
+    cause: FallCause
+    text: str
+    trunk_ratio: float
+
+    def describe(self, fps: float) -> str:
+        return (
+            f"reference lying at {self.frame / fps:.2f} s (its trunk at {self.trunk_ratio:.2f} "
+            f"of standing height): {self.text}; not counted as a fall"
+        )
 
 
 @dataclass(frozen=True)
@@ -121,7 +156,12 @@ class FallDetector:
         near = lowest_z(model, colliding, pos, mat) < tol  # (T, n)
         bodies = model.geom_bodyid[colliding]
         self.ref_ground = [set(int(b) for b in bodies[row]) for row in near]
+        d.qpos[:] = home_qpos(model)
+        mujoco.mj_kinematics(model, d)
+        self.standing_height = float(d.xpos[self.trunk, 2])
+        self.ref_resting = self.ref_height < options.rest_height_ratio * self.standing_height
         self.contact_frames = 0
+        self.resting: ReferenceResting | None = None
 
     def _ground_bodies(self, data: mujoco.MjData) -> set[int]:
         out = set()
@@ -136,6 +176,7 @@ class FallDetector:
 
     def reset(self) -> None:
         self.contact_frames = 0
+        self.resting = None
 
     def check(self, k: int, data: mujoco.MjData) -> str | None:
         """The fall reason at frame k (``data`` after mj_step/mj_forward), or None (the
@@ -144,8 +185,20 @@ class FallDetector:
         return None if fall is None else fall.text
 
     def fall(self, k: int, data: mujoco.MjData) -> Fall | None:
-        """The fall at frame k (``data`` after mj_step/mj_forward), typed, or None."""
+        """The fall at frame k (``data`` after mj_step/mj_forward), typed, or None. A
+        clause firing while the reference rests is no fall: the first such is kept in
+        :attr:`resting`."""
         k = min(k, len(self.ref_height) - 1)
+        fall = self._clause(k, data)
+        if fall is None or not self.ref_resting[k]:
+            return fall
+        if self.resting is None:
+            ratio = float(self.ref_height[k] / self.standing_height)
+            self.resting = ReferenceResting(k, fall.cause, fall.text, ratio)
+        self.contact_frames = 0
+        return None
+
+    def _clause(self, k: int, data: mujoco.MjData) -> Fall | None:
         o = self.options
         h = data.xpos[self.trunk, 2]
         if h < o.height_ratio * self.ref_height[k]:

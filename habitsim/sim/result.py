@@ -40,6 +40,9 @@ class TrackResult:
         work_j: Σ|τ·q̇|·dt over the survived part [J].
         wall_time_s: wall-clock time of the simulation loop [s].
         metrics: :data:`habitsim.metrics.simulated.SIMULATED_KEYS` → value.
+        reference_resting: when a clause of the fall rule fired while the reference
+            itself lay or sat (:class:`habitsim.sim.falls.ReferenceResting`), what and
+            when, in words: not a fall of the controller (None otherwise).
     """
 
     species: str
@@ -63,6 +66,7 @@ class TrackResult:
     wall_time_s: float
     sim_time_s: float
     metrics: dict[str, Any] = field(default_factory=dict)
+    reference_resting: str | None = None
 
     @property
     def failed(self) -> bool:
@@ -96,6 +100,7 @@ class TrackResult:
                 "fell": self.fell,
                 "fall_time_s": self.fall_time,
                 "fall_reason": self.fall_reason,
+                "reference_resting": self.reference_resting,
                 "unstable": self.unstable,
                 "unstable_reason": self.unstable_reason,
                 "metrics": self.metrics,

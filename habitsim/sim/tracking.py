@@ -151,13 +151,20 @@ def track(
     detector = FallDetector(sim_model, clip.qpos, clip.fps, clip.leg_length, clip.feet)
     if use_rollout if use_rollout is not None else fast:
         run = _run_rollout(sim_model, [clip], 1, settle_s, stop_on_fall, [detector], [dv0])[0]
-        return _finish(clip, sim_model, run, "servo", _rollout_stats(1))
+        return _resting(_finish(clip, sim_model, run, "servo", _rollout_stats(1)), detector)
     ctl = _make_controller(
         controller, sim_model, clip, None if every == 1 else every * sim_model.opt.timestep
     )
     run = _run_python(sim_model, clip, ctl, asst, every, settle_s, stop_on_fall, detector, dv0)
     name = controller if isinstance(controller, str) else str(getattr(ctl, "name", "custom"))
-    return _finish(clip, sim_model, run, name, ctl.stats.to_dict())
+    return _resting(_finish(clip, sim_model, run, name, ctl.stats.to_dict()), detector)
+
+
+def _resting(result: TrackResult, detector: FallDetector) -> TrackResult:
+    """The result with what the fall rule left uncounted because the reference lay."""
+    if detector.resting is not None:
+        result.reference_resting = detector.resting.describe(result.fps)
+    return result
 
 
 def track_many(
@@ -234,6 +241,6 @@ def track_many(
         group = [clips[i] for i in idx]
         dets = [FallDetector(sim_model, c.qpos, c.fps, c.leg_length) for c in group]
         runs = _run_rollout(sim_model, group, threads, settle_s, stop_on_fall, dets)
-        for i, c, r in zip(idx, group, runs, strict=True):
-            results[i] = _finish(c, sim_model, r, "servo", _rollout_stats(threads))
+        for i, c, r, det in zip(idx, group, runs, dets, strict=True):
+            results[i] = _resting(_finish(c, sim_model, r, "servo", _rollout_stats(threads)), det)
     return [r for r in results if r is not None]
