@@ -28,7 +28,7 @@ from ..stance.planting import (
 )
 from .chains import _AXIAL, _END_POINTS, _IDX, _LEG_CHAINS, _TAIL
 from .frame import _leg_ends
-from .inplace import InPlaceFit, InPlaceOptions, recover_in_place, sweep_labels
+from .inplace import InPlaceFit, InPlaceOptions, recover_in_place, refit_in_place, sweep_labels
 from .loops import LoopFit, LoopOptions, detect_loop
 from .names import _fore_vote
 from .report import ImportReport, InPlaceRecord, SourceStanceRecord
@@ -201,7 +201,7 @@ def retarget(
     feet_found = _source_feet(bvh, t, j2s, src, mapping)
     fit, loop = None, None
     if feet_found is not None:
-        src, fit, loop = _recovered(src, feet_found, bvh.fps, inplace, loops)
+        src, fit, loop = _recovered(src, feet_found, bvh.fps, inplace, loops, options)
         hips = s("pelvis")
     stance = _source_stance(bvh.fps, feet_found, src, options)
     # Root translation scaled by the hip-height ratio, heights above the source's ground.
@@ -365,24 +365,27 @@ def _recovered(
     fps: float,
     inplace: InPlaceOptions | None,
     loops: LoopOptions | None,
+    planting: PlantingOptions | None = None,
 ) -> tuple[np.ndarray, InPlaceFit, LoopFit]:
     """The source positions with an in-place clip's travel added, what the recovery
-    found and whether the clip is a loop (its poses relative to the trunk)."""
+    found and whether the clip is a loop (its poses relative to the trunk).
+
+    The travel is found twice: from the feet that sweep back together, then again on the
+    stance labelled on the clip with that travel added (``planting``: the labelling's
+    knobs; :func:`~habitsim.bvh_mapping.inplace.refit_in_place`)."""
     _, anchor_idx, limb_len, points = feet
     leg = float(limb_len[2:].mean())
     trunk = src[:, anchor_idx].mean(axis=1)
     loop = detect_loop(src - trunk[:, None, :], leg, loops)
     forward = src[:, anchor_idx[:2]].mean(axis=1) - src[:, anchor_idx[2:]].mean(axis=1)
-    fit = recover_in_place(
-        [src[:, pts] for pts in points],
-        trunk,
-        forward,
-        fps,
-        leg,
-        cyclic=loop.kind is not None,
-        options=inplace,
-    )
+    cyclic = loop.kind is not None
+    foot_paths = [src[:, pts] for pts in points]
+    fit = recover_in_place(foot_paths, trunk, forward, fps, leg, cyclic=cyclic, options=inplace)
     if fit.detected:
+        moved = src + fit.travel[:, None, :]
+        st = label_source_stance([moved[:, pts] for pts in points], fps, leg, planting)
+        labels, _ = sweep_labels(st.labels, fit, inplace)
+        fit = refit_in_place(fit, foot_paths, labels.array, fps, cyclic, inplace)
         src = src + fit.travel[:, None, :]
     return src, fit, loop
 
