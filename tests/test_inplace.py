@@ -171,6 +171,9 @@ def test_malformed_in_place_record_is_named(walks) -> None:
     bad["in_place"] = dict(bad["in_place"], loop="sometimes")
     with pytest.raises(MetadataError, match="import.in_place.loop"):
         ImportReport.from_metadata({"import": bad})
+    bad["in_place"] = dict(meta.to_metadata()["in_place"], unreached_frames=-1)
+    with pytest.raises(MetadataError, match="import.in_place.unreached_frames"):
+        ImportReport.from_metadata({"import": bad})
 
 
 def test_stance_centres_trim_touch_down_and_lift_off() -> None:
@@ -235,3 +238,56 @@ def test_refit_leaves_out_the_rolling_ends_of_stance() -> None:
     assert refit_in_place(off, feet, stance, fps) is off
     with pytest.raises(InPlaceOptionsError, match="stance_trim_share"):
         InPlaceOptions(stance_trim_share=0.5)
+
+
+def test_trim_unreached_takes_off_high_run_ends() -> None:
+    from habitsim.bvh_mapping.inplace import trim_unreached
+    from habitsim.stance.labels import EditReason, StanceLabels, StanceSource
+
+    c = np.zeros((20, 4), bool)
+    c[2:12, 0] = True
+    c[2:12, 1] = True
+    c[15:, 2] = True
+    c[:4, 2] = True  # a loop's run across the seam: frames 15..19, 0..3
+    h = np.zeros((20, 4))
+    h[[2, 3, 11], 0] = 0.01  # two high frames at touch-down, one at lift-off
+    h[7, 0] = 0.01  # high in the middle: not an end, kept
+    h[[2, 11], 1] = 0.01  # foot 1 is not a swept foot: kept
+    h[[3, 15], 2] = 0.01  # the seam run's lift-off and touch-down ends
+    h[10, 2] = 0.01  # a swing frame: nothing to take off
+    labels = StanceLabels(c, StanceSource.IMPORTED)
+    out, n = trim_unreached(labels, h, (0, 2), 0.005, cyclic=True)
+    assert n == 5
+    assert np.flatnonzero(out.array[:, 0]).tolist() == list(range(4, 11))
+    assert np.array_equal(out.array[:, 1], c[:, 1])
+    assert np.flatnonzero(out.array[:, 2]).tolist() == [0, 1, 2, 16, 17, 18, 19]
+    assert out.edits[-1].reason == EditReason.IN_PLACE_REACH
+    # not a loop: the run cut by the clip's start keeps its first frame
+    _, n_open = trim_unreached(labels, h, (2,), 0.005)
+    assert n_open == 2  # frame 3 (lift-off) and frame 15 (touch-down); frame 0 stays
+    same, none = trim_unreached(labels, h, (0, 2), 1.0)
+    assert none == 0 and same is labels
+
+
+def test_swept_stance_ends_out_of_reach_become_swing(tmp_path: Path) -> None:
+    """A gallop made in place whose feet all take their sweeps as stance: its sweeps are
+    longer than the legs reach planted; the ends the legs do not reach become swing."""
+    from habitsim.gaits import generate
+    from habitsim.physics_constants import CONTACT_HEIGHT_PER_LEG
+
+    g = generate("dog", "gallop", seed=3, duration_s=1.5)
+    root = g.root_positions.copy()
+    root[:, :2] = root[0, :2]
+    p = write_bvh(Motion(g.species, g.fps, root, g.rotations), tmp_path / "g.bvh")
+    top, frames = [], []
+    for reach in (InPlaceOptions().reach_per_leg, 1.0):  # 1 leg length: nothing taken off
+        m, _ = import_bvh(p, "dog", inplace=InPlaceOptions(relabel_share=5.0, reach_per_leg=reach))
+        rep = ImportReport.from_metadata(m.metadata)
+        assert rep is not None and rep.in_place is not None and len(rep.in_place.swept_feet) == 4
+        assert m.contacts is not None
+        toes = m.foot_positions()[..., 2] / m.species_info.leg_length
+        top.append(float(toes[m.contacts].max()))
+        frames.append(rep.in_place.unreached_frames)
+    assert frames[0] > 0 and frames[1] == 0
+    assert top[1] > CONTACT_HEIGHT_PER_LEG  # the untrimmed sweeps leave toes in the air
+    assert top[0] <= CONTACT_HEIGHT_PER_LEG

@@ -46,6 +46,7 @@ __all__ = [
     "refit_in_place",
     "stance_centres",
     "sweep_labels",
+    "trim_unreached",
 ]
 
 
@@ -87,6 +88,9 @@ class InPlaceOptions:
             rolls) [unitless, below 0.5].
         stance_smooth_s: window of the Savitzky–Golay filter on the foot paths whose
             velocities :func:`refit_in_place` reads [s].
+        reach_per_leg: a foot that took its sweeps as stance loses the frames at the
+            ends of a stance run where its planted toe stays higher than this above the
+            ground (:func:`trim_unreached`) [target leg lengths].
     """
 
     enabled: bool = True
@@ -101,6 +105,7 @@ class InPlaceOptions:
     relabel_share: float = 0.8
     stance_trim_share: float = 0.2
     stance_smooth_s: float = 0.1
+    reach_per_leg: float = 0.002
 
     def __post_init__(self) -> None:
         for name in (
@@ -110,6 +115,7 @@ class InPlaceOptions:
             "agree_share",
             "sweep_low_per_leg",
             "relabel_share",
+            "reach_per_leg",
         ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
@@ -335,6 +341,20 @@ def recover_in_place(
     )
 
 
+def _seam_runs(col: np.ndarray, cyclic: bool) -> tuple[int, list[tuple[int, int, bool, bool]]]:
+    """The stance runs of one foot's (T,) flags, counted from frame ``shift``: ``(shift,
+    [(start, stop, touches_down, lifts_off)])`` in the order ``np.roll(col, -shift)``.
+
+    An end at the clip's first or last frame is no touch-down or lift-off, unless the
+    clip is a loop (``cyclic``), whose runs go on across the seam: its count starts at a
+    swing frame.
+    """
+    t = len(col)
+    swings = cyclic and not col.all()
+    shift = int(np.argmin(col)) if swings else 0
+    return shift, [(a, b, a > 0, b < t or swings) for a, b in runs(np.roll(col, -shift))]
+
+
 def stance_centres(stance: np.ndarray, share: float, cyclic: bool = False) -> np.ndarray:
     """(T, F) bool: the central part of every stance run of ``stance`` (T, F), ``share`` of
     its frames (rounded down) left out at each end.
@@ -343,21 +363,65 @@ def stance_centres(stance: np.ndarray, share: float, cyclic: bool = False) -> np
     frames, unless the clip is a loop (``cyclic``), whose runs go on across the seam.
     """
     c = np.asarray(stance, dtype=bool)
-    t = c.shape[0]
     out = np.zeros_like(c)
     for k in range(c.shape[1]):
-        col = c[:, k]
-        # a loop's run across the seam is one run: start the count at a swing frame
-        shift = int(np.argmin(col)) if cyclic and not col.all() else 0
-        rolled = np.roll(col, -shift)
-        keep = np.zeros(t, dtype=bool)
-        for a, b in runs(rolled):
+        shift, found = _seam_runs(c[:, k], cyclic)
+        keep = np.zeros(c.shape[0], dtype=bool)
+        for a, b, down, up in found:
             cut = int(math.floor(share * (b - a)))
-            lo = a if (a == 0 and not cyclic) else a + cut
-            hi = b if (b == t and not cyclic) else b - cut
-            keep[lo:hi] = True
+            keep[a + cut * down : b - cut * up] = True
         out[:, k] = np.roll(keep, shift)
     return out
+
+
+def trim_unreached(
+    labels: StanceLabels,
+    toe_height: np.ndarray,
+    feet: Sequence[int],
+    limit: float,
+    cyclic: bool = False,
+) -> tuple[StanceLabels, int]:
+    """The labels with the frames at each end of the stance runs of ``feet`` where the
+    planted toe stays above ``limit`` taken off, and how many frames were taken off.
+
+    A keyframed in-place loop's stance is its feet's backward sweeps
+    (:func:`sweep_labels`), and a sweep can be longer than the target's leg reaches with
+    its foot planted: at touch-down or lift-off the leg, stretched and with the pelvis
+    lowered, still leaves the toe above its foothold. Such a frame is not stance: the
+    foot touches down later or lifts off earlier. Only the ends of a run are taken off,
+    frame by frame inwards while the toe stays high (a run high all through goes).
+
+    Args:
+        labels: (T, 4) the stance labels the legs were planted on.
+        toe_height: (T, 4) the planted toes' heights above the ground [m].
+        feet: the feet whose runs may be trimmed (those that took their sweeps).
+        limit: the highest planted toe that counts as on its foothold [m].
+        cyclic: the clip is a loop (its runs go on across the seam).
+
+    Returns:
+        The labels (edited under :attr:`EditReason.IN_PLACE_REACH`, or as they came) and
+        the number of frames taken off.
+    """
+    before = labels.array
+    c = before.copy()
+    h = np.asarray(toe_height, dtype=np.float64)
+    for k in feet:
+        shift, found = _seam_runs(c[:, k], cyclic)
+        col = np.roll(c[:, k], -shift)
+        high = np.roll(h[:, k], -shift) > limit
+        for a, b, down, up in found:
+            lo, hi = a, b
+            while down and lo < hi and high[lo]:
+                lo += 1
+            while up and hi > lo and high[hi - 1]:
+                hi -= 1
+            col[a:lo] = False
+            col[hi:b] = False
+        c[:, k] = np.roll(col, shift)
+    n = int((before & ~c).sum())
+    if n == 0:
+        return labels, 0
+    return labels.edited(c, by="bvh_mapping.inplace", reason=EditReason.IN_PLACE_REACH), n
 
 
 def refit_in_place(
