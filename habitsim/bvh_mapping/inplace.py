@@ -14,7 +14,9 @@ sweep back together; the import then labels the stance on the clip with that tra
 and :func:`refit_in_place` measures it again on those stance runs, each without its first
 and last frames (:attr:`InPlaceOptions.stance_trim_share`): a paw settles at touch-down
 and rolls over its toes at lift-off, so its points move forward with the body there and
-would make the body slower than it is.
+would make the body slower than it is. A keyframed loop's stance is its feet's backward
+sweeps (:func:`sweep_labels`); where such a sweep is longer than the target's leg reaches
+planted, :func:`trim_unreached` makes the ends it does not reach swing.
 
 Detection asks three things of the clip (each an evidence figure of :class:`InPlaceFit`):
 the trunk's horizontal travel is a small share of the feet's backward sweep (a moving
