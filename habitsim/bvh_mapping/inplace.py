@@ -9,6 +9,15 @@ in each frame is minus the velocity of the feet that are on the ground, and inte
 it gives the travel the clip left out. The stance labelling and the planting then run on
 the clip with that travel added, as on any captured clip.
 
+The travel is measured twice. :func:`recover_in_place` finds it from the low feet that
+sweep back together; the import then labels the stance on the clip with that travel added
+and :func:`refit_in_place` measures it again on those stance runs, each without its first
+and last frames (:attr:`InPlaceOptions.stance_trim_share`): a paw settles at touch-down
+and rolls over its toes at lift-off, so its points move forward with the body there and
+would make the body slower than it is. A keyframed loop's stance is its feet's backward
+sweeps (:func:`sweep_labels`); where such a sweep is longer than the target's leg reaches
+planted, :func:`trim_unreached` makes the ends it does not reach swing.
+
 Detection asks three things of the clip (each an evidence figure of :class:`InPlaceFit`):
 the trunk's horizontal travel is a small share of the feet's backward sweep (a moving
 clip's trunk travels about as far as its feet sweep back under it); the low feet move
@@ -19,6 +28,7 @@ fields of :class:`InPlaceOptions`; why each default: ``docs/import.md``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -28,14 +38,17 @@ from scipy.ndimage import uniform_filter1d
 from scipy.signal import savgol_filter
 
 from ..errors import HabitsimError
-from ..stance.labels import EditReason, StanceLabels
+from ..stance.labels import EditReason, StanceLabels, runs
 
 __all__ = [
     "InPlaceOptions",
     "InPlaceOptionsError",
     "InPlaceFit",
     "recover_in_place",
+    "refit_in_place",
+    "stance_centres",
     "sweep_labels",
+    "trim_unreached",
 ]
 
 
@@ -72,6 +85,14 @@ class InPlaceOptions:
         relabel_share: a foot of an in-place clip whose stance share (labelled on the
             recovered clip) is under this share of its sweep share takes its sweeps as
             stance (:func:`sweep_labels`) [unitless].
+        stance_trim_share: :func:`refit_in_place` leaves out this share of each stance
+            run's frames at each end (touch-down and lift-off, where a paw settles and
+            rolls) [unitless, below 0.5].
+        stance_smooth_s: window of the Savitzky–Golay filter on the foot paths whose
+            velocities :func:`refit_in_place` reads [s].
+        reach_per_leg: a foot that took its sweeps as stance loses the frames at the
+            ends of a stance run where its planted toe stays higher than this above the
+            ground (:func:`trim_unreached`) [target leg lengths].
     """
 
     enabled: bool = True
@@ -84,6 +105,9 @@ class InPlaceOptions:
     smooth_s: float = 0.2
     sweep_low_per_leg: float = 0.1
     relabel_share: float = 0.8
+    stance_trim_share: float = 0.2
+    stance_smooth_s: float = 0.1
+    reach_per_leg: float = 0.002
 
     def __post_init__(self) -> None:
         for name in (
@@ -93,14 +117,20 @@ class InPlaceOptions:
             "agree_share",
             "sweep_low_per_leg",
             "relabel_share",
+            "reach_per_leg",
         ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
                 raise InPlaceOptionsError(f"InPlaceOptions.{name} must be > 0, got {v!r}")
-        for name in ("smooth_s", "trunk_window_s"):
+        for name in ("smooth_s", "trunk_window_s", "stance_smooth_s"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
                 raise InPlaceOptionsError(f"InPlaceOptions.{name} must be > 0, got {v!r}")
+        if not 0.0 <= self.stance_trim_share < 0.5:
+            raise InPlaceOptionsError(
+                f"InPlaceOptions.stance_trim_share must be in [0, 0.5), "
+                f"got {self.stance_trim_share!r}"
+            )
         if not -1.0 <= self.min_backward_share <= 1.0:
             raise InPlaceOptionsError(
                 f"InPlaceOptions.min_backward_share must be in [-1, 1], "
@@ -124,7 +154,8 @@ class InPlaceFit:
         recovered_m: the recovered travel's path length [m] (0 when not detected).
         heading_deg: direction of the recovered travel's net displacement in the
             habitsim frame (0 = +x, 90 = +y) [deg]; None when not detected.
-        stance_share: the share of foot-frames the recovery took as stance [0–1].
+        stance_share: the share of foot-frames the recovery took as stance [0–1] (after
+            :func:`refit_in_place`: the central parts of the stance runs).
         reason: one line saying why the clip is or is not in place.
         sweep: (T, 4) where each foot sweeps backwards relative to the trunk while low
             (below :attr:`InPlaceOptions.sweep_low_per_leg`): the stance of an in-place
@@ -179,6 +210,37 @@ def _fill(v: np.ndarray, known: np.ndarray, cyclic: bool) -> np.ndarray:
     return out
 
 
+def _lowest(
+    feet: Sequence[np.ndarray], fps: float, smooth_s: float, cyclic: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """(T, 4, 2) horizontal velocity and (T, 4) height above its floor (the 2nd percentile)
+    of each foot's lowest point, on paths smoothed over ``smooth_s``."""
+    t = np.asarray(feet[0]).shape[0]
+    vel = np.empty((t, 4, 2))
+    height = np.empty((t, 4))
+    rows = np.arange(t)
+    for k, p in enumerate(feet):
+        sm = _smooth(np.asarray(p, dtype=np.float64), fps, smooth_s, cyclic)
+        arg = np.argmin(sm[..., 2], axis=1)
+        vel[:, k] = _velocity(sm[..., :2], fps, cyclic)[rows, arg]
+        z = sm[rows, arg, 2]
+        height[:, k] = z - np.percentile(z, 2)
+    return vel, height
+
+
+def _travel(body: np.ndarray, fps: float) -> np.ndarray:
+    """(T, 3) the path of a (T, 2) horizontal velocity from the first frame on [m]
+    (trapezoids; z 0)."""
+    travel = np.zeros((len(body), 3))
+    travel[1:, :2] = np.cumsum(0.5 * (body[1:] + body[:-1]), axis=0) / fps
+    return travel
+
+
+def _heading(travel: np.ndarray) -> float:
+    net = travel[-1, :2] - travel[0, :2]
+    return math.degrees(math.atan2(net[1], net[0]))
+
+
 def recover_in_place(
     feet: Sequence[np.ndarray],
     trunk: np.ndarray,
@@ -215,15 +277,7 @@ def recover_in_place(
     fwd = np.where(n > 1e-9, fwd / np.maximum(n, 1e-9), np.array([1.0, 0.0]))
 
     # Each foot's lowest point: its height above the foot's floor and its velocity.
-    vel = np.empty((t, 4, 2))
-    height = np.empty((t, 4))
-    rows = np.arange(t)
-    for k, p in enumerate(feet):
-        sm = _smooth(np.asarray(p, dtype=np.float64), fps, opts.smooth_s, cyclic)
-        arg = np.argmin(sm[..., 2], axis=1)
-        vel[:, k] = _velocity(sm[..., :2], fps, cyclic)[rows, arg]
-        z = sm[rows, arg, 2]
-        height[:, k] = z - np.percentile(z, 2)
+    vel, height = _lowest(feet, fps, opts.smooth_s, cyclic)
     trunk_xy = _smooth(trunk[:, :2], fps, opts.smooth_s, cyclic)
     rel = vel - _velocity(trunk_xy, fps, cyclic)[:, None, :]
     size = min(t, max(1, int(round(opts.trunk_window_s * fps))))
@@ -269,10 +323,7 @@ def recover_in_place(
     stance = low & (np.linalg.norm(vel + first[:, None, :], axis=-1) < opts.agree_share * ref)
     body = -(vel * stance[..., None]).sum(axis=1) / np.maximum(stance.sum(axis=1), 1)[:, None]
     body = _smooth(_fill(body, stance.any(axis=1), cyclic), fps, opts.smooth_s, cyclic)
-    travel = np.zeros((t, 3))
-    travel[1:, :2] = np.cumsum(0.5 * (body[1:] + body[:-1]), axis=0) / fps
-    net = travel[-1, :2]
-    heading = math.degrees(math.atan2(net[1], net[0]))
+    travel = _travel(body, fps)
     reason = (
         f"trunk travels {ratio:.2f} of the feet's sweep "
         f"({root:.3f} m against {sweep:.3f} m), low feet move backwards by {share:.2f}"
@@ -285,10 +336,146 @@ def recover_in_place(
         sweep,
         share,
         _path_length(travel[:, :2]),
-        heading,
+        _heading(travel),
         float(stance.mean()),
         reason,
         swept,
+    )
+
+
+def _seam_runs(col: np.ndarray, cyclic: bool) -> tuple[int, list[tuple[int, int, bool, bool]]]:
+    """The stance runs of one foot's (T,) flags, counted from frame ``shift``: ``(shift,
+    [(start, stop, touches_down, lifts_off)])`` in the order ``np.roll(col, -shift)``.
+
+    An end at the clip's first or last frame is no touch-down or lift-off, unless the
+    clip is a loop (``cyclic``), whose runs go on across the seam: its count starts at a
+    swing frame.
+    """
+    t = len(col)
+    swings = cyclic and not col.all()
+    shift = int(np.argmin(col)) if swings else 0
+    return shift, [(a, b, a > 0, b < t or swings) for a, b in runs(np.roll(col, -shift))]
+
+
+def stance_centres(stance: np.ndarray, share: float, cyclic: bool = False) -> np.ndarray:
+    """(T, F) bool: the central part of every stance run of ``stance`` (T, F), ``share`` of
+    its frames (rounded down) left out at each end.
+
+    An end at the clip's first or last frame is no touch-down or lift-off and keeps its
+    frames, unless the clip is a loop (``cyclic``), whose runs go on across the seam.
+    """
+    c = np.asarray(stance, dtype=bool)
+    out = np.zeros_like(c)
+    for k in range(c.shape[1]):
+        shift, found = _seam_runs(c[:, k], cyclic)
+        keep = np.zeros(c.shape[0], dtype=bool)
+        for a, b, down, up in found:
+            cut = int(math.floor(share * (b - a)))
+            keep[a + cut * down : b - cut * up] = True
+        out[:, k] = np.roll(keep, shift)
+    return out
+
+
+def trim_unreached(
+    labels: StanceLabels,
+    toe_height: np.ndarray,
+    feet: Sequence[int],
+    limit: float,
+    cyclic: bool = False,
+) -> tuple[StanceLabels, int]:
+    """The labels with the frames at each end of the stance runs of ``feet`` where the
+    planted toe stays above ``limit`` taken off, and how many frames were taken off.
+
+    A keyframed in-place loop's stance is its feet's backward sweeps
+    (:func:`sweep_labels`), and a sweep can be longer than the target's leg reaches with
+    its foot planted: at touch-down or lift-off the leg, stretched and with the pelvis
+    lowered, still leaves the toe above its foothold. Such a frame is not stance: the
+    foot touches down later or lifts off earlier. Only the ends of a run are taken off,
+    frame by frame inwards while the toe stays high (a run high all through goes).
+
+    Args:
+        labels: (T, 4) the stance labels the legs were planted on.
+        toe_height: (T, 4) the planted toes' heights above the ground [m].
+        feet: the feet whose runs may be trimmed (those that took their sweeps).
+        limit: the highest planted toe that counts as on its foothold [m].
+        cyclic: the clip is a loop (its runs go on across the seam).
+
+    Returns:
+        The labels (edited under :attr:`EditReason.IN_PLACE_REACH`, or as they came) and
+        the number of frames taken off.
+    """
+    before = labels.array
+    c = before.copy()
+    h = np.asarray(toe_height, dtype=np.float64)
+    for k in feet:
+        shift, found = _seam_runs(c[:, k], cyclic)
+        col = np.roll(c[:, k], -shift)
+        high = np.roll(h[:, k], -shift) > limit
+        for a, b, down, up in found:
+            lo, hi = a, b
+            while down and lo < hi and high[lo]:
+                lo += 1
+            while up and hi > lo and high[hi - 1]:
+                hi -= 1
+            col[a:lo] = False
+            col[hi:b] = False
+        c[:, k] = np.roll(col, shift)
+    n = int((before & ~c).sum())
+    if n == 0:
+        return labels, 0
+    return labels.edited(c, by="bvh_mapping.inplace", reason=EditReason.IN_PLACE_REACH), n
+
+
+def refit_in_place(
+    fit: InPlaceFit,
+    feet: Sequence[np.ndarray],
+    stance: np.ndarray,
+    fps: float,
+    cyclic: bool = False,
+    options: InPlaceOptions | None = None,
+) -> InPlaceFit:
+    """The travel of an in-place clip measured again on its labelled stance runs.
+
+    A foot in stance rests in the world, so while it is planted the body moves by minus
+    its velocity in the clip as given. At touch-down a paw settles and at lift-off it
+    rolls over its toes: there its points move forward with the body. So each stance run
+    counts without :attr:`InPlaceOptions.stance_trim_share` of its frames at each end
+    (:func:`stance_centres`), the body's velocity is minus the mean velocity of the feet in
+    such a central part (their lowest points, paths smoothed over
+    :attr:`InPlaceOptions.stance_smooth_s`), frames without one take it from their
+    neighbours (a flight phase carries the body on), and its path is the travel.
+
+    Args:
+        fit: what :func:`recover_in_place` found (returned as it is when not detected,
+            or when no stance run has a central frame).
+        feet: the four feet's points (T, P, 3) of the clip as given (without the travel).
+        stance: (T, 4) bool stance labels found on the clip with ``fit.travel`` added.
+        fps: frame rate [Hz].
+        cyclic: the clip is a loop.
+        options: the knobs (defaults when None).
+
+    Returns:
+        The fit with its travel, recovered path length, heading and stance share of the
+        second measurement.
+    """
+    opts = options or InPlaceOptions()
+    c = np.asarray(stance, dtype=bool)
+    if not fit.detected or len(feet) != 4 or c.shape != (fit.travel.shape[0], 4):
+        return fit
+    centre = stance_centres(c, opts.stance_trim_share, cyclic)
+    if not centre.any():
+        return fit
+    vel, _ = _lowest(feet, fps, opts.stance_smooth_s, cyclic)
+    n = centre.sum(axis=1)
+    body = -(vel * centre[..., None]).sum(axis=1) / np.maximum(n, 1)[:, None]
+    body = _smooth(_fill(body, n > 0, cyclic), fps, opts.smooth_s, cyclic)
+    travel = _travel(body, fps)
+    return dataclasses.replace(
+        fit,
+        travel=travel,
+        recovered_m=_path_length(travel[:, :2]),
+        heading_deg=_heading(travel),
+        stance_share=float(centre.mean()),
     )
 
 

@@ -131,6 +131,9 @@ class InPlaceRecord:
         swept_feet: the feet (``lf``, ``rf``, ``lh``, ``rh``) whose stance labels are
             their backward sweeps (a keyframed foot that rolls within its stance).
         cycles: how many times the clip was played (1: as it came).
+        unreached_frames: stance frames of the swept feet taken off at the ends of their
+            runs, where the target's leg does not reach the foothold planted
+            (:func:`habitsim.bvh_mapping.inplace.trim_unreached`).
     """
 
     detected: bool
@@ -144,6 +147,7 @@ class InPlaceRecord:
     loop_mismatch: float
     swept_feet: tuple[str, ...] = ()
     cycles: int = 1
+    unreached_frames: int = 0
 
     @classmethod
     def from_dict(cls, d: object, path: str = "import.in_place") -> InPlaceRecord:
@@ -158,6 +162,7 @@ class InPlaceRecord:
         loop = _get(m, "loop", path)
         heading = _get(m, "heading_deg", path)
         cycles = _get(m, "cycles", path)
+        unreached = _get(m, "unreached_frames", path)
         if not isinstance(detected, bool):
             raise MetadataError(f"metadata field {path}.detected is malformed: {detected!r}")
         if not isinstance(reason, str):
@@ -166,6 +171,10 @@ class InPlaceRecord:
             raise MetadataError(f"metadata field {path}.loop is malformed: {loop!r}")
         if not isinstance(cycles, int) or isinstance(cycles, bool) or cycles < 1:
             raise MetadataError(f"metadata field {path}.cycles is malformed: {cycles!r}")
+        if not isinstance(unreached, int) or isinstance(unreached, bool) or unreached < 0:
+            raise MetadataError(
+                f"metadata field {path}.unreached_frames is malformed: {unreached!r}"
+            )
         return cls(
             detected,
             _number(_get(m, "recovered_m", path), f"{path}.recovered_m"),
@@ -178,6 +187,7 @@ class InPlaceRecord:
             _number(_get(m, "loop_mismatch", path), f"{path}.loop_mismatch"),
             _list(_get(m, "swept_feet", path), f"{path}.swept_feet", str),
             cycles,
+            unreached,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -194,6 +204,7 @@ class InPlaceRecord:
             "loop_mismatch": self.loop_mismatch,
             "swept_feet": list(self.swept_feet),
             "cycles": self.cycles,
+            "unreached_frames": self.unreached_frames,
         }
 
     def lines(self) -> list[str]:
@@ -210,6 +221,12 @@ class InPlaceRecord:
                 out.append(
                     f"in place: stance of {', '.join(self.swept_feet)} taken from the "
                     "feet's backward sweeps (they roll or lift within their stance)"
+                )
+            if self.unreached_frames:
+                out.append(
+                    f"in place: {self.unreached_frames} stance frame"
+                    f"{'s' if self.unreached_frames != 1 else ''} at the ends of those sweeps "
+                    "taken off (the legs do not reach them planted)"
                 )
         else:
             out.append(f"in place: no ({self.reason})")

@@ -21,6 +21,7 @@ from ..stance.labels import stance_f1
 from ..stance.planting import (
     FOOT_ANCHORS,
     PlantingOptions,
+    PlantReport,
     SourceStance,
     label_source_stance,
     plant_legs,
@@ -28,7 +29,14 @@ from ..stance.planting import (
 )
 from .chains import _AXIAL, _END_POINTS, _IDX, _LEG_CHAINS, _TAIL
 from .frame import _leg_ends
-from .inplace import InPlaceFit, InPlaceOptions, recover_in_place, sweep_labels
+from .inplace import (
+    InPlaceFit,
+    InPlaceOptions,
+    recover_in_place,
+    refit_in_place,
+    sweep_labels,
+    trim_unreached,
+)
 from .loops import LoopFit, LoopOptions, detect_loop
 from .names import _fore_vote
 from .report import ImportReport, InPlaceRecord, SourceStanceRecord
@@ -201,7 +209,7 @@ def retarget(
     feet_found = _source_feet(bvh, t, j2s, src, mapping)
     fit, loop = None, None
     if feet_found is not None:
-        src, fit, loop = _recovered(src, feet_found, bvh.fps, inplace, loops)
+        src, fit, loop = _recovered(src, feet_found, bvh.fps, inplace, loops, options)
         hips = s("pelvis")
     stance = _source_stance(bvh.fps, feet_found, src, options)
     # Root translation scaled by the hip-height ratio, heights above the source's ground.
@@ -240,9 +248,44 @@ def retarget(
         return motion
     st, foot_idx, anchor_idx, limb_len, points = stance
     swept: tuple[int, ...] = ()
+    labels = st.labels
     if fit is not None and fit.detected:
-        labels, swept = sweep_labels(st.labels, fit, inplace)
-        st = dataclasses.replace(st, contacts=np.asarray(labels))
+        labels, swept = sweep_labels(labels, fit, inplace)
+        st = dataclasses.replace(st, contacts=labels.array)
+    planted = None
+    unreached = 0
+    if plant:
+        feet_src = smooth_path(src[:, foot_idx], bvh.fps, options)
+        feet_src[..., 2] = st.heights
+        target_len = np.array([sp.fore_leg_length] * 2 + [sp.hind_leg_length] * 2)
+        unplanted = motion
+
+        def planted_on(c: np.ndarray) -> tuple[Motion, PlantReport]:
+            return plant_legs(
+                unplanted,
+                feet_src,
+                src[:, anchor_idx],
+                c,
+                target_len / limb_len,
+                options=options,
+            )
+
+        motion, pr = planted_on(st.contacts)
+        # A swept foot's stance ends that the target's leg does not reach planted are
+        # swing (a keyframed sweep longer than the leg); the legs are planted again.
+        limit = (inplace or InPlaceOptions()).reach_per_leg * sp.leg_length
+        cyclic = loop is not None and loop.kind is not None
+        for _ in range(3 if swept else 0):
+            toes = motion.foot_positions()[..., 2]
+            labels, n = trim_unreached(labels, toes, swept, limit, cyclic)
+            if n == 0:
+                break
+            unreached += n
+            motion, pr = planted_on(labels.array)
+        st = dataclasses.replace(st, contacts=labels.array)
+        planted = tuple(pr.to_dict(sp.leg_length).items())
+    else:
+        motion = motion.with_contacts(st.contacts)
     found = SourceStanceRecord(
         "source foot path",
         tuple(bvh.names[i] for i in foot_idx),
@@ -251,22 +294,6 @@ def retarget(
         round(st.leg_length, 5),
         tuple(round(float(d), 4) for d in st.duty),
     )
-    planted = None
-    if plant:
-        feet_src = smooth_path(src[:, foot_idx], bvh.fps, options)
-        feet_src[..., 2] = st.heights
-        target_len = np.array([sp.fore_leg_length] * 2 + [sp.hind_leg_length] * 2)
-        motion, pr = plant_legs(
-            motion,
-            feet_src,
-            src[:, anchor_idx],
-            st.contacts,
-            target_len / limb_len,
-            options=options,
-        )
-        planted = tuple(pr.to_dict(sp.leg_length).items())
-    else:
-        motion = motion.with_contacts(st.contacts)
     f1 = stance_f1(motion.detect_contacts(), st.contacts)
     _limb_confidence(t, j2s, st, limb_len, mapping)
     report = ImportReport(
@@ -275,7 +302,7 @@ def retarget(
         tuple(mapping.confidence.items()),
         tuple(mapping.warnings),
         planted,
-        None if fit is None or loop is None else _in_place_record(fit, loop, swept),
+        None if fit is None or loop is None else _in_place_record(fit, loop, swept, unreached),
     )
     motion.metadata["import"] = report.to_metadata()
     motion.metadata["mapping"] = mapping.to_dict()
@@ -341,7 +368,9 @@ def _foot_points(t: _Tree, top: int, toe: int) -> list[int]:
     return out
 
 
-def _in_place_record(fit: InPlaceFit, loop: LoopFit, swept: tuple[int, ...]) -> InPlaceRecord:
+def _in_place_record(
+    fit: InPlaceFit, loop: LoopFit, swept: tuple[int, ...], unreached: int
+) -> InPlaceRecord:
     """The report's record of an in-place recovery and a loop test."""
     return InPlaceRecord(
         fit.detected,
@@ -354,6 +383,7 @@ def _in_place_record(fit: InPlaceFit, loop: LoopFit, swept: tuple[int, ...]) -> 
         loop.kind or "no",
         round(loop.mismatch, 4) if math.isfinite(loop.mismatch) else 99.0,
         tuple(("lf", "rf", "lh", "rh")[k] for k in swept),
+        unreached_frames=unreached,
     )
 
 
@@ -366,24 +396,27 @@ def _recovered(
     fps: float,
     inplace: InPlaceOptions | None,
     loops: LoopOptions | None,
+    planting: PlantingOptions | None = None,
 ) -> tuple[np.ndarray, InPlaceFit, LoopFit]:
     """The source positions with an in-place clip's travel added, what the recovery
-    found and whether the clip is a loop (its poses relative to the trunk)."""
+    found and whether the clip is a loop (its poses relative to the trunk).
+
+    The travel is found twice: from the feet that sweep back together, then again on the
+    stance labelled on the clip with that travel added (``planting``: the labelling's
+    knobs; :func:`~habitsim.bvh_mapping.inplace.refit_in_place`)."""
     _, anchor_idx, limb_len, points = feet
     leg = float(limb_len[2:].mean())
     trunk = src[:, anchor_idx].mean(axis=1)
     loop = detect_loop(src - trunk[:, None, :], leg, loops)
     forward = src[:, anchor_idx[:2]].mean(axis=1) - src[:, anchor_idx[2:]].mean(axis=1)
-    fit = recover_in_place(
-        [src[:, pts] for pts in points],
-        trunk,
-        forward,
-        fps,
-        leg,
-        cyclic=loop.kind is not None,
-        options=inplace,
-    )
+    cyclic = loop.kind is not None
+    foot_paths = [src[:, pts] for pts in points]
+    fit = recover_in_place(foot_paths, trunk, forward, fps, leg, cyclic=cyclic, options=inplace)
     if fit.detected:
+        moved = src + fit.travel[:, None, :]
+        st = label_source_stance([moved[:, pts] for pts in points], fps, leg, planting)
+        labels, _ = sweep_labels(st.labels, fit, inplace)
+        fit = refit_in_place(fit, foot_paths, labels.array, fps, cyclic, inplace)
         src = src + fit.travel[:, None, :]
     return src, fit, loop
 

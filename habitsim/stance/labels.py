@@ -120,6 +120,10 @@ class EditReason(StrEnum):
     #: its share of backward sweeps took its sweeps as stance (a keyframed foot that
     #: rolls and lifts within its stance; :mod:`habitsim.bvh_mapping.inplace`).
     IN_PLACE_SWEEP = "in_place_sweep"
+    #: Stance frames at an end of such a swept foot's run where the target's planted toe
+    #: stays above its foothold (the sweep is longer than the leg reaches planted) became
+    #: swing (:func:`habitsim.bvh_mapping.inplace.trim_unreached`).
+    IN_PLACE_REACH = "in_place_reach"
 
 
 @dataclass(frozen=True)
