@@ -17,6 +17,8 @@ def swing_clearance(
     leg_length: float,
     clearance_per_leg: float = SWING_CLEARANCE_PER_LEG,
     ramp_s: float = SWING_RAMP_S,
+    toes: np.ndarray | None = None,
+    still: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The swing clearance profile of contact labels (:mod:`habitsim.refine.solve`, step 5).
 
@@ -32,6 +34,12 @@ def swing_clearance(
         leg_length: L [m].
         clearance_per_leg: the full clearance, share of L (≥ the contact height).
         ramp_s: rise time from the ground to the full clearance [s].
+        toes: optional (T, 4, 3) toe positions of the input [m]: the swing frames at
+            either end of a swing run whose toe is still below the contact height and
+            within ``still`` [m] horizontally of the foothold it leaves or reaches count
+            as on the ground (floor 0, pinned): a foot the input lifts a frame later
+            than its label is not lifted earlier, only one that moves there is.
+        still: see ``toes``.
 
     Returns:
         ``floor`` (T, 4): lowest toe height [m] in swing, NaN in stance; ``pins``
@@ -46,20 +54,46 @@ def swing_clearance(
     frames = np.arange(t)
     floor = np.full((t, nf), np.nan)
     rest = c.copy()
+    ground = c.copy()  # stance, and swing frames where the input's toe is still down
+    if toes is not None:
+        p = np.asarray(toes, float)
+        for f in range(nf):
+            for a, b in runs(~c[:, f]):
+                if a > 0:  # after a lift-off
+                    k = a
+                    while k < b and _down(p, k, a - 1, f, h_c, still):
+                        ground[k, f] = True
+                        k += 1
+                if b < t:  # before a touch-down
+                    k = b - 1
+                    while k >= a and not ground[k, f] and _down(p, k, b, f, h_c, still):
+                        ground[k, f] = True
+                        k -= 1
     for f in range(nf):
         stance = np.flatnonzero(c[:, f])
+        down = np.flatnonzero(ground[:, f])
         for a, b in runs(~c[:, f]):
             k = frames[a:b]
             if len(stance):
-                d = np.abs(k[:, None] - stance[None, :]).min(axis=1).astype(float)
+                d0 = np.abs(k[:, None] - stance[None, :]).min(axis=1).astype(float)
+                d = np.abs(k[:, None] - down[None, :]).min(axis=1).astype(float)
             else:
-                d = np.full(len(k), np.inf)
+                d0 = d = np.full(len(k), np.inf)
             h = full * np.minimum(1.0, d / r)
             low = h < h_c
             if low.all():
-                top = d == d.max()
+                h = full * np.minimum(1.0, d0 / r)
+                low = h < h_c
+            if low.all():
+                top = d0 == d0.max()
                 h[top], low[top] = full, False
             floor[a:b, f] = h
             rest[a:b, f] = low
     pins = rest[1:] & rest[:-1]
     return floor, pins
+
+
+def _down(p: np.ndarray, k: int, hold: int, f: int, h_c: float, still: float) -> bool:
+    """Whether toe ``f`` of ``p`` is at frame ``k`` below ``h_c`` and within ``still``
+    horizontally of where it is at frame ``hold``."""
+    return bool(p[k, f, 2] < h_c and np.linalg.norm(p[k, f, :2] - p[hold, f, :2]) <= still)
