@@ -19,6 +19,7 @@ def swing_clearance(
     ramp_s: float = SWING_RAMP_S,
     toes: np.ndarray | None = None,
     still: float = 0.0,
+    sunk: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The swing clearance profile of contact labels (:mod:`habitsim.refine.solve`, step 5).
 
@@ -35,11 +36,12 @@ def swing_clearance(
         clearance_per_leg: the full clearance, share of L (≥ the contact height).
         ramp_s: rise time from the ground to the full clearance [s].
         toes: optional (T, 4, 3) toe positions of the input [m]: the swing frames at
-            either end of a swing run whose toe is still below the contact height and
-            within ``still`` [m] horizontally of the foothold it leaves or reaches count
-            as on the ground (floor 0, pinned): a foot the input lifts a frame later
-            than its label is not lifted earlier, only one that moves there is.
-        still: see ``toes``.
+            either end of a swing run whose toe is still below the contact height, not
+            more than ``sunk`` [m] under the floor, and within ``still`` [m]
+            horizontally of the foothold it leaves or reaches count as on the ground
+            (floor 0, pinned): a foot the input lifts a frame later than its label is
+            not lifted earlier, only one that moves there (or is sunk) is.
+        still, sunk: see ``toes``.
 
     Returns:
         ``floor`` (T, 4): lowest toe height [m] in swing, NaN in stance; ``pins``
@@ -61,12 +63,12 @@ def swing_clearance(
             for a, b in runs(~c[:, f]):
                 if a > 0:  # after a lift-off
                     k = a
-                    while k < b and _down(p, k, a - 1, f, h_c, still):
+                    while k < b and _down(p, k, a - 1, f, (-sunk, h_c), still):
                         ground[k, f] = True
                         k += 1
                 if b < t:  # before a touch-down
                     k = b - 1
-                    while k >= a and not ground[k, f] and _down(p, k, b, f, h_c, still):
+                    while k >= a and not ground[k, f] and _down(p, k, b, f, (-sunk, h_c), still):
                         ground[k, f] = True
                         k -= 1
     for f in range(nf):
@@ -93,7 +95,10 @@ def swing_clearance(
     return floor, pins
 
 
-def _down(p: np.ndarray, k: int, hold: int, f: int, h_c: float, still: float) -> bool:
-    """Whether toe ``f`` of ``p`` is at frame ``k`` below ``h_c`` and within ``still``
-    horizontally of where it is at frame ``hold``."""
-    return bool(p[k, f, 2] < h_c and np.linalg.norm(p[k, f, :2] - p[hold, f, :2]) <= still)
+def _down(
+    p: np.ndarray, k: int, hold: int, f: int, band: tuple[float, float], still: float
+) -> bool:
+    """Whether toe ``f`` of ``p`` is at frame ``k`` at a height in ``band`` [lo, hi) and
+    within ``still`` horizontally of where it is at frame ``hold``."""
+    z = p[k, f, 2]
+    return bool(band[0] <= z < band[1] and np.linalg.norm(p[k, f, :2] - p[hold, f, :2]) <= still)

@@ -179,6 +179,7 @@ def _prepare(
             opts.swing_ramp_s,
             toes=targets[:, toe_idx],
             still=opts.swing_still_per_leg * sp.leg_length,
+            sunk=opts.verify_tol_mm / 1000.0,
         )
     if opts.plant_start:
         x0[:, :nv] = _planted_start(

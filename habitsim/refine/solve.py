@@ -14,8 +14,8 @@ Preparation, in this order:
 1. **Jitter pre-filter** (``filter_cutoff``), only on a clip that jitters (the median
    lag-1 autocorrelation of what the filter would remove below ``jitter_autocorr``;
    the targets then get the filter's change of the model's joint positions): every
-   coordinate of the input qpos (root
-   position, root quaternion, hinges) is smoothed by the zero-phase second-difference
+   coordinate of the input qpos (root position, root quaternion, hinges) is smoothed by
+   the zero-phase second-difference
    filter ``argmin ‖y − x‖² + λ‖Δ²y‖²`` (a banded solve per coordinate, microseconds),
    with the cutoff scaled to the species' natural frequency √(g/L), so a cat and an
    elephant are smoothed alike in dimensionless time. A leg's hinges are not smoothed
@@ -48,8 +48,9 @@ Preparation, in this order:
    below the contact height are pinned horizontally to the foothold they leave or
    reach, and so are those next to a lift-off or touch-down whose input toe is still
    down (below the contact height, within ``swing_still_per_leg`` × L of the foothold):
-   a foot is not lifted where the input does not move it. A foot therefore either rests (planted) or rises vertically, or clears the
-   contact height while it moves: it never slides where the metric looks.
+   a foot is not lifted where the input does not move it. A foot therefore either rests
+   (planted) or rises vertically, or clears the contact height while it moves: it never
+   slides where the metric looks.
 
 Each window is solved first with the Gauss-Newton Hessian (at most
 ``gauss_newton_max_iter`` iterations), and if IPOPT fails with it, again from the
