@@ -62,15 +62,15 @@ def swing_clearance(
         for f in range(nf):
             for a, b in runs(~c[:, f]):
                 if a > 0:  # after a lift-off
-                    k = a
-                    while k < b and _down(p, k, a - 1, f, (-sunk, h_c), still):
-                        ground[k, f] = True
-                        k += 1
+                    i = a
+                    while i < b and _down(p, i, a - 1, f, (-sunk, h_c), still):
+                        ground[i, f] = True
+                        i += 1
                 if b < t:  # before a touch-down
-                    k = b - 1
-                    while k >= a and not ground[k, f] and _down(p, k, b, f, (-sunk, h_c), still):
-                        ground[k, f] = True
-                        k -= 1
+                    i = b - 1
+                    while i >= a and not ground[i, f] and _down(p, i, b, f, (-sunk, h_c), still):
+                        ground[i, f] = True
+                        i -= 1
     for f in range(nf):
         stance = np.flatnonzero(c[:, f])
         down = np.flatnonzero(ground[:, f])
