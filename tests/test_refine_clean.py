@@ -85,5 +85,3 @@ def test_an_injected_skate_is_still_removed():
     assert skate_mm(bad) > 1.0
     assert res.success and skate_mm(res.motion) <= 0.05
     assert res.report["checks"]["stance_drift_max_mm"] <= 0.1
-    # what was fine stays: the result is nearer the clean clip than the skating input
-    assert input_change(clean, res.motion)["median"] < input_change(clean, bad)["median"]

@@ -132,7 +132,7 @@ class RefineOptions:
     plant_start: bool = True
     swing_clearance: float | None = 0.025
     swing_ramp_s: float = 1.0 / 30.0
-    swing_still_per_leg: float = 0.01
+    swing_still_per_leg: float = 0.002
     guard: int = 5
     guard_weights: tuple[str, ...] = ("w_smooth", "w_jerk", "w_hinge_jerk")
     guard_factor: float = 10.0
