@@ -349,9 +349,22 @@ def test_plan_windows_cover_and_share_one_length():
 
 
 def test_clip_lengths_map_to_two_window_lengths():
+    """Two lengths for clips of any length, and one window for a clip of at most
+    window + overlap frames (a 4 s clip at 30 fps)."""
     opts = RefineOptions()
-    lengths = {t: {w.length for w in opts.plan(t)} for t in (40, 64, 72, 97, 100, 171, 1000)}
-    assert lengths == {40: {40}, 64: {64}, 72: {64}, 97: {64}, 100: {100}, 171: {100}, 1000: {100}}
+    ts = (40, 64, 72, 97, 100, 120, 171, 1000)
+    lengths = {t: {w.length for w in opts.plan(t)} for t in ts}
+    assert lengths == {
+        40: {40},
+        64: {64},
+        72: {64},
+        97: {64},
+        100: {100},
+        120: {120},
+        171: {100},
+        1000: {100},
+    }
+    assert len(opts.plan(120)) == 1
     assert {w.length for w in RefineOptions(short_window=None).plan(72)} == {72}
     with pytest.raises(RefineInputError):
         RefineOptions(short_window=4)

@@ -20,6 +20,14 @@
 * :func:`success_rates` — IPOPT success rate over ``success_clips`` clips per stage of
   random species, action and artefact mix, or of random windows of a data set's test
   split (target ≥ 98 %).
+* :func:`clean_synthetic` / :func:`clean_real` — the change of clean input: a 4 s,
+  30 fps clip refined as it is (stage A), per frame the mean joint position change in
+  leg lengths (:func:`habitsim.refine.verdict.input_change`), its largest and median
+  value over the frames, the skate and penetration before and after, and the time of
+  the call. Clean clips: the project's own synthetic walks (clean by construction), or
+  the first 4 s window of every clip of a folder of real clips, imported as
+  ``bench real`` imports and windows them (target: at most 1 % of leg length on every
+  frame).
 """
 
 from __future__ import annotations
@@ -33,7 +41,10 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "CleanChange",
     "RefineBenchOptions",
+    "clean_real",
+    "clean_synthetic",
     "SpeciesTiming",
     "SuccessRate",
     "Timing",
@@ -53,6 +64,11 @@ SURVIVAL_CONTROLLERS = ("servo", "servo+stance", "balance", "mpc")
 TARGET_SUCCESS = 0.98
 #: Artefacts injected into the timed clips.
 ARTEFACTS = ("slide", "sink", "jitter", "limits")
+#: Clean input: the largest per-frame change of a refined clean clip [leg lengths].
+TARGET_CLEAN_CHANGE = 0.01
+#: Length of a clean-input clip [s] and its frame rate [Hz] (``bench real``'s windows).
+CLEAN_SECONDS = 4.0
+CLEAN_FPS = 30.0
 #: A reported build time below this [s] is a cache lookup, not a build.
 _BUILD_NOISE_S = 0.01
 
@@ -356,3 +372,98 @@ def success_rates(
         if rate < TARGET_SUCCESS:
             missed = f"stage {st} IPOPT success {100 * rate:.1f} % < {100 * TARGET_SUCCESS:.0f} %"
         yield SuccessRate(st, ok, tried, rate, fails, missed)
+
+
+# --------------------------------------------------------------------------- clean input
+@dataclass(frozen=True)
+class CleanChange:
+    """How far refinement moves one clean clip (stage A, default options).
+
+    Attributes:
+        name: ``species/action`` (synthetic) or ``file@start s`` (real).
+        ok: the refinement succeeded.
+        max, median: largest and median over the frames of the mean joint position
+            change [leg lengths] (:func:`habitsim.refine.verdict.input_change`).
+        joint_max: the largest change of one joint in one frame [leg lengths].
+        skate_before, skate_after: ``skate_mm`` of the input and of the result [mm/frame].
+        penetration_before, penetration_after: ``penetration_mm`` [mm].
+        call: wall time of the refine() call less any problem build [s].
+        cpu: process CPU time over the call, every thread [s] (on a shared machine the
+            fairer of the two).
+        retries: guard retries.
+    """
+
+    name: str
+    ok: bool
+    max: float
+    median: float
+    joint_max: float
+    skate_before: float
+    skate_after: float
+    penetration_before: float
+    penetration_after: float
+    call: float
+    cpu: float
+    retries: int
+
+    @property
+    def met(self) -> bool:
+        """The clean-input target held on every frame."""
+        return self.ok and self.max <= TARGET_CLEAN_CHANGE
+
+
+def clean_change(name: str, motion: Any) -> CleanChange:
+    """Refine a clean clip at stage A (:func:`timed`) and measure how far it moved."""
+    from habitsim.metrics.kinematic import penetration_mm, skate_mm
+    from habitsim.refine.verdict import input_change
+
+    r = timed(motion, "A")
+    out = motion if r.result is None else r.result.motion
+    ch = input_change(motion, out)
+    guard = [] if r.result is None else r.result.report.get("guard", [])
+    return CleanChange(
+        name,
+        r.ok,
+        ch["max"],
+        ch["median"],
+        ch["joint_max"],
+        skate_mm(motion),
+        skate_mm(out),
+        penetration_mm(motion),
+        penetration_mm(out),
+        r.call,
+        r.cpu,
+        len(guard),
+    )
+
+
+def clean_synthetic(species: list[str], seed: int = 0) -> Iterator[CleanChange]:
+    """The clean-input change of a 4 s, 30 fps synthetic walk (or the species' first
+    action) of every species, as each finishes."""
+    from habitsim.gaits import available_actions, generate
+
+    for sp in species:
+        acts = [a for a in available_actions(sp) if a not in ("sit",)]
+        act = "walk" if "walk" in acts else acts[0]
+        clean = generate(sp, act, seed=seed, fps=CLEAN_FPS, duration_s=CLEAN_SECONDS)
+        yield clean_change(f"{sp}/{act}", clean)
+
+
+def clean_real(folder: str, species: str = "dog") -> Iterator[CleanChange]:
+    """The clean-input change of the first 4 s window of every clip of ``folder``,
+    imported onto ``species`` and resampled to 30 fps as ``bench real`` does
+    (:func:`~habitsim.evaluation.bench.real.window_starts`); clips shorter than a
+    window are left out.
+
+    Raises:
+        BenchRealError: not a folder, or no readable clip in it.
+    """
+    from habitsim.motion import resample_motion
+
+    from .real import read_clip, source_files, window_starts
+
+    for f in source_files(folder):
+        m = resample_motion(read_clip(f, species), CLEAN_FPS)
+        frames = int(round(CLEAN_SECONDS * m.fps))
+        for s in window_starts(m, frames, 1):
+            yield clean_change(f"{f.name}@{s / m.fps:.1f}s", m.slice(s, s + frames))

@@ -17,7 +17,14 @@ import json
 import math
 from typing import Any
 
-from ..evaluation.bench.refine import ARTEFACTS, SURVIVAL_CONTROLLERS, TARGET_S, TARGET_SUCCESS
+from ..evaluation.bench.refine import (
+    ARTEFACTS,
+    CLEAN_SECONDS,
+    SURVIVAL_CONTROLLERS,
+    TARGET_CLEAN_CHANGE,
+    TARGET_S,
+    TARGET_SUCCESS,
+)
 from .conventions import add_check_option, add_list_option, check_exit, format_legend
 
 
@@ -84,13 +91,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="M",
         help="random artefact clips per stage for the success rate (default 50)",
     )
+    p.add_argument(
+        "--dir",
+        metavar="DIR",
+        help="the clean-input rows on real clips: the first 4 s window of every clip "
+        "(BVH, glTF/GLB) of this folder, imported onto the dog as bench real imports "
+        "them (default: the species' own synthetic walks)",
+    )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
     p.add_argument("--json", action="store_true", help="also print one JSON object at the end")
     add_check_option(
         p,
         help="exit with code 1 when a target is MISSED: a stage's median solve "
-        "time, the success rate, or survival after refinement below survival "
-        "before (default: print the verdicts, exit 0)",
+        "time, the success rate, survival after refinement below survival "
+        "before, or a clean clip moved by more than 1 %% of leg length (default: "
+        "print the verdicts, exit 0)",
     )
     p.set_defaults(func=_bench_refine)
 
@@ -212,6 +227,45 @@ def _bench_refine(ns: argparse.Namespace) -> int:
             f"  stage {sr.stage}: {sr.ok}/{sr.tried} = {100 * sr.rate:.1f} % "
             f"(target ≥ {100 * TARGET_SUCCESS:.0f} %: {verdict})"
             + (f"; failed: {', '.join(sr.failed[:6])}" if sr.failed else "")
+        )
+    # ---------------------------------------------------------------- clean input
+    from ..evaluation.bench.refine import clean_real, clean_synthetic
+
+    kind = f"the first window of every clip of {ns.dir}" if ns.dir else "synthetic walks"
+    print(f"\nclean input, refined as it is (stage A, {CLEAN_SECONDS:g} s at 30 fps, {kind}):")
+    rows = clean_real(ns.dir) if ns.dir else clean_synthetic(species, ns.seed)
+    out["clean_input"] = []
+    n = n_met = 0
+    for c in rows:
+        n += 1
+        n_met += c.met
+        out["clean_input"].append(dict(vars(c)))
+        print(
+            f"  {c.name:34s} change max {100 * c.max:5.2f} % median {100 * c.median:5.2f} % "
+            f"(one joint {100 * c.joint_max:5.2f} %); skate {c.skate_before:.2f} → "
+            f"{c.skate_after:.2f} mm/frame, penetration {c.penetration_before:.2f} → "
+            f"{c.penetration_after:.2f} mm; call {_fmt(c.call, 5)} s, cpu {_fmt(c.cpu, 5)} s"
+            + (f", {c.retries} guard retr{'y' if c.retries == 1 else 'ies'}" if c.retries else "")
+            + ("" if c.ok else " FAILED")
+        )
+    verdict = "met" if n_met == n else "MISSED"
+    print(
+        f"  target: every frame of a clean clip within {100 * TARGET_CLEAN_CHANGE:g} % of leg "
+        f"length of its input: {n_met} of {n} clips ({verdict})"
+    )
+    print(
+        format_legend(
+            "(change: per frame the mean over the joints of their position change / leg "
+            "length, its max and median over the frames; one joint: the largest change of "
+            "any joint in any frame; call: wall time of the refine() call less builds; cpu: "
+            "process CPU time over it)",
+            indent="  ",
+        )
+    )
+    if n_met < n:
+        missed.append(
+            f"clean input moved by more than {100 * TARGET_CLEAN_CHANGE:g} % of leg length "
+            f"on {n - n_met} of {n} clips"
         )
     if ns.json:
         from ..refine.report import clean_json

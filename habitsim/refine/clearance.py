@@ -17,6 +17,9 @@ def swing_clearance(
     leg_length: float,
     clearance_per_leg: float = SWING_CLEARANCE_PER_LEG,
     ramp_s: float = SWING_RAMP_S,
+    toes: np.ndarray | None = None,
+    still: float = 0.0,
+    sunk: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The swing clearance profile of contact labels (:mod:`habitsim.refine.solve`, step 5).
 
@@ -32,6 +35,13 @@ def swing_clearance(
         leg_length: L [m].
         clearance_per_leg: the full clearance, share of L (≥ the contact height).
         ramp_s: rise time from the ground to the full clearance [s].
+        toes: optional (T, 4, 3) toe positions of the input [m]: the swing frames at
+            either end of a swing run whose toe is still below the contact height, not
+            more than ``sunk`` [m] under the floor, and within ``still`` [m]
+            horizontally of the foothold it leaves or reaches count as on the ground
+            (floor 0, pinned): a foot the input lifts a frame later than its label is
+            not lifted earlier, only one that moves there (or is sunk) is.
+        still, sunk: see ``toes``.
 
     Returns:
         ``floor`` (T, 4): lowest toe height [m] in swing, NaN in stance; ``pins``
@@ -46,20 +56,49 @@ def swing_clearance(
     frames = np.arange(t)
     floor = np.full((t, nf), np.nan)
     rest = c.copy()
+    ground = c.copy()  # stance, and swing frames where the input's toe is still down
+    if toes is not None:
+        p = np.asarray(toes, float)
+        for f in range(nf):
+            for a, b in runs(~c[:, f]):
+                if a > 0:  # after a lift-off
+                    i = a
+                    while i < b and _down(p, i, a - 1, f, (-sunk, h_c), still):
+                        ground[i, f] = True
+                        i += 1
+                if b < t:  # before a touch-down
+                    i = b - 1
+                    while i >= a and not ground[i, f] and _down(p, i, b, f, (-sunk, h_c), still):
+                        ground[i, f] = True
+                        i -= 1
     for f in range(nf):
         stance = np.flatnonzero(c[:, f])
+        down = np.flatnonzero(ground[:, f])
         for a, b in runs(~c[:, f]):
             k = frames[a:b]
             if len(stance):
-                d = np.abs(k[:, None] - stance[None, :]).min(axis=1).astype(float)
+                d0 = np.abs(k[:, None] - stance[None, :]).min(axis=1).astype(float)
+                d = np.abs(k[:, None] - down[None, :]).min(axis=1).astype(float)
             else:
-                d = np.full(len(k), np.inf)
+                d0 = d = np.full(len(k), np.inf)
             h = full * np.minimum(1.0, d / r)
             low = h < h_c
             if low.all():
-                top = d == d.max()
+                h = full * np.minimum(1.0, d0 / r)
+                low = h < h_c
+            if low.all():
+                top = d0 == d0.max()
                 h[top], low[top] = full, False
             floor[a:b, f] = h
             rest[a:b, f] = low
     pins = rest[1:] & rest[:-1]
     return floor, pins
+
+
+def _down(
+    p: np.ndarray, k: int, hold: int, f: int, band: tuple[float, float], still: float
+) -> bool:
+    """Whether toe ``f`` of ``p`` is at frame ``k`` at a height in ``band`` [lo, hi) and
+    within ``still`` horizontally of where it is at frame ``hold``."""
+    z = p[k, f, 2]
+    return bool(band[0] <= z < band[1] and np.linalg.norm(p[k, f, :2] - p[hold, f, :2]) <= still)

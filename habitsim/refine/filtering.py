@@ -39,6 +39,30 @@ def _lowpass(x: np.ndarray, lam: float, weights: np.ndarray | None = None) -> np
     return solveh_banded(ab, x)
 
 
+def _lam(fps: float, f_c: float) -> float:
+    """The penalty λ of a cutoff ``f_c`` [Hz] at ``fps`` [Hz]."""
+    return float(1.0 / (2.0 - 2.0 * np.cos(2 * np.pi * min(f_c / fps, 0.5))) ** 2)
+
+
+def jitter_autocorr(q: np.ndarray, info: Any, fps: float, f_c: float) -> float:
+    """How much a qpos trajectory jitters: the median over its hinges of the lag-1
+    autocorrelation of what the second-difference filter of cutoff ``f_c`` [Hz] removes.
+
+    White frame-to-frame noise leaves a high-passed remainder whose neighbouring frames
+    are anti-correlated (about −0.5); smooth motion attenuated above the cutoff leaves a
+    smooth remainder (0 to 0.3). A hinge the filter leaves untouched counts as 0.
+    """
+    x = np.asarray(q)[:, info.hinge_qposadr]
+    if x.shape[0] < 4 or x.shape[1] == 0:
+        return 0.0
+    r = x - _lowpass(x, _lam(fps, f_c))
+    r = r - r.mean(axis=0)
+    energy = (r * r).sum(axis=0)
+    lag1 = (r[1:] * r[:-1]).sum(axis=0)
+    ac = np.where(energy > 1e-20, lag1 / np.maximum(energy, 1e-300), 0.0)
+    return float(np.median(ac))
+
+
 def _lowpass_qpos(
     q: np.ndarray, info: Any, fps: float, f_c: float, contacts: np.ndarray
 ) -> np.ndarray:
@@ -49,7 +73,7 @@ def _lowpass_qpos(
     smoothed at the corners of its touchdowns and lift-offs (the two second differences
     around a label change), where a foot's velocity legitimately jumps.
     """
-    lam = 1.0 / (2.0 - 2.0 * np.cos(2 * np.pi * min(f_c / fps, 0.5))) ** 2
+    lam = _lam(fps, f_c)
     out = q.copy()
     fa = info.free_qposadr
     out[:, fa : fa + 3] = _lowpass(q[:, fa : fa + 3], lam)

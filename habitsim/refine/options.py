@@ -40,6 +40,11 @@ class RefineOptions:
         filter_cutoff: cutoff of the jitter pre-filter in units of the species' natural
             frequency √(g/L) [rad/s] (10 → 6.4 Hz for a dog, 3.5 Hz for an elephant);
             None switches the filter off.
+        jitter_autocorr: the filter runs only on a clip that jitters: when the median
+            over its hinges of the lag-1 autocorrelation of what the filter would remove
+            (:func:`~habitsim.refine.filtering.jitter_autocorr`) is below this (white
+            frame-to-frame noise: about −0.5; smooth motion: 0 to 0.3); None filters
+            every clip.
         w_track, w_smooth, w_jerk, w_hinge_jerk, w_reg, w_root, w_residual, w_force: cost weights.
         friction: friction coefficient of the pyramid (None: the model's foot / floor).
         align_ground: shift the targets onto the floor first (:mod:`habitsim.refine.solve`,
@@ -71,6 +76,10 @@ class RefineOptions:
             stay above the floor).
         swing_ramp_s: time over which a swing foot's minimum height rises from the ground
             to the clearance after a lift-off (and falls before a touch-down) [s].
+        swing_still_per_leg: a swing frame next to a lift-off or touch-down whose input
+            toe is still below the contact height and within this share of leg length
+            horizontally of the foothold stays on the ground (pinned) instead of being
+            lifted to the clearance: a foot is lifted only where it moves low.
         guard: when the result is worse than the input on a metric of the verdict
             (:func:`~habitsim.refine.verdict.compare_metrics`; in practice the jerk), solve
             again with the ``guard_weights`` × ``guard_factor`` (a weight that is 0 is
@@ -102,6 +111,7 @@ class RefineOptions:
     short_window: int | None = 64
     short_overlap: int = 16
     filter_cutoff: float | None = 10.0
+    jitter_autocorr: float | None = -0.2
     w_track: float = 1.0
     w_smooth: float = 1e-5
     w_jerk: float = 0.0
@@ -122,10 +132,11 @@ class RefineOptions:
     plant_start: bool = True
     swing_clearance: float | None = 0.025
     swing_ramp_s: float = 1.0 / 30.0
-    guard: int = 3
+    swing_still_per_leg: float = 0.002
+    guard: int = 5
     guard_weights: tuple[str, ...] = ("w_smooth", "w_jerk", "w_hinge_jerk")
     guard_factor: float = 10.0
-    guard_start: float = 1e-5
+    guard_start: float = 1e-7
     fallback: bool = False
     metrics: bool = True
     max_iter: int = 200
@@ -143,6 +154,9 @@ class RefineOptions:
                 raise RefineInputError(f"{f.name} must be a finite number ≥ 0, got {v!r}")
         if self.w_track <= 0:
             raise RefineInputError("w_track must be > 0")
+        ja = self.jitter_autocorr
+        if ja is not None and not (np.isfinite(ja) and -1.0 <= ja <= 1.0):
+            raise RefineInputError(f"jitter_autocorr must be in [-1, 1] or None, got {ja!r}")
         if self.filter_cutoff is not None and not (
             np.isfinite(self.filter_cutoff) and self.filter_cutoff > 0
         ):
@@ -166,6 +180,7 @@ class RefineOptions:
             "max_trim_share",
             "min_run_s",
             "swing_ramp_s",
+            "swing_still_per_leg",
             "guard_factor",
             "guard_start",
             "exact_first_excess_rad",
@@ -188,11 +203,16 @@ class RefineOptions:
             plan_windows(self.short_window + 1, self.short_window, self.short_overlap)
 
     def plan(self, n_frames: int) -> list[Window]:
-        """The windows of an ``n_frames`` clip: of ``window`` frames if it is at least that
-        long, else of ``short_window`` frames if it is longer than that, else one."""
+        """The windows of an ``n_frames`` clip: one if it is at most ``window + overlap``
+        frames long and not shorter than ``window`` (two windows would solve the
+        frames they share twice: a 120-frame clip 200 frames), of ``window`` frames if
+        it is longer, else of ``short_window`` frames if it is longer than that, else
+        one."""
         sw = self.short_window
         if sw is not None and sw < n_frames < self.window:
             return plan_windows(n_frames, sw, self.short_overlap)
+        if n_frames <= self.window + self.overlap:
+            return plan_windows(n_frames, max(n_frames, self.window), self.overlap)
         return plan_windows(n_frames, self.window, self.overlap)
 
     def cutoff_hz(self, leg_length: float, gravity: float = GRAVITY) -> float | None:

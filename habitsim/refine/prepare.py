@@ -19,7 +19,7 @@ from ..stance.labels import StanceLabels
 from ..stance.planting import PlantingOptions, plant_motion
 from .cleaning import clean_contact_labels, cleaning_summary
 from .clearance import swing_clearance
-from .filtering import _lowpass_qpos
+from .filtering import _lowpass_qpos, jitter_autocorr
 from .options import RefineOptions
 from .problem import (
     ModelInfo,
@@ -85,6 +85,8 @@ class _Prepared:
     pins: np.ndarray
     labels_input: StanceLabels  # the labels as they came (given, the input's, detected)
     cleaning: dict[str, Any] | None  # :func:`cleaning_summary` (None: not cleaned)
+    filtered: bool = False  # the jitter pre-filter ran
+    jitter: float | None = None  # :func:`jitter_autocorr` of the input (None: filter off)
 
     @property
     def contacts(self) -> np.ndarray:
@@ -111,12 +113,24 @@ def _prepare(
     labels = labels_in
     c = labels.array
     q_raw = motion_to_qpos(motion, model).qpos
+    # the targets are the input's own joint positions (what the model's hinges cannot
+    # represent, e.g. a twist, is not taken for the input's pose); the jitter filter,
+    # when the clip jitters, adds its change of the model's joint positions to them
+    p_in = motion.global_positions()
     f_c = opts.cutoff_hz(motion.species_info.leg_length, info.gravity)
-    if f_c is None:
-        q, targets = q_raw, motion.global_positions()
-    else:
-        q = _lowpass_qpos(q_raw, info, motion.fps, f_c, c)
-        targets = qpos_joint_positions(model, q)
+    score = None if f_c is None else jitter_autocorr(q_raw, info, motion.fps, f_c)
+    if f_c is not None and opts.jitter_autocorr is not None and score is not None:
+        if score >= opts.jitter_autocorr:
+            f_c = None  # no jitter: nothing to filter
+    fk_raw = None if f_c is None else qpos_joint_positions(model, q_raw)
+
+    def _filtered(labels_now: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if f_c is None or fk_raw is None:
+            return q_raw, p_in
+        qf = _lowpass_qpos(q_raw, info, motion.fps, f_c, labels_now)
+        return qf, p_in + (qpos_joint_positions(model, qf) - fk_raw)
+
+    q, targets = _filtered(c)
     toe_idx = [motion.skeleton.foot_indices[i] for i in range(4)]
     sp = motion.species_info
     cleaning = None
@@ -124,8 +138,7 @@ def _prepare(
         labels, cleaning = _cleaned(labels_in, targets[:, toe_idx], motion.fps, sp.leg_length, opts)
         c = labels.array
         if cleaning["frames_changed"] and f_c is not None:  # corners moved: filter again
-            q = _lowpass_qpos(q_raw, info, motion.fps, f_c, c)
-            targets = qpos_joint_positions(model, q)
+            q, targets = _filtered(c)
     offset = np.zeros(len(q))
     if opts.align_ground:
         lim = opts.max_align_per_leg * motion.species_info.leg_length
@@ -159,7 +172,14 @@ def _prepare(
         clearance, pins = None, c[1:] & c[:-1]
     else:
         clearance, pins = swing_clearance(
-            c, motion.fps, sp.leg_length, opts.swing_clearance, opts.swing_ramp_s
+            c,
+            motion.fps,
+            sp.leg_length,
+            opts.swing_clearance,
+            opts.swing_ramp_s,
+            toes=targets[:, toe_idx],
+            still=opts.swing_still_per_leg * sp.leg_length,
+            sunk=opts.verify_tol_mm / 1000.0,
         )
     if opts.plant_start:
         x0[:, :nv] = _planted_start(
@@ -180,6 +200,8 @@ def _prepare(
         pins,
         labels_in,
         cleaning,
+        f_c is not None,
+        score,
     )
 
 

@@ -49,6 +49,12 @@ Keys (all values JSON types; lengths in mm where the key says so):
                                 result was worse (``options.guard``): per retry the
                                 ``worse`` keys, the ``after`` values, ``iterations`` and
                                 ``solve_time_s`` of the discarded attempt, ``status``
+``filter``                      the jitter pre-filter: ``applied`` and the input's
+                                ``jitter_autocorr`` (None: filter off)
+``change_per_leg``              how far the result lies from the input in leg lengths
+                                (:func:`~.verdict.input_change`): per frame the mean
+                                joint position change, its ``max`` and ``median`` over
+                                the frames, and ``joint_max`` (one joint, one frame)
 ``ground_offset_mm``            mean and largest ground-alignment shift
 ``residual_mg``                 stage B: the model's root residual force / (m·g): mean, max
                                 and ``per_frame`` (0 at the first and last frame)
@@ -65,7 +71,7 @@ import mujoco
 import numpy as np
 
 from .problem import COST_TERMS, STAGE_A_TERMS, RefinementProblem, clip_evaluator
-from .verdict import WORSE_TOLERANCE
+from .verdict import WORSE_TOLERANCE, input_change
 
 __all__ = ["build_report", "clean_json"]
 
@@ -189,6 +195,8 @@ def build_report(
             if opts.swing_clearance is None
             else float(opts.swing_clearance * motion_in.species_info.leg_length * 1000.0),
         },
+        "filter": {"applied": bool(prep.filtered), "jitter_autocorr": prep.jitter},
+        "change_per_leg": input_change(motion_in, motion_out),
         "ground_offset_mm": {
             "mean": float(prep.offset.mean() * 1000.0),
             "max_abs": float(np.abs(prep.offset).max() * 1000.0),

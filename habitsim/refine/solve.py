@@ -9,8 +9,13 @@ and writes the report (:mod:`habitsim.refine.report`).
 
 Preparation, in this order:
 
-1. **Jitter pre-filter** (``filter_cutoff``): every coordinate of the input qpos (root
-   position, root quaternion, hinges) is smoothed by the zero-phase second-difference
+0. **Targets**: the input's own joint positions (what the model's hinges cannot
+   represent, e.g. a twist of a real animal's limb, is not taken for its pose).
+1. **Jitter pre-filter** (``filter_cutoff``), only on a clip that jitters (the median
+   lag-1 autocorrelation of what the filter would remove below ``jitter_autocorr``;
+   the targets then get the filter's change of the model's joint positions): every
+   coordinate of the input qpos (root position, root quaternion, hinges) is smoothed by
+   the zero-phase second-difference
    filter ``argmin ‖y − x‖² + λ‖Δ²y‖²`` (a banded solve per coordinate, microseconds),
    with the cutoff scaled to the species' natural frequency √(g/L), so a cat and an
    elephant are smoothed alike in dimensionless time. A leg's hinges are not smoothed
@@ -41,8 +46,11 @@ Preparation, in this order:
    falls to it at the touch-down) over ``swing_ramp_s`` to ``swing_clearance`` × L
    (2.5 %: the contact height plus a margin); the swing frames whose minimum is still
    below the contact height are pinned horizontally to the foothold they leave or
-   reach. A foot therefore either rests (planted) or rises vertically, or clears the
-   contact height while it moves: it never slides where the metric looks.
+   reach, and so are those next to a lift-off or touch-down whose input toe is still
+   down (below the contact height, within ``swing_still_per_leg`` × L of the foothold):
+   a foot is not lifted where the input does not move it. A foot therefore either rests
+   (planted) or rises vertically, or clears the contact height while it moves: it never
+   slides where the metric looks.
 
 Each window is solved first with the Gauss-Newton Hessian (at most
 ``gauss_newton_max_iter`` iterations), and if IPOPT fails with it, again from the
