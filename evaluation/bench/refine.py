@@ -451,19 +451,22 @@ def clean_synthetic(species: list[str], seed: int = 0) -> Iterator[CleanChange]:
 
 def clean_real(folder: str, species: str = "dog") -> Iterator[CleanChange]:
     """The clean-input change of the first 4 s window of every clip of ``folder``,
-    imported onto ``species`` and resampled to 30 fps as ``bench real`` does
-    (:func:`~habitsim.evaluation.bench.real.window_starts`); clips shorter than a
-    window are left out.
+    imported onto ``species`` and resampled to 30 fps, the window chosen from its
+    locomotion as ``bench real`` chooses it
+    (:func:`~habitsim.evaluation.bench.real.clip_windows`); clips without a whole window
+    are left out.
 
     Raises:
         BenchRealError: not a folder, or no readable clip in it.
     """
     from habitsim.motion import resample_motion
 
-    from .real import read_clip, source_files, window_starts
+    from .real import clip_windows, read_clip, source_files
 
     for f in source_files(folder):
         m = resample_motion(read_clip(f, species), CLEAN_FPS)
         frames = int(round(CLEAN_SECONDS * m.fps))
-        for s in window_starts(m, frames, 1):
-            yield clean_change(f"{f.name}@{s / m.fps:.1f}s", m.slice(s, s + frames))
+        windows, _ = clip_windows(m, frames, 1, frames)
+        for w in windows:
+            if not w.short:
+                yield clean_change(f"{f.name}@{w.start / m.fps:.1f}s", m.slice(w.start, w.stop))
