@@ -140,6 +140,8 @@ class RealOptions:
         repeats: tracking runs per kept reference (the first unperturbed).
         perturb: initial joint-velocity noise of the repeated runs [rad/s].
         workers: worker processes (None: the CPU count; 1: in this process).
+        variants: run these transformed copies of every clip instead of the clips
+            (:mod:`habitsim.evaluation.bench.variants`; ``original`` is the clip itself).
     """
 
     data: str | Path
@@ -160,13 +162,14 @@ class RealOptions:
     repeats: int = 1
     perturb: float = PERTURB_QVEL
     workers: int | None = None
+    variants: tuple[str, ...] = ()
 
 
 # ---------------------------------------------------------------------------- sources
 
 
 def read_clip(
-    path: str | Path,
+    path: str | Path | Any,
     species: str,
     joint_map: Path | None = None,
     units: str | None = None,
@@ -175,7 +178,7 @@ def read_clip(
     """One source clip on ``species``' skeleton (:func:`habitsim.bvh_mapping.import_bvh`,
     the options as ``import-bvh`` takes them, None for its defaults), with stance labels
     and ``metadata["import"]`` when the importer finds them. A glTF/GLB file gives its
-    first animation.
+    first animation; ``path`` may also be a parsed :class:`habitsim.bvh.BVHData`.
 
     Raises:
         SkeletonMappingError: a file type :func:`~habitsim.bvh_mapping.read_source` does
@@ -407,11 +410,16 @@ def plan(options: RealOptions) -> RealPlan:
         load_joint_map(o.joint_map)  # a bad map file fails here, not once per clip
     notes: list[str] = []
     windows: list[tuple[str, float, Any]] = []
-    for f in files:
+    sources: list[tuple[str, Any]] = [(f.name, f) for f in files]
+    if o.variants:
+        from .variants import variant_sources
+
+        sources = variant_sources(files, o.variants, o.seed, notes)
+    for name, f in sources:
         try:
             m = read_clip(f, species, joint_map=o.joint_map, units=o.units, up=o.up)
         except HabitsimError as e:
-            notes.append(f"{f.name}: skipped, import failed: {e}")
+            notes.append(f"{name}: skipped, import failed: {e}")
             continue
         if o.fps > 0:
             m = resample_motion(m, o.fps)
@@ -420,12 +428,12 @@ def plan(options: RealOptions) -> RealPlan:
         starts = window_starts(m, frames, max_windows)
         if not starts:
             notes.append(
-                f"{f.name}: skipped, {m.num_frames} frames ({m.duration:.2f} s) is "
+                f"{name}: skipped, {m.num_frames} frames ({m.duration:.2f} s) is "
                 f"shorter than one {o.seconds:g} s window ({frames} frames)"
             )
             continue
         for s in starts:
-            windows.append((f.name, round(s / m.fps, 3), m.slice(s, s + frames)))
+            windows.append((name, round(s / m.fps, 3), m.slice(s, s + frames)))
     if not windows:
         raise BenchRealError(
             f"--data {o.data}: no clip gives a {o.seconds:g} s window; " + "; ".join(notes)

@@ -21,6 +21,7 @@ from ..stance.planting import (
     PlantingOptions,
     SourceStance,
     label_source_stance,
+    resolve_planting,
     plant_legs,
     smooth_path,
 )
@@ -349,10 +350,11 @@ def _source_stance(
         anchor_idx.append(a)
         lengths.append(t.path_length(a, f) * (mapping.frame.scale if mapping.frame else 1.0))
         points.append(_foot_points(t, bvh.index(top), f))
-    # A point that sinks far below the feet's typical lowest point is an unnamed helper.
+    # A point that sinks far below the feet's typical lowest point is an unnamed helper;
+    # the fore and hind feet's points may lie up to pair_spread_per_leg apart.
     z5 = [np.percentile(src[:, pts, 2], 5, axis=0) for pts in points]
     ref = float(np.median([z.min() for z in z5]))
-    tol = 0.1 * float(np.mean(lengths))
+    tol = resolve_planting(options).pair_spread_per_leg * float(np.mean(lengths[2:]))
     points = [
         [p for p, z in zip(pts, zs, strict=True) if z >= ref - tol] or pts
         for pts, zs in zip(points, z5, strict=True)

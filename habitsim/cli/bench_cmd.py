@@ -18,14 +18,30 @@ import argparse
 from typing import TYPE_CHECKING
 
 from ..evaluation.bench.data import DEFAULT_CLIPS, TARGET_BUILD_S
-from . import bench_balance, bench_model, bench_real, bench_refine, bench_sim, bench_train
+from . import (
+    bench_balance,
+    bench_model,
+    bench_real,
+    bench_refine,
+    bench_sim,
+    bench_train,
+    bench_variants,
+)
 from .conventions import add_check_option, check_exit
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..evaluation.bench.data import DataResult
 
 #: Modules of ``habitsim.cli`` that add more ``bench`` sub-commands, in help order.
-_EXTRA = (bench_sim, bench_refine, bench_balance, bench_train, bench_model, bench_real)
+_EXTRA = (
+    bench_sim,
+    bench_refine,
+    bench_balance,
+    bench_train,
+    bench_model,
+    bench_real,
+    bench_variants,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:

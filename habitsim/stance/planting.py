@@ -191,10 +191,14 @@ def label_source_stance(
         zr = z[rest[:, k]]
         enough = zr.size >= opts.min_rest_frames
         floors[k] = np.percentile(zr, 10) if enough else np.percentile(z, 2)
-    # Feet stand on one ground: a foot point may sit higher than another (a marker on the
-    # wrist, a thick pad) but not by more than floor_spread_per_leg; a foot held in the air
-    # for the whole clip does not get a floor of its own.
-    floors = np.minimum(floors, floors.min() + opts.floor_spread_per_leg * leg_length)
+    # Feet stand on one ground. The two feet of a pair carry the same rig: one may sit at
+    # most floor_spread_per_leg above its partner, so a foot held in the air for the whole
+    # clip does not get a floor of its own. The fore and hind feet's points may sit at
+    # other heights above their soles (a marker on the wrist, a toe tip placed higher on
+    # the hind paws): a pair's floor may lie up to pair_spread_per_leg above the other's.
+    pair = np.array([floors[:2].min(), floors[2:].min()])
+    pair = np.minimum(pair, pair.min() + opts.pair_spread_per_leg * leg_length)
+    floors = np.minimum(floors, np.repeat(pair, 2) + opts.floor_spread_per_leg * leg_length)
     # A foot rests at slightly different heights over a clip (the paw's pose, an uneven or
     # sloping capture floor): each frame's floor is the lower envelope of the foot's
     # resting heights over about floor_window_s (between rests, interpolated), but never
