@@ -314,7 +314,9 @@ def _trim(rig: _Rig) -> BVHData:
 
 def _pad(rig: _Rig) -> BVHData:
     n = int(round(TRIM_S / rig.bvh.frame_time))
-    return _with_frames(rig.bvh, np.concatenate([np.repeat(rig.bvh.frames[:1], n, 0), rig.bvh.frames]))
+    return _with_frames(
+        rig.bvh, np.concatenate([np.repeat(rig.bvh.frames[:1], n, 0), rig.bvh.frames])
+    )
 
 
 def _z_up(rig: _Rig) -> BVHData:
@@ -391,7 +393,9 @@ VARIANTS: dict[str, Variant] = {
             "hind legs 0.87× as long, root kept (hind toes above the ground)",
             lambda rig: _legs(rig, "h", 0.87, False, None),
         ),
-        Variant("scale-small", "the whole animal and its travel 0.6×", lambda rig: _whole(rig, 0.6)),
+        Variant(
+            "scale-small", "the whole animal and its travel 0.6×", lambda rig: _whole(rig, 0.6)
+        ),
         Variant(
             "units-m",
             "written in metres",
@@ -416,7 +420,9 @@ VARIANTS: dict[str, Variant] = {
             _noise,
         ),
         Variant("trim", f"the first {TRIM_S:g} s cut off", _trim, _shifted(-TRIM_S)),
-        Variant("pad", f"the first frame held {TRIM_S:g} s before the clip", _pad, _shifted(TRIM_S)),
+        Variant(
+            "pad", f"the first frame held {TRIM_S:g} s before the clip", _pad, _shifted(TRIM_S)
+        ),
         Variant("z-up", "turned to z up", _z_up),
         Variant("renamed", "joint names under a namespace (Dog2:…)", _renamed),
     )
@@ -518,9 +524,11 @@ class VariantsOptions:
     seed: int = 0
 
 
-def _on_original_frames(contacts: np.ndarray, fps: float, times: np.ndarray) -> np.ndarray:
-    """Labels (T, F) sampled at ``times`` [s] (nearest frame); rows outside the clip are
-    marked by a mask: returns (labels, mask)."""
+def _on_original_frames(
+    contacts: np.ndarray, fps: float, times: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Labels (T, F) of a clip at ``fps`` sampled at ``times`` [s] (nearest frame), and
+    the mask of the times inside the clip."""
     j = np.rint(times * fps).astype(int)
     ok = (j >= 0) & (j < contacts.shape[0])
     out = np.zeros((len(times), contacts.shape[1]), bool)

@@ -21,10 +21,10 @@ from ..stance.planting import (
     PlantingOptions,
     SourceStance,
     label_source_stance,
-    resolve_planting,
     plant_legs,
     smooth_path,
 )
+from ..stance.policy import resolve_planting
 from .chains import _AXIAL, _END_POINTS, _IDX, _LEG_CHAINS, _TAIL
 from .frame import _leg_ends
 from .names import _fore_vote

@@ -46,9 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_list_option(
         p, "--clips", default=[], metavar="NAME", help="only these clips (file names or stems)"
     )
-    add_list_option(
-        p, "--variants", default=[], metavar="NAME", help="the variants (default: all)"
-    )
+    add_list_option(p, "--variants", default=[], metavar="NAME", help="the variants (default: all)")
     p.add_argument(
         "--species", default="dog", metavar="NAME", help="skeleton imported onto (default dog)"
     )

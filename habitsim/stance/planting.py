@@ -134,6 +134,19 @@ def smooth_path(x: np.ndarray, fps: float, options: PlantingOptions | None = Non
     return savgol_filter(x, win, 2, axis=0, mode="interp")
 
 
+def _span_velocity(x: np.ndarray, fps: float, span_s: float) -> np.ndarray:
+    """Velocity of a path (T, ...) [units/s]: the central difference over ± half of
+    ``span_s`` (at least one frame; one-sided at the ends), the same time span at any
+    frame rate."""
+    t = x.shape[0]
+    if t < 2:
+        return np.zeros_like(x)
+    h = max(1, int(round(0.5 * span_s * fps)))
+    i = np.arange(t)
+    a, b = np.clip(i - h, 0, t - 1), np.clip(i + h, 0, t - 1)
+    return (x[b] - x[a]) * (fps / (b - a)).reshape((t,) + (1,) * (x.ndim - 1))
+
+
 def label_source_stance(
     points: Sequence[np.ndarray],
     fps: float,
@@ -177,7 +190,7 @@ def label_source_stance(
             raise InvalidMotionError(f"foot {k} points contain NaN or inf")
         t = len(p)
         sm = smooth_path(p, fps, opts)
-        vel = np.gradient(sm[..., :2], axis=0) * fps if t >= 2 else np.zeros_like(sm[..., :2])
+        vel = _span_velocity(sm[..., :2], fps, opts.velocity_span_s)
         arg = np.argmin(sm[..., 2], axis=1)
         rows = np.arange(t)
         low.append(np.concatenate([vel[rows, arg], sm[rows, arg, 2:3]], axis=-1))
@@ -195,10 +208,10 @@ def label_source_stance(
     # most floor_spread_per_leg above its partner, so a foot held in the air for the whole
     # clip does not get a floor of its own. The fore and hind feet's points may sit at
     # other heights above their soles (a marker on the wrist, a toe tip placed higher on
-    # the hind paws): a pair's floor may lie up to pair_spread_per_leg above the other's.
-    pair = np.array([floors[:2].min(), floors[2:].min()])
-    pair = np.minimum(pair, pair.min() + opts.pair_spread_per_leg * leg_length)
-    floors = np.minimum(floors, np.repeat(pair, 2) + opts.floor_spread_per_leg * leg_length)
+    # the hind paws): no floor lies more than pair_spread_per_leg above the lowest one.
+    pair = np.repeat([floors[:2].min(), floors[2:].min()], 2)
+    floors = np.minimum(floors, pair + opts.floor_spread_per_leg * leg_length)
+    floors = np.minimum(floors, floors.min() + opts.pair_spread_per_leg * leg_length)
     # A foot rests at slightly different heights over a clip (the paw's pose, an uneven or
     # sloping capture floor): each frame's floor is the lower envelope of the foot's
     # resting heights over about floor_window_s (between rests, interpolated), but never

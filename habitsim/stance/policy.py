@@ -53,6 +53,8 @@ class PlantingOptions:
     Attributes:
         smooth_s: window of the Savitzky–Golay filter a foot path is smoothed with
             before labelling [s] (at least 5 frames).
+        velocity_span_s: a foot point's velocity is its displacement over this time span
+            (centred; at least two frames) [s].
         floor_window_s: window of a foot's local floor, the lower envelope of its
             resting heights (about a stride) [s].
         floor_spread_per_leg: how far one foot's floor may sit above its partner's (the
@@ -80,6 +82,7 @@ class PlantingOptions:
     """
 
     smooth_s: float = 0.1
+    velocity_span_s: float = 0.05
     floor_window_s: float = 0.75
     floor_spread_per_leg: float = 0.1
     pair_spread_per_leg: float = 0.25
@@ -94,6 +97,7 @@ class PlantingOptions:
     def __post_init__(self) -> None:
         positive = (
             "smooth_s",
+            "velocity_span_s",
             "floor_window_s",
             "body_speed_s",
             "centre_travel_per_leg",
