@@ -14,6 +14,7 @@ from habitsim.cli.conventions import ListAction, check_exit, split_names
 #: Options that take ONE species (the skeleton a BVH is imported onto or sized against).
 _SINGLE = {
     ("bench real", "--species"),
+    ("bench variants", "--species"),
     ("data import-bvh", "--species"),
     ("data inspect-bvh", "--species"),
 }
