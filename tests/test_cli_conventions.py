@@ -16,6 +16,7 @@ _SINGLE = {
     ("bench real", "--species"),
     ("bench inplace", "--species"),
     ("bench export", "--species"),
+    ("bench variants", "--species"),
     ("data import-bvh", "--species"),
     ("data inspect-bvh", "--species"),
     # the one skeleton a motion-capture source is imported onto (also --from)

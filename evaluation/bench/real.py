@@ -148,6 +148,8 @@ class RealOptions:
         repeats: tracking runs per kept reference (the first unperturbed).
         perturb: initial joint-velocity noise of the repeated runs [rad/s].
         workers: worker processes (None: the CPU count; 1: in this process).
+        variants: run these transformed copies of every clip instead of the clips
+            (:mod:`habitsim.evaluation.bench.variants`; ``original`` is the clip itself).
     """
 
     data: str | Path
@@ -169,13 +171,14 @@ class RealOptions:
     repeats: int = 1
     perturb: float = PERTURB_QVEL
     workers: int | None = None
+    variants: tuple[str, ...] = ()
 
 
 # ---------------------------------------------------------------------------- sources
 
 
 def read_clip(
-    path: str | Path,
+    path: str | Path | Any,
     species: str,
     joint_map: Path | None = None,
     units: str | None = None,
@@ -184,7 +187,7 @@ def read_clip(
     """One source clip on ``species``' skeleton (:func:`habitsim.bvh_mapping.import_bvh`,
     the options as ``import-bvh`` takes them, None for its defaults), with stance labels
     and ``metadata["import"]`` when the importer finds them. A glTF/GLB file gives its
-    first animation.
+    first animation; ``path`` may also be a parsed :class:`habitsim.bvh.BVHData`.
 
     Raises:
         SkeletonMappingError: a file type :func:`~habitsim.bvh_mapping.read_source` does
@@ -429,11 +432,16 @@ def plan(options: RealOptions) -> RealPlan:
         load_joint_map(o.joint_map)  # a bad map file fails here, not once per clip
     notes: list[str] = []
     windows: list[tuple[str, float, Any, bool, str]] = []
-    for f in files:
+    sources: list[tuple[str, Any]] = [(f.name, f) for f in files]
+    if o.variants:
+        from .variants import variant_sources
+
+        sources = variant_sources(files, o.variants, o.seed, notes)
+    for name, f in sources:
         try:
             m = read_clip(f, species, joint_map=o.joint_map, units=o.units, up=o.up)
         except HabitsimError as e:
-            notes.append(f"{f.name}: skipped, import failed: {e}")
+            notes.append(f"{name}: skipped, import failed: {e}")
             continue
         if o.fps > 0:
             m = resample_motion(m, o.fps)
@@ -444,12 +452,12 @@ def plan(options: RealOptions) -> RealPlan:
         for seg in tl.segments:
             if seg.trunk_on_ground:
                 notes.append(
-                    f"{f.name}: {seg.activity.value} {seg.start_s:.2f}–{seg.end_s:.2f} s "
+                    f"{name}: {seg.activity.value} {seg.start_s:.2f}–{seg.end_s:.2f} s "
                     "(trunk on the ground): kept out of the windows"
                 )
         if not chosen:
             notes.append(
-                f"{f.name}: skipped, no stretch of {o.min_seconds:g} s or more in which the "
+                f"{name}: skipped, no stretch of {o.min_seconds:g} s or more in which the "
                 "animal stands or moves on its legs ("
                 + ", ".join(
                     f"{s.activity.value} {s.start_s:.2f}–{s.end_s:.2f} s" for s in tl.segments
@@ -466,12 +474,12 @@ def plan(options: RealOptions) -> RealPlan:
                     else f"its longest stretch on its legs ({sec:.2f} s of {m.duration:.2f} s)"
                 )
                 notes.append(
-                    f"{f.name}: {what} is shorter than one {o.seconds:g} s window: runs as "
+                    f"{name}: {what} is shorter than one {o.seconds:g} s window: runs as "
                     f"one {sec:.2f} s window"
                 )
             windows.append(
                 (
-                    f.name,
+                    name,
                     round(w.start / m.fps, 3),
                     m.slice(w.start, w.stop),
                     w.short,

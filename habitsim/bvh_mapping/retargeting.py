@@ -27,6 +27,7 @@ from ..stance.planting import (
     plant_legs,
     smooth_path,
 )
+from ..stance.policy import resolve_planting
 from .chains import _AXIAL, _END_POINTS, _IDX, _LEG_CHAINS, _TAIL
 from .frame import _leg_ends
 from .inplace import (
@@ -206,7 +207,7 @@ def retarget(
     # An in-place clip gets the travel its stance feet show; then the stance of the
     # source's own feet, and the ground they stand on.
     t = _Tree(bvh)
-    feet_found = _source_feet(bvh, t, j2s, src, mapping)
+    feet_found = _source_feet(bvh, t, j2s, src, mapping, options)
     fit, loop = None, None
     if feet_found is not None:
         src, fit, loop = _recovered(src, feet_found, bvh.fps, inplace, loops, options)
@@ -427,9 +428,10 @@ def _source_feet(
     j2s: Mapping[str, str],
     src: np.ndarray,
     mapping: JointMapping,
+    options: PlantingOptions | None = None,
 ) -> _Feet | None:
     """The source's toe joints, anchors, limb lengths and the joints each foot's stance
-    is found on.
+    is found on (``options``: the labelling's knobs, for the feet's height spread).
 
     None (with a note) when a leg lacks a mapped foot or shoulder / hip joint.
     """
@@ -450,10 +452,11 @@ def _source_feet(
         anchor_idx.append(a)
         lengths.append(t.path_length(a, f) * (mapping.frame.scale if mapping.frame else 1.0))
         points.append(_foot_points(t, bvh.index(top), f))
-    # A point that sinks far below the feet's typical lowest point is an unnamed helper.
+    # A point that sinks far below the feet's typical lowest point is an unnamed helper;
+    # the fore and hind feet's points may lie up to pair_spread_per_leg apart.
     z5 = [np.percentile(src[:, pts, 2], 5, axis=0) for pts in points]
     ref = float(np.median([z.min() for z in z5]))
-    tol = 0.1 * float(np.mean(lengths))
+    tol = resolve_planting(options).pair_spread_per_leg * float(np.mean(lengths[2:]))
     points = [
         [p for p, z in zip(pts, zs, strict=True) if z >= ref - tol] or pts
         for pts, zs in zip(points, z5, strict=True)

@@ -27,6 +27,7 @@ from . import (
     bench_refine,
     bench_sim,
     bench_train,
+    bench_variants,
 )
 from .conventions import add_check_option, check_exit
 
@@ -43,6 +44,7 @@ _EXTRA = (
     bench_real,
     bench_export,
     bench_inplace,
+    bench_variants,
 )
 
 

@@ -128,6 +128,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="W",
         help="worker processes (default: CPU count; 1 = in this process)",
     )
+    add_list_option(
+        p,
+        "--variants",
+        default=[],
+        metavar="NAME",
+        help=(
+            "run transformed copies of every clip instead of the clips (other frame "
+            "rates, proportions, toe points, noise...; 'habitsim bench variants --help' "
+            "lists them; original = the clip itself)"
+        ),
+    )
     p.add_argument("--json", metavar="OUT", help="also write the rows and targets here")
     p.set_defaults(func=_bench_real)
 
@@ -165,6 +176,7 @@ def options(ns: argparse.Namespace) -> RealOptions:
         repeats=ns.repeats,
         perturb=ns.perturb,
         workers=ns.workers,
+        variants=tuple(split_names(ns.variants)),
     )
 
 

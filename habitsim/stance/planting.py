@@ -135,6 +135,19 @@ def smooth_path(x: np.ndarray, fps: float, options: PlantingOptions | None = Non
     return savgol_filter(x, win, 2, axis=0, mode="interp")
 
 
+def _span_velocity(x: np.ndarray, fps: float, span_s: float) -> np.ndarray:
+    """Velocity of a path (T, ...) [units/s]: the central difference over ± half of
+    ``span_s`` (at least one frame; one-sided at the ends), the same time span at any
+    frame rate."""
+    t = x.shape[0]
+    if t < 2:
+        return np.zeros_like(x)
+    h = max(1, int(round(0.5 * span_s * fps)))
+    i = np.arange(t)
+    a, b = np.clip(i - h, 0, t - 1), np.clip(i + h, 0, t - 1)
+    return (x[b] - x[a]) * (fps / (b - a)).reshape((t,) + (1,) * (x.ndim - 1))
+
+
 def label_source_stance(
     points: Sequence[np.ndarray],
     fps: float,
@@ -178,7 +191,7 @@ def label_source_stance(
             raise InvalidMotionError(f"foot {k} points contain NaN or inf")
         t = len(p)
         sm = smooth_path(p, fps, opts)
-        vel = np.gradient(sm[..., :2], axis=0) * fps if t >= 2 else np.zeros_like(sm[..., :2])
+        vel = _span_velocity(sm[..., :2], fps, opts.velocity_span_s)
         arg = np.argmin(sm[..., 2], axis=1)
         rows = np.arange(t)
         low.append(np.concatenate([vel[rows, arg], sm[rows, arg, 2:3]], axis=-1))
@@ -192,10 +205,14 @@ def label_source_stance(
         zr = z[rest[:, k]]
         enough = zr.size >= opts.min_rest_frames
         floors[k] = np.percentile(zr, 10) if enough else np.percentile(z, 2)
-    # Feet stand on one ground: a foot point may sit higher than another (a marker on the
-    # wrist, a thick pad) but not by more than floor_spread_per_leg; a foot held in the air
-    # for the whole clip does not get a floor of its own.
-    floors = np.minimum(floors, floors.min() + opts.floor_spread_per_leg * leg_length)
+    # Feet stand on one ground. The two feet of a pair carry the same rig: one may sit at
+    # most floor_spread_per_leg above its partner, so a foot held in the air for the whole
+    # clip does not get a floor of its own. The fore and hind feet's points may sit at
+    # other heights above their soles (a marker on the wrist, a toe tip placed higher on
+    # the hind paws): no floor lies more than pair_spread_per_leg above the lowest one.
+    pair = np.repeat([floors[:2].min(), floors[2:].min()], 2)
+    floors = np.minimum(floors, pair + opts.floor_spread_per_leg * leg_length)
+    floors = np.minimum(floors, floors.min() + opts.pair_spread_per_leg * leg_length)
     # A foot rests at slightly different heights over a clip (the paw's pose, an uneven or
     # sloping capture floor): each frame's floor is the lower envelope of the foot's
     # resting heights over about floor_window_s (between rests, interpolated), but never

@@ -53,10 +53,14 @@ class PlantingOptions:
     Attributes:
         smooth_s: window of the Savitzky–Golay filter a foot path is smoothed with
             before labelling [s] (at least 5 frames).
+        velocity_span_s: a foot point's velocity is its displacement over this time span
+            (centred; at least two frames) [s].
         floor_window_s: window of a foot's local floor, the lower envelope of its
             resting heights (about a stride) [s].
-        floor_spread_per_leg: how far one foot's floor may sit above the lowest foot's
-            [hind-leg lengths].
+        floor_spread_per_leg: how far one foot's floor may sit above its partner's (the
+            other fore or hind foot) [hind-leg lengths].
+        pair_spread_per_leg: how far the fore feet's floor may sit above the hind feet's,
+            or the hind feet's above the fore feet's [hind-leg lengths].
         floor_rise_per_leg: how far a foot's local floor may rise above its clip floor
             [hind-leg lengths].
         min_rest_frames: below this many resting frames a foot's floor is taken from all
@@ -78,8 +82,10 @@ class PlantingOptions:
     """
 
     smooth_s: float = 0.1
+    velocity_span_s: float = 0.05
     floor_window_s: float = 0.75
     floor_spread_per_leg: float = 0.1
+    pair_spread_per_leg: float = 0.25
     floor_rise_per_leg: float = 0.05
     min_rest_frames: int = 3
     stance_speed_per_body: float = 0.35
@@ -91,6 +97,7 @@ class PlantingOptions:
     def __post_init__(self) -> None:
         positive = (
             "smooth_s",
+            "velocity_span_s",
             "floor_window_s",
             "body_speed_s",
             "centre_travel_per_leg",
@@ -100,7 +107,12 @@ class PlantingOptions:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
                 raise PlantingOptionsError(f"{name} must be finite and > 0, got {v!r}")
-        for name in ("floor_spread_per_leg", "floor_rise_per_leg", "stance_speed_per_body"):
+        for name in (
+            "floor_spread_per_leg",
+            "pair_spread_per_leg",
+            "floor_rise_per_leg",
+            "stance_speed_per_body",
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise PlantingOptionsError(f"{name} must be finite and ≥ 0, got {v!r}")
