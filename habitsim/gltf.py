@@ -266,6 +266,18 @@ def _rest_trs(f: _File, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return t, q / np.linalg.norm(q), s
 
 
+def _rest_above(f: _File, above: list[int]) -> tuple[Rotation, np.ndarray, float]:
+    """The rest transform of the nodes above the root joint, top first: rotation,
+    translation and uniform scale of their product."""
+    r_rot, r_pos, r_scale = Rotation.identity(), np.zeros(3), 1.0
+    for i in above:
+        rt, rq, rs = _rest_trs(f, i)
+        r_pos = r_pos + r_rot.apply(rt * r_scale)
+        r_rot = r_rot * Rotation.from_quat(rq)
+        r_scale *= float(_uniform(f, i, rs[None])[0])
+    return r_rot, r_pos, r_scale
+
+
 def _uniform(f: _File, i: int, s: np.ndarray) -> np.ndarray:
     """(F,) uniform scale from (F, 3) scales of node ``i``, or GLTFError."""
     lo, hi = s.min(axis=1), s.max(axis=1)
@@ -564,12 +576,7 @@ def read_gltf(path: str | Path, animation: str | int | None = None, fps: float =
     # Rest offsets (rest TRS of every node; the channels override them).
     rest_off = np.empty((n_j, 3))
     rest_cum = np.empty(n_j)
-    r_rot, r_pos, r_scale = Rotation.identity(), np.zeros(3), 1.0
-    for i in above:
-        rt, rq, rs = _rest_trs(f, i)
-        r_pos = r_pos + r_rot.apply(rt * r_scale)
-        r_rot = r_rot * Rotation.from_quat(rq)
-        r_scale *= float(_uniform(f, i, rs[None])[0])
+    r_rot, r_pos, r_scale = _rest_above(f, above)
     for k, i in enumerate(order):
         rt, _, rs = _rest_trs(f, i)
         s0 = float(_uniform(f, i, rs[None])[0]) if i in has_kids else 1.0

@@ -23,7 +23,15 @@ from scipy.spatial.transform import Rotation
 from .bvh import BVHData
 from .errors import GLTFError
 from .fileio import atomic_path
-from .gltf import _File, _joint_names, _rest_trs, _rig_nodes, _select_animation, _uniform
+from .gltf import (
+    _File,
+    _joint_names,
+    _rest_above,
+    _rest_trs,
+    _rig_nodes,
+    _select_animation,
+    _uniform,
+)
 
 __all__ = ["add_gltf_animation", "GLTF_SUFFIXES"]
 
@@ -42,12 +50,7 @@ def _node_channels(f: _File, ai: int, motion: BVHData) -> list[tuple[int, np.nda
             f"{f.source}: the motion's joints are not the model's skin joints "
             f"({len(joints)} against {len(names)}); write it with the rig it was exported on"
         )
-    r_rot, r_pos, r_scale = Rotation.identity(), np.zeros(3), 1.0
-    for i in above:
-        rt, rq, rs = _rest_trs(f, i)
-        r_pos = r_pos + r_rot.apply(rt * r_scale)
-        r_rot = r_rot * Rotation.from_quat(rq)
-        r_scale *= float(_uniform(f, i, rs[None])[0])
+    r_rot, r_pos, r_scale = _rest_above(f, above)
     has_kids = {par[i] for i in order if i != root}
     cum: dict[int, float] = {}
     q = motion.local_rotations()  # (F, J, 4) wxyz
