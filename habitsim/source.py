@@ -245,8 +245,11 @@ def load_clip(path: str | Path, options: SourceOptions | None = None) -> LoadedC
                 f"(.bvh, .glb, .gltf), not to the habitsim motion {p.name}"
             )
         whole = load_motion(p)
-        motion = o.span.cut(whole, what=p.name)
-        first = 0 if o.span.whole else o.span.frames(whole.num_frames, whole.fps)[0]
+        if o.span.whole:
+            motion, first = whole, 0
+        else:
+            first, stop = o.span.frames(whole.num_frames, whole.fps, what=p.name)
+            motion = whole.slice(first, stop)
         return _looped(LoadedClip(motion, None, p, first, whole.num_frames, whole.fps), o)
     if o.species is None:
         raise MotionFileError(

@@ -25,6 +25,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -32,6 +33,9 @@ from habitsim.errors import HabitsimError
 from habitsim.physics_constants import CONTACT_HEIGHT_PER_LEG
 
 from .targets import TargetCheck, verdict
+
+if TYPE_CHECKING:  # pragma: no cover
+    from habitsim.motion import Motion
 
 __all__ = [
     "BenchInPlaceError",
@@ -152,20 +156,24 @@ def make_in_place(bvh: object, up: str) -> object:
     return dataclasses.replace(bvh, frames=frames)
 
 
-def synthetic_walk(seed: int = 3, seconds: float = 3.0, in_place: bool = True) -> object:
+def synthetic_walk(seed: int = 3, seconds: float = 3.0, in_place: bool = True) -> Motion:
     """A habitsim synthetic dog walk, an exact loop of whole strides (the frame rate is
     chosen so a stride is 24 frames), its root's horizontal travel removed when
     ``in_place``: a :class:`~habitsim.motion.Motion`."""
     from habitsim.gaits import generate
-    from habitsim.motion import Motion
 
     probe = generate("dog", "walk", seed=seed, duration_s=seconds)
     fps = 24.0 * float(probe.metadata["stride_frequency_hz"])
     m = generate("dog", "walk", seed=seed, duration_s=seconds, fps=fps)
     n = 24 * int(m.num_frames // 24) + 1
     m = m.slice(0, n)
-    if not in_place:
-        return m
+    return held_in_place(m) if in_place else m
+
+
+def held_in_place(m: Motion) -> Motion:
+    """``m`` with its root's horizontal travel removed (held at the first frame)."""
+    from habitsim.motion import Motion
+
     root = m.root_positions.copy()
     root[:, :2] = root[0, :2]
     return Motion(m.species, m.fps, root, m.rotations, m.contacts, dict(m.metadata))
@@ -248,7 +256,7 @@ def run_inplace(options: InPlaceBenchOptions | None = None) -> InPlaceBenchResul
     loops: list[LoopRow] = []
     with tempfile.TemporaryDirectory() as tmp:
         walk = synthetic_walk(opts.seed, in_place=False)
-        still = synthetic_walk(opts.seed, in_place=True)
+        still = held_in_place(walk)
         orig, _ = import_bvh(write_bvh(walk, Path(tmp) / "walk.bvh"), opts.species)
         inpl, _ = import_bvh(write_bvh(still, Path(tmp) / "walk_in_place.bvh"), opts.species)
     recovery.append(recovery_row("synthetic walk", orig, inpl))

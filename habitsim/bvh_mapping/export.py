@@ -43,7 +43,7 @@ from ..rotations import matrix_to_quat, quat_fix_continuity, quat_to_euler, quat
 from ..skeleton import JOINT_NAMES, fk
 from ..species import Species, load_species
 from ..stance.planting import stance_slip
-from .chains import _LEG_CHAINS
+from .chains import _HEADING, _LEG_CHAINS
 from .frame import FrameConversion, _parse_up
 from .identity import _habitsim_order, identity_root_scale, is_habitsim_bvh
 from .importing import map_joints, read_source
@@ -52,7 +52,6 @@ from .result import JointMapping
 from .retargeting import _driven, _source_feet, _source_stance, retarget
 from .tree import _Tree
 
-_FORWARD = ("spine3", "spine2", "spine1", "neck", "head")
 _X, _Y, _Z = np.eye(3)
 
 
@@ -166,7 +165,7 @@ def check_rig(mapping: JointMapping, where: str) -> None:
         "'habitsim data inspect-bvh RIG' prints one to "
         "edit), or give a rig with that chain"
     )
-    if not any(n in j2s for n in _FORWARD):
+    if not any(n in j2s for n in _HEADING):
         raise RigExportError(
             f"{where}: no spine, neck or head joint is mapped, so the rig's pelvis cannot "
             f"take the motion's heading; {fix}"
@@ -366,7 +365,7 @@ class _Solver:
 
     def __init__(self, motion: Motion, rig: BVHData, mapping: JointMapping):
         assert mapping.frame is not None
-        self.rig, self.mapping, self.motion = rig, mapping, motion
+        self.rig, self.motion = rig, motion
         fr = mapping.frame
         m, s = fr.matrix, fr.scale
         self.m, self.s = m, s
@@ -383,7 +382,7 @@ class _Solver:
             g0[j] = loc0[j] if p < 0 else g0[p] @ loc0[j]
             p0[j] = tr0[j] if p < 0 else p0[p] + g0[p] @ tr0[j]
         self.loc0, self.tr0 = loc0, tr0
-        fwd = next(n for n in _FORWARD if n in j2s)
+        fwd = next(n for n in _HEADING if n in j2s)
         ahead = p0[idx[fwd]] - p0[idx["pelvis"]]
         ahead[2] = 0.0
         side0 = np.cross(_Z, _unit(ahead) if np.linalg.norm(ahead) > 1e-9 else _X)

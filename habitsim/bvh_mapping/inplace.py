@@ -118,11 +118,10 @@ class InPlaceOptions:
             "sweep_low_per_leg",
             "relabel_share",
             "reach_per_leg",
+            "smooth_s",
+            "trunk_window_s",
+            "stance_smooth_s",
         ):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
-                raise InPlaceOptionsError(f"InPlaceOptions.{name} must be > 0, got {v!r}")
-        for name in ("smooth_s", "trunk_window_s", "stance_smooth_s"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
                 raise InPlaceOptionsError(f"InPlaceOptions.{name} must be > 0, got {v!r}")

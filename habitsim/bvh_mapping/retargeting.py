@@ -28,7 +28,7 @@ from ..stance.planting import (
     smooth_path,
 )
 from ..stance.policy import resolve_planting
-from .chains import _AXIAL, _END_POINTS, _IDX, _LEG_CHAINS, _TAIL
+from .chains import _AXIAL, _END_POINTS, _HEADING, _IDX, _LEG_CHAINS, _TAIL
 from .frame import _leg_ends
 from .inplace import (
     InPlaceFit,
@@ -152,7 +152,7 @@ def retarget(
 
     # Pelvis: heading along hips → chest (pitch kept), up from the world up.
     hips = s("pelvis")
-    fwd_name = next((n for n in ("spine3", "spine2", "spine1", "neck", "head") if n in j2s), None)
+    fwd_name = next((n for n in _HEADING if n in j2s), None)
     z_up = np.array([0.0, 0.0, 1.0])
     if fwd_name is not None:
         x = s(fwd_name) - hips

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..bvh import BVHData
-from .names import is_control_name, is_helper_name, is_never_limb_name, is_segment_name, name_cues
+from .names import is_control_name, is_never_limb_name, is_segment_name, name_cues
 
 
 class _Tree:
@@ -27,8 +27,6 @@ class _Tree:
             self.depth[j] = 0 if p < 0 else self.depth[p] + 1
         self.cues = [name_cues(n) for n in bvh.names]
         self.blen = np.linalg.norm(bvh.offsets, axis=1)
-        #: any helper or control bone (never a foot point, tagged in the hierarchy)
-        self.helper = [is_helper_name(n) for n in bvh.names]
         #: helpers that are never part of a limb (tails, armour, nubs)
         self.never = [is_never_limb_name(n) for n in bvh.names]
         #: control bones (IK, pole, target, twist, roll, MCH/ORG): limbs only if they animate

@@ -18,9 +18,6 @@ from .conventions import UNIT_CHOICES, UP_CHOICES, add_source_options, source_op
 if TYPE_CHECKING:  # pragma: no cover
     from ..motion import Motion
 
-if TYPE_CHECKING:  # pragma: no cover
-    from ..motion import Motion
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``import-bvh`` and ``export-bvh`` commands to the ``data`` group."""

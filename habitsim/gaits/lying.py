@@ -17,17 +17,13 @@ import numpy as np
 
 from ..errors import GaitError
 from ..rotations import heading_yaw, quat_mul, quat_slerp, rot_y, rot_z
-from ..skeleton import JOINT_NAMES, get_skeleton
+from ..skeleton import _FORE, _HIND, _INDEX, JOINT_NAMES, get_skeleton
 from ..species import Species, load_species
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..motion import Motion
 
 __all__ = ["lying_pose", "with_lying_start"]
-
-_INDEX = {n: i for i, n in enumerate(JOINT_NAMES)}
-_FORE = ("scapula", "shoulder", "elbow", "wrist", "toe")
-_HIND = ("ilium", "hip", "knee", "hock", "toe")
 
 
 def lying_pose(species: str | Species) -> tuple[np.ndarray, np.ndarray]:
@@ -49,9 +45,7 @@ def lying_pose(species: str | Species) -> tuple[np.ndarray, np.ndarray]:
     lift = 0.1 * sp.leg_length
     for side in ("l", "r"):
         for limb, sign, segs in (("f", -1.0, _FORE), ("h", 1.0, _HIND)):
-            reach = float(
-                sum(np.linalg.norm(skel.offsets[_INDEX[f"{side}{limb}_{g}"]]) for g in segs[1:])
-            )
+            reach = float(skel.bone_lengths[[_INDEX[f"{side}{limb}_{g}"] for g in segs[1:]]].sum())
             tilt = math.asin(min(1.0, lift / max(reach, 1e-9)))
             quats[_INDEX[f"{side}{limb}_{segs[0]}"]] = rot_y(sign * (0.5 * math.pi - tilt))
             for seg in segs[1:-1]:

@@ -52,21 +52,15 @@ def compare_metrics(motion_in: Motion, motion_out: Motion) -> dict[str, Any]:
     return out
 
 
-def input_change(
-    motion_in: Motion,
-    motion_out: Motion,
-    positions_in: np.ndarray | None = None,
-    positions_out: np.ndarray | None = None,
-) -> dict[str, float]:
+def input_change(motion_in: Motion, motion_out: Motion) -> dict[str, float]:
     """How far the result lies from the input, in leg lengths.
 
     Per frame the mean over the joints of their position change ‖p_out − p_in‖ / L
     (the change of the frame's pose), and of that its ``max`` and ``median`` over the
     frames; ``joint_max``: the largest change of any one joint in any frame.
     """
-    a = motion_in.global_positions() if positions_in is None else positions_in
-    b = motion_out.global_positions() if positions_out is None else positions_out
-    d = np.linalg.norm(np.asarray(b) - np.asarray(a), axis=-1) / motion_in.species_info.leg_length
+    a, b = motion_in.global_positions(), motion_out.global_positions()
+    d = np.linalg.norm(b - a, axis=-1) / motion_in.species_info.leg_length
     per_frame = d.mean(axis=1)
     return {
         "max": float(per_frame.max()),
