@@ -64,6 +64,10 @@ class GaitError(HabitsimError, ValueError):
     """A gait or action that a species does not have, or bad generator parameters."""
 
 
+class CaptionError(HabitsimError, ValueError):
+    """A clip a caption cannot be written for, or bad caption settings."""
+
+
 class DatasetError(HabitsimError, ValueError):
     """A data set folder that is missing files or has an inconsistent manifest."""
 

@@ -162,15 +162,38 @@ def test_targets_and_exit_code() -> None:
     assert evaluate_targets(slow, seconds=10)[-1].verdict == "met"  # 25 s per 10 s window
     t = evaluate_targets(rows, seconds=4, refine="none", tracked=False)
     assert [x.verdict for x in t][:4] == ["n/a"] * 4
-    # the MPJPE target is the median over every tracked window; the habit median is shown
+    # the MPJPE target is the habit windows' median; every tracked window's is shown
     mixed = [
         _row("habit", 1.0, sim_mpjpe_per_leg=0.2),
         _row("direct", 1.0, sim_mpjpe_per_leg=0.1),
         _row("direct", 1.0, sim_mpjpe_per_leg=0.1),
     ]
     m = next(x for x in evaluate_targets(mixed, seconds=4) if "MPJPE" in x.name)
-    assert m.value == pytest.approx(0.1) and m.verdict == "met"
-    assert m.shown == "0.100 of 3 (habit 0.200)"
+    assert m.value == pytest.approx(0.2) and m.verdict == "MISSED"
+    assert m.shown == "0.200 of 1 (all tracked windows 0.100)"
+    mixed[0]["sim_mpjpe_per_leg"] = 0.09
+    m = next(x for x in evaluate_targets(mixed, seconds=4) if "MPJPE" in x.name)
+    assert m.value == pytest.approx(0.09) and m.verdict == "met"
+
+
+def test_gallop_windows_are_shown_beside_the_survival_target() -> None:
+    """A source window above the gallop Froude number is reported, not counted."""
+    rows = [
+        _row("habit", 1.0, source_froude_peak=1.2),
+        _row("habit", 1.0, source_froude_peak=GALLOP_FROUDE),  # at the boundary: counted
+        _row("habit", 1.0, source_froude_peak=None),  # unknown: counted
+        _row("habit", 0.4, source_froude_peak=3.7, survival_runs=[0.4, 1.0]),
+        _row("direct", 1.0),
+    ]
+    t = next(x for x in evaluate_targets(rows, seconds=4) if "surviving" in x.name)
+    assert t.value == pytest.approx(1.0) and t.verdict == "met"
+    assert t.shown == "100 % of 3; gallops (Fr > 2.5, not counted): 1/2 whole"
+    rows[1]["survival"] = 0.5
+    t = next(x for x in evaluate_targets(rows, seconds=4) if "surviving" in x.name)
+    assert t.value == pytest.approx(2 / 3) and t.verdict == "MISSED"
+    only = [_row("habit", 0.4, source_froude_peak=3.7)]
+    t = next(x for x in evaluate_targets(only, seconds=4) if "surviving" in x.name)
+    assert t.verdict == "n/a"
 
 
 def test_survival_targets_count_every_run_of_every_window() -> None:

@@ -38,9 +38,13 @@ target does not apply to the run):
 
 * refinement: skate ≤ 1 mm/frame, jerk ≤ the input's and penetration ≤ 1 mm on ≥ 95 % of
   the refined transfers;
-* ≥ 90 % of the habit transfers survive the whole window unassisted under ``mpc``;
-* median sim MPJPE ≤ 0.15 leg length (over the habit and direct windows; the habit
-  windows' own median is shown beside it);
+* ≥ 90 % of the habit transfers survive the whole window unassisted under ``mpc``,
+  over the windows whose source moves below a gallop (peak Froude number at most
+  :data:`~habitsim.gait_stats.GALLOP_FROUDE`); gallops, whose flight phases are beyond
+  model-based tracking on a CPU (docs/controllers.md, "Limits"), are counted
+  beside the target, never in it;
+* median sim MPJPE of the habit windows ≤ 0.10 leg length (the median over every
+  tracked window is shown beside it);
 * habit ≥ direct on mean survival;
 * transfer + refine + track of one 4 s window ≤ 10 s (median; scaled with ``seconds``).
 
@@ -80,6 +84,7 @@ __all__ = [
     "RealPlan",
     "WindowTask",
     "evaluate_targets",
+    "galloping",
     "exit_code",
     "plan",
     "read_clip",
@@ -101,8 +106,8 @@ REFINE_PENETRATION_MM = 1.0
 REFINE_SHARE = 0.95
 #: Share of habit transfers that survive the whole window unassisted under mpc.
 SURVIVAL_SHARE = 0.90
-#: Median sim MPJPE [leg lengths].
-MPJPE_PER_LEG = 0.15
+#: Median sim MPJPE of the habit windows [leg lengths].
+MPJPE_PER_LEG = 0.10
 #: Transfer + refine + track of one 4 s window [s].
 SECONDS_PER_4S_CLIP = 10.0
 #: Initial joint-velocity noise [rad/s] of the repeated runs.
@@ -560,6 +565,15 @@ def survival_runs(row: RealRow) -> list[float]:
     return [] if row.get("survival") is None else [float(row["survival"])]
 
 
+def galloping(row: RealRow) -> bool:
+    """The row's source window gallops: its peak Froude number is above
+    :data:`~habitsim.gait_stats.GALLOP_FROUDE` (unknown counts as not)."""
+    from habitsim.gait_stats import GALLOP_FROUDE
+
+    fr = finite_or_none(row.get("source_froude_peak"))
+    return fr is not None and fr > GALLOP_FROUDE
+
+
 def evaluate_targets(
     rows: Sequence[RealRow],
     *,
@@ -573,6 +587,8 @@ def evaluate_targets(
     Verdicts are ``met``, ``MISSED`` or ``n/a`` (the run does not measure it: no
     refinement, no tracking, another controller, a method missing).
     """
+    from habitsim.gait_stats import GALLOP_FROUDE
+
     ok = [r for r in rows if r.get("status") == "ok"]
     out: list[TargetCheck] = []
 
@@ -603,20 +619,29 @@ def evaluate_targets(
         )
     )
 
-    # survival of habit transfers under mpc, unassisted (every run of every window)
+    # survival of habit transfers under mpc, unassisted (every run of every window below
+    # a gallop; the gallop windows beside it)
     trk = [r for r in ok if tracked and r.get("survival") is not None]
     habit = [r for r in trk if r["method"] == "habit"]
-    applies = tracked and controller == "mpc" and habit
-    hruns = [x for r in habit for x in survival_runs(r)]
+    below = [r for r in habit if not galloping(r)]
+    gallops = [r for r in habit if galloping(r)]
+    applies = tracked and controller == "mpc" and below
+    hruns = [x for r in below for x in survival_runs(r)]
     share = (sum(x >= 1.0 for x in hruns) / len(hruns)) if applies else None
     shown = "-"
     if share is not None:
-        shown = f"{100 * share:.0f} % of {len(habit)}"
-        if len(hruns) > len(habit):
+        shown = f"{100 * share:.0f} % of {len(below)}"
+        if len(hruns) > len(below):
             shown = f"{100 * share:.0f} % of {len(hruns)} runs"
+    if gallops:
+        gruns = [x for r in gallops for x in survival_runs(r)]
+        shown += (
+            f"; gallops (Fr > {GALLOP_FROUDE:g}, not counted): "
+            f"{sum(x >= 1.0 for x in gruns)}/{len(gruns)} whole"
+        )
     out.append(
         TargetCheck(
-            "habit transfers surviving unassisted (mpc)",
+            f"habit transfers surviving unassisted (mpc), source Fr ≤ {GALLOP_FROUDE:g}",
             share,
             shown,
             f"≥ {100 * SURVIVAL_SHARE:.0f} %",
@@ -624,17 +649,16 @@ def evaluate_targets(
         )
     )
 
-    # median sim MPJPE, over every tracked window (habit and direct); the habit windows'
-    # own median is shown beside it
+    # median sim MPJPE of the habit windows; over every tracked window beside it
     e = [r["sim_mpjpe_per_leg"] for r in trk if r.get("sim_mpjpe_per_leg") is not None]
-    med = float(np.median(e)) if e else None
     eh = [r["sim_mpjpe_per_leg"] for r in habit if r.get("sim_mpjpe_per_leg") is not None]
-    shown = "-" if med is None else f"{med:.3f} of {len(e)}"
-    if med is not None and eh:
-        shown += f" (habit {float(np.median(eh)):.3f})"
+    med = float(np.median(eh)) if eh else None
+    shown = "-" if med is None else f"{med:.3f} of {len(eh)}"
+    if med is not None and e:
+        shown += f" (all tracked windows {float(np.median(e)):.3f})"
     out.append(
         TargetCheck(
-            "median sim MPJPE / leg length, all tracked windows",
+            "median sim MPJPE / leg length, habit windows",
             med,
             shown,
             f"≤ {MPJPE_PER_LEG}",

@@ -24,7 +24,11 @@ from ..errors import HabitsimError, bounded
 # (group name, help, module names registering into it). Group None = top-level commands.
 _GROUPS: list[tuple[str | None, str, tuple[str, ...]]] = [
     ("species", "the species catalog", ("species_cmd",)),
-    ("data", "data sets: synthetic gaits, BVH import", ("synth_cmd", "bvh_cmd")),
+    (
+        "data",
+        "data sets: synthetic gaits, BVH import, captions",
+        ("synth_cmd", "bvh_cmd", "captions_cmd"),
+    ),
     ("motion", "inspect motion files", ("motion_cmd",)),
     ("models", "per-species MuJoCo (MJCF) models", ("models_cmd",)),
     ("bench", "benchmarks that print figures", ("bench_cmd",)),
