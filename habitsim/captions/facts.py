@@ -31,15 +31,12 @@ import numpy as np
 from ..activity import Activity, ActivityOptions, timeline
 from ..errors import CaptionError
 from ..physics_constants import GRAVITY
-from ..rotations import quat_to_matrix
+from ..rotations import heading_yaw
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..motion import Motion
 
 __all__ = ["ClipFacts", "FactsOptions", "SegmentFacts", "clip_facts"]
-
-#: The generator's actions that move the animal along the ground.
-_TRAVEL = ("walk", "trot", "pace", "amble", "canter", "gallop", "bound")
 
 
 @dataclass(frozen=True)
@@ -128,7 +125,9 @@ class ClipFacts:
     @property
     def travels(self) -> bool:
         """The clip moves the animal along the ground."""
-        return self.action in _TRAVEL + ("turn_left", "turn_right", "walk_backward")
+        from ..gaits import LOCOMOTION_ACTIONS
+
+        return self.action in LOCOMOTION_ACTIONS
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready facts (rounded)."""
@@ -150,12 +149,6 @@ class ClipFacts:
             "jump_height_m": None if self.jump_height_m is None else round(self.jump_height_m, 3),
             "source": self.source,
         }
-
-
-def _heading(motion: Motion) -> np.ndarray:
-    """(T,) unwrapped yaw [rad] of the pelvis' forward axis (+x of the pelvis)."""
-    fwd = quat_to_matrix(motion.rotations[:, 0])[..., :, 0]
-    return np.unwrap(np.arctan2(fwd[:, 1], fwd[:, 0]))
 
 
 def _backward(motion: Motion, yaw: np.ndarray) -> bool:
@@ -213,7 +206,7 @@ def clip_facts(motion: Motion, options: FactsOptions | None = None) -> ClipFacts
     net = float(np.linalg.norm(root[-1, :2] - root[0, :2]))
     speed = path / duration if net > 0.2 * path else net / duration
     froude = speed**2 / (GRAVITY * sp.hip_height)
-    yaw = _heading(motion)
+    yaw = np.unwrap(heading_yaw(motion.rotations[:, 0]))
     turn = float(yaw[-1] - yaw[0])
     turn_nd = turn / duration * math.sqrt(sp.hip_height / GRAVITY)
     moving = speed / sp.leg_length >= opts.moving_speed_per_leg

@@ -379,7 +379,7 @@ def _cap(s: str) -> str:
     return s[:1].upper() + s[1:]
 
 
-def _render(p: _Parts, form: str, level: int, rng: np.random.Generator) -> str:
+def _render(p: _Parts, form: str, rng: np.random.Generator) -> str:
     body = f"{p.manner}{p.figures}{p.tail}"
     if form == "sentence":
         s = f"{p.subject} {p.third}{body}"
@@ -440,7 +440,7 @@ def captions(
             # spread over the levels: the first three captions take one level each
             level = int(LEVELS[k]) if k < 3 and w[k] > 0 else int(rng.choice(LEVELS, p=w))
             form = str(rng.choice(FORMS))
-            text = _render(_parts(facts, level, rng), form, level, rng)
+            text = _render(_parts(facts, level, rng), form, rng)
             text = re.sub(r"\s+", " ", text).strip()
             if text.lower() not in seen:
                 seen.add(text.lower())
