@@ -47,6 +47,7 @@ from habitsim.errors import HabitsimError
 from habitsim.fileio import atomic_write, atomic_write_text, make_dirs
 from habitsim.motion import FEATURE_DIM, Motion
 from habitsim.rotations import quat_fix_continuity, quat_mul, quat_slerp
+from habitsim.threads import one_thread
 
 __all__ = [
     "EvaluatorConfig",
@@ -345,13 +346,8 @@ class Evaluator:
         Inference runs on one CPU thread (restored afterwards), so features are bitwise
         identical in every process of a benchmark, whatever its thread settings.
         """
-        threads = torch.get_num_threads()
-        torch.set_num_threads(1)
-        try:
-            with torch.no_grad():
-                return self._predict(inputs, batch_size)
-        finally:
-            torch.set_num_threads(threads)
+        with one_thread(), torch.no_grad():
+            return self._predict(inputs, batch_size)
 
     def _predict(self, inputs: Sequence[np.ndarray], batch_size: int) -> Predictions:
         feats = []

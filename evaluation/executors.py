@@ -21,15 +21,20 @@ the run's to stop.
 
 Starting a Dask cluster by hand (one scheduler, any number of workers, any machines)::
 
-    dask scheduler --host 0.0.0.0 --port 8786              # on the head node
+    dask scheduler --host HEAD --port 8786                 # on the head node
     dask worker tcp://HEAD:8786 --nworkers 2 --nthreads 1  # on each worker machine
     habitsim eval --data DIR --methods direct --out OUT --executor dask --scheduler tcp://HEAD:8786
+
+``HEAD`` is the head node's address on the cluster's private network, never ``0.0.0.0``
+on a machine reachable from outside: Dask's protocol has no authentication and runs the
+pickled tasks it receives, so an open scheduler runs anyone's code.
 
 (``dask-scheduler`` / ``dask-worker`` are the older names of the same commands;
 ``python -m distributed.cli.dask_scheduler`` works everywhere.) Use ``--nthreads 1``:
 each task already keeps a core busy (MuJoCo, numpy), and threads inside one worker
-process would contend for the GIL. Results do not depend on the executor: every task is
-deterministic and independent of where and in which order it runs.
+process would contend for the GIL. Results do not depend on the executor or the
+machine: every task is deterministic and independent of where and in which order it
+runs, and its thread-count sensitive steps run on one thread (:mod:`habitsim.threads`).
 """
 
 from __future__ import annotations

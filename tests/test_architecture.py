@@ -306,6 +306,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.bvh_mapping.export",
             "habitsim.render",
             "habitsim.workers",
+            "habitsim.threads",
         ),
     ),
     (

@@ -143,3 +143,83 @@ def test_same_seed_eval_tables_are_identical(
     assert rows(eval_run / "rows.csv") == rows(again / "rows.csv")
     for f in ["summary.json", *(f for f in files_under(again) if f.startswith("rows/"))]:
         _same_report(eval_run / f, again / f, drop=("out",))
+
+
+def _pools() -> list[tuple[str, int]]:
+    from threadpoolctl import threadpool_info
+
+    return sorted((d["filepath"], d["num_threads"]) for d in threadpool_info())
+
+
+def test_one_thread_limits_every_pool_and_restores_them() -> None:
+    import torch
+
+    from habitsim.threads import one_thread
+
+    before, torch_before = _pools(), torch.get_num_threads()
+    with one_thread():
+        assert torch.get_num_threads() == 1
+        assert {n for _, n in _pools()} == {1}
+    assert _pools() == before and torch.get_num_threads() == torch_before
+
+
+def _under_threads(n: int, fn):
+    """``fn()`` with torch, BLAS and OpenMP set to ``n`` threads by the caller."""
+    import torch
+    from threadpoolctl import threadpool_limits
+
+    import habitsim.threads  # noqa: F401  (CasADi's OpenBLAS known to threadpoolctl)
+
+    old = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        with threadpool_limits(limits=n):
+            return fn()
+    finally:
+        torch.set_num_threads(old)
+
+
+def test_transfer_does_not_depend_on_the_callers_threads() -> None:
+    import numpy as np
+
+    import habitsim
+    from habitsim.gaits import generate
+
+    m = generate("dog", "trot", seed=1, duration_s=4.0)
+    one, two = (
+        _under_threads(n, lambda: habitsim.transfer(m, "cat", seed=3, plant=False)) for n in (1, 2)
+    )
+    assert np.array_equal(one.rotations, two.rotations)
+    assert np.array_equal(one.root_positions, two.root_positions)
+
+
+@pytest.fixture(scope="module")
+def trot_to_cat(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 3 s trot transferred to the cat (long enough for threads to change sums)."""
+    import habitsim
+    from habitsim.gaits import generate
+
+    p = tmp_path_factory.mktemp("trot") / "cat.npz"
+    habitsim.transfer(generate("dog", "trot", seed=1, duration_s=3.0), "cat", seed=3).save(p)
+    return p
+
+
+@pytest.mark.slow
+def test_refine_does_not_depend_on_the_machines_threads(tmp_path: Path, trot_to_cat: Path) -> None:
+    """``habitsim refine`` in processes whose BLAS libraries start with 1 and 2 threads
+    (as on machines of 1 and 2 cores): the same bytes."""
+    import os
+    import subprocess
+    import sys
+
+    outs = []
+    for n in ("1", "2"):
+        env = {**os.environ, "OPENBLAS_NUM_THREADS": n, "OMP_NUM_THREADS": n}
+        out = tmp_path / f"r{n}.npz"
+        argv = ["refine", str(trot_to_cat), "--max-iter", "20", "--out", str(out)]
+        done = subprocess.run(
+            [sys.executable, "-m", "habitsim", *argv], env=env, capture_output=True, text=True
+        )
+        assert done.returncode == 0, done.stderr
+        outs.append(out)
+    _same_bytes(*outs)

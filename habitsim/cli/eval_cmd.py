@@ -47,7 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         epilog=(
             "Dask cluster (every machine with the same habitsim install and the data/out\n"
             "folders on a shared file system):\n"
-            "  dask scheduler --host 0.0.0.0 --port 8786\n"
+            "  dask scheduler --host HEAD --port 8786   # HEAD: a private address (no auth)\n"
             "  dask worker tcp://HEAD:8786 --nworkers 2 --nthreads 1     # per machine\n"
             "  habitsim eval --data DIR --out OUT --executor dask --scheduler tcp://HEAD:8786\n"
             "(--executor dask without --scheduler starts a local cluster of --workers.)"

@@ -57,6 +57,7 @@ from ..species import load_species
 from ..stance.conform import ConformReport, conform
 from ..stance.policy import ConformPolicy
 from ..stance.schedule import transfer_contacts, walking_stance
+from ..threads import one_thread
 from ..transfer_methods import METHODS, TransferMethod, register_method, run_method
 from ..transfer_methods import method_names as available_methods
 from .checkpoint import CONFIG_FILE, LoadedCheckpoint, load_checkpoint
@@ -247,6 +248,7 @@ def _prior_draw(
     return z
 
 
+@one_thread()  # the same output on every machine (habitsim.threads)
 @torch.no_grad()
 def _run_network(
     ck: LoadedCheckpoint,

@@ -15,6 +15,7 @@ from ..qpos import (
 )
 from ..rotations import quat_mul, quat_normalize
 from ..stance.labels import runs
+from ..threads import one_thread
 from . import cache
 from .cache import get_problem
 from .options import RefineOptions
@@ -88,7 +89,8 @@ def _solve_windows(
             solver = pr.solver
             assert solver is not None  # get_problem builds the solver
             t0 = time.perf_counter()
-            sol = solver(x0=pr.pack(x_start), p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+            with one_thread():  # the same solution on every machine (habitsim.threads)
+                sol = solver(x0=pr.pack(x_start), p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
             dt = time.perf_counter() - t0
             st = solver.stats()
             status = str(st["return_status"])
