@@ -55,10 +55,11 @@ class QposTrajectory:
 
 
 def load_species_model(species: str) -> mujoco.MjModel:
-    """The shipped scene (model + floor) of a catalog species."""
-    from .mjcf_models.builder import scene_path
+    """The shipped torque scene (``scene_torque.xml``: torque model + floor) of a catalog
+    species, the model habitsim's controllers drive; a fresh compile on every call."""
+    from .mjcf_models.builder import torque_scene_path
 
-    path = scene_path(species)
+    path = torque_scene_path(species)
     if not path.is_file():
         raise InvalidMotionError(
             f"no MJCF model for species {species!r} at {path}; run `habitsim models build`"

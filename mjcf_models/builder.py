@@ -19,13 +19,14 @@ Conventions (after MuJoCo Menagerie):
   timestep 2 ms; ``<species>.xml`` holds the animal, ``scene.xml`` adds floor, light and
   includes it.
 
-Two models per species. ``<species>.xml`` (and ``scene.xml``) carries one torque motor
-per hinge: the model habitsim's controllers drive, which needs a controller to stand.
-``<species>_position.xml`` (and ``scene_position.xml``) is the same animal with position
-actuators instead (:func:`to_position_actuators`): its ``home`` keyframe holds the
-standing pose in ``ctrl``, so it stands in plain MuJoCo (``python -m mujoco.viewer
---mjcf=.../scene_position.xml``, or ``mj_resetDataKeyframe`` + ``mj_step``) with no
-habitsim code. ``preview.png`` shows it standing.
+Two models per species. ``<species>.xml`` (and ``scene.xml``), as in Menagerie, is the
+model that stands in plain MuJoCo: position actuators (:func:`position_spec`, made by
+:func:`to_position_actuators`) whose ``home`` keyframe holds the standing pose in
+``ctrl`` (``python -m mujoco.viewer --mjcf=.../scene.xml``, or ``mj_resetDataKeyframe`` +
+``mj_step``, with no habitsim code). ``<species>_torque.xml`` (and ``scene_torque.xml``)
+is the same animal with one torque motor per hinge instead (:func:`build_spec`): the
+model habitsim's controllers drive, which needs a controller to stand.
+``preview.png`` shows the standing model on ``home``.
 
 Mass properties: each bone is a capsule (radius from the species' girth, i.e.
 circumference / 2π) made with trimesh, which gives its volume and inertia tensor; one
@@ -67,10 +68,10 @@ __all__ = [
     "build_all",
     "model_path",
     "scene_path",
+    "torque_model_path",
+    "torque_scene_path",
     "to_position_actuators",
     "position_spec",
-    "position_model_path",
-    "position_scene_path",
     "preview_path",
     "write_preview",
 ]
@@ -236,7 +237,9 @@ def build_spec(
     mesh_dir: str | Path | None = None,
     rules: BuildRules = BuildRules(),
 ) -> mujoco.MjSpec:
-    """The MjSpec of a species' model (no floor; see :func:`write_model` for the scene).
+    """The MjSpec of a species' torque model (``<species>_torque.xml``, no floor; see
+    :func:`write_model` for the scene): one torque motor per hinge, the model habitsim's
+    controllers drive. :func:`position_spec` makes the standing model from it.
 
     Args:
         species: catalog name or Species.
@@ -252,7 +255,7 @@ def build_spec(
     g = GRAVITY
     mgl = sp.mass_kg * g * sp.leg_length
     spec = mujoco.MjSpec()
-    spec.modelname = sp.name
+    spec.modelname = f"{sp.name}_torque"
     spec.compiler.degree = False
     spec.compiler.autolimits = True
     spec.option.timestep = rules.timestep
@@ -427,7 +430,8 @@ def to_position_actuators(
 
     Example::
 
-        spec = to_position_actuators(mujoco.MjSpec.from_file("mjcf_models/cat/scene.xml"))
+        path = "mjcf_models/cat/scene_torque.xml"
+        spec = to_position_actuators(mujoco.MjSpec.from_file(path))
         model = spec.compile()   # stands after mj_resetDataKeyframe(model, data, 0)
 
     Raises:
@@ -492,16 +496,16 @@ def position_spec(
     mesh_dir: str | Path | None = None,
     rules: BuildRules = BuildRules(),
 ) -> mujoco.MjSpec:
-    """The MjSpec of a species' standing model: :func:`build_spec` with position
-    actuators holding ``home`` (:func:`to_position_actuators`, with the stiffness and
-    damping of ``rules``)."""
+    """The MjSpec of a species' standing model (``<species>.xml``, no floor):
+    :func:`build_spec` with position actuators holding ``home``
+    (:func:`to_position_actuators`, with the stiffness and damping of ``rules``)."""
     sp = load_species(species)
     spec = to_position_actuators(
         build_spec(sp, mesh_dir=mesh_dir, rules=rules),
         full_torque_error=rules.position_full_torque_error,
         dampratio=rules.position_dampratio,
     )
-    spec.modelname = f"{sp.name}_position"
+    spec.modelname = sp.name
     return spec
 
 
@@ -541,23 +545,27 @@ def _species_file(species: str | Species, filename: str, root: str | Path | None
 
 
 def model_path(species: str | Species, root: str | Path | None = None) -> Path:
-    """Path of ``<species>/<species>.xml`` in the models folder (or ``root``)."""
+    """Path of ``<species>/<species>.xml`` in the models folder (or ``root``): the
+    standing model (position actuators holding ``home``), no floor."""
     return _species_file(species, "{name}.xml", root)
 
 
 def scene_path(species: str | Species, root: str | Path | None = None) -> Path:
-    """Path of ``<species>/scene.xml`` in the models folder (or ``root``)."""
+    """Path of ``<species>/scene.xml`` in the models folder (or ``root``): floor, light
+    and the standing model; it stands in plain MuJoCo from ``home``."""
     return _species_file(species, "scene.xml", root)
 
 
-def position_model_path(species: str | Species, root: str | Path | None = None) -> Path:
-    """Path of ``<species>/<species>_position.xml`` (the standing model, no floor)."""
-    return _species_file(species, "{name}_position.xml", root)
+def torque_model_path(species: str | Species, root: str | Path | None = None) -> Path:
+    """Path of ``<species>/<species>_torque.xml``: the torque model habitsim's
+    controllers drive, no floor."""
+    return _species_file(species, "{name}_torque.xml", root)
 
 
-def position_scene_path(species: str | Species, root: str | Path | None = None) -> Path:
-    """Path of ``<species>/scene_position.xml``: floor, light and the standing model."""
-    return _species_file(species, "scene_position.xml", root)
+def torque_scene_path(species: str | Species, root: str | Path | None = None) -> Path:
+    """Path of ``<species>/scene_torque.xml``: floor, light and the torque model (what
+    :func:`habitsim.qpos.load_species_model` loads)."""
+    return _species_file(species, "scene_torque.xml", root)
 
 
 def preview_path(species: str | Species, root: str | Path | None = None) -> Path:
@@ -589,7 +597,7 @@ def write_preview(species: str | Species, root: str | Path | None = None) -> Pat
     from habitsim.render import RenderError, _headless_context
 
     sp = load_species(species)
-    scene = position_scene_path(sp, root)
+    scene = scene_path(sp, root)
     if not scene.is_file():
         raise ModelBuildError(f"{scene} missing: build the model first")
     model = mujoco.MjModel.from_xml_path(str(scene))
@@ -639,21 +647,30 @@ def _readme(sp: Species, model: mujoco.MjModel, density: float, rules: BuildRule
         f" ({density:.0f} kg/m³) makes the total mass equal the species' mass"
         f" ({sp.mass_kg:g} kg; compiled total {model.body_mass.sum():.3f} kg).",
         "* Feet: spheres tangent to the toe end points (friction 1.0), with touch sensors.",
-        f"* Actuators: {len(hinges)} torque motors, limits = role factor × m·g·L"
+        f"* Actuators: one per hinge ({len(hinges)}), torque limit = role factor × m·g·L"
         f" (m·g·L = {sp.mass_kg * GRAVITY * sp.leg_length:.1f} N·m, L = hind-leg length"
         f" {sp.leg_length:.3f} m); joint damping and armature scale with the same size.",
         f"* `home` keyframe: the species' standing posture (hip height {sp.hip_height:.3f} m).",
         f"* Integrator implicitfast, timestep {rules.timestep * 1000:g} ms,"
         " pyramidal friction cones.",
         "",
+        "## Files",
+        "",
+        "| file | what |",
+        "|---|---|",
+        f"| `scene.xml` | floor, light and `{sp.name}.xml`: open this one |",
+        f"| `{sp.name}.xml` | the standing model: position actuators holding the `home`"
+        " keyframe, so it stands in plain MuJoCo |",
+        f"| `scene_torque.xml` | floor, light and `{sp.name}_torque.xml` |",
+        f"| `{sp.name}_torque.xml` | the same animal with torque motors instead: the model"
+        " habitsim's controllers drive (it needs a controller to stand) |",
+        "| `assets/` | the visual meshes |",
+        "| `preview.png` | the standing model on `home` |",
+        "",
         "## Standing model",
         "",
-        f"`{sp.name}_position.xml` (with floor and light: `scene_position.xml`) is the same"
-        " animal with position actuators instead of torque motors, so it stands on its"
-        " `home` keyframe in plain MuJoCo:",
-        "",
         "```",
-        "python -m mujoco.viewer --mjcf=scene_position.xml",
+        "python -m mujoco.viewer --mjcf=scene.xml",
         "```",
         "",
         "The viewer opens at `qpos0` (straight legs); load the `home` keyframe (Simulation"
@@ -664,9 +681,9 @@ def _readme(sp: Species, model: mujoco.MjModel, density: float, rules: BuildRule
         f" reached at {rules.position_full_torque_error:g} rad of error), damping ratio"
         f" {rules.position_dampratio:g}; force range = the torque motor's limit; control range ="
         " the joint's range; the `home` keyframe's `ctrl` holds the standing pose.",
-        "* Made by `habitsim.mjcf_models.builder.to_position_actuators`, which converts any"
-        " such torque model in one call. habitsim's controllers use the torque model.",
-        "* `preview.png`: the standing model on `home`.",
+        "* Made from the torque model by"
+        " `habitsim.mjcf_models.builder.to_position_actuators`, which converts any such torque"
+        " model in one call.",
         "",
         "## Sources of the species numbers",
         "",
@@ -682,8 +699,11 @@ def write_model(
     preview: bool = False,
     rules: BuildRules = BuildRules(),
 ) -> Path:
-    """Write ``<root>/<species>/{<species>.xml, scene.xml, <species>_position.xml,
-    scene_position.xml, README.md, assets/*.stl}`` (and ``preview.png`` with ``preview``).
+    """Write ``<root>/<species>/{<species>.xml, scene.xml, <species>_torque.xml,
+    scene_torque.xml, README.md, assets/*.stl}`` (and ``preview.png`` with ``preview``).
+
+    ``<species>.xml`` is the standing model (:func:`position_spec`), ``<species>_torque.xml``
+    the torque model (:func:`build_spec`); each ``scene*.xml`` adds floor and light.
 
     A previous ``preview.png`` is kept when ``preview`` is False; ``rules`` are the
     builder's rules (:class:`BuildRules`).
@@ -692,7 +712,7 @@ def write_model(
     then moved into place, so a failed build leaves the previous model untouched.
 
     Returns:
-        The path of the written ``scene.xml``.
+        The path of the written ``scene.xml`` (the standing scene).
 
     Raises:
         ModelBuildError: the generated model does not compile.
@@ -706,19 +726,16 @@ def write_model(
         assets.mkdir()
         for body, mesh in _body_meshes(sp).items():
             mesh.export(assets / f"{body}.stl")
-        spec = build_spec(sp, mesh_dir="assets", rules=rules)
-        spec.modelfiledir = str(tmp)  # resolve "assets/" while compiling for to_xml
-        xml = spec.to_xml()
-        (tmp / f"{sp.name}.xml").write_text(xml, encoding="utf-8")
-        pspec = position_spec(sp, mesh_dir="assets", rules=rules)
-        pspec.modelfiledir = str(tmp)
-        (tmp / f"{sp.name}_position.xml").write_text(pspec.to_xml(), encoding="utf-8")
+        for make, name in ((position_spec, sp.name), (build_spec, f"{sp.name}_torque")):
+            spec = make(sp, mesh_dir="assets", rules=rules)
+            spec.modelfiledir = str(tmp)  # resolve "assets/" while compiling for to_xml
+            (tmp / f"{name}.xml").write_text(spec.to_xml(), encoding="utf-8")
         solids = _body_meshes(sp)
         density = sp.mass_kg / sum(m.volume for m in solids.values())
         extent = 2.0 * sp.segments["trunk"] + sp.segments["neck"] + sp.segments["head"]
         for scene, animal in (
             ("scene.xml", sp.name),
-            ("scene_position.xml", f"{sp.name}_position"),
+            ("scene_torque.xml", f"{sp.name}_torque"),
         ):
             (tmp / scene).write_text(
                 _SCENE.format(
@@ -731,7 +748,7 @@ def write_model(
             )
         try:
             model = mujoco.MjModel.from_xml_path(str(tmp / "scene.xml"))
-            mujoco.MjModel.from_xml_path(str(tmp / "scene_position.xml"))
+            mujoco.MjModel.from_xml_path(str(tmp / "scene_torque.xml"))
         except ValueError as e:
             raise ModelBuildError(f"generated model of {sp.name!r} does not compile: {e}") from e
         if (final / "preview.png").is_file():

@@ -32,7 +32,7 @@ from habitsim.controllers import stance as stance_mod
 from habitsim.controllers.gains import joint_space_inertia
 
 ROBOT_XML = Path(__file__).parent / "data" / "quadruped12.xml"
-DOG_SCENE = Path(__file__).resolve().parents[1] / "mjcf_models" / "dog" / "scene.xml"
+DOG_SCENE = Path(__file__).resolve().parents[1] / "mjcf_models" / "dog" / "scene_torque.xml"
 FEET = ["FL_foot", "FR_foot", "RL_foot", "RR_foot"]
 JOINTS = [f"{leg}_{j}" for leg in ("FL", "FR", "RL", "RR") for j in ("hip", "thigh", "calf")]
 

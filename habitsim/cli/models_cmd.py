@@ -24,13 +24,13 @@ def _build(ns: argparse.Namespace) -> int:
 def _path(ns: argparse.Namespace) -> int:
     from habitsim.mjcf_models.builder import (
         model_path,
-        position_model_path,
-        position_scene_path,
         scene_path,
+        torque_model_path,
+        torque_scene_path,
     )
 
-    if ns.position:
-        print(position_scene_path(ns.species) if ns.scene else position_model_path(ns.species))
+    if ns.torque:
+        print(torque_scene_path(ns.species) if ns.scene else torque_model_path(ns.species))
     else:
         print(scene_path(ns.species) if ns.scene else model_path(ns.species))
     return 0
@@ -40,8 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add ``models build`` and ``models path``."""
     p = sub.add_parser(
         "build",
-        help="write <species>/<species>.xml, scene.xml, the standing model "
-        "<species>_position.xml and scene_position.xml, README.md, preview.png",
+        help="write <species>/<species>.xml and scene.xml (the standing model), "
+        "<species>_torque.xml and scene_torque.xml (the torque model), README.md, preview.png",
     )
     add_list_option(p, "--species", help="species (default: all)")
     p.add_argument(
@@ -58,11 +58,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_build)
     q = sub.add_parser("path", help="print the path of a species' model file")
     q.add_argument("species")
-    q.add_argument("--scene", action="store_true", help="the scene.xml (floor + light)")
+    q.add_argument("--scene", action="store_true", help="the scene (floor + light)")
     q.add_argument(
-        "--position",
+        "--torque",
         action="store_true",
-        help="the standing model (position actuators holding 'home'; it stands "
-        "in plain MuJoCo) instead of the torque model the controllers use",
+        help="the torque model the controllers drive instead of the standing model "
+        "(position actuators holding 'home'; it stands in plain MuJoCo)",
     )
     q.set_defaults(func=_path)
