@@ -12,12 +12,14 @@ the ground has pushed as much as it physically can? For every reference frame:
    its friction pyramid (4 edges, μ = the larger friction of foot and floor, as MuJoCo
    combines them), applied at the lowest point of the foot sphere. A foot is in contact
    when the labels say so *and* the geometry allows it: the lowest point of its sphere is
-   at most the contact height (:data:`habitsim.physics_constants.CONTACT_HEIGHT_PER_LEG`
-   × L) above the floor. A labelled stance foot higher than that pushes on nothing, so a
-   walk lifted off the floor needs its whole weight from outside; a foot below the floor
-   still pushes (sinking is the penetration metric's business). The non-negative edge weights minimising the remaining free-joint
-   wrench ``[F/(m·g), T/(m·g·L)]`` come from non-negative least squares
-   (``scipy.optimize.nnls``).
+   no higher than :func:`habitsim.contacts.ground_reach` (the contact height
+   :data:`habitsim.physics_constants.CONTACT_HEIGHT_PER_LEG` × L with contact
+   detection's hysteresis: 3 % of L, the highest foot detection keeps in contact). A
+   labelled stance foot higher than that pushes on nothing, so a walk lifted off the
+   floor needs its whole weight from outside; a foot below the floor still pushes
+   (sinking is the penetration metric's business). The non-negative edge weights
+   minimising the remaining free-joint wrench ``[F/(m·g), T/(m·g·L)]`` come from
+   non-negative least squares (``scipy.optimize.nnls``).
 4. What is left on the free joint is the residual: ``root_residual_mg`` = mean ‖F‖/(m·g),
    ``root_residual_torque_mgl`` = mean ‖T‖/(m·g·L) (torque about the trunk origin, in the
    trunk frame, MuJoCo's free-joint convention; L the hind-leg length). The joint part
@@ -44,10 +46,10 @@ import mujoco
 import numpy as np
 from scipy.optimize import nnls
 
+from habitsim.contacts import ground_reach
 from habitsim.errors import InvalidMotionError
 from habitsim.mjutils import free_joints
 from habitsim.motion import Motion
-from habitsim.physics_constants import CONTACT_HEIGHT_PER_LEG
 from habitsim.qpos import motion_to_qpos, species_model
 
 __all__ = [
@@ -72,7 +74,7 @@ class InverseDynamics:
         joint_torque: (T, n) feed-forward torques of the actuated joints [N·m].
         contact_force: (T, 4, 3) ground forces on the feet [N] (world frame).
         contacts: (T, 4) bool feet that could push: labelled in contact and no higher
-            than the contact height (LF, RF, LH, RH).
+            than :func:`habitsim.contacts.ground_reach` (LF, RF, LH, RH).
         torque_limit: (n,) the actuators' torque limits [N·m].
         joint_names: the n actuated joints.
         mg: m·g [N]; leg_length: L [m].
@@ -121,7 +123,7 @@ def inverse_dynamics(
         fps: frame rate [Hz].
         contacts: (T, 4) bool feet labelled in contact (LF, RF, LH, RH); None = no contact
             at all. A labelled foot whose sphere's lowest point is higher than
-            ``CONTACT_HEIGHT_PER_LEG × leg_length`` above the floor exerts no force.
+            :func:`habitsim.contacts.ground_reach` above the floor exerts no force.
         leg_length: normalising length L [m] (also scales the contact height).
 
     Raises:
@@ -156,7 +158,7 @@ def inverse_dynamics(
     free_model = model.__copy__()
     free_model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
     d = mujoco.MjData(free_model)
-    reach = CONTACT_HEIGHT_PER_LEG * float(leg_length)  # highest foot the ground can push [m]
+    reach = ground_reach(leg_length)  # highest foot the ground can push [m]
     pushing = np.zeros((t, 4), bool)
     weight = np.r_[np.full(3, 1.0 / mg), np.full(3, 1.0 / (mg * leg_length))]
     jac = np.zeros((3, model.nv))
@@ -213,7 +215,8 @@ def dynamic_metrics(
             the torque limit).
         contacts: (T, 4) feet in contact; default the motion's labels, else
             :meth:`~habitsim.motion.Motion.detect_contacts`. Either way a foot higher than
-            the contact height above the floor exerts no force (:func:`inverse_dynamics`).
+            :func:`habitsim.contacts.ground_reach` above the floor exerts no force
+            (:func:`inverse_dynamics`).
 
     Returns:
         ``root_residual_mg``, ``root_residual_torque_mgl``, ``torque_saturation``.
