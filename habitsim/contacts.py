@@ -50,6 +50,8 @@ __all__ = [
     "FootTrack",
     "detect_contacts",
     "contacts_from_feet",
+    "ground_reach",
+    "bearing_contacts",
     "contacts_by_duty",
     "touchdown_frames",
     "drop_short_runs",
@@ -162,6 +164,50 @@ def detect_contacts(motion: FootTrack, options: ContactOptions = ContactOptions(
     return contacts_from_feet(
         motion.foot_positions(), motion.fps, motion.species_info.leg_length, options
     )
+
+
+def ground_reach(leg_length: float, options: ContactOptions | None = None) -> float:
+    """The highest a foot may be above the ground and still bear weight [m].
+
+    The contact height (:data:`CONTACT_HEIGHT_PER_LEG` × leg length) times the detection's
+    hysteresis factor: the highest toe :func:`detect_contacts` ever keeps in contact
+    (3 % of the leg with the default options), so every detected contact bears weight and
+    a labelled foot higher than that does not.
+
+    Args:
+        leg_length: the normalising hind-leg length [m].
+        options: the detection's thresholds (default :class:`ContactOptions`).
+    """
+    o = ContactOptions() if options is None else options
+    return CONTACT_HEIGHT_PER_LEG * o.hysteresis * float(leg_length)
+
+
+def bearing_contacts(
+    contacts: np.ndarray,
+    heights: np.ndarray,
+    leg_length: float,
+    options: ContactOptions | None = None,
+) -> np.ndarray:
+    """Contact labels the geometry allows: a labelled foot in mid-air bears nothing.
+
+    Args:
+        contacts: (T, F) bool contact labels.
+        heights: (T, F) height of each foot's lowest point above the ground [m] (below the
+            ground, negative, still bears: sinking is the penetration metric's business).
+        leg_length: the normalising hind-leg length [m].
+        options: the detection's thresholds (:func:`ground_reach`).
+
+    Returns:
+        (T, F) bool: labelled and no higher than :func:`ground_reach`.
+
+    Raises:
+        InvalidMotionError: the shapes differ.
+    """
+    c = np.asarray(contacts, dtype=bool)
+    z = np.asarray(heights, dtype=np.float64)
+    if c.shape != z.shape:
+        raise InvalidMotionError(f"contacts {c.shape} and foot heights {z.shape} must match")
+    return c & (z <= ground_reach(leg_length, options))
 
 
 def contacts_by_duty(

@@ -30,7 +30,10 @@ Definitions (keys of :meth:`GaitStats.to_dict`; docs/metrics.md names where it h
   no usable touchdown (standing still, a clip without steps).
 * static stability: per frame, the signed horizontal distance from the centre of mass
   (:func:`habitsim.body.center_of_mass`) to the support polygon (convex hull of the
-  toes in contact): positive inside (distance to the nearest edge), negative outside
+  toes in contact that can bear weight: a toe higher than
+  :func:`habitsim.contacts.ground_reach`, the contact height with the detection's
+  hysteresis, supports nothing whatever its label says, so a walk lifted off the floor
+  has no support): positive inside (distance to the nearest edge), negative outside
   (minus the distance to the polygon). With fewer than three feet in contact — or three
   or four collinear ones — the support is a segment or a point and the margin is minus
   the distance to it (≤ 0). Frames without any contact (flight) have no margin and are
@@ -57,7 +60,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .body import center_of_mass
-from .contacts import detect_contacts, foot_stride_periods, touchdown_frames
+from .contacts import bearing_contacts, detect_contacts, foot_stride_periods, touchdown_frames
 from .errors import InvalidMotionError
 from .physics_constants import GRAVITY
 from .species import FEET
@@ -300,15 +303,16 @@ def gait_statistics(motion: Motion, contacts: np.ndarray | None = None) -> GaitS
     # Static stability.
     pos = motion.global_positions()
     com = center_of_mass(sp, pos)[:, :2]
-    feet = pos[:, motion.skeleton.foot_indices, :2]
-    margin = stability_margins(com, feet, c)
+    toes = pos[:, motion.skeleton.foot_indices]
+    support = bearing_contacts(c, toes[..., 2], leg)  # a labelled foot in mid-air bears nothing
+    margin = stability_margins(com, toes[..., :2], support)
     have = np.isfinite(margin)
     if have.any():
         m_min = float(margin[have].min())
         m_mean = float(margin[have].mean())
     else:
         m_min = m_mean = math.nan
-    three = c.sum(axis=1) >= 3
+    three = support.sum(axis=1) >= 3
     stable_frac = float((margin[three] > 0).mean()) if three.any() else math.nan
 
     return GaitStats(

@@ -17,6 +17,9 @@ Fixtures:
 
 Option:
     ``--habitsim-update-goldens``: (re)record golden files instead of failing.
+
+Each fixture's docstring says the same (``pytest --fixtures`` prints them); the user guide
+is docs/testing.md.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ import pytest
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
+    """Add ``--habitsim-update-goldens`` to pytest's command line (group "habitsim")."""
     group = parser.getgroup("habitsim")
     group.addoption(
         "--habitsim-update-goldens",
@@ -41,6 +45,8 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 @pytest.fixture(scope="session")
 def habitsim_species_model() -> Callable[[str], Any]:
+    """habitsim: ``(species) -> mujoco.MjModel``, the shipped scene of a catalog species
+    (loaded once per session)."""
     from .qpos import species_model
 
     return species_model
@@ -48,6 +54,9 @@ def habitsim_species_model() -> Callable[[str], Any]:
 
 @pytest.fixture(scope="session")
 def habitsim_clip() -> Callable[..., Any]:
+    """habitsim: ``(species, action, seed=0, **kw) -> Motion``, a synthetic clip of
+    ``habitsim.gaits.generate`` (keywords as there, e.g. ``duration_s``; cached per
+    session, so do not modify the returned motion in place)."""
     from .gaits import generate
 
     cache: dict[tuple, Any] = {}
@@ -63,6 +72,10 @@ def habitsim_clip() -> Callable[..., Any]:
 
 @pytest.fixture
 def habitsim_track() -> Callable[..., Any]:
+    """habitsim: ``(motion, **kw) -> TrackResult``, ``habitsim.sim.track`` on a motion
+    (keywords as there, e.g. ``controller="mpc"``, ``assist=True``); the result has
+    ``fell``, ``survival`` and ``metrics``."""
+
     def run(motion: Any, **kw: Any) -> Any:
         from .sim import track
 
@@ -73,6 +86,9 @@ def habitsim_track() -> Callable[..., Any]:
 
 @pytest.fixture
 def habitsim_golden(request: pytest.FixtureRequest) -> Callable[..., Any]:
+    """habitsim: ``(figures, name=None, tolerances=None)``, compare a ``{metric: number}``
+    dict with ``<test dir>/goldens/<test module>/<name or test name>.json`` (default
+    tolerance: 2 % relative); ``pytest --habitsim-update-goldens`` records the file."""
     from .testing import assert_matches_golden
 
     update = bool(request.config.getoption("--habitsim-update-goldens"))
@@ -90,6 +106,9 @@ def habitsim_golden(request: pytest.FixtureRequest) -> Callable[..., Any]:
 
 @pytest.fixture
 def habitsim_assert_plausible() -> Callable[..., None]:
+    """habitsim: ``(motion, bounds=None, *, use_contacts=False, **bounds)``, fail when a
+    kinematic metric exceeds its bound (``habitsim.testing.assert_plausible``); a bound is
+    changed by its keyword, e.g. ``skate_per_leg=0.004``, or switched off with ``None``."""
     from .testing import assert_plausible
 
     return assert_plausible

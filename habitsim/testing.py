@@ -125,12 +125,31 @@ def assert_plausible(
 ) -> None:
     """Fail (AssertionError) if any kinematic metric of ``motion`` exceeds its bound.
 
-    The message names every violated metric with its value and bound.
+    The message names every violated metric with its value, its bound and the keyword
+    argument that changes it (e.g. ``skate_per_leg=0.004``; ``None`` switches it off).
+
+    Args:
+        motion: the motion.
+        bounds: the bounds (default :class:`PlausibilityBounds`).
+        use_contacts: measure skating with the motion's own contact labels.
+        **overrides: replace single bounds (see :func:`plausibility_violations`).
     """
     bad = plausibility_violations(motion, bounds, use_contacts=use_contacts, **overrides)
     if bad:
         lines = [f"motion of {motion.species!r} ({motion.num_frames} frames) is not plausible:"]
-        lines += [f"  {k} = {v:.6g} > {bound:.6g}" for k, (v, bound) in sorted(bad.items())]
+        lines += [
+            f"  {k} = {v:.6g} > {bound:.6g} (raise it with {k}=<bound>, None switches it off)"
+            for k, (v, bound) in sorted(bad.items())
+        ]
+        lines.append(
+            "bounds are keyword arguments of assert_plausible / habitsim_assert_plausible "
+            "or fields of habitsim.testing.PlausibilityBounds (docs/testing.md)"
+        )
+        if "skate_per_leg" in bad and not use_contacts:
+            lines.append(
+                "skating counts toes below 2 % of the leg as standing; use_contacts=True "
+                "measures it on the motion's own stance labels"
+            )
         raise AssertionError("\n".join(lines))
 
 

@@ -14,9 +14,11 @@ from habitsim.cli import main
 from habitsim.contacts import (
     CONTACT_HEIGHT_PER_LEG,
     ContactOptions,
+    bearing_contacts,
     contacts_by_duty,
     contacts_from_feet,
     detect_contacts,
+    ground_reach,
     touchdown_frames,
 )
 from habitsim.errors import InvalidMotionError
@@ -82,6 +84,20 @@ def test_fast_sliding_foot_is_not_in_contact() -> None:
     root = m.root_positions.copy()
     root[:, 0] += 0.005 * np.arange(60)
     assert detect_contacts(shifted(m, root)).all()
+
+
+def test_ground_reach_bounds_every_detected_contact() -> None:
+    """A labelled foot bears weight up to the highest height detection keeps in contact."""
+    reach = ground_reach(LEG)
+    assert reach == pytest.approx(CONTACT_HEIGHT_PER_LEG * ContactOptions().hysteresis * LEG)
+    m = standing()
+    for dz, held in ((0.99 * reach, True), (1.01 * reach, False), (-0.05, True)):
+        up = shifted(m, m.root_positions + [0.0, 0.0, dz])
+        heights = up.foot_positions()[..., 2]
+        assert bearing_contacts(np.ones((60, 4), bool), heights, LEG).all() == held
+    assert not bearing_contacts(np.zeros((60, 4), bool), heights, LEG).any()
+    with pytest.raises(InvalidMotionError):
+        bearing_contacts(np.ones((60, 4), bool), heights[:, :3], LEG)
 
 
 def _one_foot(z: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:

@@ -129,6 +129,24 @@ def test_lifted_upward_at_g_reads_two_mg(dog) -> None:
     assert inv.metrics()["root_residual_mg"] == pytest.approx(2.0, rel=1e-6)
 
 
+def test_labelled_feet_in_mid_air_push_on_nothing(dog) -> None:
+    """All four feet labelled in contact, the body held still 0.5 m up: a hand of god."""
+    from habitsim.contacts import ground_reach
+
+    labels = np.ones((30, 4), bool)
+    up = _home(dog)
+    up[:, 2] += 0.5
+    inv = inverse_dynamics(dog, up, FPS, labels, _leg())
+    assert not inv.contacts.any() and not inv.contact_force.any()
+    assert inv.metrics()["root_residual_mg"] == pytest.approx(1.0, abs=1e-9)
+    # just within reach the feet still carry the body (the ground bears it)
+    near = _home(dog)
+    near[:, 2] += 0.9 * ground_reach(_leg())
+    inv = inverse_dynamics(dog, near, FPS, labels, _leg())
+    assert inv.contacts.all()
+    assert inv.metrics()["root_residual_mg"] == pytest.approx(0.0, abs=1e-9)
+
+
 def test_ground_explains_a_gentle_push_within_friction(dog) -> None:
     """Standing feet planted, trunk accelerating forward at 0.1 g: friction suffices."""
     q = _home(dog, 30)

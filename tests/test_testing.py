@@ -44,6 +44,28 @@ def test_sliding_feet_are_caught_with_a_readable_message() -> None:
     assert_plausible(bad, use_contacts=True, skate_per_leg=None)  # that bound switched off
 
 
+@pytest.mark.parametrize("use_contacts", [False, True])
+def test_failure_names_the_keyword_that_changes_each_bound(use_contacts: bool) -> None:
+    m = generate("dog", "walk", seed=0, duration_s=1.0)
+    root = m.root_positions.copy()
+    root[:, 0] += 0.01 * np.arange(m.num_frames)  # stance feet slide 1 cm per frame
+    root[:, 2] -= 0.002  # and sink 2 mm into the floor
+    from habitsim.motion import Motion
+
+    bad = Motion("dog", m.fps, root, m.rotations, m.contacts)
+    bounds = dict(skate_per_leg=0.002, penetration_per_leg=1e-9)
+    with pytest.raises(AssertionError) as info:
+        assert_plausible(bad, use_contacts=use_contacts, **bounds)
+    text = str(info.value)
+    for key in bounds:  # each violated bound's keyword, as it is passed
+        assert f"{key}=" in text
+    assert "PlausibilityBounds" in text
+    assert ("use_contacts=True" in text) is not use_contacts
+    for key, value in bounds.items():  # raising it by that keyword passes
+        bounds[key] = 10 * value + 1.0
+    assert_plausible(bad, use_contacts=use_contacts, **bounds)
+
+
 def test_unknown_bound_is_a_typed_error() -> None:
     from habitsim.errors import HabitsimError
 

@@ -8,12 +8,18 @@ the ground has pushed as much as it physically can? For every reference frame:
 2. ``mj_inverse`` with every constraint disabled gives the generalised force the motion
    needs without any ground, ``τ = M(q)·q̈ + c(q, q̇) − passive``. For a body in the air
    its free-joint force part is exactly ``m·g`` upward.
-3. The ground may explain part of it: each foot in contact (the reference's contact
-   labels) can push with a force inside its friction pyramid (4 edges, μ = the larger
-   friction of foot and floor, as MuJoCo combines them), applied at the lowest point of
-   the foot sphere. The non-negative edge weights minimising the remaining free-joint
-   wrench ``[F/(m·g), T/(m·g·L)]`` come from non-negative least squares
-   (``scipy.optimize.nnls``).
+3. The ground may explain part of it: each foot in contact can push with a force inside
+   its friction pyramid (4 edges, μ = the larger friction of foot and floor, as MuJoCo
+   combines them), applied at the lowest point of the foot sphere. A foot is in contact
+   when the labels say so *and* the geometry allows it: the lowest point of its sphere is
+   no higher than :func:`habitsim.contacts.ground_reach` (the contact height
+   :data:`habitsim.physics_constants.CONTACT_HEIGHT_PER_LEG` × L with contact
+   detection's hysteresis: 3 % of L, the highest foot detection keeps in contact). A
+   labelled stance foot higher than that pushes on nothing, so a walk lifted off the
+   floor needs its whole weight from outside; a foot below the floor still pushes
+   (sinking is the penetration metric's business). The non-negative edge weights
+   minimising the remaining free-joint wrench ``[F/(m·g), T/(m·g·L)]`` come from
+   non-negative least squares (``scipy.optimize.nnls``).
 4. What is left on the free joint is the residual: ``root_residual_mg`` = mean ‖F‖/(m·g),
    ``root_residual_torque_mgl`` = mean ‖T‖/(m·g·L) (torque about the trunk origin, in the
    trunk frame, MuJoCo's free-joint convention; L the hind-leg length). The joint part
@@ -40,6 +46,7 @@ import mujoco
 import numpy as np
 from scipy.optimize import nnls
 
+from habitsim.contacts import ground_reach
 from habitsim.errors import InvalidMotionError
 from habitsim.mjutils import free_joints
 from habitsim.motion import Motion
@@ -66,6 +73,8 @@ class InverseDynamics:
         root_torque: (T, 3) residual torque on the free joint [N·m] (trunk frame).
         joint_torque: (T, n) feed-forward torques of the actuated joints [N·m].
         contact_force: (T, 4, 3) ground forces on the feet [N] (world frame).
+        contacts: (T, 4) bool feet that could push: labelled in contact and no higher
+            than :func:`habitsim.contacts.ground_reach` (LF, RF, LH, RH).
         torque_limit: (n,) the actuators' torque limits [N·m].
         joint_names: the n actuated joints.
         mg: m·g [N]; leg_length: L [m].
@@ -75,6 +84,7 @@ class InverseDynamics:
     root_torque: np.ndarray
     joint_torque: np.ndarray
     contact_force: np.ndarray
+    contacts: np.ndarray
     torque_limit: np.ndarray
     joint_names: tuple[str, ...]
     mg: float
@@ -111,8 +121,10 @@ def inverse_dynamics(
             actuators) with a floor.
         qpos: (T, nq) reference frames.
         fps: frame rate [Hz].
-        contacts: (T, 4) bool feet in contact (LF, RF, LH, RH); None = no contact at all.
-        leg_length: normalising length L [m].
+        contacts: (T, 4) bool feet labelled in contact (LF, RF, LH, RH); None = no contact
+            at all. A labelled foot whose sphere's lowest point is higher than
+            :func:`habitsim.contacts.ground_reach` above the floor exerts no force.
+        leg_length: normalising length L [m] (also scales the contact height).
 
     Raises:
         InvalidMotionError: shapes or model do not fit.
@@ -146,6 +158,8 @@ def inverse_dynamics(
     free_model = model.__copy__()
     free_model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
     d = mujoco.MjData(free_model)
+    reach = ground_reach(leg_length)  # highest foot the ground can push [m]
+    pushing = np.zeros((t, 4), bool)
     weight = np.r_[np.full(3, 1.0 / mg), np.full(3, 1.0 / (mg * leg_length))]
     jac = np.zeros((3, model.nv))
     root_f = np.zeros((t, 3))
@@ -160,6 +174,9 @@ def inverse_dynamics(
         for f in np.flatnonzero(c[k]):
             g = feet[f]
             point = d.geom_xpos[g] - np.array([0.0, 0.0, model.geom_size[g, 0]])
+            if point[2] > reach:  # a labelled stance foot in mid-air pushes on nothing
+                continue
+            pushing[k, f] = True
             mujoco.mj_jac(free_model, d, jac, None, point, int(model.geom_bodyid[g]))
             for edge in edges[f]:
                 cols.append(jac.T @ edge)  # generalised force of a unit force along edge
@@ -173,7 +190,15 @@ def inverse_dynamics(
         root_f[k], root_t[k] = tau[r0 : r0 + 3], tau[r0 + 3 : r0 + 6]
         joint_tau[k] = tau[amap.dof_adr]
     return InverseDynamics(
-        root_f, root_t, joint_tau, forces, amap.torque_limit, amap.names, mg, float(leg_length)
+        root_f,
+        root_t,
+        joint_tau,
+        forces,
+        pushing,
+        amap.torque_limit,
+        amap.names,
+        mg,
+        float(leg_length),
     )
 
 
@@ -189,7 +214,9 @@ def dynamic_metrics(
         model: a habitsim-named MuJoCo model with torque motors (their control range is
             the torque limit).
         contacts: (T, 4) feet in contact; default the motion's labels, else
-            :meth:`~habitsim.motion.Motion.detect_contacts`.
+            :meth:`~habitsim.motion.Motion.detect_contacts`. Either way a foot higher than
+            :func:`habitsim.contacts.ground_reach` above the floor exerts no force
+            (:func:`inverse_dynamics`).
 
     Returns:
         ``root_residual_mg``, ``root_residual_torque_mgl``, ``torque_saturation``.
