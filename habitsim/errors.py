@@ -95,6 +95,22 @@ class OutputPathError(HabitsimError, OSError):
     where a file should be, a read-only folder, a full disk."""
 
 
+class OutputFolderError(HabitsimError, ValueError):
+    """An output folder habitsim may not write into as asked: it holds files habitsim did
+    not write or an earlier run (without ``--overwrite`` / ``--resume``), or a path in it
+    leads out of it through a link. The message says what is there and what to do."""
+
+
+class OutputBusyError(HabitsimError):
+    """An output folder another habitsim run is writing into (its lock is held); the
+    message names that run's PID, host, command and start time."""
+
+
+class InputPathError(HabitsimError, ValueError):
+    """An input folder holding a link that leads out of it (without
+    ``--follow-symlinks``); the message names the link, never a file's content."""
+
+
 class ArgumentRangeError(HabitsimError, ValueError):
     """A command-line or API argument outside its physically sensible range."""
 

@@ -11,7 +11,7 @@ from habitsim.bvh import write_bvh
 from habitsim.cli import main
 from habitsim.dataset import iter_clips, load_manifest
 from habitsim.dataset_import import IMPORT_KIND, import_folder, read_labels
-from habitsim.errors import BVHParseError, DatasetError
+from habitsim.errors import BVHParseError, DatasetError, OutputFolderError
 from habitsim.gaits import generate
 
 
@@ -76,7 +76,7 @@ def test_bad_inputs_are_refused_and_nothing_is_left(mocap, tmp_path):
     assert not (out / "manifest.json").exists() and not list(out.rglob("*.npz"))
     build = import_folder(bad, out, "dog", skip_bad=True)
     assert [f for f, _ in build.skipped] == ["b.bvh"] and len(build.manifest.clips) == 1
-    with pytest.raises(DatasetError, match="--overwrite"):
+    with pytest.raises(OutputFolderError, match="--overwrite"):
         import_folder(bad, out, "dog", skip_bad=True)
     # an overwrite replaces the clips the old data set had
     import_folder(mocap, out, "dog", overwrite=True)
