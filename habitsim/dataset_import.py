@@ -47,7 +47,7 @@ from .dataset import (
     DatasetManifest,
 )
 from .dataset.clips import _measure
-from .errors import DatasetError, HabitsimError, OutputPathError, brief, brief_path
+from .errors import DatasetError, HabitsimError, OutputPathError, brief, brief_path, unquoted
 from .fileio import atomic_write_text, make_dirs, output_transaction
 from .folders import claim_output_folder, input_files
 from .motion import Motion, resample_motion
@@ -279,7 +279,10 @@ def import_folder(
             rel_src = f.relative_to(src).as_posix()
             lab = table.get(rel_src) or table.get(f.name) or {}
             try:
-                m, mapping = import_bvh(f, sp, joint_map=joint_map, units=units, up=up, plant=plant)
+                with unquoted():  # a message names the file, never what it holds
+                    m, mapping = import_bvh(
+                        f, sp, joint_map=joint_map, units=units, up=up, plant=plant
+                    )
             except HabitsimError as e:
                 if not skip_bad:
                     raise type(e)(f"{rel_src}: {e}") from None

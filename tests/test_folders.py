@@ -3,15 +3,12 @@ at a time, no links out."""
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import subprocess
-import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from helpers import hold
 
 from habitsim.errors import InputPathError, OutputBusyError, OutputFolderError
 from habitsim.fileio import atomic_write_text, make_dirs
@@ -84,28 +81,6 @@ def test_links_out_of_the_output_folder_are_not_followed(tmp_path: Path) -> None
     assert _files(outside) == ["cat/x.npz"] and (outside / "cat" / "x.npz").read_text() == (
         "someone's data"
     )
-
-
-_HOLDER = (
-    "import sys, time; from habitsim.folders import claim_output_folder\n"
-    "with claim_output_folder(sys.argv[1], command='eval'):\n"
-    "    print('held', flush=True); time.sleep(60)\n"
-)
-
-
-@contextlib.contextmanager
-def hold(out: Path) -> Iterator[subprocess.Popen]:
-    """Another process holding ``out`` until the block ends; then it is SIGKILLed (its
-    lock file stays behind)."""
-    proc = subprocess.Popen(
-        [sys.executable, "-c", _HOLDER, str(out)], stdout=subprocess.PIPE, text=True
-    )
-    try:
-        assert proc.stdout is not None and proc.stdout.readline().strip() == "held"
-        yield proc
-    finally:
-        proc.kill()
-        proc.wait()
 
 
 def test_a_second_run_is_refused_and_a_killed_runs_lock_taken_over(tmp_path: Path) -> None:
