@@ -545,15 +545,15 @@ def input_files(
             continue
         seen.add(real)
         try:
-            entries = sorted(os.scandir(d), key=lambda e: e.name)
+            entries = sorted(os.scandir(d), key=lambda x: x.name)
         except OSError as e:
             raise InputPathError(
                 f"{what} {brief_path(d)}: cannot be read ({e.strerror or type(e).__name__})"
             ) from None
-        for e in entries:
-            p = Path(e.path)
-            link = e.is_symlink()
-            is_dir = e.is_dir(follow_symlinks=True)
+        for entry in entries:
+            p = Path(entry.path)
+            link = entry.is_symlink()
+            is_dir = entry.is_dir(follow_symlinks=True)
             wanted = is_dir or p.suffix.lower() in suffixes
             if link and wanted and not follow_symlinks:
                 if _inside(real_root, os.path.realpath(p)):
@@ -567,7 +567,7 @@ def input_files(
                 )
             if is_dir:
                 stack.append(p)
-            elif wanted and e.is_file(follow_symlinks=True):
+            elif wanted and entry.is_file(follow_symlinks=True):
                 out.append(p)
     return sorted(out)
 

@@ -182,7 +182,9 @@ def test_resume_after_kill_gives_the_same_table(data: Path, reference_run, tmp_p
     assert 5 <= done < 16, f"killed after {done} rows: {proc.stderr.read().decode()[-500:]}"
     assert not (out / "summary.json").exists()
 
-    with pytest.raises(EvalError, match="--resume"):
+    from habitsim.errors import OutputFolderError
+
+    with pytest.raises(OutputFolderError, match="--resume"):
         run_benchmark(_cfg(data, out), workers=1, progress=False, report=False)
     with pytest.raises(EvalError, match="refine"):
         run_benchmark(
