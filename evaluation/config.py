@@ -74,6 +74,8 @@ class EvalConfig:
         report_pairs: pairs per method whose traces (gait diagrams, tracking error,
             videos) are kept for the report.
         videos: render videos of the report pairs when :mod:`habitsim.render` works.
+        follow_symlinks: read clips through links in ``data`` that lead out of it (else
+            they are refused).
     """
 
     data: str
@@ -95,6 +97,7 @@ class EvalConfig:
     seed: int = 0
     report_pairs: int = 3
     videos: bool = True
+    follow_symlinks: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "data", str(Path(self.data).resolve()))

@@ -138,8 +138,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="local worker processes (default: CPU count; 1 = in-process)",
     )
+    p.add_argument(
+        "--follow-symlinks",
+        action="store_true",
+        help="read clips through links in --data that lead out of it (refused by default)",
+    )
     p.add_argument("--resume", action="store_true", help="continue a run in OUT")
-    p.add_argument("--overwrite", action="store_true", help="delete a run in OUT first")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="delete a run in OUT first (only the files habitsim wrote there)",
+    )
     p.add_argument(
         "--report-pairs",
         type=int,
@@ -206,6 +215,7 @@ def _eval(ns: argparse.Namespace) -> int:
         seed=ns.seed,
         report_pairs=ns.report_pairs,
         videos=not ns.no_videos,
+        follow_symlinks=ns.follow_symlinks,
     )
     res = run_benchmark(
         cfg,
