@@ -436,12 +436,14 @@ def claim_output_folder(
         finally:
             _HELD[real] -= 1
         return
+    created = _first_missing(root)
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise _output_error(root / "x", e, what) from None
     fd, note = _lock(root, command, what)
     _HELD[real] = 1
+    failed = True
     try:
         if note and log:
             log(f"note: {note}")
@@ -483,9 +485,42 @@ def claim_output_folder(
             if not present:
                 _new_record(root, command)
         yield OutputClaim(root, earlier if resume else None, removed, note, stale)
+        failed = False
     finally:
         _HELD.pop(real, None)
         _unlock(root, fd)
+        if failed and created is not None:
+            _remove_if_unused(root, created)
+
+
+def _first_missing(root: Path) -> Path | None:
+    """The outermost folder of ``root``'s path that does not exist yet (None: it does)."""
+    missing = None
+    p = Path(os.path.abspath(root))
+    while not os.path.lexists(p):
+        missing = p
+        if p.parent == p:
+            break
+        p = p.parent
+    return missing
+
+
+def _remove_if_unused(root: Path, created: Path) -> None:
+    """After a failed run: remove the folders this claim created (``created`` and the
+    folders below it down to ``root``) when nothing but the record was written into them."""
+    with contextlib.suppress(OSError):
+        if any(e.name != WRITTEN_NAME for e in os.scandir(root)):
+            return
+        _, listed = _read_record(root / WRITTEN_NAME)
+        if listed:
+            return
+        os.unlink(root / WRITTEN_NAME)
+        p = Path(os.path.abspath(root))
+        while True:
+            os.rmdir(p)  # fails (and stops) on a folder that is not empty
+            if p == created:
+                break
+            p = p.parent
 
 
 def is_written(path: str | Path) -> bool:

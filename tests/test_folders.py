@@ -128,3 +128,19 @@ def test_input_links_leading_out_are_refused(tmp_path: Path) -> None:
     with pytest.raises(InputPathError):
         check_inside(src, src / "linked" / "key.bvh")
     check_inside(src, src / "linked" / "key.bvh", follow_symlinks=True)
+
+
+def test_a_run_that_fails_before_writing_leaves_no_folder(tmp_path: Path) -> None:
+    out = tmp_path / "new" / "out"
+    with pytest.raises(ValueError), claim_output_folder(out, command="train"):
+        raise ValueError("bad configuration")
+    assert not (tmp_path / "new").exists()
+    # a folder that existed, or one the failed run wrote into, stays
+    (tmp_path / "kept").mkdir()
+    with pytest.raises(ValueError), claim_output_folder(tmp_path / "kept", command="train"):
+        raise ValueError("bad configuration")
+    assert (tmp_path / "kept").is_dir()
+    with pytest.raises(ValueError), claim_output_folder(out, command="train"):
+        atomic_write_text(out / "partial.json", "{}")
+        raise ValueError("failed later")
+    assert is_written(out / "partial.json")
