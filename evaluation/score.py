@@ -115,6 +115,9 @@ class ScoreOptions:
         track: track every motion in MuJoCo, unassisted (survival, sim MPJPE, …).
         controller: the tracking controller (:data:`habitsim.controllers.CONTROLLERS`).
         dynamic: compute the dynamic plausibility (inverse dynamics).
+        evaluator: classify every motion with the frozen evaluator network
+            (``pred_species``, ``pred_action``, ``habit_correct``: the predicted species is
+            the file's; imports torch).
         seed: the tracking's seed.
         source: how motion-capture files are read (``joint_map``, ``units``, ``up``,
             ``animation``, ``fps``; None: automatic). Their legs are never planted.
@@ -126,6 +129,7 @@ class ScoreOptions:
     track: bool = False
     controller: str = "mpc"
     dynamic: bool = True
+    evaluator: bool = True
     seed: int = 0
     source: SourceOptions | None = None
 
@@ -491,9 +495,11 @@ def score_motion(
 
     Returns:
         The row's metric columns: the kinematic keys, ``skate_labelled_mm``,
-        ``stance_toe_height_per_leg``, the dynamic keys, the biomechanical keys, and with
-        tracking the simulated keys, ``sim_biomech_score`` / ``sim_biomech_gait``;
-        ``refine_status`` and ``track_status``.
+        ``stance_toe_height_per_leg``, the dynamic keys, the biomechanical keys, the
+        evaluator's ``pred_species``, ``pred_action`` and ``habit_correct`` (NaN for a
+        species it has no class for), and with tracking the simulated keys,
+        ``sim_biomech_score`` / ``sim_biomech_gait``; ``refine_status`` and
+        ``track_status``.
     """
     from habitsim.metrics.biomech import biomech_metrics
 
@@ -524,6 +530,8 @@ def score_motion(
     else:
         bio = biomech_metrics(bare, contacts=run.reference_contacts)
     row.update(bio.to_dict())
+    if o.evaluator:
+        row.update(_classified(ref))
     if o.track and run.track_result is not None:
         row.update(figures.track_columns())
         row["sim_biomech_score"], row["sim_biomech_gait"] = math.nan, ""
@@ -532,6 +540,21 @@ def score_motion(
             sb = biomech_metrics(sim_m, species=motion.species, contacts=sim_m.contacts)
             row["sim_biomech_score"], row["sim_biomech_gait"] = sb.score, sb.gait
     return row
+
+
+def _classified(motion: Motion) -> dict[str, Any]:
+    """The evaluator network's species and action of a motion, and whether the species
+    is the motion's own (NaN for a species it has no class for)."""
+    from .evaluator import load_evaluator
+
+    ev = load_evaluator()
+    p = ev.predict([motion])
+    known = motion.species in ev.config.species
+    return {
+        "pred_species": p.species[0],
+        "pred_action": p.actions[0],
+        "habit_correct": float(p.species[0] == motion.species) if known else math.nan,
+    }
 
 
 def _score_file(path: Path, options: ScoreOptions, trace: dict[str, np.ndarray]) -> dict[str, Any]:

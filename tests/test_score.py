@@ -71,6 +71,7 @@ def test_npz_and_its_bvh_export_score_alike(walk_pair: Path) -> None:
     for k in SAME:
         assert _close(a[k], b[k]), (k, a[k], b[k])
     assert abs(a["torque_saturation"] - b["torque_saturation"]) <= 2.0 / a["frames"]
+    assert (a["pred_species"], a["pred_action"]) == (b["pred_species"], b["pred_action"])
 
 
 @pytest.mark.slow
@@ -142,9 +143,15 @@ def test_another_species_is_an_error_per_file_and_the_table_is_whole(
     assert (out / "report.html").is_file() and (out / "report.md").is_file()
 
 
-def test_cli_scores_as_given_and_exits_0(walk_pair: Path, capsys: pytest.CaptureFixture) -> None:
-    code, err = run_cli(["score", walk_pair / "walk.npz", "--contacts", "geometry"], capsys)
+def test_cli_scores_as_given_and_exits_0(
+    walk_pair: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    argv = ["score", walk_pair / "walk.npz", "--no-evaluator", "--out", tmp_path]
+    code, err = run_cli(argv, capsys)
     assert code == 0, err
+    row = json.loads((tmp_path / "scores.json").read_text())["rows"][0]
+    assert row["stance"] == STANCE_FROM_FILE and "pred_species" not in row
+    assert row["refine_status"] == "none"  # judged as it is
 
 
 def test_unwritable_out_fails_before_scoring(walk_pair: Path, tmp_path: Path, capsys) -> None:

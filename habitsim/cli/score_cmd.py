@@ -78,6 +78,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f"tracking controller: {', '.join(CONTROLLERS)} (default mpc)",
     )
     p.add_argument("--no-dynamic", action="store_true", help="skip the inverse-dynamics metrics")
+    p.add_argument(
+        "--no-evaluator",
+        action="store_true",
+        help="skip the evaluator network's species and action (no torch import)",
+    )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="tracking seed (default 0)")
     p.add_argument(
         "--out", default=None, metavar="DIR", help="write scores.csv and scores.json here"
@@ -103,6 +108,7 @@ def _score(ns: argparse.Namespace) -> int:
         track=ns.track,
         controller=ns.controller,
         dynamic=not ns.no_dynamic,
+        evaluator=not ns.no_evaluator,
         seed=ns.seed,
         source=source_options(ns, plant=False),
     )
