@@ -77,6 +77,8 @@ class EvalConfig:
         outputs: ``(name, folder)`` of methods whose transfers are files in a folder
             (:mod:`habitsim.evaluation.outputs`: ``DIR/<target>/<clip_id>.npz`` or
             ``.bvh``); each name is added to ``methods`` when it is not there.
+        follow_symlinks: read clips through links in ``data`` that lead out of it (else
+            they are refused).
     """
 
     data: str
@@ -99,6 +101,7 @@ class EvalConfig:
     report_pairs: int = 3
     videos: bool = True
     outputs: tuple[tuple[str, str], ...] = ()
+    follow_symlinks: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "data", str(Path(self.data).resolve()))

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .config import EvalConfig, EvalError, PairTask
 
-__all__ = ["DEFAULT_DATA_CLIPS_PER_SPECIES", "default_data", "plan_tasks"]
+__all__ = ["DEFAULT_DATA_CLIPS_PER_SPECIES", "clip_key", "default_data", "plan_tasks"]
 
 #: Clips per species of the data set ``habitsim eval`` builds when given no ``--data``
 #: (every species; 1–3 validation clips per training species, the first a trot for 8 of
@@ -60,7 +60,7 @@ def default_data(
 def _manifest(cfg: EvalConfig):
     from habitsim.dataset import load_manifest
 
-    return load_manifest(cfg.data, check_files=False)
+    return load_manifest(cfg.data, check_files=False, follow_symlinks=cfg.follow_symlinks)
 
 
 def _targets(cfg: EvalConfig, man) -> list[str]:
@@ -108,15 +108,21 @@ def plan_tasks(cfg: EvalConfig) -> list[PairTask]:
 
     trace_pairs = _report_pairs(clips, targets, cfg.report_pairs, cfg.include_self)
     tasks = []
+    owner: dict[str, str] = {}
     for c in clips:
+        clip_id = clip_key(c.path)
+        if owner.setdefault(clip_id, c.path) != c.path:
+            raise EvalError(
+                f"the data set at {cfg.data} has clips {owner[clip_id]!r} and {c.path!r} "
+                "whose row keys would be the same; rename one"
+            )
         for t in targets:
             if t == c.species and not cfg.include_self:
                 continue
             for m in cfg.methods:
-                stem = Path(c.path).stem
                 tasks.append(
                     PairTask(
-                        key=f"{m}__{stem}__{t}",
+                        key=f"{m}__{clip_id}__{t}",
                         method=m,
                         clip=c.path,
                         clip_path=str(Path(cfg.data) / c.path),
@@ -140,6 +146,13 @@ def plan_tasks(cfg: EvalConfig) -> list[PairTask]:
                     )
                 )
     return tasks
+
+
+def clip_key(path: str) -> str:
+    """A clip's part of a row key: its path relative to the data set folder without the
+    suffix, ``/`` written ``~`` (``val/cat/cat_walk_0003.npz`` → ``val~cat~cat_walk_0003``),
+    so two clips of the same file name in two folders get two rows."""
+    return Path(path).with_suffix("").as_posix().replace("/", "~")
 
 
 def _report_pairs(clips, targets: list[str], n: int, include_self: bool) -> set[tuple[str, str]]:

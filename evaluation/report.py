@@ -26,14 +26,16 @@ import html
 import io
 import json
 import math
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from habitsim.errors import HabitsimError, OutputPathError, brief_path
+from habitsim.errors import HabitsimError
 from habitsim.fileio import atomic_write, atomic_write_text, check_writable, make_dirs
+from habitsim.folders import remove_written
 from habitsim.species import FEET
 
 __all__ = ["ReportError", "write_report", "SUMMARY_PLOT_METRICS"]
@@ -336,22 +338,16 @@ def check_report_outputs(out: str | Path) -> None:
 
 
 def clear_figures(files: Path) -> None:
-    """Remove the figures of an earlier report from ``files`` (a typed error when one
-    cannot be removed).
+    """Remove the figures of an earlier report from ``files``: only files habitsim wrote
+    (listed in the output folder's record, :mod:`habitsim.folders`); anything else is
+    left alone.
 
     Raises:
-        OutputPathError: a figure that cannot be removed (a folder, a read-only folder).
+        OutputPathError: a figure that cannot be removed (a read-only folder).
     """
-    if not files.is_dir():
+    if not files.is_dir() or os.path.islink(files):
         return
-    for old in files.glob("*"):
-        try:
-            old.unlink()
-        except OSError as e:
-            raise OutputPathError(
-                f"report folder {brief_path(files)}: cannot remove the old figure "
-                f"{brief_path(old.name)} ({e.strerror or type(e).__name__})"
-            ) from None
+    remove_written(sorted(files.glob("*")), "report folder")
 
 
 def write_report(out: str | Path) -> list[Path]:

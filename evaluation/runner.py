@@ -42,8 +42,10 @@ the refinement as it is) and measures:
 A failure inside a pair (a typed habitsim error or a bug) becomes ``status = "error"``
 with the message in ``note``; the benchmark goes on and ``--resume`` retries it.
 
-Output folder::
+Output folder (claimed with :func:`habitsim.folders.claim_output_folder`: one run at a
+time, ``--overwrite`` removes only the files habitsim wrote there)::
 
+    .habitsim-written          the record of every file habitsim wrote in the folder
     run.json                   configuration (checked by --resume)
     rows/<key>.json            one finished pair (written atomically; --resume skips it)
     traces/<key>/…             contacts, tracking error and motions of the report's pairs
@@ -85,15 +87,15 @@ defaults), :mod:`~habitsim.evaluation.planning` (:func:`default_data`,
 from __future__ import annotations
 
 import json
-import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from habitsim.errors import OutputPathError, brief, brief_path
+from habitsim.errors import brief
 from habitsim.fileio import atomic_write, atomic_write_text, check_writable, json_safe, make_dirs
+from habitsim.folders import claim_output_folder
 
 from .config import (
     DEFAULT_CLIPS_PER_SOURCE,
@@ -205,45 +207,13 @@ def _check_outputs(out: Path, report: bool) -> None:
         check_report_outputs(out)
 
 
-def _check_out(cfg: EvalConfig, resume: bool, overwrite: bool) -> None:
+def _check_resume(cfg: EvalConfig) -> None:
+    """On ``--resume``, refuse a run folder whose ``run.json`` is unreadable or records
+    other settings (see :attr:`EvalConfig.RESUME_KEYS`)."""
     out = Path(cfg.out)
-    if out.exists() and not out.is_dir():
-        raise EvalError(f"{out} exists and is not a folder")
     run = out / "run.json"
     if not run.is_file():
-        if (out / "rows").is_dir() and any((out / "rows").glob("*.json")) and not overwrite:
-            raise EvalError(f"{out} holds rows without run.json; pass --overwrite to start over")
         return
-    if overwrite:
-        for sub in ("rows", "traces", "report_files"):
-            shutil.rmtree(out / sub, ignore_errors=True)
-        for f in (
-            "run.json",
-            "rows.csv",
-            "rows.parquet",
-            "features.npz",
-            "summary.json",
-            "summary.csv",
-            "summary.md",
-            "report.html",
-            "report.md",
-            "reference_features.npz",
-        ):
-            try:
-                (out / f).unlink()
-            except FileNotFoundError:
-                pass
-            except OSError as e:  # a folder of that name, a read-only folder
-                raise OutputPathError(
-                    f"--out {brief_path(out / f)}: cannot be replaced "
-                    f"({e.strerror or type(e).__name__})"
-                ) from None
-        return
-    if not resume:
-        raise EvalError(
-            f"{out} already holds a benchmark run; pass --resume to continue it "
-            "or --overwrite to start over"
-        )
     try:
         old = json.loads(run.read_text(encoding="utf-8"))["config"]
         if not isinstance(old, dict):
@@ -282,19 +252,46 @@ def run_benchmark(
             the size of the local cluster.
         scheduler: Dask scheduler address (``tcp://host:port``).
         resume: continue a run in ``cfg.out`` (finished pairs are skipped).
-        overwrite: delete a previous run in ``cfg.out`` first.
+        overwrite: delete a previous run in ``cfg.out`` first: only the files habitsim
+            wrote there (:func:`habitsim.folders.claim_output_folder`).
         progress: show a tqdm progress bar with ETA.
         report: write report.html / report.md at the end.
         log: where to print progress notes (None: silent).
 
     Raises:
         EvalError: see the class. ExecutorError: the executor cannot start.
+        OutputFolderError: ``cfg.out`` holds files habitsim did not write, or an earlier
+            run without ``resume`` / ``overwrite``.
+        OutputBusyError: another run is writing into ``cfg.out``.
     """
-    from .executors import make_executor
 
     t0 = time.perf_counter()
-    _check_out(cfg, resume, overwrite)
+    out = Path(cfg.out)
+    if out.exists() and not out.is_dir():
+        raise EvalError(f"{out} exists and is not a folder")
     tasks = plan_tasks(cfg)
+    with claim_output_folder(
+        out, command="eval", overwrite=overwrite, resume=resume, log=log
+    ) as claim:
+        if claim.earlier is not None:
+            _check_resume(cfg)
+        return _run(cfg, tasks, t0, executor, workers, scheduler, progress, report, log)
+
+
+def _run(
+    cfg: EvalConfig,
+    tasks: list[PairTask],
+    t0: float,
+    executor: str,
+    workers: int | None,
+    scheduler: str | None,
+    progress: bool,
+    report: bool,
+    log: Callable[[str], None] | None,
+) -> BenchmarkResult:
+    """:func:`run_benchmark` in its claimed output folder."""
+    from .executors import make_executor
+
     out = Path(cfg.out)
     make_dirs(out / "rows", "--out")
     _check_outputs(out, report)

@@ -18,7 +18,11 @@ An optional CSV names each file's action (and, optionally, its split)::
 Without a split column (or an empty cell), the i-th file in sorted order goes to ``val``
 when ``i mod 10 = 4``, to ``test`` when it is 9, else to ``train`` (the synthetic data
 set's 8/1/1 rule); a held-out species' clips all go to ``test``. The whole folder is
-written as one transaction: all clips and the manifest, or nothing.
+written as one transaction: all clips and the manifest, or nothing. The output folder is
+claimed with :func:`habitsim.folders.claim_output_folder`: one import at a time, a
+folder holding files habitsim did not write or an earlier data set refused without
+``overwrite``, and ``overwrite`` removes only the files habitsim wrote there. Links in the
+source folder that lead out of it are refused unless ``follow_symlinks``.
 """
 
 from __future__ import annotations
@@ -43,8 +47,9 @@ from .dataset import (
     DatasetManifest,
 )
 from .dataset.clips import _measure
-from .errors import DatasetError, HabitsimError, OutputPathError, brief, brief_path
+from .errors import DatasetError, HabitsimError, OutputPathError, brief, brief_path, unquoted
 from .fileio import atomic_write_text, make_dirs, output_transaction
+from .folders import claim_output_folder, input_files
 from .motion import Motion, resample_motion
 from .physics_constants import GRAVITY
 from .species import load_species
@@ -198,6 +203,7 @@ def import_folder(
     units: str | None = None,
     up: str | None = None,
     plant: bool = True,
+    follow_symlinks: bool = False,
     log: Callable[[str], None] | None = None,
 ) -> ImportBuild:
     """Import every motion file under ``src_dir`` onto ``species`` as a data set.
@@ -210,16 +216,24 @@ def import_folder(
             label get the action ``unlabelled``.
         fps: frame rate every clip is resampled to [Hz] (a training set has one rate; the
             shipped model runs at 30).
-        overwrite: replace a data set already in ``out_dir``.
+        overwrite: replace a data set already in ``out_dir``: the files an earlier
+            habitsim run wrote there are removed first, nothing else.
         skip_bad: skip files that cannot be imported (listed in the result) instead of
             failing on the first one.
         joint_map, units, up, plant: as :func:`habitsim.bvh_mapping.import_bvh`, for every
             file.
+        follow_symlinks: read through links in ``src_dir`` that lead out of it (else
+            they are refused).
         log: where per-file lines go (None = nowhere).
 
     Raises:
         DatasetError: no such folder, no motion file in it, a labels entry naming no file,
             an existing data set without ``overwrite``, or nothing importable.
+        InputPathError: a link in ``src_dir`` leading out of it (without
+            ``follow_symlinks``).
+        OutputFolderError: ``out_dir`` holds files habitsim did not write, or an earlier
+            run (without ``overwrite``).
+        OutputBusyError: another run is writing into ``out_dir``.
         OutputPathError: ``out_dir`` cannot be written.
         BVHParseError, GLTFError, SkeletonMappingError: a file that cannot be imported
             (without ``skip_bad``; the message names the file).
@@ -233,7 +247,7 @@ def import_folder(
         raise DatasetError(f"fps must be in [1, 1000] Hz, got {brief(fps)}")
     if not src.is_dir():
         raise DatasetError(f"{brief_path(src)}: no such folder")
-    files = sorted(p for p in src.rglob("*") if p.suffix.lower() in SOURCE_SUFFIXES and p.is_file())
+    files = input_files(src, SOURCE_SUFFIXES, follow_symlinks=follow_symlinks, what="--dir")
     if not files:
         raise DatasetError(
             f"{brief_path(src)}: no motion file ({', '.join(SOURCE_SUFFIXES)}) in the folder"
@@ -247,74 +261,79 @@ def import_folder(
         raise DatasetError(f"labels name files that are not in {brief_path(src)}: {brief(unknown)}")
     if out.exists() and not out.is_dir():
         raise OutputPathError(f"output folder {brief_path(out)}: is a file, expected a folder")
-    if (out / MANIFEST_NAME).exists() and not overwrite:
-        raise DatasetError(
-            f"{brief_path(out)} already holds a data set; pass --overwrite to replace it"
-        )
-    make_dirs(out)
-    held = bool(sp.held_out)
-    entries: list[ClipEntry] = []
-    motions: list[tuple[str, Motion]] = []
-    warnings: list[tuple[str, str]] = []
-    skipped: list[tuple[str, str]] = []
-    taken: set[str] = set()
-    for f in files:
-        rel_src = f.relative_to(src).as_posix()
-        lab = table.get(rel_src) or table.get(f.name) or {}
-        try:
-            m, mapping = import_bvh(f, sp, joint_map=joint_map, units=units, up=up, plant=plant)
-        except HabitsimError as e:
-            if not skip_bad:
-                raise type(e)(f"{rel_src}: {e}") from None
-            skipped.append((rel_src, str(e)))
+    with claim_output_folder(
+        out,
+        command="data import-bvh",
+        overwrite=overwrite,
+        resume_flag=None,
+        defer_removal=True,
+        log=log,
+    ) as claim:
+        held = bool(sp.held_out)
+        entries: list[ClipEntry] = []
+        motions: list[tuple[str, Motion]] = []
+        warnings: list[tuple[str, str]] = []
+        skipped: list[tuple[str, str]] = []
+        taken: set[str] = set()
+        for f in files:
+            rel_src = f.relative_to(src).as_posix()
+            lab = table.get(rel_src) or table.get(f.name) or {}
+            try:
+                with unquoted():  # a message names the file, never what it holds
+                    m, mapping = import_bvh(
+                        f, sp, joint_map=joint_map, units=units, up=up, plant=plant
+                    )
+            except HabitsimError as e:
+                if not skip_bad:
+                    raise type(e)(f"{rel_src}: {e}") from None
+                skipped.append((rel_src, str(e)))
+                if log:
+                    log(f"skipped {rel_src}: {e}")
+                continue
+            warnings += [(rel_src, w) for w in mapping.warnings]
+            m = resample_motion(m, float(fps))
+            action = lab.get("action") or "unlabelled"
+            split = lab.get("split") or _default_split(len(entries), held)
+            if held and split != "test":
+                raise DatasetError(
+                    f"{rel_src}: {sp.name} is a held-out species; its clips may only be in 'test'"
+                )
+            meta = dict(m.metadata)
+            meta.update(action=action, source_file=rel_src)
+            rel = f"{split}/{sp.name}/{_stem(f, taken)}.npz"
+            meta["pair_key"] = f"import:{Path(rel).stem}"
+            m = Motion(m.species, m.fps, m.root_positions, m.rotations, m.contacts, meta)
+            entries.append(_entry(m, rel, split, held, action, len(entries)))
+            motions.append((rel, m))
             if log:
-                log(f"skipped {rel_src}: {e}")
-            continue
-        warnings += [(rel_src, w) for w in mapping.warnings]
-        m = resample_motion(m, float(fps))
-        action = lab.get("action") or "unlabelled"
-        split = lab.get("split") or _default_split(len(entries), held)
-        if held and split != "test":
-            raise DatasetError(
-                f"{rel_src}: {sp.name} is a held-out species; its clips may only be in 'test'"
+                line = f"{rel_src} -> {rel}: {m.num_frames} frames, {m.duration:.1f} s, {action}"
+                if m.contacts is not None:
+                    duty = " ".join(f"{d:.2f}" for d in np.mean(m.contacts, axis=0))
+                    line += f", stance share LF RF LH RH {duty}"
+                log(line)
+        if not entries:
+            raise DatasetError(f"{brief_path(src)}: no file could be imported ({len(files)} tried)")
+        manifest = DatasetManifest(
+            root=out,
+            seed=0,
+            fps=float(fps),
+            clips_per_species=len(entries),
+            generator_version=0,
+            species=({"name": sp.name, "held_out": held, "cousin": None, "actions": []},),
+            clips=tuple(entries),
+        )
+        doc: dict[str, Any] = manifest.to_dict()
+        doc["kind"] = IMPORT_KIND
+        doc["format_version"] = MANIFEST_FORMAT_VERSION
+        doc["source"] = {"folder": str(src.resolve()), "files": len(files)}
+        doc["pairing"] = "none: every imported clip is its own pair key"
+        with output_transaction():
+            for rel, m in motions:
+                make_dirs((out / rel).parent)
+                m.save(out / rel)
+            atomic_write_text(
+                out / MANIFEST_NAME, json.dumps(doc, indent=1, allow_nan=False) + "\n"
             )
-        meta = dict(m.metadata)
-        meta.update(action=action, source_file=rel_src)
-        rel = f"{split}/{sp.name}/{_stem(f, taken)}.npz"
-        meta["pair_key"] = f"import:{Path(rel).stem}"
-        m = Motion(m.species, m.fps, m.root_positions, m.rotations, m.contacts, meta)
-        entries.append(_entry(m, rel, split, held, action, len(entries)))
-        motions.append((rel, m))
-        if log:
-            line = f"{rel_src} -> {rel}: {m.num_frames} frames, {m.duration:.1f} s, {action}"
-            if m.contacts is not None:
-                duty = " ".join(f"{d:.2f}" for d in np.mean(m.contacts, axis=0))
-                line += f", stance share LF RF LH RH {duty}"
-            log(line)
-    if not entries:
-        raise DatasetError(f"{brief_path(src)}: no file could be imported ({len(files)} tried)")
-    manifest = DatasetManifest(
-        root=out,
-        seed=0,
-        fps=float(fps),
-        clips_per_species=len(entries),
-        generator_version=0,
-        species=({"name": sp.name, "held_out": held, "cousin": None, "actions": []},),
-        clips=tuple(entries),
-    )
-    doc: dict[str, Any] = manifest.to_dict()
-    doc["kind"] = IMPORT_KIND
-    doc["format_version"] = MANIFEST_FORMAT_VERSION
-    doc["source"] = {"folder": str(src.resolve()), "files": len(files)}
-    doc["pairing"] = "none: every imported clip is its own pair key"
-    with output_transaction():
-        for rel, m in motions:
-            make_dirs((out / rel).parent)
-            m.save(out / rel)
-        atomic_write_text(out / MANIFEST_NAME, json.dumps(doc, indent=1, allow_nan=False) + "\n")
-    keep = {out / rel for rel, _ in motions}
-    for split in SPLITS:  # clips of a replaced data set that the new one does not list
-        for old in sorted((out / split).rglob("*.npz")) if (out / split).is_dir() else []:
-            if old not in keep:
-                old.unlink()
+        # the replaced data set's files that the new one does not write again
+        claim.remove_stale({out / rel for rel, _ in motions} | {out / MANIFEST_NAME})
     return ImportBuild(manifest, warnings, skipped)

@@ -6,7 +6,9 @@ lists them, so a user can fix the input without reading the source.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import contextlib
+import contextvars
+from collections.abc import Iterable, Iterator
 
 
 class HabitsimError(Exception):
@@ -95,6 +97,22 @@ class OutputPathError(HabitsimError, OSError):
     where a file should be, a read-only folder, a full disk."""
 
 
+class OutputFolderError(HabitsimError, ValueError):
+    """An output folder habitsim may not write into as asked: it holds files habitsim did
+    not write or an earlier run (without ``--overwrite`` / ``--resume``), or a path in it
+    leads out of it through a link. The message says what is there and what to do."""
+
+
+class OutputBusyError(HabitsimError):
+    """An output folder another habitsim run is writing into (its lock is held); the
+    message names that run's PID, host, command and start time."""
+
+
+class InputPathError(HabitsimError, ValueError):
+    """An input folder holding a link that leads out of it (without
+    ``--follow-symlinks``); the message names the link, never a file's content."""
+
+
 class ArgumentRangeError(HabitsimError, ValueError):
     """A command-line or API argument outside its physically sensible range."""
 
@@ -110,9 +128,28 @@ def unknown_choice(kind: str, value: object, valid: Iterable[str]) -> str:
     return f"unknown {kind} {value!r}; valid: {', '.join(sorted(valid))}"
 
 
+#: False while reading files of an input folder (:func:`unquoted`): :func:`brief` then
+#: gives a string's length, never its text.
+_QUOTE_TEXT: contextvars.ContextVar[bool] = contextvars.ContextVar("habitsim_quote", default=True)
+
+
+@contextlib.contextmanager
+def unquoted() -> Iterator[None]:
+    """Inside the block, messages built with :func:`brief` say how long a piece of text
+    is instead of quoting it (files read from an input folder: a message never echoes
+    what a file holds)."""
+    token = _QUOTE_TEXT.set(False)
+    try:
+        yield
+    finally:
+        _QUOTE_TEXT.reset(token)
+
+
 def brief(value: object, limit: int = BRIEF_CHARS) -> str:
     """``repr(value)`` cut to ``limit`` characters, so a 5 MB token or a huge array never
-    ends up whole in an error message."""
+    ends up whole in an error message (inside :func:`unquoted`, text is not quoted)."""
+    if isinstance(value, str | bytes) and not _QUOTE_TEXT.get():
+        return f"<text of {len(value)} characters>"
     if isinstance(value, str | bytes) and len(value) > 4 * limit:
         value = value[: 4 * limit]  # repr of a huge string costs its whole length
         text = repr(value)

@@ -7,6 +7,10 @@ starts, the atomic writes inside the block are staged, and the files are renamed
 place together when the block ends without an error, so the command leaves all of its
 outputs or none. Any path that cannot be written is an
 :class:`~habitsim.errors.OutputPathError`, never a raw ``OSError``.
+
+Inside an output folder claimed with :func:`habitsim.folders.claim_output_folder`, every
+path written here is listed in the folder's record first, and a path leading out of the
+folder through a link or naming a file habitsim did not write is refused.
 """
 
 from __future__ import annotations
@@ -23,21 +27,12 @@ from typing import IO, Any
 import numpy as np
 
 from .errors import OutputPathError, brief_path
+from .folders import _guard, _output_error, _record_write
 
 #: Staged (temporary, destination) pairs of the innermost :func:`output_transaction`.
 _STAGED: contextvars.ContextVar[list[tuple[str, Path]] | None] = contextvars.ContextVar(
     "habitsim_staged_outputs", default=None
 )
-
-
-def _output_error(path: Path, e: OSError, what: str = "output") -> OutputPathError:
-    reason = e.strerror or type(e).__name__
-    anc = path.parent
-    while not anc.exists() and anc.parent != anc:
-        anc = anc.parent
-    if anc.exists() and not anc.is_dir():
-        reason = f"{brief_path(anc)} is a file where a folder should be"
-    return OutputPathError(f"{what} {brief_path(path)}: cannot be written ({reason})")
 
 
 def check_writable(path: str | Path, what: str = "output") -> Path:
@@ -55,12 +50,18 @@ def check_writable(path: str | Path, what: str = "output") -> Path:
     Returns:
         ``path`` as a :class:`~pathlib.Path`.
 
+    Inside a claimed output folder (:func:`claim_output_folder`) the path must also stay
+    in the folder (no link leading out) and must not replace a file habitsim did not write.
+
     Raises:
         OutputPathError: naming the path and the reason.
+        OutputFolderError: a path through a link leading out of its output folder, or
+            one naming a file habitsim did not write.
     """
     p = Path(path)
     if p.is_dir():
         raise OutputPathError(f"{what} {brief_path(p)}: is a folder, expected a file path")
+    _guard(p, what)
     anc = p.parent
     while not anc.exists():
         if anc.is_symlink():  # a dangling link where a folder should be
@@ -91,8 +92,11 @@ def make_dirs(path: str | Path, what: str = "output folder") -> Path:
 
     Raises:
         OutputPathError: a file where a folder should be, a read-only parent, …
+        OutputFolderError: a folder reached through a link leading out of its output
+            folder.
     """
     p = Path(path)
+    _guard(p, what, folder=True)
     try:
         p.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -180,10 +184,15 @@ def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[str]:
     (ffmpeg); it is renamed over ``path`` when the block ends normally (or staged, inside
     an :func:`output_transaction`) and removed on any exception.
 
+    Inside a claimed output folder the path is listed in the folder's record before the
+    file appears (see :func:`claim_output_folder`).
+
     Raises:
         OutputPathError: the folder cannot be created or written.
+        OutputFolderError: see :func:`check_writable`.
     """
     path = Path(path)
+    _record_write(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:64]}.", suffix=suffix, dir=path.parent)

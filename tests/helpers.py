@@ -1,9 +1,14 @@
 """Helpers shared by test files: running the command line in this process, listing a folder, the
-unwritable destinations and the small evaluation's arguments."""
+unwritable destinations, the small evaluation's arguments and another process holding an
+output folder."""
 
 from __future__ import annotations
 
+import contextlib
 import os
+import subprocess
+import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -90,3 +95,25 @@ def install_plugin(
     lines = ["[habitsim.methods]", *(f"{k} = {v}" for k, v in entries.items())]
     (info / "entry_points.txt").write_text("\n".join(lines) + "\n")
     return folder
+
+
+_HOLDER = (
+    "import sys, time; from habitsim.folders import claim_output_folder\n"
+    "with claim_output_folder(sys.argv[1], command='eval'):\n"
+    "    print('held', flush=True); time.sleep(60)\n"
+)
+
+
+@contextlib.contextmanager
+def hold(out: Path) -> Iterator[subprocess.Popen]:
+    """Another process holding ``out`` until the block ends; then it is SIGKILLed (its
+    lock file stays behind)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _HOLDER, str(out)], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "held"
+        yield proc
+    finally:
+        proc.kill()
+        proc.wait()

@@ -528,3 +528,21 @@ def test_synth_into_existing_read_only_folder_even_for_root(tmp_path: Path, monk
     with pytest.raises(OutputPathError, match="Permission denied"):
         build_dataset(tmp_path / "d", clips_per_species=1, species=["cat"], workers=1)
     assert files_under(tmp_path) == ["d"]
+
+
+def test_build_leaves_files_habitsim_did_not_write(tmp_path: Path) -> None:
+    """A folder with someone's files is refused; --overwrite writes beside them and removes
+    only the earlier build's files."""
+    from habitsim.errors import OutputFolderError
+
+    out = tmp_path / "ds"
+    (out / "train" / "cat").mkdir(parents=True)
+    theirs = out / "train" / "cat" / "cat_walk_0000.npz"  # a name of the clip layout
+    theirs.write_text("not habitsim's")
+    kw = dict(clips_per_species=1, species=["dog"], workers=1, progress=False)
+    with pytest.raises(OutputFolderError):
+        build_dataset(out, **kw)
+    build_dataset(out, overwrite=True, **kw)
+    build_dataset(out, overwrite=True, seed=1, **kw)
+    assert theirs.read_text() == "not habitsim's"
+    assert load_manifest(out).seed == 1

@@ -11,7 +11,13 @@ from habitsim.bvh import write_bvh
 from habitsim.cli import main
 from habitsim.dataset import iter_clips, load_manifest
 from habitsim.dataset_import import IMPORT_KIND, import_folder, read_labels
-from habitsim.errors import BVHParseError, DatasetError
+from habitsim.errors import (
+    BVHParseError,
+    DatasetError,
+    InputPathError,
+    OutputBusyError,
+    OutputFolderError,
+)
 from habitsim.gaits import generate
 
 
@@ -76,7 +82,7 @@ def test_bad_inputs_are_refused_and_nothing_is_left(mocap, tmp_path):
     assert not (out / "manifest.json").exists() and not list(out.rglob("*.npz"))
     build = import_folder(bad, out, "dog", skip_bad=True)
     assert [f for f, _ in build.skipped] == ["b.bvh"] and len(build.manifest.clips) == 1
-    with pytest.raises(DatasetError, match="--overwrite"):
+    with pytest.raises(OutputFolderError, match="--overwrite"):
         import_folder(bad, out, "dog", skip_bad=True)
     # an overwrite replaces the clips the old data set had
     import_folder(mocap, out, "dog", overwrite=True)
@@ -133,3 +139,60 @@ def test_the_command_line(mocap, tmp_path, capsys):
     )
     assert "not both" in capsys.readouterr().err
     assert np.isfinite(load_manifest(out).clips[0].froude)
+
+
+def test_files_and_links_habitsim_did_not_write_are_left_alone(mocap, tmp_path):
+    """A folder holding no data set keeps its files; a link out of --out is not written
+    through; --overwrite removes only what habitsim wrote."""
+    out = tmp_path / "ds"
+    (out / "train" / "dog").mkdir(parents=True)
+    theirs = out / "train" / "dog" / "theirs.npz"
+    theirs.write_text("not habitsim's")
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "keep.npz").write_text("outside")
+    (out / "val").symlink_to(outside, target_is_directory=True)
+    labels = {"trot_02.bvh": {"action": "trot", "split": "val"}}
+    with pytest.raises(OutputFolderError):  # without --overwrite
+        import_folder(mocap, out, "dog", labels=labels)
+    with pytest.raises(OutputFolderError):  # val/ leads out of --out
+        import_folder(mocap, out, "dog", labels=labels, overwrite=True)
+    assert sorted(p.name for p in outside.iterdir()) == ["keep.npz"]
+    (out / "val").unlink()
+    import_folder(mocap, out, "dog", labels=labels, overwrite=True)
+    import_folder(mocap, out, "dog", overwrite=True)  # replaces its own data set
+    assert theirs.read_text() == "not habitsim's"
+    assert sorted(p.name for p in out.rglob("*.npz")) == [
+        "theirs.npz",
+        "trot_02.npz",
+        "w3.npz",
+        "walk_01.npz",
+    ]
+    assert not (out / "val").exists()  # the replaced data set's val/ clip is gone
+
+
+def test_links_out_of_the_source_folder_are_refused(mocap, tmp_path):
+    src = tmp_path / "src"
+    src.mkdir()
+    (src / "a.bvh").write_bytes((mocap / "trot_02.bvh").read_bytes())
+    secret = tmp_path / "secret.txt"
+    secret.write_text("root:x:0:0:SECRET-LINE\n")
+    (src / "b.bvh").symlink_to(secret)
+    with pytest.raises(InputPathError) as e:
+        import_folder(src, tmp_path / "out", "dog")
+    assert "SECRET" not in str(e.value) and not (tmp_path / "out").exists()
+    # followed when asked; the parse error names the file, not what it holds
+    with pytest.raises(BVHParseError) as e:
+        import_folder(src, tmp_path / "out", "dog", follow_symlinks=True)
+    assert str(e.value).startswith("b.bvh:") and "SECRET" not in str(e.value)
+
+
+def test_a_second_import_into_one_folder_is_refused(mocap, tmp_path):
+    from helpers import hold
+
+    out = tmp_path / "ds"
+    with hold(out) as proc:
+        with pytest.raises(OutputBusyError, match=str(proc.pid)):
+            import_folder(mocap, out, "dog", overwrite=True)
+    build = import_folder(mocap, out, "dog")  # the killed holder's lock is taken over
+    assert len(build.manifest.clips) == 3

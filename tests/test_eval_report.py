@@ -130,12 +130,30 @@ def test_write_report_unwritable(tmp_path: Path, eval_run: Path) -> None:
         shutil.rmtree(out / "report_files", ignore_errors=True)
         if case == "file":
             (out / "report_files").write_text("x")
-        else:  # an old figure that is a folder cannot be cleared
-            (out / "report_files" / "01_old.png").mkdir(parents=True)
+        else:  # a folder where the report's Markdown goes
+            (out / "report.md").unlink(missing_ok=True)
+            (out / "report.md").mkdir()
+        (out / "report.html").unlink(missing_ok=True)
         with pytest.raises(OutputPathError) as ei:
             write_report(out)
         _typed_output_error(ei.value)
         assert not (out / "report.html").exists()
+
+
+def test_old_figures_habitsim_did_not_write_are_kept(tmp_path: Path, eval_run: Path) -> None:
+    """Clearing the old report's figures removes only files habitsim wrote."""
+    import shutil
+
+    from habitsim.evaluation.report import write_report
+
+    out = tmp_path / "run"
+    shutil.copytree(eval_run, out)
+    (out / "report_files").mkdir(exist_ok=True)
+    (out / "report_files" / "my_notes.txt").write_text("mine")
+    (out / "report_files" / "01_old.png").mkdir()
+    write_report(out)
+    assert (out / "report_files" / "my_notes.txt").read_text() == "mine"
+    assert (out / "report_files" / "01_old.png").is_dir()
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="the super-user writes into read-only folders")

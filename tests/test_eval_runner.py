@@ -182,7 +182,9 @@ def test_resume_after_kill_gives_the_same_table(data: Path, reference_run, tmp_p
     assert 5 <= done < 16, f"killed after {done} rows: {proc.stderr.read().decode()[-500:]}"
     assert not (out / "summary.json").exists()
 
-    with pytest.raises(EvalError, match="--resume"):
+    from habitsim.errors import OutputFolderError
+
+    with pytest.raises(OutputFolderError, match="--resume"):
         run_benchmark(_cfg(data, out), workers=1, progress=False, report=False)
     with pytest.raises(EvalError, match="refine"):
         run_benchmark(
@@ -385,3 +387,61 @@ def test_eval_tables_when_no_pair_has_features(tmp_path: Path, eval_run: Path) -
     write_tables(tmp_path, rows)
     with np.load(tmp_path / "features.npz") as z:
         assert z["features"].shape == (0, 0) and z["keys"].shape == (0,)
+
+
+def test_clips_of_one_file_name_in_two_species_folders_get_two_rows(
+    data: Path, tmp_path: Path
+) -> None:
+    """Row keys come from the clip's path, so ``val/cat/same.npz`` and ``val/dog/same.npz``
+    are two pairs, not one row for two computed pairs."""
+    import shutil
+
+    doc = json.loads((data / "manifest.json").read_text())
+    clips = []
+    for sp in ("cat", "dog"):
+        c = next(c for c in doc["clips"] if c["species"] == sp and c["split"] == "val")
+        (tmp_path / "d" / "val" / sp).mkdir(parents=True)
+        shutil.copy(data / c["path"], tmp_path / "d" / "val" / sp / "same.npz")
+        clips.append(dict(c, path=f"val/{sp}/same.npz"))
+    doc["clips"] = clips
+    (tmp_path / "d" / "manifest.json").write_text(json.dumps(doc))
+    tasks = plan_tasks(_cfg(tmp_path / "d", tmp_path / "out", targets=("horse",)))
+    assert len(tasks) == 4 and len({t.key for t in tasks}) == 4
+
+
+def test_a_second_eval_on_one_folder_is_refused(data: Path, tmp_path: Path) -> None:
+    """While another run holds --out, eval (even with --overwrite) stops before any work."""
+    from helpers import hold
+
+    from habitsim.errors import OutputBusyError
+
+    out = tmp_path / "out"
+    with hold(out) as proc:
+        for kw in ({}, {"overwrite": True}, {"resume": True}):
+            with pytest.raises(OutputBusyError, match=str(proc.pid)):
+                run_benchmark(_cfg(data, out), workers=1, progress=False, report=False, **kw)
+    assert not (out / "rows").exists()
+
+
+def test_overwrite_keeps_files_habitsim_did_not_write(
+    tmp_path: Path, small_dataset: Path, eval_run: Path, capsys
+) -> None:
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(eval_run, out)
+    (out / "rows" / "notes.txt").write_text("mine")
+    (out / "report_files").mkdir(exist_ok=True)
+    (out / "report_files" / "my_plot.png").write_text("mine")
+    # files habitsim did not write: refused without --overwrite, even with --resume
+    code, err = run_cli(
+        ["eval", "--data", small_dataset, "--out", out, *EVAL_ARGS, "--resume"], capsys
+    )
+    assert code == 2 and "--overwrite" in err
+    code, err = run_cli(
+        ["eval", "--data", small_dataset, "--out", out, *EVAL_ARGS, "--overwrite"], capsys
+    )
+    assert code == 0, err
+    assert (out / "rows" / "notes.txt").read_text() == "mine"
+    assert (out / "report_files" / "my_plot.png").read_text() == "mine"
+    assert (out / "summary.json").is_file()

@@ -72,7 +72,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="with --dir: skip files that cannot be imported instead of stopping",
     )
     p.add_argument(
-        "--overwrite", action="store_true", help="with --dir: replace a data set already in --out"
+        "--overwrite",
+        action="store_true",
+        help="with --dir: replace a data set already in --out (only files habitsim wrote "
+        "there are removed)",
+    )
+    p.add_argument(
+        "--follow-symlinks",
+        action="store_true",
+        help="with --dir: read through links in DIR that lead out of it (refused by default)",
     )
     add_source_options(p)
     p.add_argument(
@@ -360,6 +368,7 @@ def _import_dir(ns: argparse.Namespace) -> int:
         units=ns.units,
         up=ns.up,
         plant=not ns.no_plant,
+        follow_symlinks=ns.follow_symlinks,
         log=print,
     )
     for f, w in build.warnings:

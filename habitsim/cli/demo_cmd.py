@@ -112,8 +112,26 @@ def _check_outputs(ns: argparse.Namespace) -> None:
 
 
 def _demo(ns: argparse.Namespace) -> int:
+    from ..folders import claim_output_folder
+
     t0 = time.perf_counter()
     _check_outputs(ns)
+    # one demo at a time in --out; an earlier demo (or data set build) there continues;
+    # a folder holding files habitsim did not write is refused
+    with claim_output_folder(
+        ns.out,
+        command="demo",
+        resume=True,
+        resume_flag=None,
+        overwrite_flag=None,
+        continues=("data synth",),
+        log=print,
+    ):
+        return _demo_in(ns, t0)
+
+
+def _demo_in(ns: argparse.Namespace, t0: float) -> int:
+    """The demo in its claimed output folder."""
     try:
         check_resumable(ns.out, seed=ns.seed)
         overwrite = False

@@ -156,8 +156,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="local worker processes (default: CPU count; 1 = in-process)",
     )
+    p.add_argument(
+        "--follow-symlinks",
+        action="store_true",
+        help="read clips through links in --data that lead out of it (refused by default)",
+    )
     p.add_argument("--resume", action="store_true", help="continue a run in OUT")
-    p.add_argument("--overwrite", action="store_true", help="delete a run in OUT first")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="delete a run in OUT first (only the files habitsim wrote there)",
+    )
     p.add_argument(
         "--report-pairs",
         type=int,
@@ -228,6 +237,7 @@ def _eval(ns: argparse.Namespace) -> int:
         report_pairs=ns.report_pairs,
         videos=not ns.no_videos,
         outputs=tuple((o.name, o.folder) for o in outputs),
+        follow_symlinks=ns.follow_symlinks,
     )
     if outputs:
         from ..evaluation.outputs import dataset_clip_ids, stray_outputs

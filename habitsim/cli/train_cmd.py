@@ -64,7 +64,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="share of the training windows drawn from --rehearse, in (0, 1) (default 0.5)",
     )
     p.add_argument("--resume", action="store_true", help="continue the training state in CKPT")
-    p.add_argument("--overwrite", action="store_true", help="replace a checkpoint already in CKPT")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a checkpoint already in CKPT (only files habitsim wrote there are removed)",
+    )
     p.add_argument("--steps", type=int, metavar="N", help="override the number of steps")
     p.add_argument("--seed", type=int, metavar="S", help="override the seed (default 0)")
     p.add_argument(
@@ -120,6 +124,17 @@ def _finetune_config(init: str, cfg):
 
 
 def _train(ns: argparse.Namespace) -> int:
+    from ..folders import claim_output_folder
+
+    # one training run at a time in CKPT; --resume / --overwrite as for the checkpoint
+    with claim_output_folder(
+        ns.out, command="train", overwrite=ns.overwrite, resume=ns.resume, log=print
+    ):
+        return _train_in(ns)
+
+
+def _train_in(ns: argparse.Namespace) -> int:
+    """``habitsim train`` in its claimed checkpoint folder."""
     from ..fileio import check_writable
     from ..models.checkpoint import MODEL_FILE
     from ..models.config import preset

@@ -15,6 +15,7 @@ from typing import Any
 
 from ..errors import DatasetError, brief
 from ..fileio import atomic_write_text, check_writable, make_dirs
+from ..folders import claim_output_folder, is_written, remove_written
 from ..gaits import GENERATOR_VERSION, available_actions
 from ..species import load_species
 from .clips import _make_clip
@@ -103,10 +104,10 @@ def _dataset_files(out: Path) -> list[Path]:
 def _remove_empty_dirs(out: Path) -> None:
     for split in SPLITS:
         base = out / split
-        if not base.is_dir():
+        if base.is_symlink() or not base.is_dir():
             continue
         for sub in base.iterdir():
-            if sub.is_dir() and not any(sub.iterdir()):
+            if sub.is_dir() and not sub.is_symlink() and not any(sub.iterdir()):
                 sub.rmdir()
         if not any(base.iterdir()):
             base.rmdir()
@@ -137,8 +138,9 @@ def build_dataset(
         progress: show a tqdm progress bar on stderr.
         resume: keep clips already on disk that load and match their plan (an
             interrupted build continues); False regenerates every clip.
-        overwrite: delete an existing data set in ``out_dir`` (manifest, statistics and
-            clip files of the layout) first, whatever its configuration.
+        overwrite: delete an earlier build in ``out_dir`` first, whatever its
+            configuration: only the files habitsim wrote there
+            (:func:`habitsim.folders.claim_output_folder`).
 
     Returns:
         A :class:`DatasetBuild` with the manifest, the statistics and counts.
@@ -147,6 +149,9 @@ def build_dataset(
         DatasetError: bad arguments, ``out_dir`` not a directory, ``out_dir`` holding a
             data set of another seed / fps / generator version (without ``overwrite``),
             or a clip that fails to generate (the message names it).
+        OutputFolderError: ``out_dir`` holds files habitsim did not write, or the output
+            of another command (without ``overwrite``).
+        OutputBusyError: another run is writing into ``out_dir``.
         UnknownSpeciesError: an unknown species name.
     """
     t0 = time.perf_counter()
@@ -172,80 +177,94 @@ def build_dataset(
         check_resumable(out, seed=seed, fps=fps)
 
     jobs = plan_clips(names, clips_per_species, seed, fps)
-    make_dirs(out, "data set folder")
-    check_writable(out / MANIFEST_NAME, "data set folder")  # an existing read-only folder
-    # From here on the folder is "being built": no manifest until the end.
-    for name in (MANIFEST_NAME, STATS_CSV_NAME, STATS_MD_NAME):
-        (out / name).unlink(missing_ok=True)
-    planned = {out / j.path for j in jobs}
-    removed = 0
-    for f in _dataset_files(out):
-        if overwrite or f not in planned:
-            f.unlink()
-            removed += f.name.endswith(".npz")
-    entries: list[dict[str, Any] | None] = [None] * len(jobs)
-    generated = 0
-    n_workers = max(1, min(n_workers, len(jobs)))
+    with claim_output_folder(
+        out,
+        command="data synth",
+        what="data set folder",
+        overwrite=overwrite,
+        resume=True,
+        resume_flag=None,
+        continues=("demo", "bench data"),
+        defer_removal=True,
+    ) as claim:
+        make_dirs(out, "data set folder")
+        check_writable(out / MANIFEST_NAME, "data set folder")  # an existing read-only folder
+        # From here on the folder is "being built": no manifest until the end. Only files
+        # habitsim wrote are removed (habitsim.folders), never a file of someone else's;
+        # with overwrite, every file of the earlier run.
+        remove_written([out / n for n in (MANIFEST_NAME, STATS_CSV_NAME, STATS_MD_NAME)])
+        planned = {out / j.path for j in jobs}
+        stale = {out / r for r in claim.stale}
+        stale.update(f for f in _dataset_files(out) if f not in planned and is_written(f))
+        remove_written(sorted(stale))
+        removed = sum(f.name.endswith(".npz") for f in stale)
+        entries: list[dict[str, Any] | None] = [None] * len(jobs)
+        generated = 0
+        n_workers = max(1, min(n_workers, len(jobs)))
 
-    from tqdm import tqdm
+        from tqdm import tqdm
 
-    with tqdm(total=len(jobs), desc="synthetic clips", unit="clip", disable=not progress) as bar:
-        if n_workers == 1:
-            for i, job in enumerate(jobs):
-                entries[i], made = _make_clip(str(out), job, resume)
-                generated += made
-                bar.update(1)
-        else:
-            from ..workers import init_worker, stop_pool
+        with tqdm(
+            total=len(jobs), desc="synthetic clips", unit="clip", disable=not progress
+        ) as bar:
+            if n_workers == 1:
+                for i, job in enumerate(jobs):
+                    entries[i], made = _make_clip(str(out), job, resume)
+                    generated += made
+                    bar.update(1)
+            else:
+                from ..workers import init_worker, stop_pool
 
-            # workers die with this process, however it ends (see habitsim.workers)
-            with cf.ProcessPoolExecutor(
-                max_workers=n_workers, initializer=init_worker, initargs=(os.getpid(),)
-            ) as pool:
-                futures: dict[cf.Future, int] = {}
-                try:
-                    # submitting hundreds of clips takes a while: an interrupt that lands
-                    # here must stop the pool too, not leave `with` waiting for the queue
-                    for i, job in enumerate(jobs):
-                        futures[pool.submit(_make_clip, str(out), job, resume)] = i
-                    for fut in cf.as_completed(futures):
-                        entries[futures[fut]], made = fut.result()
-                        generated += made
-                        bar.update(1)
-                except BaseException:
-                    stop_pool(pool)
-                    raise
-    _remove_empty_dirs(out)
+                # workers die with this process, however it ends (see habitsim.workers)
+                with cf.ProcessPoolExecutor(
+                    max_workers=n_workers, initializer=init_worker, initargs=(os.getpid(),)
+                ) as pool:
+                    futures: dict[cf.Future, int] = {}
+                    try:
+                        # submitting hundreds of clips takes a while: an interrupt that lands
+                        # here must stop the pool too, not leave `with` waiting for the queue
+                        for i, job in enumerate(jobs):
+                            futures[pool.submit(_make_clip, str(out), job, resume)] = i
+                        for fut in cf.as_completed(futures):
+                            entries[futures[fut]], made = fut.result()
+                            generated += made
+                            bar.update(1)
+                    except BaseException:
+                        stop_pool(pool)
+                        raise
+        _remove_empty_dirs(out)
 
-    clips = tuple(ClipEntry.from_dict(e, job.path) for e, job in zip(entries, jobs, strict=True))
-    manifest = DatasetManifest(
-        root=out,
-        seed=seed,
-        fps=fps,
-        clips_per_species=clips_per_species,
-        generator_version=GENERATOR_VERSION,
-        species=tuple(
-            {
-                "name": n,
-                "held_out": load_species(n).held_out,
-                "cousin": load_species(n).cousin,
-                "actions": available_actions(n),
-            }
-            for n in names
-        ),
-        clips=clips,
-    )
-    rows = stats_rows(manifest)
-    atomic_write_text(out / STATS_CSV_NAME, _stats_csv(rows))
-    atomic_write_text(out / STATS_MD_NAME, _stats_markdown(rows, manifest))
-    text = json.dumps(manifest.to_dict(), indent=1, allow_nan=False) + "\n"
-    atomic_write_text(out / MANIFEST_NAME, text)  # last: its presence marks a complete build
-    return DatasetBuild(
-        manifest=manifest,
-        stats=rows,
-        generated=generated,
-        reused=len(jobs) - generated,
-        removed=removed,
-        wall_time_s=time.perf_counter() - t0,
-        workers=n_workers,
-    )
+        clips = tuple(
+            ClipEntry.from_dict(e, job.path) for e, job in zip(entries, jobs, strict=True)
+        )
+        manifest = DatasetManifest(
+            root=out,
+            seed=seed,
+            fps=fps,
+            clips_per_species=clips_per_species,
+            generator_version=GENERATOR_VERSION,
+            species=tuple(
+                {
+                    "name": n,
+                    "held_out": load_species(n).held_out,
+                    "cousin": load_species(n).cousin,
+                    "actions": available_actions(n),
+                }
+                for n in names
+            ),
+            clips=clips,
+        )
+        rows = stats_rows(manifest)
+        atomic_write_text(out / STATS_CSV_NAME, _stats_csv(rows))
+        atomic_write_text(out / STATS_MD_NAME, _stats_markdown(rows, manifest))
+        text = json.dumps(manifest.to_dict(), indent=1, allow_nan=False) + "\n"
+        atomic_write_text(out / MANIFEST_NAME, text)  # last: its presence marks a complete build
+        return DatasetBuild(
+            manifest=manifest,
+            stats=rows,
+            generated=generated,
+            reused=len(jobs) - generated,
+            removed=removed,
+            wall_time_s=time.perf_counter() - t0,
+            workers=n_workers,
+        )

@@ -8,6 +8,7 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 from ..errors import DatasetError, brief
+from ..folders import check_inside
 from ..motion import Motion, load_motion
 from .records import (
     DATASET_KIND,
@@ -56,18 +57,24 @@ def _safe_relpath(p: str, where: str) -> str:
     return p
 
 
-def load_manifest(dataset_dir: str | Path, *, check_files: bool = True) -> DatasetManifest:
+def load_manifest(
+    dataset_dir: str | Path, *, check_files: bool = True, follow_symlinks: bool = True
+) -> DatasetManifest:
     """Read and validate ``manifest.json`` of a built data set.
 
     Args:
         dataset_dir: the data set folder.
         check_files: also require every listed clip file to exist.
+        follow_symlinks: False refuses a clip path that leads out of the folder through
+            a link (:func:`habitsim.folders.check_inside`).
 
     Raises:
         DatasetError: no folder, no manifest (an incomplete build), unreadable or
             inconsistent manifest (bad keys or types, unknown split, duplicate paths,
             a held-out species outside ``test``, a clip of an unlisted species) or a
             missing clip file.
+        InputPathError: a clip path leading out of the folder (without
+            ``follow_symlinks``).
     """
     root = Path(dataset_dir)
     if not root.is_dir():
@@ -120,6 +127,8 @@ def load_manifest(dataset_dir: str | Path, *, check_files: bool = True) -> Datas
         if c.path in seen:
             raise DatasetError(f"{where}: duplicate clip path {c.path!r}")
         seen.add(c.path)
+        if not follow_symlinks:
+            check_inside(root, root / c.path, what="--data")
         if check_files and not (root / c.path).is_file():
             raise DatasetError(f"{root}: clip file {c.path} listed in the manifest is missing")
         clips.append(c)
