@@ -74,6 +74,9 @@ class EvalConfig:
         report_pairs: pairs per method whose traces (gait diagrams, tracking error,
             videos) are kept for the report.
         videos: render videos of the report pairs when :mod:`habitsim.render` works.
+        outputs: ``(name, folder)`` of methods whose transfers are files in a folder
+            (:mod:`habitsim.evaluation.outputs`: ``DIR/<target>/<clip_id>.npz`` or
+            ``.bvh``); each name is added to ``methods`` when it is not there.
         follow_symlinks: read clips through links in ``data`` that lead out of it (else
             they are refused).
     """
@@ -97,12 +100,19 @@ class EvalConfig:
     seed: int = 0
     report_pairs: int = 3
     videos: bool = True
+    outputs: tuple[tuple[str, str], ...] = ()
     follow_symlinks: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "data", str(Path(self.data).resolve()))
         object.__setattr__(self, "out", str(Path(self.out).resolve()))
-        object.__setattr__(self, "methods", tuple(self.methods))
+        outputs = tuple((str(n), str(Path(f).resolve())) for n, f in self.outputs)
+        object.__setattr__(self, "outputs", outputs)
+        names = [n for n, _ in outputs]
+        if len(set(names)) != len(names):
+            raise EvalError(f"outputs named twice: {', '.join(names)}")
+        extra = tuple(n for n in names if n not in self.methods)
+        object.__setattr__(self, "methods", tuple(self.methods) + extra)
         if self.sources is not None:
             object.__setattr__(self, "sources", tuple(self.sources))
         if self.targets is not None:
@@ -135,6 +145,7 @@ class EvalConfig:
         for k in ("methods", "sources", "targets"):
             if d[k] is not None:
                 d[k] = list(d[k])
+        d["outputs"] = [list(o) for o in self.outputs]
         return d
 
     #: fields that must match for --resume (the others only select which pairs run)
@@ -174,3 +185,6 @@ class PairTask:
     out: str
     trace: bool = False
     videos: bool = False
+    #: the folder of the method's outputs (:mod:`habitsim.evaluation.outputs`; None: a
+    #: registered method)
+    outputs: str | None = None

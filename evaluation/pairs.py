@@ -60,13 +60,19 @@ def evaluate_pair(task: PairTask) -> dict[str, Any]:
     row = _row_base(task)
     try:
         src = load_motion(task.clip_path)
+        method: Any = task.method
+        if task.outputs is not None:  # another method's outputs, read from a folder
+            from .outputs import MethodOutputs
+
+            method = MethodOutputs(task.method, task.outputs).method()
         try:
             # transfer → refine → track: the one pipeline (habitsim.pipeline); the
             # refinement check is off so the rows measure the refinement as it is
             run = run_clip(
                 src,
                 task.target,
-                method=task.method,
+                method=method,
+                clip_id=Path(task.clip).stem,
                 refine=task.refine,
                 controller=task.controller,
                 assist=task.assist,

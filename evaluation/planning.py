@@ -79,8 +79,10 @@ def plan_tasks(cfg: EvalConfig) -> list[PairTask]:
     """
     from habitsim.transfer_methods import get_method
 
+    folders = dict(cfg.outputs)
     for m in cfg.methods:
-        get_method(m)  # raises UnknownMethodError listing the registered ones
+        if m not in folders:
+            get_method(m)  # raises UnknownMethodError listing the registered ones
     man = _manifest(cfg)
     clips = man.select(split=cfg.split, species=cfg.sources)
     if cfg.clips_per_source is not None:
@@ -140,6 +142,7 @@ def plan_tasks(cfg: EvalConfig) -> list[PairTask]:
                         out=cfg.out,
                         trace=(c.path, t) in trace_pairs,
                         videos=cfg.videos,
+                        outputs=folders.get(m),
                     )
                 )
     return tasks

@@ -49,6 +49,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .refine import RefineOptions, RefineResult
     from .sim import TrackResult
+    from .transfer_methods import TransferMethod
 
 __all__ = [
     "PipelineError",
@@ -281,11 +282,13 @@ def _method_labels(contacts: np.ndarray, record: TransferRecord | None) -> Stanc
 # ---------------------------------------------------------------------------- stages
 
 
-def _transfer(source: Motion, target: str, method: str, seed: int) -> Stage:
+def _transfer(
+    source: Motion, target: str, method: str | TransferMethod, seed: int, clip_id: str | None
+) -> Stage:
     from .transfer_methods import run_method
 
     t0 = time.perf_counter()
-    out = run_method(method, source, target, seed=seed)
+    out = run_method(method, source, target, seed=seed, clip_id=clip_id)
     record = TransferRecord.from_metadata(out.metadata)
     if out.contacts is not None:
         labels = _method_labels(np.asarray(out.contacts, dtype=bool), record)
@@ -417,7 +420,7 @@ def run_clip(
     source: Motion,
     target: str,
     *,
-    method: str = "habit",
+    method: str | TransferMethod = "habit",
     refine: str = "A",
     controller: str = "mpc",
     assist: bool | str = False,
@@ -426,6 +429,7 @@ def run_clip(
     guard: bool = True,
     refine_options: RefineOptions | None = None,
     guard_options: GuardOptions = GuardOptions(),
+    clip_id: str | None = None,
 ) -> ClipRun:
     """Run one clip through transfer → refine → track, with the metrics of every stage.
 
@@ -434,7 +438,8 @@ def run_clip(
         target: target species.
         method: transfer method, a name of the registry
             :data:`habitsim.transfer_methods.METHODS` (``habit``, ``direct``,
-            ``ground_truth``, …).
+            ``ground_truth``, …) or an unregistered
+            :class:`~habitsim.transfer_methods.TransferMethod`.
         refine: ``none``, ``A`` (kinematic) or ``B`` (dynamics); ``kinematic`` and
             ``dynamics`` are accepted too. A failed solve keeps its input (fallback) and
             says so in ``refined.status``.
@@ -448,6 +453,8 @@ def run_clip(
             without its own before/after metrics; ``dynamics`` and ``fallback`` are set
             here).
         guard_options: the guard's thresholds (:class:`GuardOptions`).
+        clip_id: the source clip's id, passed to a method that takes ``clip_id``
+            (:func:`habitsim.transfer_methods.run_method`).
 
     Returns:
         The :class:`ClipRun`.
@@ -478,11 +485,11 @@ def run_clip(
         _motion_metrics(source, source.contacts),
         species=source.species,
     )
-    moved = _transfer(source, tgt, method, seed)
+    moved = _transfer(source, tgt, method, seed, clip_id)
     refined, rres = _refine(moved, mode, model, refine_options)
     run = ClipRun(
         tgt,
-        method,
+        method if isinstance(method, str) else method.name,
         mode,
         controller,
         assist,

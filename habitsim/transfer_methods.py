@@ -49,13 +49,34 @@ temperature=…, plant=…)``, the pipeline as ``fn(motion, target, seed=…)``;
 New methods register with :func:`register_method` or its decorator form
 :meth:`MethodRegistry.add`. For the process-pool and Dask executors a method travels to
 the workers by name: register module-level functions (or ``functools.partial`` of them).
+
+**The source clip's id.** A caller that knows which clip the source is (the evaluation:
+the data set's clip id, the clip file's stem) passes it as ``clip_id``; a method receives
+it when its function takes a ``clip_id`` keyword (or ``**options``), so one that looks up
+its own precomputed outputs can find them. Methods written without it keep working.
+
+**Plugins.** A pip-installed package registers methods under the entry-point group
+:data:`ENTRY_POINT_GROUP` (``habitsim.methods``), one entry per method, its name the
+method's name and its value the function::
+
+    [project.entry-points."habitsim.methods"]
+    my_method = "my_package.transfer:my_method"
+
+They join the registry on its first lookup (:meth:`MethodRegistry.load_entry_points`),
+as :class:`LazyFunction` entries of kind ``external``: the package is imported only when
+the method is first called. Every process finds them by itself, so they also run on the
+process-pool and Dask workers. An entry whose name is invalid or already taken is left
+out with a :class:`MethodPluginWarning`.
 """
 
 from __future__ import annotations
 
 import importlib
+import inspect
+import warnings
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
+from importlib import metadata as importlib_metadata
 from typing import Any, Literal, get_args
 
 from .errors import HabitsimError, MethodUnavailable, UnknownMethodError
@@ -65,7 +86,9 @@ from .stance.policy import ConformPolicy
 from .stance.schedule import transfer_contacts
 
 __all__ = [
+    "ENTRY_POINT_GROUP",
     "METHODS",
+    "MethodPluginWarning",
     "LazyFunction",
     "MethodKind",
     "MethodRegistrationError",
@@ -85,14 +108,36 @@ __all__ = [
 
 #: ``fn(motion, target, *, seed, **options) -> Motion``: a transfer method's function.
 TransferFn = Callable[..., Motion]
-#: ``learned`` (a trained network), ``baseline`` (no network) or ``reference`` (the
-#: ground truth a benchmark compares against).
-MethodKind = Literal["learned", "baseline", "reference"]
+#: ``learned`` (a trained network), ``baseline`` (no network), ``reference`` (the
+#: ground truth a benchmark compares against) or ``external`` (another system's: a
+#: plugin's function, a folder of its outputs).
+MethodKind = Literal["learned", "baseline", "reference", "external"]
+#: The entry-point group under which installed packages register transfer methods.
+ENTRY_POINT_GROUP = "habitsim.methods"
 
 
 class MethodRegistrationError(HabitsimError, ValueError):
     """A method that cannot be registered: a bad name or kind, a function that is not
     callable, or a name already taken."""
+
+
+class MethodPluginWarning(UserWarning):
+    """An entry point of the ``habitsim.methods`` group that was left out (an invalid
+    method name or one already registered); the message names the entry and why."""
+
+
+def accepts_keyword(fn: Callable[..., Any], name: str) -> bool:
+    """True when ``fn`` takes the keyword argument ``name`` (by name or ``**kwargs``);
+    False when its signature cannot be read."""
+    try:
+        params = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):
+        return False
+    return any(
+        p.kind == p.VAR_KEYWORD
+        or (p.name == name and p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD))
+        for p in params
+    )
 
 
 @dataclass(frozen=True)
@@ -111,8 +156,10 @@ class LazyFunction:
     factory_args: tuple[str, ...] | None = None
 
     def load(self) -> TransferFn:
-        """The function (imports :attr:`module`)."""
-        obj = getattr(importlib.import_module(self.module), self.attribute)
+        """The function (imports :attr:`module`; a dotted :attr:`attribute` is followed)."""
+        obj: Any = importlib.import_module(self.module)
+        for part in self.attribute.split("."):
+            obj = getattr(obj, part)
         return obj if self.factory_args is None else obj(*self.factory_args)
 
 
@@ -125,7 +172,8 @@ class TransferMethod:
             ``--methods``).
         description: one line for listings and reports.
         fn: the function, or where to load it from on first call (:class:`LazyFunction`).
-        kind: ``learned``, ``baseline`` or ``reference`` (:data:`MethodKind`).
+        kind: ``learned``, ``baseline``, ``reference`` or ``external``
+            (:data:`MethodKind`).
         variant: the model variant whose trained checkpoint it needs (None: no network).
     """
 
@@ -150,23 +198,42 @@ class TransferMethod:
         return self.fn.load() if isinstance(self.fn, LazyFunction) else self.fn
 
     def __call__(
-        self, motion: Motion, target: str, *, seed: int | None = 0, **options: Any
+        self,
+        motion: Motion,
+        target: str,
+        *,
+        seed: int | None = 0,
+        clip_id: str | None = None,
+        **options: Any,
     ) -> Motion:
-        """``fn(motion, target, seed=seed, **options)`` (no checks: see :func:`run_method`)."""
-        return self.load()(motion, target, seed=seed, **options)
+        """``fn(motion, target, seed=seed, **options)``, plus ``clip_id=clip_id`` when it
+        is given and the function takes it (no checks: see :func:`run_method`)."""
+        fn = self.load()
+        if clip_id is not None and accepts_keyword(fn, "clip_id"):
+            options["clip_id"] = clip_id
+        return fn(motion, target, seed=seed, **options)
 
 
 class MethodRegistry(Mapping[str, TransferMethod]):
     """Transfer methods by name, in registration order.
 
     Looking up an unknown name raises :class:`UnknownMethodError` listing the registered
-    ones (a ``KeyError``, so ``in`` and ``.get`` work as for a dict).
+    ones (a ``KeyError``, so ``in`` and ``.get`` work as for a dict). The methods of
+    installed plugins (entry-point group :data:`ENTRY_POINT_GROUP`) join on the first
+    lookup, listing or count.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, entry_point_group: str | None = None) -> None:
         self._methods: dict[str, TransferMethod] = {}
+        self._group = entry_point_group
+        self._plugins_loaded = entry_point_group is None
+
+    def _plugins(self) -> None:
+        if not self._plugins_loaded:
+            self.load_entry_points()
 
     def __getitem__(self, name: str) -> TransferMethod:
+        self._plugins()
         try:
             return self._methods[name]
         except (KeyError, TypeError):
@@ -174,10 +241,48 @@ class MethodRegistry(Mapping[str, TransferMethod]):
             raise UnknownMethodError(f"unknown transfer method {name!r}; valid: {valid}") from None
 
     def __iter__(self) -> Iterator[str]:
+        self._plugins()
         return iter(self._methods)
 
     def __len__(self) -> int:
+        self._plugins()
         return len(self._methods)
+
+    def load_entry_points(self) -> list[TransferMethod]:
+        """Register the methods installed packages declare under the registry's
+        entry-point group (done once by the first lookup; call it again after installing
+        a package in a running process). An entry already registered under its name by
+        an earlier call is kept as it is.
+
+        Returns:
+            The methods registered by this call.
+        """
+        self._plugins_loaded = True
+        if self._group is None:
+            return []
+        added = []
+        for ep in importlib_metadata.entry_points(group=self._group):
+            fn = LazyFunction(ep.module, ep.attr) if ep.attr else None
+            known = self._methods.get(ep.name)
+            if known is not None and known.fn == fn:
+                continue  # found by an earlier call
+            dist = getattr(ep.dist, "name", None) or "an installed package"
+            try:
+                if fn is None:
+                    raise MethodRegistrationError(
+                        f"method {ep.name!r}: the entry point names a module, not its "
+                        "function ('package.module:function')"
+                    )
+                m = self.register(ep.name, fn, f"from {dist} ({ep.value})", kind="external")
+            except MethodRegistrationError as e:
+                warnings.warn(
+                    f"{self._group} entry point {ep.name} = {ep.value!r} of {dist} left out: {e}",
+                    MethodPluginWarning,
+                    stacklevel=2,
+                )
+                continue
+            added.append(m)
+        return added
 
     def register(
         self,
@@ -196,7 +301,7 @@ class MethodRegistry(Mapping[str, TransferMethod]):
             fn: ``fn(motion, target, *, seed, **options) -> Motion``, or a
                 :class:`LazyFunction` naming it.
             description: one line for listings.
-            kind: ``learned``, ``baseline`` or ``reference``.
+            kind: ``learned``, ``baseline``, ``reference`` or ``external``.
             variant: the model variant whose checkpoint it needs (None: no network).
             overwrite: replace a method of the same name.
 
@@ -243,8 +348,8 @@ class MethodRegistry(Mapping[str, TransferMethod]):
         return decorate
 
 
-#: The one registry of transfer methods.
-METHODS = MethodRegistry()
+#: The one registry of transfer methods (with the plugins of :data:`ENTRY_POINT_GROUP`).
+METHODS = MethodRegistry(ENTRY_POINT_GROUP)
 #: Add a transfer method to :data:`METHODS` (:meth:`MethodRegistry.register`).
 register_method = METHODS.register
 
@@ -269,6 +374,7 @@ def run_method(
     target: str,
     *,
     seed: int | None = 0,
+    clip_id: str | None = None,
     **options: Any,
 ) -> Motion:
     """Apply a method and check its output is on the target species' skeleton.
@@ -278,6 +384,8 @@ def run_method(
         source: the source motion.
         target: target species.
         seed: the method's seed.
+        clip_id: the source clip's id (a data set's clip id, a file's stem), passed to
+            a method whose function takes ``clip_id`` (None: not passed).
         **options: passed on to the method (:func:`habitsim.transfer` passes
             ``checkpoint``, ``temperature`` and ``plant``).
 
@@ -287,7 +395,7 @@ def run_method(
         HabitsimError: the method returned a motion of another species.
     """
     m = METHODS[method] if isinstance(method, str) else method
-    out = m(source, target, seed=seed, **options)
+    out = m(source, target, seed=seed, clip_id=clip_id, **options)
     if not isinstance(out, Motion):
         raise HabitsimError(f"method {m.name!r} returned {type(out).__name__}, not a Motion")
     if out.species != load_species(target).name:

@@ -80,6 +80,23 @@ def _dog_text() -> str:
     return DOG.read_text()
 
 
+def install_plugin(
+    folder: Path, dist: str, module: str, code: str, entries: dict[str, str]
+) -> Path:
+    """A pip-installed package as ``folder`` holds it for sys.path: the module
+    ``module.py`` with ``code`` and ``dist-0.1.dist-info`` declaring ``entries`` (method
+    name → ``module:function``) in the ``habitsim.methods`` entry-point group. Put
+    ``folder`` on sys.path (``monkeypatch.syspath_prepend``) to install it."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{module}.py").write_text(code)
+    info = folder / f"{dist}-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
+    lines = ["[habitsim.methods]", *(f"{k} = {v}" for k, v in entries.items())]
+    (info / "entry_points.txt").write_text("\n".join(lines) + "\n")
+    return folder
+
+
 _HOLDER = (
     "import sys, time; from habitsim.folders import claim_output_folder\n"
     "with claim_output_folder(sys.argv[1], command='eval'):\n"

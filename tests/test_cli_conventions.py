@@ -22,6 +22,8 @@ _SINGLE = {
     # the one skeleton a motion-capture source is imported onto (also --from)
     ("transfer", "--species"),
     ("retarget", "--species"),
+    # the one species the scored files must be
+    ("score", "--species"),
 }
 _LIST_FLAGS = ("--species", "--targets", "--sources", "--methods")
 

@@ -39,6 +39,7 @@ _GROUPS: list[tuple[str | None, str, tuple[str, ...]]] = [
             "demo_cmd",
             "track_cmd",
             "eval_cmd",
+            "score_cmd",
             "train_evaluator_cmd",
             "train_cmd",
             "transfer_cmd",

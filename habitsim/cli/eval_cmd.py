@@ -16,11 +16,17 @@ Writes ``bench/rows.csv`` (+ ``rows.parquet``), ``summary.md`` / ``summary.json`
 with ``--resume``. ``--executor dask --scheduler tcp://HOST:8786`` runs the pairs on a
 Dask cluster (see :mod:`habitsim.evaluation.executors` for starting one).
 ``habitsim eval --report-only --out bench`` rewrites the report of a finished run.
+
+Another method joins the table by ``--method NAME=DIR`` (a folder of its outputs,
+``DIR/<target>/<clip_id>.npz`` or ``.bvh``: :mod:`habitsim.evaluation.outputs`) or as a
+plugin (an installed package's entry point in the ``habitsim.methods`` group, listed in
+``--methods``' help). A run with any pair in error exits with code 1.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
 
 from ..evaluation.runner import (
@@ -72,12 +78,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out", default="eval_out", metavar="DIR", help="output folder (default eval_out)"
     )
+    from ..transfer_methods import method_names
+
     add_list_option(
         p,
         "--methods",
         default=list(DEFAULT_METHODS),
         metavar="METHOD",
-        help=f"methods (default {','.join(DEFAULT_METHODS)})",
+        help=f"methods (default {','.join(DEFAULT_METHODS)}; registered: "
+        f"{', '.join(method_names())})",
+    )
+    p.add_argument(
+        "--method",
+        action="append",
+        default=[],
+        dest="method_outputs",
+        metavar="NAME=DIR",
+        help="another method's outputs, DIR/<target>/<clip_id>.npz (or .bvh), put in the "
+        "table as NAME (repeatable)",
     )
     p.add_argument(
         "--refine",
@@ -190,6 +208,9 @@ def _eval(ns: argparse.Namespace) -> int:
                 f"--clips-per-source must be a whole number >= 1 or 'all', got "
                 f"{ns.clips_per_source!r}"
             ) from None
+    from ..evaluation.outputs import parse_method_outputs
+
+    outputs = [parse_method_outputs(text) for text in ns.method_outputs]
     data = ns.data
     if not data:
         from ..evaluation.runner import default_data
@@ -215,8 +236,23 @@ def _eval(ns: argparse.Namespace) -> int:
         seed=ns.seed,
         report_pairs=ns.report_pairs,
         videos=not ns.no_videos,
+        outputs=tuple((o.name, o.folder) for o in outputs),
         follow_symlinks=ns.follow_symlinks,
     )
+    if outputs:
+        from ..evaluation.outputs import dataset_clip_ids, stray_outputs
+
+        clip_ids = dataset_clip_ids(cfg.data)
+        for o in outputs:
+            stray = stray_outputs(o, clip_ids)
+            if stray:
+                print(
+                    f"warning: {o.name}: {len(stray)} file(s) under {o.folder} follow no pair "
+                    f"of this run (DIR/<target>/<clip_id>.npz|.bvh), not read: "
+                    + ", ".join(stray[:10])
+                    + (" …" if len(stray) > 10 else ""),
+                    file=sys.stderr,
+                )
     res = run_benchmark(
         cfg,
         executor=ns.executor,
@@ -236,4 +272,8 @@ def _eval(ns: argparse.Namespace) -> int:
     )
     for path in res.report:
         print(f"report: {path}")
-    return 0
+    if errors:
+        for r in res.rows:
+            if r.get("status") == "error":
+                print(f"error in {r['key']}: {r.get('note', '')}", file=sys.stderr)
+    return 1 if errors else 0
