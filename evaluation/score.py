@@ -121,6 +121,8 @@ class ScoreOptions:
         seed: the tracking's seed.
         source: how motion-capture files are read (``joint_map``, ``units``, ``up``,
             ``animation``, ``fps``; None: automatic). Their legs are never planted.
+        follow_symlinks: read through links in a given folder that lead out of it
+            (refused by default, :func:`habitsim.folders.input_files`).
     """
 
     species: str | None = None
@@ -132,6 +134,7 @@ class ScoreOptions:
     evaluator: bool = True
     seed: int = 0
     source: SourceOptions | None = None
+    follow_symlinks: bool = False
 
     def __post_init__(self) -> None:
         from habitsim.controllers import CONTROLLERS
@@ -319,21 +322,24 @@ def _csv_cell(v: Any) -> str:
 # ---------------------------------------------------------------------------- files
 
 
-def motion_files(inputs: Iterable[str | Path]) -> list[Path]:
+def motion_files(inputs: Iterable[str | Path], follow_symlinks: bool = False) -> list[Path]:
     """The motion files of ``inputs``: each file as given, each folder's ``.npz``,
     ``.bvh``, ``.glb`` and ``.gltf`` files at any depth (sorted), duplicates once.
 
     Raises:
         ScoreError: a path that does not exist, a file of another type, or nothing found.
+        InputPathError: a link in a folder that leads out of it (without
+            ``follow_symlinks``).
     """
+    from habitsim.folders import input_files
     from habitsim.source import CLIP_SUFFIXES
 
     out: list[Path] = []
     given = [Path(p) for p in inputs]
     for p in given:
         if p.is_dir():
-            out += sorted(
-                f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in CLIP_SUFFIXES
+            out += input_files(
+                p, tuple(CLIP_SUFFIXES), follow_symlinks=follow_symlinks, what="folder"
             )
         elif p.is_file():
             if p.suffix.lower() not in CLIP_SUFFIXES:
@@ -597,7 +603,7 @@ def score_files(
         ScoreError: no motion file given or found; a path that does not exist.
     """
     o = options or ScoreOptions()
-    files = motion_files(inputs)
+    files = motion_files(inputs, o.follow_symlinks)
     t0 = time.perf_counter()
     rows = []
     traces: dict[str, dict[str, np.ndarray]] = {}

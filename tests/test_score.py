@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import run_cli
+from helpers import hold, run_cli
 
 from habitsim.bvh import bvh_text, write_bvh
 from habitsim.errors import OutputPathError
@@ -174,6 +174,31 @@ def test_motion_files(walk_pair: Path, tmp_path: Path) -> None:
         motion_files([tmp_path / "notes.txt"])
     with pytest.raises(ScoreError):
         motion_files([tmp_path / "missing"])
+
+
+def test_links_out_of_a_folder_are_refused(walk_pair: Path, tmp_path: Path) -> None:
+    from habitsim.errors import InputPathError
+
+    (tmp_path / "in").mkdir()
+    (tmp_path / "in" / "theirs.npz").symlink_to(walk_pair / "walk.npz")
+    with pytest.raises(InputPathError):
+        motion_files([tmp_path / "in"])
+    assert [f.name for f in motion_files([tmp_path / "in"], follow_symlinks=True)] == ["theirs.npz"]
+
+
+def test_out_is_written_by_one_run_and_keeps_foreign_files(
+    walk_pair: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    out = tmp_path / "out"
+    argv = ["score", walk_pair / "walk.npz", "--no-evaluator", "--no-dynamic", "--out", out]
+    assert run_cli(argv, capsys)[0] == 0
+    (out / "mine.txt").write_text("a file of the user's")
+    assert run_cli(argv, capsys)[0] == 0  # a new run replaces its own files
+    assert (out / "mine.txt").read_text() == "a file of the user's"
+    busy = tmp_path / "busy"
+    with hold(busy):
+        code, _ = run_cli([*argv[:-1], busy], capsys)
+    assert code == 2 and not (busy / "scores.json").exists()
 
 
 def test_options_are_checked() -> None:

@@ -17,8 +17,12 @@ cannot be told, an unreadable file), 1 when scoring a file failed otherwise.
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from .conventions import add_source_options, format_legend, source_options
+
+if TYPE_CHECKING:
+    from ..evaluation.score import ScoreResult
 
 _LEGEND = (
     "residual F / T: the mean force [m·g] and torque [m·g·L] the motion needs beyond what "
@@ -92,6 +96,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="also write report.html and report.md into --out",
     )
+    p.add_argument(
+        "--follow-symlinks",
+        action="store_true",
+        help="read through links in a given folder that lead out of it (refused by default)",
+    )
     add_source_options(p, of="every motion-capture file", span=False, loop=False)
     p.set_defaults(func=_score)
 
@@ -111,10 +120,22 @@ def _score(ns: argparse.Namespace) -> int:
         evaluator=not ns.no_evaluator,
         seed=ns.seed,
         source=source_options(ns, plant=False),
+        follow_symlinks=ns.follow_symlinks,
     )
-    if ns.out is not None:
-        check_outputs(ns.out, report=ns.report)
-    res = score_files(ns.inputs, options)
+    if ns.out is None:
+        return _report(ns, score_files(ns.inputs, options))
+    from ..folders import claim_output_folder
+
+    check_outputs(ns.out, report=ns.report)
+    # one run at a time in --out; a new run replaces only the files habitsim wrote there
+    with claim_output_folder(
+        ns.out, command="score", overwrite=True, resume_flag=None, overwrite_flag=None
+    ):
+        return _report(ns, score_files(ns.inputs, options))
+
+
+def _report(ns: argparse.Namespace, res: ScoreResult) -> int:
+    """Print the table (and write ``--out``'s files); the exit code."""
     print(res.table_text())
     print(format_legend(_LEGEND))
     for line in res.stance_lines():
