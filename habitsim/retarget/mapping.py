@@ -76,7 +76,7 @@ def retarget(
     if isinstance(robot, RobotLegs):
         rl = robot
     else:
-        rl = robot_legs(robot, _need_feet(feet, robot, home), home, opts)
+        rl = robot_legs(robot, _need_feet(feet, robot, home, opts), home, opts)
     if len(rl.feet) != 4:
         raise RetargetError(
             f"a habitsim motion has 4 feet (LF, RF, LH, RH); got "

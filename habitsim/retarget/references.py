@@ -58,7 +58,7 @@ def trot(
     rl = (
         robot
         if isinstance(robot, RobotLegs)
-        else robot_legs(robot, _need_feet(feet, robot), options=options)
+        else robot_legs(robot, _need_feet(feet, robot, options=options), options=options)
     )
     if len(rl.feet) != 4:
         raise RetargetError(
@@ -157,7 +157,7 @@ def stand(
     rl = (
         robot
         if isinstance(robot, RobotLegs)
-        else robot_legs(robot, _need_feet(feet, robot), options=options)
+        else robot_legs(robot, _need_feet(feet, robot, options=options), options=options)
     )
     for name, v in (("duration_s", duration_s), ("fps", fps)):
         if not (math.isfinite(v) and v > 0):
