@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..errors import HabitsimError
 
-__all__ = ["RetargetError", "StandingPoseError", "RobotSourceError"]
+__all__ = ["RetargetError", "StandingPoseError", "RobotSourceError", "VendorError"]
 
 
 class RetargetError(HabitsimError, ValueError):
@@ -24,3 +24,10 @@ class RobotSourceError(RetargetError):
     """A robot named by its MuJoCo Menagerie name that cannot be had here: the optional
     package ``mujoco-menagerie`` is not installed, or it cannot fetch the model (offline,
     an unknown name). The message says how to install it or vendor a copy instead."""
+
+
+class VendorError(RetargetError):
+    """A robot model that cannot be made into a collision-only single-file copy: it does
+    not load, a collision mesh in a ``<frame>``, a height field or skin read from a file,
+    an output that would overwrite the input, a bad option (the message says which are
+    valid)."""

@@ -1,0 +1,242 @@
+"""A collision-only, single-file copy of a robot model, for vendoring it:
+:func:`vendor_robot` (``habitsim models vendor``).
+
+MuJoCo Menagerie robots ship their visual meshes and, for some (Spot), collision meshes
+as separate files. The copy keeps the bodies, inertials, joints, actuators, sensors,
+keyframes and primitive geoms as they are, drops every visual mesh geom (one that neither
+collides nor is collided with: ``contype == conaffinity == 0``), replaces every colliding
+mesh geom by a primitive fitted to its mesh by MuJoCo's compiler (the ``mesh`` attribute
+on a box, capsule or sphere geom; ``fitaabb`` and ``fitscale`` as :class:`VendorOptions`
+says) and removes the mesh and file texture assets, so that the MJCF written holds no
+reference to another file. Includes are merged into the one file.
+
+The inertials do not move: a body whose mass came from its meshes' volume (no
+``<inertial>``, ``inertiafromgeom``) keeps the mass and inertia the meshes gave it, written
+as an explicit ``<inertial>``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from .errors import VendorError
+
+__all__ = ["VendorOptions", "VendorReport", "vendor_robot", "SHAPES"]
+
+#: Primitives a collision mesh can become (``auto``: the one closest to the mesh's volume).
+SHAPES = ("auto", "box", "capsule", "sphere")
+_GEOM = {
+    "box": mujoco.mjtGeom.mjGEOM_BOX,
+    "capsule": mujoco.mjtGeom.mjGEOM_CAPSULE,
+    "sphere": mujoco.mjtGeom.mjGEOM_SPHERE,
+}
+#: Files copied beside the model when the robot's folder has them (its licence).
+LICENCE_FILES = ("LICENSE", "LICENSE.txt", "LICENCE", "COPYING")
+
+
+@dataclass(frozen=True)
+class VendorOptions:
+    """Knobs of :func:`vendor_robot`.
+
+    Attributes:
+        shape: the primitive each collision mesh becomes (:data:`SHAPES`); ``auto`` fits
+            each of box, capsule and sphere and keeps the one whose volume is closest to
+            the mesh's.
+        fit_aabb: fit the primitive to the mesh's bounding box in its principal frame
+            (MuJoCo's ``compiler/fitaabb``) instead of to its equivalent-inertia box.
+        fit_scale: scale of the fitted primitive (MuJoCo's ``geom/fitscale``).
+    """
+
+    shape: str = "auto"
+    fit_aabb: bool = True
+    fit_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.shape not in SHAPES:
+            raise VendorError(f"shape must be one of {', '.join(SHAPES)}, got {self.shape!r}")
+        if not (np.isfinite(self.fit_scale) and self.fit_scale > 0):
+            raise VendorError(f"fit_scale must be > 0, got {self.fit_scale!r}")
+
+
+@dataclass
+class VendorReport:
+    """What :func:`vendor_robot` did.
+
+    Attributes:
+        out: the model written; licence: the licence file copied beside it (or None).
+        dropped: names (``body/#i`` when unnamed) of the visual mesh geoms dropped.
+        fitted: per colliding mesh geom replaced, (name, primitive, size (3,) [m]).
+        assets_removed: the mesh and texture assets removed.
+    """
+
+    out: Path
+    licence: Path | None = None
+    dropped: list[str] = field(default_factory=list)
+    fitted: list[tuple[str, str, tuple[float, float, float]]] = field(default_factory=list)
+    assets_removed: list[str] = field(default_factory=list)
+
+
+def _load(path: Path) -> mujoco.MjSpec:
+    if not path.is_file():
+        raise VendorError(f"robot model {str(path)!r} does not exist; give an MJCF file")
+    try:
+        spec = mujoco.MjSpec.from_file(str(path))
+        spec.compile()
+    except ValueError as e:
+        raise VendorError(f"robot model {str(path)!r} does not load: {e}") from e
+    return spec
+
+
+def _label(model: mujoco.MjModel, gid: int) -> str:
+    name = model.geom(gid).name
+    return name or f"{model.body(int(model.geom_bodyid[gid])).name}/#{gid}"
+
+
+def _mesh_volume(model: mujoco.MjModel, mid: int) -> float:
+    import trimesh
+
+    va, vn = int(model.mesh_vertadr[mid]), int(model.mesh_vertnum[mid])
+    fa, fn = int(model.mesh_faceadr[mid]), int(model.mesh_facenum[mid])
+    mesh = trimesh.Trimesh(
+        model.mesh_vert[va : va + vn], model.mesh_face[fa : fa + fn], process=False
+    )
+    vol = abs(float(mesh.volume))
+    return vol if vol > 0 else float(mesh.convex_hull.volume)
+
+
+def _primitive_volume(kind: str, size: np.ndarray) -> float:
+    if kind == "box":
+        return float(8.0 * np.prod(size[:3]))
+    if kind == "sphere":
+        return float(4.0 / 3.0 * np.pi * size[0] ** 3)
+    r, h = float(size[0]), float(size[1])
+    return float(np.pi * r * r * 2.0 * h + 4.0 / 3.0 * np.pi * r**3)
+
+
+def _fits(
+    path: Path, kind: str, ids: list[int], opts: VendorOptions
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(size, pos, quat) per geom id of ``ids`` fitted as ``kind`` by MuJoCo's compiler
+    (body frame)."""
+    spec = mujoco.MjSpec.from_file(str(path))
+    spec.compiler.fitaabb = bool(opts.fit_aabb)
+    geoms = list(spec.geoms)
+    for gid in ids:
+        geoms[gid].type = _GEOM[kind]
+        geoms[gid].fitscale = float(opts.fit_scale)
+    m = spec.compile()
+    return m.geom_size[ids].copy(), m.geom_pos[ids].copy(), m.geom_quat[ids].copy()
+
+
+def vendor_robot(
+    path: str | Path, out_dir: str | Path, options: VendorOptions | None = None
+) -> VendorReport:
+    """Write a collision-only, single-file copy of the robot MJCF ``path`` (see the
+    module) as ``out_dir/<its file name>``, atomically, and its folder's licence file
+    beside it.
+
+    Args:
+        path: the robot's MJCF (or its scene); includes and mesh files are read from
+            where it says.
+        out_dir: the folder to write into (made if missing).
+        options: the knobs (default :class:`VendorOptions`).
+
+    Returns:
+        The :class:`VendorReport`.
+
+    Raises:
+        VendorError: a model that does not load, a mesh geom inside a ``<frame>``, a
+            height field or skin read from a file (the copy could not be one file), an
+            output that is the input.
+    """
+    from ..fileio import atomic_write_text
+
+    opts = options or VendorOptions()
+    src = Path(path)
+    spec = _load(src)
+    out = Path(out_dir) / src.name
+    if out.resolve() == src.resolve():
+        raise VendorError(f"the copy would overwrite {str(src)!r}; give another --out folder")
+    for what, items in (("height field", spec.hfields), ("skin", spec.skins)):
+        files = [x.name for x in items if getattr(x, "file", "")]
+        if files:
+            raise VendorError(
+                f"{str(src)!r} reads a {what} from a file ({', '.join(files)}); the copy "
+                "could not be one file: remove it first"
+            )
+    m0 = spec.compile()
+    geoms = list(spec.geoms)
+    report = VendorReport(out=out)
+    mesh_type = mujoco.mjtGeom.mjGEOM_MESH
+    meshes = [i for i in range(m0.ngeom) if m0.geom_type[i] == mesh_type]
+    colliding = [i for i in meshes if m0.geom_contype[i] or m0.geom_conaffinity[i]]
+    for i in colliding:
+        if geoms[i].frame is not None:
+            raise VendorError(
+                f"the collision mesh geom {_label(m0, i)} sits in a <frame>; move it onto "
+                "its body before vendoring"
+            )
+    kinds = ["box", "capsule", "sphere"] if opts.shape == "auto" else [opts.shape]
+    fitted = {k: _fits(src, k, colliding, opts) for k in kinds} if colliding else {}
+    for n, gid in enumerate(colliding):
+        vol = _mesh_volume(m0, int(m0.geom_dataid[gid]))
+        best = min(
+            kinds, key=lambda k: abs(_primitive_volume(k, fitted[k][0][n]) - vol) / max(vol, 1e-12)
+        )
+        size, pos, quat = (a[n] for a in fitted[best])
+        g = geoms[gid]
+        g.type = _GEOM[best]
+        g.size = size
+        g.pos = pos
+        g.quat = quat
+        g.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
+        g.meshname = ""
+        report.fitted.append((_label(m0, gid), best, tuple(float(v) for v in size)))
+    # the bodies keep the mass and inertia their meshes gave them
+    bodies = list(spec.bodies)
+    for body in bodies:
+        b = int(body.id)
+        if b <= 0 or body.explicitinertial:
+            continue
+        body.explicitinertial = True
+        body.mass = float(m0.body_mass[b])
+        body.ipos = m0.body_ipos[b].copy()
+        body.iquat = m0.body_iquat[b].copy()
+        body.inertia = m0.body_inertia[b].copy()
+    for gid in sorted(set(meshes) - set(colliding), reverse=True):
+        report.dropped.append(_label(m0, gid))
+        spec.delete(geoms[gid])
+    for mesh in list(spec.meshes):
+        report.assets_removed.append(f"mesh {mesh.name}")
+        spec.delete(mesh)
+    removed = set()
+    for tex in list(spec.textures):
+        if tex.file or any(tex.cubefiles):
+            removed.add(tex.name)
+            report.assets_removed.append(f"texture {tex.name}")
+            spec.delete(tex)
+    for mat in spec.materials:
+        mat.textures = ["" if t in removed else t for t in mat.textures]
+    spec.meshdir = ""
+    spec.texturedir = ""
+    report.dropped.reverse()
+    try:
+        spec.compile()
+        xml = spec.to_xml()
+        mujoco.MjModel.from_xml_string(xml)  # no file left to read
+    except ValueError as e:
+        raise VendorError(f"the collision-only copy of {str(src)!r} does not load: {e}") from e
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out, xml)
+    for name in LICENCE_FILES:
+        lic = src.parent / name
+        if lic.is_file():
+            report.licence = out.parent / name
+            if lic.resolve() != report.licence.resolve():
+                atomic_write_text(report.licence, lic.read_text(encoding="utf-8"))
+            break
+    return report
