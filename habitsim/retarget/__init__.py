@@ -42,7 +42,7 @@ from __future__ import annotations
 
 from .clip import CLIP_VERSION as CLIP_VERSION
 from .clip import RobotClip, load_robot_clip, track_clip
-from .errors import RetargetError, RobotSourceError, StandingPoseError
+from .errors import RetargetError, RobotSourceError, StandingPoseError, VendorError
 from .ik import leg_ik
 from .keyframes import file_keyframes, nearby_keyframes, standing_keyframe
 from .legs import StandingPoseWarning, find_robot_feet, leg_extension, robot_legs, stand_check
@@ -57,12 +57,17 @@ from .options import STRAIGHT_REACH as STRAIGHT_REACH
 from .options import RetargetOptions
 from .references import stand, trot
 from .robot import RobotLegs, drawable, load_robot, menagerie_robot
+from .vendor import VendorOptions, VendorReport, vendor_robot
 
 __all__ = [
     "RetargetError",
     "StandingPoseError",
     "StandingPoseWarning",
     "RobotSourceError",
+    "VendorError",
+    "VendorOptions",
+    "VendorReport",
+    "vendor_robot",
     "stand_check",
     "standing_keyframe",
     "file_keyframes",
