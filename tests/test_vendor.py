@@ -110,6 +110,21 @@ def test_a_chosen_shape_is_used_for_every_mesh(tmp_path):
     assert len(rep.fitted) == 2
 
 
+def test_visual_mesh_files_are_not_needed(tmp_path):
+    """A robot downloaded without its visual mesh files is vendored the same (the bodies
+    whose inertia came from their geoms say so); a missing collision mesh file is a typed
+    error."""
+    src = _robot(tmp_path / "src")
+    (src.parent / "meshes" / "shell.stl").unlink()
+    rep = vendor_robot(src, tmp_path / "out")
+    assert rep.dropped == ["shell"] and len(rep.fitted) == 2
+    assert rep.inertia_without_visuals == ["trunk", "leg"]
+    mujoco.MjModel.from_xml_path(str(rep.out))
+    (src.parent / "meshes" / "trunk.stl").unlink()
+    with pytest.raises(VendorError):
+        vendor_robot(src, tmp_path / "out2")
+
+
 def test_bad_input_is_a_typed_error(tmp_path):
     with pytest.raises(VendorError):
         vendor_robot(tmp_path / "missing.xml", tmp_path / "out")

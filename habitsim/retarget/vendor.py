@@ -71,6 +71,8 @@ class VendorReport:
         dropped: names (``body/#i`` when unnamed) of the visual mesh geoms dropped.
         fitted: per colliding mesh geom replaced, (name, primitive, size (3,) [m]).
         assets_removed: the mesh and texture assets removed.
+        inertia_without_visuals: bodies whose inertia comes from their geoms and whose
+            visual mesh files were missing: their inertia is that of the geoms left.
     """
 
     out: Path
@@ -78,17 +80,20 @@ class VendorReport:
     dropped: list[str] = field(default_factory=list)
     fitted: list[tuple[str, str, tuple[float, float, float]]] = field(default_factory=list)
     assets_removed: list[str] = field(default_factory=list)
+    inertia_without_visuals: list[str] = field(default_factory=list)
 
 
 def _load(path: Path) -> mujoco.MjSpec:
     if not path.is_file():
         raise VendorError(f"robot model {str(path)!r} does not exist; give an MJCF file")
     try:
-        spec = mujoco.MjSpec.from_file(str(path))
-        spec.compile()
+        return mujoco.MjSpec.from_file(str(path))
     except ValueError as e:
         raise VendorError(f"robot model {str(path)!r} does not load: {e}") from e
-    return spec
+
+
+def _visual_mesh(g: mujoco.MjsGeom) -> bool:
+    return g.type == mujoco.mjtGeom.mjGEOM_MESH and g.contype == 0 and g.conaffinity == 0
 
 
 def _label(model: mujoco.MjModel, gid: int) -> str:
@@ -118,11 +123,11 @@ def _primitive_volume(kind: str, size: np.ndarray) -> float:
 
 
 def _fits(
-    path: Path, kind: str, ids: list[int], opts: VendorOptions
+    base: mujoco.MjSpec, kind: str, ids: list[int], opts: VendorOptions
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(size, pos, quat) per geom id of ``ids`` fitted as ``kind`` by MuJoCo's compiler
     (body frame)."""
-    spec = mujoco.MjSpec.from_file(str(path))
+    spec = base.copy()
     spec.compiler.fitaabb = bool(opts.fit_aabb)
     geoms = list(spec.geoms)
     for gid in ids:
@@ -168,12 +173,27 @@ def vendor_robot(
                 f"{str(src)!r} reads a {what} from a file ({', '.join(files)}); the copy "
                 "could not be one file: remove it first"
             )
-    m0 = spec.compile()
-    geoms = list(spec.geoms)
+    try:  # the whole model, visual meshes included: the bodies' inertia as shipped
+        full: mujoco.MjModel | None = spec.compile()
+    except ValueError:  # visual mesh files left out of the download: not needed
+        full = None
     report = VendorReport(out=out)
-    mesh_type = mujoco.mjtGeom.mjGEOM_MESH
-    meshes = [i for i in range(m0.ngeom) if m0.geom_type[i] == mesh_type]
-    colliding = [i for i in meshes if m0.geom_contype[i] or m0.geom_conaffinity[i]]
+    for g in [g for g in spec.geoms if _visual_mesh(g)]:
+        report.dropped.append(g.name or f"{g.parent.name}/#{len(report.dropped)}")
+        spec.delete(g)
+    used = {g.meshname for g in spec.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH}
+    for mesh in [m for m in spec.meshes if m.name not in used]:
+        report.assets_removed.append(f"mesh {mesh.name}")
+        spec.delete(mesh)
+    try:
+        m0 = spec.compile()
+    except ValueError as e:
+        raise VendorError(
+            f"{str(src)!r} does not compile without its visual meshes: {e} (a collision "
+            "mesh's file is needed to fit its primitive)"
+        ) from e
+    geoms = list(spec.geoms)
+    colliding = [i for i in range(m0.ngeom) if m0.geom_type[i] == mujoco.mjtGeom.mjGEOM_MESH]
     for i in colliding:
         if geoms[i].frame is not None:
             raise VendorError(
@@ -181,7 +201,7 @@ def vendor_robot(
                 "its body before vendoring"
             )
     kinds = ["box", "capsule", "sphere"] if opts.shape == "auto" else [opts.shape]
-    fitted = {k: _fits(src, k, colliding, opts) for k in kinds} if colliding else {}
+    fitted = {k: _fits(spec, k, colliding, opts) for k in kinds} if colliding else {}
     for n, gid in enumerate(colliding):
         vol = _mesh_volume(m0, int(m0.geom_dataid[gid]))
         best = min(
@@ -195,21 +215,22 @@ def vendor_robot(
         g.quat = quat
         g.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
         g.meshname = ""
-        report.fitted.append((_label(m0, gid), best, tuple(float(v) for v in size)))
+        report.fitted.append(
+            (_label(m0, gid), best, (float(size[0]), float(size[1]), float(size[2])))
+        )
     # the bodies keep the mass and inertia their meshes gave them
-    bodies = list(spec.bodies)
-    for body in bodies:
+    source = full if full is not None else m0
+    for body in list(spec.bodies):
         b = int(body.id)
         if b <= 0 or body.explicitinertial:
             continue
+        if full is None:
+            report.inertia_without_visuals.append(body.name or f"#{b}")
         body.explicitinertial = True
-        body.mass = float(m0.body_mass[b])
-        body.ipos = m0.body_ipos[b].copy()
-        body.iquat = m0.body_iquat[b].copy()
-        body.inertia = m0.body_inertia[b].copy()
-    for gid in sorted(set(meshes) - set(colliding), reverse=True):
-        report.dropped.append(_label(m0, gid))
-        spec.delete(geoms[gid])
+        body.mass = float(source.body_mass[b])
+        body.ipos = source.body_ipos[b].copy()
+        body.iquat = source.body_iquat[b].copy()
+        body.inertia = source.body_inertia[b].copy()
     for mesh in list(spec.meshes):
         report.assets_removed.append(f"mesh {mesh.name}")
         spec.delete(mesh)
@@ -223,7 +244,6 @@ def vendor_robot(
         mat.textures = ["" if t in removed else t for t in mat.textures]
     spec.meshdir = ""
     spec.texturedir = ""
-    report.dropped.reverse()
     try:
         spec.compile()
         xml = spec.to_xml()
