@@ -641,3 +641,20 @@ def test_a_menagerie_name_without_the_package_is_a_typed_error(monkeypatch, tmp_
     assert load_robot("unitree_go1").nq == 19 and seen == ["unitree_go1"]
     with pytest.raises(RetargetError):  # a path that does not exist is no name
         load_robot(tmp_path / "missing.xml")
+
+
+def test_vendored_a1_is_menagerie_through_the_vendor_helper(walk):
+    """The A1 vendored by `habitsim models vendor`: one file without meshes, its feet found
+    by their bodies, standing on its home keyframe (no folded pose), retargeted cleanly."""
+    from habitsim.retarget import stand_check
+
+    scene = Path(__file__).parent / "robots" / "unitree_a1" / "scene.xml"
+    assert "made by `habitsim models vendor`" in scene.read_text().splitlines()[0]
+    a1 = load_robot(scene)
+    assert not np.any(a1.geom_type == mujoco.mjtGeom.mjGEOM_MESH) and a1.nmesh == 0
+    feet = find_robot_feet(a1)
+    assert feet == ("FL_calf", "FR_calf", "RL_calf", "RR_calf")
+    rl = robot_legs(a1, feet)
+    assert rl.home_source == "keyframe 'home'" and stand_check(rl)["problems"] == []
+    clip = retarget(walk, rl)
+    assert clip.metadata["ik_residual_max_m"] < 1e-3

@@ -185,12 +185,20 @@ def vendor_robot(
     for mesh in [m for m in spec.meshes if m.name not in used]:
         report.assets_removed.append(f"mesh {mesh.name}")
         spec.delete(mesh)
+    removed = set()
+    for tex in list(spec.textures):
+        if tex.file or any(tex.cubefiles):
+            removed.add(tex.name)
+            report.assets_removed.append(f"texture {tex.name}")
+            spec.delete(tex)
+    for mat in spec.materials:
+        mat.textures = ["" if t in removed else t for t in mat.textures]
     try:
         m0 = spec.compile()
     except ValueError as e:
         raise VendorError(
-            f"{str(src)!r} does not compile without its visual meshes: {e} (a collision "
-            "mesh's file is needed to fit its primitive)"
+            f"{str(src)!r} does not compile without its visual meshes and file textures: "
+            f"{e} (a collision mesh's file is needed to fit its primitive)"
         ) from e
     geoms = list(spec.geoms)
     colliding = [i for i in range(m0.ngeom) if m0.geom_type[i] == mujoco.mjtGeom.mjGEOM_MESH]
@@ -234,14 +242,6 @@ def vendor_robot(
     for mesh in list(spec.meshes):
         report.assets_removed.append(f"mesh {mesh.name}")
         spec.delete(mesh)
-    removed = set()
-    for tex in list(spec.textures):
-        if tex.file or any(tex.cubefiles):
-            removed.add(tex.name)
-            report.assets_removed.append(f"texture {tex.name}")
-            spec.delete(tex)
-    for mat in spec.materials:
-        mat.textures = ["" if t in removed else t for t in mat.textures]
     spec.meshdir = ""
     spec.texturedir = ""
     try:
@@ -251,7 +251,12 @@ def vendor_robot(
     except ValueError as e:
         raise VendorError(f"the collision-only copy of {str(src)!r} does not load: {e}") from e
     out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out, xml)
+    note = (
+        f"<!-- A collision-only copy of {src.name} made by `habitsim models vendor`: "
+        f"{len(report.dropped)} visual mesh geoms dropped, {len(report.fitted)} collision "
+        "meshes replaced by fitted primitives, mesh and file texture assets removed. -->\n"
+    )
+    atomic_write_text(out, note + xml)
     for name in LICENCE_FILES:
         lic = src.parent / name
         if lic.is_file():
