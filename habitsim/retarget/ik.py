@@ -103,8 +103,6 @@ def _solve_frames(
 def _fit_figures(
     rl: RobotLegs, qpos: np.ndarray, res: np.ndarray, extra: dict[str, Any]
 ) -> dict[str, Any]:
-    from .legs import stand_check
-
     at_limit = []
     for i in range(len(rl.feet)):
         v = qpos[:, rl.qadr[i]]
@@ -117,5 +115,4 @@ def _fit_figures(
         "joints_at_limit_share": float(np.mean(at_limit)),
         "robot_leg_length_m": rl.leg_length,
         "robot_home": rl.home_source,
-        "robot_stand": {k: v for k, v in stand_check(rl).items() if k != "keyframes"},
     }

@@ -174,6 +174,11 @@ def stand_check(rl: RobotLegs, options: RetargetOptions | None = None) -> dict[s
     }
 
 
+def _stand_figures(rl: RobotLegs) -> dict[str, Any]:
+    """:func:`stand_check`'s figures and problems for a clip's metadata."""
+    return {k: v for k, v in stand_check(rl).items() if k != "keyframes"}
+
+
 def _describe(check: dict[str, Any]) -> str:
     keys = ", ".join(check["keyframes"]) or "(none)"
     return f"{'; '.join(check['problems'])}; the model's keyframes: {keys}"

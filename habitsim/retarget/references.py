@@ -12,7 +12,7 @@ from ..physics_constants import GRAVITY
 from .clip import RobotClip
 from .errors import RetargetError
 from .ik import _fit_figures, _solve_frames
-from .legs import _need_feet, robot_legs
+from .legs import _need_feet, _stand_figures, robot_legs
 from .options import RetargetOptions
 from .robot import RobotLegs
 
@@ -136,6 +136,7 @@ def trot(
                 "duty": float(duty),
                 "step_height_m": height,
                 "frames": n,
+                "robot_stand": _stand_figures(rl),
             },
         ),
     )
