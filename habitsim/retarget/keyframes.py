@@ -142,5 +142,6 @@ def nearby_keyframes(robot_path: str | Path, nq: int) -> list[str]:
         except RetargetError:
             continue
         if keys:
-            out.append(f"{f.name} ({', '.join(k.label.strip(chr(39)) for k in keys)})")
+            names = ", ".join(k.name or f"#{k.index}" for k in keys)
+            out.append(f"{f.name} ({names})")
     return out

@@ -178,9 +178,10 @@ def vendor_robot(
     except ValueError:  # visual mesh files left out of the download: not needed
         full = None
     report = VendorReport(out=out)
-    for g in [g for g in spec.geoms if _visual_mesh(g)]:
-        report.dropped.append(g.name or f"{g.parent.name}/#{len(report.dropped)}")
-        spec.delete(g)
+    for i, g in enumerate(list(spec.geoms)):
+        if _visual_mesh(g):
+            report.dropped.append(g.name or f"{g.parent.name}/#{i}")
+            spec.delete(g)
     used = {g.meshname for g in spec.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH}
     for mesh in [m for m in spec.meshes if m.name not in used]:
         report.assets_removed.append(f"mesh {mesh.name}")
