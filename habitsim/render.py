@@ -25,13 +25,14 @@ OpenGL backend raises it too (``render_available()`` tells beforehand).
 
 from __future__ import annotations
 
+import copy
 import importlib
 import importlib.util
 import os
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO, cast
+from typing import Any, BinaryIO, cast
 
 import mujoco
 import numpy as np
@@ -50,6 +51,8 @@ __all__ = [
     "SPECIES_COLOURS",
     "GhostStyle",
     "render_tracking",
+    "RenderOptions",
+    "iter_frames",
 ]
 
 VIDEO_FORMATS = (".mp4", ".gif")
@@ -110,6 +113,60 @@ class GhostStyle:
     floor_drop: float | None = None
 
 
+@dataclass(frozen=True)
+class RenderOptions:
+    """How fast and how finely videos are drawn and encoded.
+
+    The defaults draw a frame in a few milliseconds with a software OpenGL (Mesa's
+    llvmpipe behind EGL or OSMesa, a headless server's): MuJoCo's shadow map
+    (4096² by default) and floor reflection each cost more than the rest of the frame.
+
+    Attributes:
+        shadows: draw the lights' shadows (MuJoCo's ``mjRND_SHADOW``).
+        reflections: draw reflections on reflective floors (``mjRND_REFLECTION``).
+        multisamples: multisample anti-aliasing samples of the off-screen buffer
+            (``visual/quality/offsamples``; MuJoCo's default is 4).
+        video_fps: a video keeps every n-th frame, n the smallest whole number that
+            brings the clip's rate to at most this [Hz]; None keeps every frame.
+        preset: libx264's speed preset for MP4 (``ultrafast`` … ``veryslow``).
+    """
+
+    shadows: bool = False
+    reflections: bool = False
+    multisamples: int = 0
+    video_fps: float | None = 30.0
+    preset: str = "veryfast"
+
+    def __post_init__(self) -> None:
+        if int(self.multisamples) < 0:
+            raise RenderError(f"multisamples must be >= 0, got {self.multisamples!r}")
+        if self.video_fps is not None and not (np.isfinite(self.video_fps) and self.video_fps > 0):
+            raise RenderError(f"video_fps must be > 0 or None, got {self.video_fps!r}")
+        if self.preset not in X264_PRESETS:
+            raise RenderError(
+                f"preset must be one of {', '.join(X264_PRESETS)}, got {self.preset!r}"
+            )
+
+    def frame_step(self, fps: float) -> int:
+        """Keep every n-th frame of a clip at ``fps`` [Hz] (see ``video_fps``)."""
+        if self.video_fps is None or fps <= self.video_fps:
+            return 1
+        return int(np.ceil(fps / self.video_fps - 1e-9))
+
+
+#: libx264's presets, fastest first.
+X264_PRESETS = (
+    "ultrafast",
+    "superfast",
+    "veryfast",
+    "faster",
+    "fast",
+    "medium",
+    "slow",
+    "slower",
+    "veryslow",
+)
+
 _backend_checked = False
 
 
@@ -159,8 +216,49 @@ def render_frames(
     feet: Sequence[str] | None = None,
     species: str | None = None,
     style: GhostStyle | None = None,
+    options: RenderOptions | None = None,
 ) -> np.ndarray:
-    """(T, height, width, 3) uint8 images of a qpos trajectory.
+    """(T, height, width, 3) uint8 images of a qpos trajectory (every frame; arguments
+    as :func:`iter_frames`)."""
+    q = np.atleast_2d(np.asarray(qpos, dtype=np.float64))
+    out = np.empty((len(q), height, width, 3), dtype=np.uint8)
+    frames = iter_frames(
+        model,
+        q,
+        width=width,
+        height=height,
+        camera=camera,
+        reference=reference,
+        contacts=contacts,
+        reference_contacts=reference_contacts,
+        feet=feet,
+        species=species,
+        style=style,
+        options=options,
+    )
+    for k, frame in enumerate(frames):
+        out[k] = frame
+    return out
+
+
+def iter_frames(
+    model: mujoco.MjModel,
+    qpos: np.ndarray,
+    *,
+    width: int = 640,
+    height: int = 480,
+    camera: str | int = "track",
+    reference: np.ndarray | None = None,
+    contacts: np.ndarray | None = None,
+    reference_contacts: np.ndarray | None = None,
+    feet: Sequence[str] | None = None,
+    species: str | None = None,
+    style: GhostStyle | None = None,
+    options: RenderOptions | None = None,
+) -> Iterator[np.ndarray]:
+    """The (height, width, 3) uint8 images of a qpos trajectory, one per row of ``qpos``,
+    drawn by one renderer into one buffer (the same array each time: copy a frame to keep
+    it).
 
     Args:
         model: the model (the frame buffer must fit: MJCF ``<visual><global offwidth>``
@@ -184,11 +282,14 @@ def render_frames(
             drawn low (:attr:`GhostStyle.floor_drop`) whenever a reference, contacts or a
             species is given.
         style: the ghost's look (default :class:`GhostStyle`).
+        options: shadows, reflections, anti-aliasing (default :class:`RenderOptions`;
+            its ``video_fps`` applies to videos, :func:`render_video`).
 
     Raises:
         RenderError: no OpenGL backend, a bad size/camera, arrays of the wrong shape, a
             foot name the model does not have.
     """
+    opts = options or RenderOptions()
     q = np.atleast_2d(np.asarray(qpos, dtype=np.float64))
     if q.shape[1] != model.nq:
         raise RenderError(f"qpos must have shape (T, {model.nq}), got {q.shape}")
@@ -215,6 +316,9 @@ def render_frames(
         isinstance(camera, str) and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera) < 0
     ):
         cam = _tracking_camera(model)
+    if int(model.vis.quality.offsamples) != int(opts.multisamples):
+        model = copy.copy(model)  # the caller's model keeps its own setting
+        model.vis.quality.offsamples = int(opts.multisamples)
     _headless_context()
     try:
         renderer = mujoco.Renderer(model, height, width)
@@ -242,9 +346,11 @@ def render_frames(
         for i in range(model.ngeom)
         if model.geom_bodyid[i] == 0 and model.geom_type[i] == mujoco.mjtGeom.mjGEOM_PLANE
     }
-    out = np.empty((len(q), height, width, 3), dtype=np.uint8)
+    buf = np.empty((height, width, 3), dtype=np.uint8)
     with renderer:
         scn = renderer.scene
+        scn.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = bool(opts.shadows)
+        scn.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = bool(opts.reflections)
         for k, row in enumerate(q):
             data.qpos[:] = row
             mujoco.mj_forward(model, data)
@@ -283,8 +389,7 @@ def render_frames(
                             foot_points.radius,
                             (*style.stance_rgba[:3], style.stance_rgba[3] * a),
                         )
-            out[k] = renderer.render()
-    return out
+            yield renderer.render(out=buf)
 
 
 def _stance(c: np.ndarray | None, n: int, name: str) -> np.ndarray | None:
@@ -412,8 +517,11 @@ def _has(module: str) -> bool:
     return importlib.util.find_spec(module) is not None
 
 
-def save_video(frames: np.ndarray, fps: float, path: str | Path) -> Path:
-    """Write (T, H, W, 3) uint8 frames as ``.mp4`` or ``.gif`` (atomically).
+def save_video(
+    frames: np.ndarray, fps: float, path: str | Path, options: RenderOptions | None = None
+) -> Path:
+    """Write (T, H, W, 3) uint8 frames as ``.mp4`` or ``.gif`` (atomically), every frame
+    at ``fps`` [Hz] (``options.preset``: libx264's speed preset).
 
     Raises:
         RenderError: unsupported suffix, or no installed writer (the message names the
@@ -426,16 +534,7 @@ def save_video(frames: np.ndarray, fps: float, path: str | Path) -> Path:
     if frames.ndim != 4 or frames.shape[-1] != 3 or len(frames) == 0:
         raise RenderError(f"frames must have shape (T, H, W, 3) with T > 0, got {frames.shape}")
     if suffix == ".mp4":
-        import imageio.v2 as iio
-
-        # the ffmpeg writer needs a file name: a temporary file, renamed when complete
-        with atomic_path(path, suffix=".mp4") as tmp:
-            with iio.get_writer(
-                tmp, format="FFMPEG", mode="I", fps=float(fps), codec="libx264", macro_block_size=8
-            ) as w:
-                for f in frames:
-                    w.append_data(f)  # type: ignore[attr-defined]  # imageio's stub: base class
-        return path
+        return _write_mp4(frames, fps, path, options or RenderOptions())
     duration_ms = max(int(round(1000.0 / float(fps))), 20)
     if _has("PIL"):
         from PIL import Image
@@ -458,6 +557,26 @@ def save_video(frames: np.ndarray, fps: float, path: str | Path) -> Path:
     return path
 
 
+def _write_mp4(frames: Iterable[np.ndarray], fps: float, path: Path, opts: RenderOptions) -> Path:
+    """Stream frames into ffmpeg (libx264 at ``opts.preset``; it encodes in its own
+    process while the next frames are drawn), into a temporary file renamed when complete."""
+    import imageio.v2 as iio
+
+    with atomic_path(path, suffix=".mp4") as tmp:
+        with iio.get_writer(
+            tmp,
+            format="FFMPEG",
+            mode="I",
+            fps=float(fps),
+            codec="libx264",
+            macro_block_size=8,
+            ffmpeg_params=["-preset", opts.preset],
+        ) as w:
+            for f in frames:
+                w.append_data(f)  # type: ignore[attr-defined]  # imageio's stub: base class
+    return path
+
+
 def render_video(
     model: mujoco.MjModel,
     qpos: np.ndarray,
@@ -473,28 +592,43 @@ def render_video(
     feet: Sequence[str] | None = None,
     species: str | None = None,
     style: GhostStyle | None = None,
+    options: RenderOptions | None = None,
 ) -> Path:
-    """Render a qpos trajectory and write it as MP4/GIF (see :func:`save_video`; the
-    reference ghost, stance marks and species colour as in :func:`render_frames`).
+    """Render a qpos trajectory at ``fps`` [Hz] and write it as MP4/GIF (see
+    :func:`save_video`; the reference ghost, stance marks and species colour as in
+    :func:`iter_frames`).
 
-    The writer is checked BEFORE rendering, so a missing package fails fast.
+    The video keeps every n-th frame when ``fps`` is above ``options.video_fps`` (its
+    rate ``fps / n``, its length the clip's); an MP4's frames stream into the encoder as
+    they are drawn. The writer is checked BEFORE rendering, so a missing package fails
+    fast.
     """
+    opts = options or RenderOptions()
     path = Path(path)
     check_video_writer(path)
-    frames = render_frames(
-        model,
-        qpos,
-        width=width,
-        height=height,
-        camera=camera,
-        reference=reference,
-        contacts=contacts,
-        reference_contacts=reference_contacts,
-        feet=feet,
-        species=species,
-        style=style,
-    )
-    return save_video(frames, fps, path)
+    step = opts.frame_step(float(fps))
+    q = np.atleast_2d(np.asarray(qpos, dtype=np.float64))
+    if len(q) == 0:
+        raise RenderError("qpos holds no frame; a video needs at least one")
+
+    def every(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else np.asarray(a)[::step]
+
+    kw: dict[str, Any] = {
+        "width": width,
+        "height": height,
+        "camera": camera,
+        "reference": every(reference),
+        "contacts": every(contacts),
+        "reference_contacts": every(reference_contacts),
+        "feet": feet,
+        "species": species,
+        "style": style,
+        "options": opts,
+    }
+    if path.suffix.lower() == ".mp4":
+        return _write_mp4(iter_frames(model, q[::step], **kw), fps / step, path, opts)
+    return save_video(render_frames(model, q[::step], **kw), fps / step, path, opts)
 
 
 def check_video_writer(path: Path) -> None:
@@ -521,6 +655,7 @@ def render_tracking(
     camera: str | int = "track",
     feet: Sequence[str] | None = None,
     style: GhostStyle | None = None,
+    options: RenderOptions | None = None,
 ) -> Path:
     """The video of a tracking run (:class:`habitsim.sim.TrackResult`): the simulated body
     in its species' colour, the reference it tracked as a ghost beside it, stance marked
@@ -543,4 +678,5 @@ def render_tracking(
         feet=feet,
         species=result.species,
         style=style,
+        options=options,
     )

@@ -96,3 +96,41 @@ def test_bad_requests_are_render_errors(dog) -> None:
         render.render_frames(
             dog, q, contacts=np.ones((3, 4), bool), feet=["lf_foot"], width=W, height=H
         )
+
+
+def test_render_options_frame_step_and_bad_values() -> None:
+    """A video keeps every n-th frame, n the smallest that brings the rate to at most
+    ``video_fps``; bad knobs are typed errors."""
+    opts = render.RenderOptions(video_fps=30.0)
+    assert [opts.frame_step(f) for f in (24.0, 30.0, 50.0, 60.0, 100.0, 500.0)] == [
+        1,
+        1,
+        2,
+        2,
+        4,
+        17,
+    ]
+    assert render.RenderOptions(video_fps=None).frame_step(500.0) == 1
+    for bad in ({"multisamples": -1}, {"video_fps": 0.0}, {"preset": "instant"}):
+        with pytest.raises(render.RenderError):
+            render.RenderOptions(**bad)  # type: ignore[arg-type]
+
+
+def test_video_is_drawn_at_the_video_rate_with_scene_flags(dog, tmp_path) -> None:
+    """A 100 Hz clip becomes a 25 Hz video of a quarter of the frames, the clip's length;
+    shadows are drawn only when asked (the frames differ), the caller's model untouched."""
+    from PIL import Image
+
+    q = _home(dog, 12)
+    q[:, 0] += 0.05 * np.arange(12)  # moving, so that no two frames are alike
+    path = render.render_video(dog, q, 100.0, tmp_path / "v.gif", width=64, height=48)
+    with Image.open(path) as gif:
+        assert gif.n_frames == 3
+        assert gif.info["duration"] == 40
+    samples = int(dog.vis.quality.offsamples)
+    plain = render.render_frames(dog, q[:1], width=W, height=H)[0]
+    shaded = render.render_frames(
+        dog, q[:1], width=W, height=H, options=render.RenderOptions(shadows=True, multisamples=4)
+    )[0]
+    assert np.abs(plain.astype(int) - shaded.astype(int)).sum() > 0
+    assert int(dog.vis.quality.offsamples) == samples

@@ -502,3 +502,159 @@ def test_trunk_is_lowered_where_stance_legs_would_be_straight(anymal, go1, walk)
         ext = leg_extension(rl, clip.qpos[k])[clip.contacts[k]]
         assert ext.max() <= DEFAULTS.straight_reach + 0.002, (k, ext)
     assert retarget(walk, go1, FEET).metadata["trunk_lowered_max_m"] == 0.0
+
+
+# ------------------------------------------------------------------ the standing pose
+GO1_HOME = "0 0 0.27 1 0 0 0 0 0.9 -1.8 0 0.9 -1.8 0 0.9 -1.8 0 0.9 -1.8"
+#: How far the folded Go1 variant's calves are turned at qpos0 [rad].
+FOLD = 2.6
+
+
+def _go1_without_key(folder: Path) -> Path:
+    """The vendored Go1 with its keyframe removed (scene.xml in ``folder``)."""
+    xml = GO1.with_name("go1.xml").read_text()
+    bare = re.sub(r"<keyframe>.*?</keyframe>", "", xml, flags=re.S)
+    assert bare != xml
+    (folder / "go1.xml").write_text(bare)
+    (folder / "scene.xml").write_text(GO1.read_text())
+    return folder / "scene.xml"
+
+
+def _keys_file(path: Path, qpos: str, name: str = "home") -> Path:
+    path.write_text(f'<mujoco><keyframe><key name="{name}" qpos="{qpos}"/></keyframe></mujoco>')
+    return path
+
+
+def _folded_go1(scene: Path) -> Path:
+    """The Go1 whose qpos0 is folded (each calf body turned by FOLD, the knee range with
+    it), as a robot whose default pose is no standing pose: its scene, one file."""
+    spec = mujoco.MjSpec.from_file(str(scene))
+    quat = np.zeros(4)
+    mujoco.mju_axisAngle2Quat(quat, np.array([0.0, 1.0, 0.0]), -FOLD)
+    for leg in FEET:
+        spec.body(f"{leg}_calf").quat = quat
+        joint = spec.joint(f"{leg}_calf_joint")
+        joint.range = np.asarray(joint.range) + FOLD
+    spec.compile()
+    out = scene.with_name("folded_scene.xml")
+    out.write_text(spec.to_xml())
+    return out
+
+
+def test_a_keyframe_from_another_file_is_the_standing_pose(go1, walk, tmp_path, capsys):
+    """The Go1 with its home keyframe removed, the keyframe given in a second file: the
+    robot stands on it (options and CLI); a file without a key of the robot's size is a
+    typed error."""
+    from habitsim.retarget import standing_keyframe
+
+    scene = _go1_without_key(tmp_path)
+    keys = _keys_file(tmp_path / "keys.xml", GO1_HOME)
+    robot = load_robot(scene)
+    assert robot.nkey == 0
+    rl = robot_legs(robot, FEET, options=RetargetOptions(keyframe_from=keys))
+    np.testing.assert_array_equal(rl.home, go1.key("home").qpos)
+    assert rl.home_source == "keyframe 'home' of keys.xml"
+    named = _keys_file(tmp_path / "named.xml", GO1_HOME, name="stand")
+    opts = RetargetOptions(keyframe="stand", keyframe_from=named)
+    np.testing.assert_array_equal(standing_keyframe(robot, options=opts)[0], rl.home)
+    with pytest.raises(RetargetError):  # no key "walk" there
+        standing_keyframe(robot, options=RetargetOptions(keyframe="walk", keyframe_from=named))
+    short = _keys_file(tmp_path / "short.xml", "0 0 0.27 1 0 0 0")
+    with pytest.raises(RetargetError):  # a key of another model's size
+        robot_legs(robot, FEET, options=RetargetOptions(keyframe_from=short))
+    walk.save(tmp_path / "walk.npz")
+    out = tmp_path / "q.npz"
+    argv = ["retarget", str(tmp_path / "walk.npz"), "--robot", str(scene), "--out", str(out)]
+    assert main([*argv, "--keyframe-from", str(keys), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["robot_home"] == "keyframe 'home' of keys.xml"
+    assert summary["robot_stand"]["problems"] == []
+    bad = [*argv[:-1], str(tmp_path / "bad.npz"), "--keyframe-from", str(short)]
+    assert main(bad) == 2 and not (tmp_path / "bad.npz").exists()
+
+
+def test_a_folded_default_pose_is_refused_and_a_keyframe_file_fixes_it(walk, tmp_path, capsys):
+    """A robot without a keyframe whose qpos0 is folded (trunk a few cm up) is refused
+    with a StandingPoseError, not stood on; the same robot with its home keyframe from a
+    second file stands at the Go1's scale. A folded keyframe is warned about."""
+    from habitsim.retarget import StandingPoseError, StandingPoseWarning, stand_check
+
+    folded_scene = _folded_go1(_go1_without_key(tmp_path))
+    robot = load_robot(folded_scene)
+    with pytest.raises(StandingPoseError):
+        robot_legs(robot, FEET)
+    home = np.fromstring(GO1_HOME, sep=" ")
+    home[9::3] += FOLD  # the knee angles of the turned calves
+    keys = _keys_file(tmp_path / "scene_mjx.xml", " ".join(map(str, home)))
+    rl = robot_legs(robot, FEET, options=RetargetOptions(keyframe_from=keys))
+    check = stand_check(rl)
+    assert check["problems"] == [] and check["height_over_leg"] > 0.5
+    clip = retarget(walk, rl)
+    assert 0.3 < clip.metadata["scale"] < 1.0  # not the folded pose's few percent
+    folded = _keys_file(tmp_path / "folded.xml", " ".join(map(str, robot.qpos0)))
+    with pytest.warns(StandingPoseWarning):
+        robot_legs(robot, FEET, options=RetargetOptions(keyframe_from=folded))
+    # the CLI refuses it too, and names the file beside the robot that holds a keyframe
+    walk.save(tmp_path / "walk.npz")
+    out = tmp_path / "q.npz"
+    argv = ["retarget", str(tmp_path / "walk.npz"), "--robot", str(folded_scene), "--out"]
+    argv.append(str(out))
+    assert main([*argv, "--feet", "FL,FR,RL,RR"]) == 2 and not out.exists()
+    assert "scene_mjx.xml (home)" in capsys.readouterr().err
+    assert main([*argv, "--feet", "FL,FR,RL,RR", "--keyframe-from", str(keys)]) == 0
+    assert out.exists()
+
+
+# ------------------------------------------------------------ robots by Menagerie name
+def test_a_menagerie_name_without_the_package_is_a_typed_error(monkeypatch, tmp_path, capsys):
+    """``--robot unitree_go2`` goes through mujoco-menagerie: not installed, or failing
+    to give the model (offline), is a RobotSourceError (exit 2); a package that gives a
+    model is used. The network is never touched: the module is replaced."""
+    import sys
+    import types
+
+    from habitsim.retarget import RobotSourceError
+
+    monkeypatch.setitem(sys.modules, "mujoco_menagerie", None)  # import fails
+    with pytest.raises(RobotSourceError):
+        load_robot("unitree_go2")
+    walk_path = tmp_path / "walk.npz"
+    generate("dog", "walk", seed=7, duration_s=0.5).save(walk_path)
+    out = tmp_path / "q.npz"
+    argv = ["retarget", str(walk_path), "--robot", "unitree_go2", "--out", str(out)]
+    assert main(argv) == 2 and not out.exists()
+    assert "pip install mujoco-menagerie" in capsys.readouterr().err
+
+    offline = types.ModuleType("mujoco_menagerie")
+
+    def fail(name: str) -> mujoco.MjModel:
+        raise OSError("no network")
+
+    offline.load = fail  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "mujoco_menagerie", offline)
+    with pytest.raises(RobotSourceError):
+        load_robot("unitree_go2")
+    seen = []
+    online = types.ModuleType("mujoco_menagerie")
+    online.load = lambda name: seen.append(name) or load_robot(GO1)  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "mujoco_menagerie", online)
+    assert load_robot("unitree_go1").nq == 19 and seen == ["unitree_go1"]
+    with pytest.raises(RetargetError):  # a path that does not exist is no name
+        load_robot(tmp_path / "missing.xml")
+
+
+def test_vendored_a1_is_menagerie_through_the_vendor_helper(walk):
+    """The A1 vendored by `habitsim models vendor`: one file without meshes, its feet found
+    by their bodies, standing on its home keyframe (no folded pose), retargeted cleanly."""
+    from habitsim.retarget import stand_check
+
+    scene = Path(__file__).parent / "robots" / "unitree_a1" / "scene.xml"
+    assert "made by `habitsim models vendor`" in scene.read_text().splitlines()[0]
+    a1 = load_robot(scene)
+    assert not np.any(a1.geom_type == mujoco.mjtGeom.mjGEOM_MESH) and a1.nmesh == 0
+    feet = find_robot_feet(a1)
+    assert feet == ("FL_calf", "FR_calf", "RL_calf", "RR_calf")
+    rl = robot_legs(a1, feet)
+    assert rl.home_source == "keyframe 'home'" and stand_check(rl)["problems"] == []
+    clip = retarget(walk, rl)
+    assert clip.metadata["ik_residual_max_m"] < 1e-3

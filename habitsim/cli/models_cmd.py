@@ -1,4 +1,5 @@
-"""``habitsim models build|path``: generate the per-species MJCF models."""
+"""``habitsim models build|path|vendor``: generate the per-species MJCF models; make a
+collision-only single-file copy of a robot."""
 
 from __future__ import annotations
 
@@ -36,8 +37,29 @@ def _path(ns: argparse.Namespace) -> int:
     return 0
 
 
+def _vendor(ns: argparse.Namespace) -> int:
+    from habitsim.retarget.vendor import VendorOptions, vendor_robot
+
+    opts = VendorOptions(shape=ns.shape, fit_aabb=not ns.inertia_fit, fit_scale=ns.fit_scale)
+    rep = vendor_robot(ns.model, ns.out, opts)
+    kinds: dict[str, int] = {}
+    for _, kind, _ in rep.fitted:
+        kinds[kind] = kinds.get(kind, 0) + 1
+    fits = ", ".join(
+        f"{n} {k}{'es' if k == 'box' and n > 1 else 's' if n > 1 else ''}"
+        for k, n in sorted(kinds.items())
+    )
+    print(
+        f"{ns.model} -> {rep.out}: {len(rep.dropped)} visual mesh geoms dropped, "
+        f"{len(rep.fitted)} collision meshes replaced ({fits or 'none'}), "
+        f"{len(rep.assets_removed)} assets removed"
+        + (f"; licence {rep.licence}" if rep.licence else "; no licence file found beside it")
+    )
+    return 0
+
+
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``models build`` and ``models path``."""
+    """Add ``models build``, ``models path`` and ``models vendor``."""
     p = sub.add_parser(
         "build",
         help="write <species>/<species>.xml and scene.xml (the standing model), "
@@ -66,3 +88,32 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(position actuators holding 'home'; it stands in plain MuJoCo)",
     )
     q.set_defaults(func=_path)
+    v = sub.add_parser(
+        "vendor",
+        help="write a collision-only single-file copy of a robot MJCF (visual meshes "
+        "dropped, collision meshes replaced by fitted primitives), to vendor it",
+    )
+    v.add_argument("model", type=Path, metavar="ROBOT.xml", help="the robot's MJCF or scene")
+    v.add_argument(
+        "--out", type=Path, required=True, metavar="DIR", help="folder to write the copy into"
+    )
+    v.add_argument(
+        "--shape",
+        default="auto",
+        choices=("auto", "box", "capsule", "sphere"),
+        help="primitive each collision mesh becomes (default auto: the one closest to the "
+        "mesh's volume)",
+    )
+    v.add_argument(
+        "--inertia-fit",
+        action="store_true",
+        help="fit primitives to the mesh's equivalent-inertia box instead of its bounding box",
+    )
+    v.add_argument(
+        "--fit-scale",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="scale of the fitted primitives (default 1)",
+    )
+    v.set_defaults(func=_vendor)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -54,10 +55,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_source_options(p, of="the source")
     p.add_argument(
         "--robot",
-        type=Path,
         required=True,
-        metavar="MJCF",
-        help="robot model; its scene (with a floor) for --track",
+        metavar="MJCF|NAME",
+        help=(
+            "robot model; its scene (with a floor) for --track; or a MuJoCo Menagerie name "
+            "(e.g. unitree_go2) through the optional package mujoco-menagerie"
+        ),
     )
     add_list_option(
         p,
@@ -70,12 +73,24 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument(
+        "--keyframe",
         "--home",
+        dest="home",
         default="home",
-        metavar="KEY",
+        metavar="NAME",
         help=(
             "keyframe the robot stands on (default home; without a keyframe home, qpos0, "
-            "crouched when its legs are straight)"
+            "crouched when its legs are straight, refused when folded)"
+        ),
+    )
+    p.add_argument(
+        "--keyframe-from",
+        type=Path,
+        metavar="FILE",
+        help=(
+            "MJCF file whose <keyframe> holds the standing pose (a key of the robot's qpos "
+            "size, named by --keyframe or the file's only one; e.g. Menagerie's "
+            "scene_mjx.xml)"
         ),
     )
     p.add_argument("--out", type=Path, required=True, metavar="Q.npz", help="robot clip to write")
@@ -131,8 +146,12 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
     from ..fileio import atomic_write_text, json_safe
     from ..retarget import (
         RetargetError,
+        RetargetOptions,
+        StandingPoseError,
+        StandingPoseWarning,
         drawable,
         load_robot,
+        nearby_keyframes,
         retarget,
         track_clip,
     )
@@ -175,7 +194,23 @@ def _retarget_outputs(ns: argparse.Namespace) -> int:
         from ..render import check_video_writer
 
         check_video_writer(ns.video)  # fail before the work
-    clip = retarget(motion, robot, ns.feet or None, home=ns.home)
+    ropts = RetargetOptions(keyframe_from=ns.keyframe_from)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", StandingPoseWarning)
+        try:
+            clip = retarget(motion, robot, ns.feet or None, home=ns.home, options=ropts)
+        except StandingPoseError as e:
+            near = nearby_keyframes(ns.robot, robot.nq) if Path(ns.robot).is_file() else []
+            if near:
+                raise StandingPoseError(
+                    f"{e}; beside {ns.robot} a keyframe of its size is in: {', '.join(near)}"
+                ) from e
+            raise
+    for w in caught:
+        if not issubclass(w.category, StandingPoseWarning):
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+        elif not ns.json:
+            print(f"warning: {w.message}")
     if clip.metadata["feet_found"] and not ns.json:
         print(f"feet (found, LF, RF, LH, RH): {', '.join(clip.feet)}")
     clip.save(ns.out)

@@ -42,10 +42,11 @@ from __future__ import annotations
 
 from .clip import CLIP_VERSION as CLIP_VERSION
 from .clip import RobotClip, load_robot_clip, track_clip
-from .errors import RetargetError
+from .errors import RetargetError, RobotSourceError, StandingPoseError, VendorError
 from .ik import leg_ik
+from .keyframes import file_keyframes, nearby_keyframes, standing_keyframe
+from .legs import StandingPoseWarning, find_robot_feet, leg_extension, robot_legs, stand_check
 from .legs import _knee_joints as _knee_joints
-from .legs import find_robot_feet, leg_extension, robot_legs
 from .mapping import retarget
 from .options import CROUCH_BEND as CROUCH_BEND
 from .options import CROUCH_HEIGHT as CROUCH_HEIGHT
@@ -55,16 +56,29 @@ from .options import MAX_IK_STEP as MAX_IK_STEP
 from .options import STRAIGHT_REACH as STRAIGHT_REACH
 from .options import RetargetOptions
 from .references import stand, trot
-from .robot import RobotLegs, drawable, load_robot
+from .robot import RobotLegs, drawable, load_robot, menagerie_robot
+from .vendor import VendorOptions, VendorReport, vendor_robot
 
 __all__ = [
     "RetargetError",
+    "StandingPoseError",
+    "StandingPoseWarning",
+    "RobotSourceError",
+    "VendorError",
+    "VendorOptions",
+    "VendorReport",
+    "vendor_robot",
+    "stand_check",
+    "standing_keyframe",
+    "file_keyframes",
+    "nearby_keyframes",
     "RetargetOptions",
     "RobotLegs",
     "RobotClip",
     "robot_legs",
     "find_robot_feet",
     "load_robot",
+    "menagerie_robot",
     "leg_ik",
     "leg_extension",
     "retarget",

@@ -4,6 +4,7 @@ how straight a leg is, and the feet found when nobody names them."""
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
@@ -11,9 +12,10 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from ..mjutils import free_body, home_qpos
-from .errors import RetargetError
+from ..mjutils import free_body
+from .errors import RetargetError, StandingPoseError
 from .ik import leg_ik
+from .keyframes import model_keys, standing_keyframe
 from .options import RetargetOptions
 from .robot import RobotLegs, _point_names
 
@@ -21,6 +23,8 @@ __all__ = [
     "robot_legs",
     "leg_extension",
     "find_robot_feet",
+    "stand_check",
+    "StandingPoseWarning",
 ]
 
 
@@ -34,18 +38,24 @@ def robot_legs(
     foot sphere, :func:`habitsim.mjutils.resolve_feet`).
 
     The standing pose is the keyframe named ``home`` (default ``"home"``; Menagerie's
-    ``anymal_c_mjx.xml`` calls it ``"standing"``); without a keyframe ``"home"``, ``qpos0``,
-    crouched when its legs are straight (``options.straight_reach``): the trunk lowered to
-    ``options.crouch_height`` of its height with the feet kept where they stand, the legs
-    solved by :func:`leg_ik` from knees bent so that each foot moves forward (the knees
-    point backward, as on most legged robots). :attr:`RobotLegs.home_source` says which.
+    ``anymal_c_mjx.xml`` calls it ``"standing"``), or ``options.keyframe``, read from
+    ``options.keyframe_from`` when that names another MJCF file
+    (:func:`~habitsim.retarget.keyframes.standing_keyframe`); without a keyframe
+    ``"home"``, ``qpos0``, crouched when its legs are straight (``options.straight_reach``):
+    the trunk lowered to ``options.crouch_height`` of its height with the feet kept where
+    they stand, the legs solved by :func:`leg_ik` from knees bent so that each foot moves
+    forward (the knees point backward, as on most legged robots).
+    :attr:`RobotLegs.home_source` says which. The pose is checked (:func:`stand_check`):
+    a folded ``qpos0`` is refused, a folded keyframe warned about
+    (:class:`StandingPoseWarning`).
 
     Raises:
         RetargetError: no free joint, an unknown foot (the message lists the model's
             sites, geoms and bodies), a foot without joints of its own, a keyframe name
             ``home`` other than ``"home"`` that the model does not have (the message lists
             its keyframes), a straight-legged ``qpos0`` the crouch cannot solve (add a
-            ``home`` keyframe).
+            ``home`` keyframe); a bad ``options.keyframe_from``.
+        StandingPoseError: no keyframe and a folded ``qpos0``.
     """
     from ..controllers import ControllerError
     from ..controllers.legs import LegSet
@@ -72,25 +82,106 @@ def robot_legs(
         legs = LegSet(model, feet)
     except ControllerError as e:
         raise RetargetError(str(e)) from e
-    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, str(home)) >= 0:
-        return _legs_at(model, feet, legs, home_qpos(model, str(home)), f"keyframe {home!r}", opts)
-    if home != "home":
-        keys = [model.key(k).name or f"#{k}" for k in range(model.nkey)]
-        raise RetargetError(
-            f"the robot has no keyframe {home!r}; its keyframes: {', '.join(keys) or '(none)'}"
-        )
-    rl = _legs_at(model, feet, legs, model.qpos0.copy(), "qpos0", opts)
-    if float(leg_extension(rl).max()) <= opts.straight_reach:
+    chosen = standing_keyframe(model, home, opts)
+    if chosen is not None:
+        rl = _legs_at(model, feet, legs, chosen[0], chosen[1], opts)
+        check = stand_check(rl, opts)
+        if check["problems"]:
+            warnings.warn(
+                f"the robot's standing pose ({rl.home_source}) looks folded: {_describe(check)}",
+                StandingPoseWarning,
+                stacklevel=2,
+            )
         return rl
-    crouched = _crouch(rl, opts)
-    return _legs_at(
-        model,
-        feet,
-        legs,
-        crouched,
-        f"qpos0 crouched to {opts.crouch_height:.0%} of its height",
-        opts,
-    )
+    rl = _legs_at(model, feet, legs, model.qpos0.copy(), "qpos0", opts)
+    if float(leg_extension(rl).max()) > opts.straight_reach:
+        crouched = _crouch(rl, opts)
+        rl = _legs_at(
+            model,
+            feet,
+            legs,
+            crouched,
+            f"qpos0 crouched to {opts.crouch_height:.0%} of its height",
+            opts,
+        )
+    check = stand_check(rl, opts)
+    if check["problems"]:
+        raise StandingPoseError(
+            f"the robot has no keyframe 'home' and its qpos0 is no standing pose: "
+            f"{_describe(check)}; point at one: --keyframe NAME (options.keyframe) for "
+            "another keyframe of the model, --keyframe-from FILE (options.keyframe_from) "
+            "for one in another MJCF file (Menagerie keeps some robots' home in "
+            'scene_mjx.xml), or add a <key name="home" qpos="..."/> to the model'
+        )
+    return rl
+
+
+class StandingPoseWarning(UserWarning):
+    """A keyframe the robot stands on looks folded (:func:`stand_check`)."""
+
+
+def stand_check(rl: RobotLegs, options: RetargetOptions | None = None) -> dict[str, Any]:
+    """How much the standing pose looks like one: figures and the problems found.
+
+    Returns:
+        ``joints_at_limit_share``: share of the legs' limited joints within
+        ``options.stand_limit_margin`` of their range (or outside it);
+        ``height_over_leg``: trunk height over the ground [m] over the legs' mean length
+        (hip to knee plus knee to foot, :func:`leg_extension`'s joints);
+        ``keyframes``: the model's keyframe names; ``problems``: what is off, in words
+        (empty for a usable standing pose: at most ``options.stand_max_limit_share`` at a
+        limit, height at least ``options.stand_min_height``).
+    """
+    opts = options or RetargetOptions()
+    m = rl.model
+    d, knees = _at_home(rl)
+    pts = np.array(rl.legs.positions(d))
+    lengths = [
+        float(
+            np.linalg.norm(d.xanchor[hk[1]] - d.xanchor[hk[0]])
+            + np.linalg.norm(pts[i] - d.xanchor[hk[1]])
+        )
+        for i, hk in enumerate(knees)
+        if hk is not None
+    ]
+    at = []
+    for i in range(len(rl.feet)):
+        jid = rl.legs.jmap.joint_ids[rl.legs.own[i]]
+        for j, qa in zip(jid, rl.qadr[i], strict=True):
+            if m.jnt_limited[j]:
+                lo, hi = (float(v) for v in m.jnt_range[j])
+                gap = opts.stand_limit_margin * (hi - lo)
+                at.append(not (lo + gap < float(rl.home[qa]) < hi - gap))
+    share = float(np.mean(at)) if at else 0.0
+    ratio = rl.height / float(np.mean(lengths)) if lengths else float("nan")
+    problems = []
+    if share > opts.stand_max_limit_share:
+        problems.append(
+            f"{share:.0%} of its leg joints at a range limit (a standing pose has at most "
+            f"{opts.stand_max_limit_share:.0%})"
+        )
+    if math.isfinite(ratio) and ratio < opts.stand_min_height:
+        problems.append(
+            f"trunk {rl.height:.3f} m over the ground, {ratio:.2f} of its "
+            f"{float(np.mean(lengths)):.3f} m legs (a standing pose has at least "
+            f"{opts.stand_min_height:.2f})"
+        )
+    return {
+        "joints_at_limit_share": share,
+        "height_over_leg": ratio,
+        "keyframes": model_keys(m),
+        "problems": problems,
+    }
+
+
+def _stand_figures(rl: RobotLegs) -> dict[str, Any]:
+    """:func:`stand_check`'s figures and problems for a clip's metadata."""
+    return {k: v for k, v in stand_check(rl).items() if k != "keyframes"}
+
+
+def _describe(check: dict[str, Any]) -> str:
+    keys = ", ".join(check["keyframes"]) or "(none)"
+    return f"{'; '.join(check['problems'])}; the model's keyframes: {keys}"
 
 
 def _legs_at(
@@ -284,7 +375,10 @@ def _crouch(rl: RobotLegs, opts: RetargetOptions) -> np.ndarray:
 
 
 def _need_feet(
-    feet: Sequence[str] | None, model: mujoco.MjModel | None = None, home: str = "home"
+    feet: Sequence[str] | None,
+    model: mujoco.MjModel | None = None,
+    home: str = "home",
+    options: RetargetOptions | None = None,
 ) -> Sequence[str]:
     if feet is not None:
         return feet
@@ -292,14 +386,17 @@ def _need_feet(
         raise RetargetError(
             "name the robot's feet (feet=[...], --feet FL,FR,RL,RR) in the order LF, RF, LH, RH"
         )
-    return find_robot_feet(model, home)
+    return find_robot_feet(model, home, options)
 
 
-def find_robot_feet(model: mujoco.MjModel, home: str = "home") -> tuple[str, ...]:
+def find_robot_feet(
+    model: mujoco.MjModel, home: str = "home", options: RetargetOptions | None = None
+) -> tuple[str, ...]:
     """The robot's four feet in the order LF, RF, LH, RH when nobody names them: the
     usual names (:func:`habitsim.mjutils.known_feet`: ``FL``, ``FL_foot``, ``LF_FOOT``
-    …), else the four legs standing on the ground at the standing pose (keyframe
-    ``home``, else ``qpos0``; :func:`habitsim.mjutils.standing_feet`).
+    …), else the four legs standing on the ground at the standing pose (the keyframe
+    :func:`~habitsim.retarget.keyframes.standing_keyframe` picks with ``home`` and
+    ``options``, else ``qpos0``; :func:`habitsim.mjutils.standing_feet`).
 
     Raises:
         RetargetError: not four legs standing on the ground, or a foot that is an
@@ -311,7 +408,8 @@ def find_robot_feet(model: mujoco.MjModel, home: str = "home") -> tuple[str, ...
     if names is not None:
         return tuple(names)
     try:
-        return standing_feet(model, home_qpos(model, home))
+        key = standing_keyframe(model, home, options)
+        return standing_feet(model, model.qpos0.copy() if key is None else key[0])
     except ModelLookupError as e:
         raise RetargetError(
             f"{e}; name them (feet=[...], --feet FL,FR,RL,RR) in the order LF, RF, LH, RH"

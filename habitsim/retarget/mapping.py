@@ -15,7 +15,7 @@ from ..stance.planting import carriage_drop
 from .clip import RobotClip
 from .errors import RetargetError
 from .ik import _fit_figures, _solve_frames
-from .legs import _at_home, _extensions, _need_feet, robot_legs
+from .legs import _at_home, _extensions, _need_feet, _stand_figures, robot_legs
 from .options import RetargetOptions
 from .robot import RobotLegs
 
@@ -76,7 +76,7 @@ def retarget(
     if isinstance(robot, RobotLegs):
         rl = robot
     else:
-        rl = robot_legs(robot, _need_feet(feet, robot, home), home, opts)
+        rl = robot_legs(robot, _need_feet(feet, robot, home, opts), home, opts)
     if len(rl.feet) != 4:
         raise RetargetError(
             f"a habitsim motion has 4 feet (LF, RF, LH, RH); got "
@@ -148,6 +148,7 @@ def retarget(
                 "frames": t,
                 "feet_found": feet is None and not isinstance(robot, RobotLegs),
                 "trunk_lowered_max_m": float(drop.max()),
+                "robot_stand": _stand_figures(rl),
             },
         ),
     )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Final
 
 from .errors import RetargetError
@@ -42,6 +43,17 @@ class RetargetOptions:
             leg IK [rad].
         lower_passes: passes of lowering the trunk where a stance leg would be straighter
             than ``straight_reach`` or its foot short of the ground.
+        keyframe: the keyframe the robot stands on (None: the ``home`` argument, default
+            ``"home"``).
+        keyframe_from: an MJCF file whose ``<keyframe>`` holds the standing pose (a key
+            of the robot's qpos size, named ``keyframe`` or the file's only one); None:
+            the robot's own keyframes.
+        stand_max_limit_share: a standing pose with more than this share of its limited
+            leg joints at a range limit is no standing pose (refused when it is
+            ``qpos0``, warned about when it is a keyframe).
+        stand_limit_margin: a joint is at its limit within this share of its range.
+        stand_min_height: a standing pose whose trunk stands lower than this share of
+            the legs' length (hip to knee plus knee to foot) is folded, no standing pose.
     """
 
     straight_reach: float = 0.97
@@ -50,9 +62,20 @@ class RetargetOptions:
     hinge_span: float = math.pi
     max_ik_step: float = 0.3
     lower_passes: int = 4
+    keyframe: str | None = None
+    keyframe_from: str | Path | None = None
+    stand_max_limit_share: float = 0.25
+    stand_limit_margin: float = 0.02
+    stand_min_height: float = 0.4
 
     def __post_init__(self) -> None:
-        for name in ("straight_reach", "crouch_height"):
+        for name in (
+            "straight_reach",
+            "crouch_height",
+            "stand_max_limit_share",
+            "stand_limit_margin",
+            "stand_min_height",
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and 0 < v <= 1):
                 raise RetargetError(f"{name} must be in (0, 1], got {v!r}")

@@ -12,7 +12,7 @@ from ..physics_constants import GRAVITY
 from .clip import RobotClip
 from .errors import RetargetError
 from .ik import _fit_figures, _solve_frames
-from .legs import _need_feet, robot_legs
+from .legs import _need_feet, _stand_figures, robot_legs
 from .options import RetargetOptions
 from .robot import RobotLegs
 
@@ -58,7 +58,7 @@ def trot(
     rl = (
         robot
         if isinstance(robot, RobotLegs)
-        else robot_legs(robot, _need_feet(feet, robot), options=options)
+        else robot_legs(robot, _need_feet(feet, robot, options=options), options=options)
     )
     if len(rl.feet) != 4:
         raise RetargetError(
@@ -136,6 +136,7 @@ def trot(
                 "duty": float(duty),
                 "step_height_m": height,
                 "frames": n,
+                "robot_stand": _stand_figures(rl),
             },
         ),
     )
@@ -157,7 +158,7 @@ def stand(
     rl = (
         robot
         if isinstance(robot, RobotLegs)
-        else robot_legs(robot, _need_feet(feet, robot), options=options)
+        else robot_legs(robot, _need_feet(feet, robot, options=options), options=options)
     )
     for name, v in (("duration_s", duration_s), ("fps", fps)):
         if not (math.isfinite(v) and v > 0):

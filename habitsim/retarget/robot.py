@@ -10,9 +10,9 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from .errors import RetargetError
+from .errors import RetargetError, RobotSourceError
 
-__all__ = ["RobotLegs", "load_robot", "drawable"]
+__all__ = ["RobotLegs", "load_robot", "menagerie_robot", "drawable"]
 
 
 @dataclass(frozen=True)
@@ -59,18 +59,81 @@ class RobotLegs:
 
 
 def load_robot(path: str | Path) -> mujoco.MjModel:
-    """A robot MJCF (its scene, with a floor, for simulation).
+    """A robot MJCF (its scene, with a floor, for simulation), or a MuJoCo Menagerie
+    model name (e.g. ``"unitree_go2"``: :func:`menagerie_robot`).
+
+    A ``path`` that is no existing file, has no ``.xml`` suffix and no folder part is
+    taken as a Menagerie name.
 
     Raises:
         RetargetError: the file is missing or does not compile.
+        RobotSourceError: a Menagerie name that cannot be had here (see
+            :func:`menagerie_robot`).
     """
     p = Path(path)
     if not p.is_file():
-        raise RetargetError(f"robot model {str(p)!r} does not exist")
+        if _is_model_name(str(path)):
+            return menagerie_robot(str(path))
+        raise RetargetError(
+            f"robot model {str(p)!r} does not exist; give an MJCF file or a MuJoCo "
+            "Menagerie name such as unitree_go2"
+        )
     try:
         return mujoco.MjModel.from_xml_path(str(p))
     except ValueError as e:
         raise RetargetError(f"robot model {str(p)!r} does not load: {e}") from e
+
+
+def _is_model_name(text: str) -> bool:
+    return (
+        bool(text)
+        and Path(text).suffix == ""
+        and "/" not in text
+        and "\\" not in text
+        and all(c.isalnum() or c in "_-" for c in text)
+    )
+
+
+#: What to do when a Menagerie robot cannot be had, the end of :class:`RobotSourceError`.
+_INSTEAD = (
+    "or vendor a copy: download the robot's folder of MuJoCo Menagerie and make a "
+    "collision-only single-file model of it with `habitsim models vendor ROBOT.xml "
+    "--out DIR`, then give --robot DIR/scene.xml"
+)
+
+
+def menagerie_robot(name: str) -> mujoco.MjModel:
+    """The default scene (robot and floor) of the MuJoCo Menagerie model ``name``,
+    through the optional package ``mujoco-menagerie`` (``mujoco_menagerie.load``), which
+    fetches the model on its first use.
+
+    Raises:
+        RobotSourceError: the package is not installed (the message says how to install
+            it, or to vendor a copy instead), or it cannot give the model (offline, an
+            unknown name: the message carries the package's reason).
+    """
+    try:
+        import mujoco_menagerie  # type: ignore[import-not-found,unused-ignore]
+    except ImportError as e:
+        raise RobotSourceError(
+            f"{name!r} is no file; as a MuJoCo Menagerie robot name it needs the optional "
+            "package mujoco-menagerie (pip install mujoco-menagerie; it downloads the "
+            f"model on first use), {_INSTEAD}"
+        ) from e
+    try:
+        model = mujoco_menagerie.load(name)
+    except Exception as e:  # noqa: BLE001 - network, lookup and compile errors alike
+        raise RobotSourceError(
+            f"mujoco-menagerie cannot give the robot {name!r} ({type(e).__name__}: {e}); "
+            "check the name (mujoco_menagerie.names() lists them) and the network, "
+            f"{_INSTEAD}"
+        ) from e
+    if not isinstance(model, mujoco.MjModel):
+        raise RobotSourceError(
+            f"mujoco-menagerie gave {type(model).__name__} for {name!r}, not a MuJoCo "
+            f"model; {_INSTEAD}"
+        )
+    return model
 
 
 def _point_names(model: mujoco.MjModel) -> list[str]:
