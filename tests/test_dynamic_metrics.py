@@ -105,11 +105,11 @@ def test_floating_body_reads_exactly_one_mg(dog) -> None:
 def test_still_standing_pose_needs_no_external_force(dog) -> None:
     motion = qpos_to_motion(dog, _home(dog), "dog", FPS)
     m = dynamic_metrics(motion, contacts=np.ones((30, 4), bool))
-    assert m["root_residual_mg"] == pytest.approx(0.0, abs=1e-9)
-    assert m["root_residual_torque_mgl"] == pytest.approx(0.0, abs=1e-9)
+    assert m["root_residual_mg"] == pytest.approx(0.0, abs=1e-6)
+    assert m["root_residual_torque_mgl"] == pytest.approx(0.0, abs=1e-6)
     assert m["torque_saturation"] == 0.0
     # default contacts (detected from toe heights) find the four planted feet too
-    assert dynamic_metrics(motion)["root_residual_mg"] == pytest.approx(0.0, abs=1e-9)
+    assert dynamic_metrics(motion)["root_residual_mg"] == pytest.approx(0.0, abs=1e-6)
 
 
 def test_ballistic_flight_needs_no_external_force(dog) -> None:
@@ -144,7 +144,7 @@ def test_labelled_feet_in_mid_air_push_on_nothing(dog) -> None:
     near[:, 2] += 0.9 * ground_reach(_leg())
     inv = inverse_dynamics(dog, near, FPS, labels, _leg())
     assert inv.contacts.all()
-    assert inv.metrics()["root_residual_mg"] == pytest.approx(0.0, abs=1e-9)
+    assert inv.metrics()["root_residual_mg"] == pytest.approx(0.0, abs=1e-6)
 
 
 def test_ground_explains_a_gentle_push_within_friction(dog) -> None:
@@ -215,3 +215,23 @@ def test_cost_of_transport_by_hand(dog) -> None:
     q[:, 0] += np.linspace(0.0, 2.0, 11)  # 2 m travelled
     mg = mujoco.mj_getTotalmass(dog) * G
     assert cost_of_transport(dog, q, work_j=mg, leg_length=_leg()) == pytest.approx(0.5)
+
+
+def test_the_ground_force_split_is_unique_and_continuous() -> None:
+    """Standing still on four feet needs no joint beyond its motor, and a change of 1e-9
+    in the pose moves no joint torque by more than 0.1 % of the smallest limit: of the many
+    splits of the ground force over the stance feet the least-norm one is taken."""
+    from habitsim.gaits import generate
+    from habitsim.metrics.dynamic import inverse_dynamics
+    from habitsim.qpos import motion_to_qpos, species_model
+
+    for species, action, seed in (("horse", "idle", 1), ("cat", "walk", 1)):
+        m = generate(species, action, seed=seed, duration_s=2.0)
+        model = species_model(species)
+        q = motion_to_qpos(m, model).qpos
+        leg = m.species_info.leg_length
+        inv = inverse_dynamics(model, q, m.fps, m.contacts, leg)
+        assert inv.metrics()["torque_saturation"] == 0.0, species
+        nudged = q + 1e-9 * np.random.default_rng(0).standard_normal(q.shape)
+        again = inverse_dynamics(model, nudged, m.fps, m.contacts, leg)
+        assert np.abs(again.joint_torque - inv.joint_torque).max() < 1e-3 * inv.torque_limit.min()

@@ -19,7 +19,9 @@ the ground has pushed as much as it physically can? For every reference frame:
    floor needs its whole weight from outside; a foot below the floor still pushes
    (sinking is the penetration metric's business). The non-negative edge weights
    minimising the remaining free-joint wrench ``[F/(m·g), T/(m·g·L)]`` come from
-   non-negative least squares (``scipy.optimize.nnls``).
+   non-negative least squares (``scipy.optimize.nnls``), with a small penalty on the
+   forces so that of the many splits over two or more feet that explain the wrench alike
+   the least-norm one is taken: the joint torques then follow the motion continuously.
 4. What is left on the free joint is the residual: ``root_residual_mg`` = mean ‖F‖/(m·g),
    ``root_residual_torque_mgl`` = mean ‖T‖/(m·g·L) (torque about the trunk origin, in the
    trunk frame, MuJoCo's free-joint convention; L the hind-leg length). The joint part
@@ -33,7 +35,7 @@ the penetration depth, so a kinematic reference with feet exactly on the floor r
 1.0 standing still (checked: the dog's home pose gives ‖qfrc_inverse[0:3]‖ = m·g). The
 contact-wrench fit above is the same "unexplained external force" with the contact forces
 the motion could actually get; a floating body still reads exactly 1.0 and a still
-standing pose 0.
+standing pose 0 (to within 1e-6 m·g, the bias of the force penalty).
 
 Keys: :data:`DYNAMIC_KEYS`.
 """
@@ -113,6 +115,7 @@ def inverse_dynamics(
     fps: float,
     contacts: np.ndarray | None,
     leg_length: float,
+    split: float = 1e-3,
 ) -> InverseDynamics:
     """Residual root wrench, joint torques and ground forces of a qpos trajectory.
 
@@ -125,6 +128,11 @@ def inverse_dynamics(
             at all. A labelled foot whose sphere's lowest point is higher than
             :func:`habitsim.contacts.ground_reach` above the floor exerts no force.
         leg_length: normalising length L [m] (also scales the contact height).
+        split: weight of the penalty on the contact forces, ``split``·‖f‖/(m·g) beside the
+            wrench residual in units of m·g: among the splits of the ground force over
+            the feet that explain the wrench equally well, the least-norm one (unique, so
+            the joint torques do not jump between equally good splits); its bias on the
+            residual is of order ``split``² (1e-6 m·g by default).
 
     Raises:
         InvalidMotionError: shapes or model do not fit.
@@ -183,7 +191,12 @@ def inverse_dynamics(
                 dirs.append((f, edge))
         if cols:
             a = np.array(cols).T  # (nv, m)
-            beta, _ = nnls(weight[:, None] * a[root], weight * tau[root], maxiter=200)
+            # with two or more feet down many splits explain the wrench alike; the small
+            # penalty on the forces picks the one of least norm, so the split (and the
+            # joint torques) move continuously with the motion
+            fit = np.vstack([weight[:, None] * a[root], np.eye(len(cols)) * (split / mg)])
+            rhs = np.r_[weight * tau[root], np.zeros(len(cols))]
+            beta, _ = nnls(fit, rhs, maxiter=400)
             tau = tau - a @ beta
             for b, (f, edge) in zip(beta, dirs, strict=True):
                 forces[k, f] += b * edge
