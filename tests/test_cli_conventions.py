@@ -16,6 +16,7 @@ _SINGLE = {
     ("bench real", "--species"),
     ("bench inplace", "--species"),
     ("bench export", "--species"),
+    ("bench render", "--species"),
     ("bench variants", "--species"),
     ("data import-bvh", "--species"),
     ("data inspect-bvh", "--species"),

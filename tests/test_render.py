@@ -134,3 +134,19 @@ def test_video_is_drawn_at_the_video_rate_with_scene_flags(dog, tmp_path) -> Non
     )[0]
     assert np.abs(plain.astype(int) - shaded.astype(int)).sum() > 0
     assert int(dog.vis.quality.offsamples) == samples
+
+
+def test_bench_render_prints_figures_and_its_target(capsys) -> None:
+    import json
+
+    from helpers import run_cli
+
+    from habitsim.cli import main
+
+    assert main(["bench", "render", "--frames", "20", "--before-frames", "4", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert [r["setting"] for r in doc["rows"]] == ["defaults", "MuJoCo's own"]
+    defaults = doc["rows"][0]
+    assert defaults["frames_drawn"] == 10  # a 50 Hz clip drawn at 25 frames a second
+    assert defaults["x_real_time"] > 0 and doc["targets"][0]["verdict"] in ("met", "MISSED")
+    assert run_cli(["bench", "render", "--species", "hores"], capsys)[0] == 2

@@ -25,6 +25,7 @@ from . import (
     bench_model,
     bench_real,
     bench_refine,
+    bench_render,
     bench_sim,
     bench_train,
     bench_variants,
@@ -45,6 +46,7 @@ _EXTRA = (
     bench_export,
     bench_inplace,
     bench_variants,
+    bench_render,
 )
 
 
