@@ -218,3 +218,47 @@ def test_model_shapes(trained: Path) -> None:
     )
     assert len(logits) == 4 and logits[0].shape == (b, t, model.num_codes)
     assert path is not None and path.shape == (b, t, 3)
+
+
+def test_prompt_agreement_per_guidance(trained: Path) -> None:
+    from habitsim.models.t2m_eval import prompt_agreement
+
+    rows = prompt_agreement(trained, (0.0, 3.0), split="train", limit=2, embed=fake_embed)
+    assert [r.guidance for r in rows] == [0.0, 3.0]
+    for r in rows:
+        assert r.clips == 2 and 0.0 <= r.action <= 1.0 and 0.0 <= r.turning <= 1.0
+        assert 0.0 <= r.no_action <= 1.0 and set(r.to_dict()) >= {"action", "speed_error_mps"}
+    with pytest.raises(CodeSetError):
+        prompt_agreement(trained, split="test", embed=fake_embed)
+
+
+def test_command_line(code_set: Path, trained: Path, tmp_path: Path, monkeypatch, capsys) -> None:
+    import habitsim.models.text as text_mod
+    from habitsim.cli import main
+    from habitsim.motion import load_motion
+
+    monkeypatch.setattr(text_mod, "embed_texts", lambda texts, model="": fake_embed(texts))
+    data = json.loads((code_set / CODES_NAME).read_text())["dataset"]
+    assert main(["t2m", "codes", data, "--out", str(tmp_path / "codes")]) == 0
+    assert load_code_set(tmp_path / "codes").species == ["cat", "dog"]
+    ck = tmp_path / "ck"
+    args = ["t2m", "train", "--codes", str(code_set), "--out", str(ck), "--config", "tiny"]
+    assert main([*args, "--steps", "2"]) == 0
+    assert load_codegpt(ck).meta["training"]["step"] == 2
+    out = tmp_path / "dog.npz"
+    gen = ["t2m", "generate", "a dog walks", "dog", "--checkpoint", str(trained)]
+    assert main([*gen, "--out", str(out), "--seconds", "2", "--guidance", "3"]) == 0
+    m = load_motion(out)
+    assert m.species == "dog" and m.num_frames == 60
+    capsys.readouterr()
+    bad = tmp_path / "bad.npz"
+    assert main([*gen, "--out", str(bad), "--seconds", "100"]) == 2
+    assert capsys.readouterr().err.startswith("error:")
+    assert not bad.exists()
+    assert (
+        main(
+            ["t2m", "generate", "a cat", "unicorn", "--checkpoint", str(trained), "--out", str(bad)]
+        )
+        == 2
+    )
+    assert not bad.exists()

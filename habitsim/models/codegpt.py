@@ -36,88 +36,20 @@ predictions blended with min(s, 1) (a regression mean is never extrapolated).
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import torch
 from torch import nn
 
 from .errors import ConfigError
+from .t2m_config import CodeGPTConfig
 
 __all__ = ["CodeGPTConfig", "CodeGPT", "path_features", "decoder_path", "path_feature_dim"]
 
 #: The prefix tokens before the first code step, in order.
 PREFIX_TOKENS = ("text", "habit", "length")
 PREFIX = len(PREFIX_TOKENS)
-
-
-@dataclass(frozen=True)
-class CodeGPTConfig:
-    """Shape and training-time regularisation of :class:`CodeGPT`.
-
-    Attributes:
-        d_model: width of every token [channels].
-        layers: transformer blocks.
-        heads: attention heads per block (must divide ``d_model``).
-        ff: hidden width of each block's feed-forward layer.
-        dropout: dropout inside the blocks while training.
-        max_steps: most code steps the model makes (its position table); at 30 fps and
-            rate 4, 64 steps = 8.5 s.
-        text_dropout: probability that a training sequence sees the null text token
-            (classifier-free guidance's condition dropout), in [0, 1).
-        path_weight: weight of the path regression loss beside the code cross-entropy.
-    """
-
-    d_model: int = 256
-    layers: int = 4
-    heads: int = 4
-    ff: int = 1024
-    dropout: float = 0.1
-    max_steps: int = 64
-    text_dropout: float = 0.1
-    path_weight: float = 1.0
-
-    def validate(self) -> CodeGPTConfig:
-        """Self, or :class:`~habitsim.models.errors.ConfigError` naming the bad field."""
-        checks = [
-            (self.d_model >= 8, f"d_model must be ≥ 8, got {self.d_model}"),
-            (self.layers >= 1, f"layers must be ≥ 1, got {self.layers}"),
-            (
-                self.heads >= 1 and self.d_model % self.heads == 0,
-                f"heads must divide d_model {self.d_model}, got {self.heads}",
-            ),
-            (self.ff >= 1, f"ff must be ≥ 1, got {self.ff}"),
-            (0.0 <= self.dropout < 1.0, f"dropout must be in [0, 1), got {self.dropout}"),
-            (self.max_steps >= 1, f"max_steps must be ≥ 1, got {self.max_steps}"),
-            (
-                0.0 <= self.text_dropout < 1.0,
-                f"text_dropout must be in [0, 1), got {self.text_dropout}",
-            ),
-            (self.path_weight >= 0.0, f"path_weight must be ≥ 0, got {self.path_weight}"),
-        ]
-        for ok, msg in checks:
-            if not ok:
-                raise ConfigError(f"codegpt: {msg}")
-        return self
-
-    def to_dict(self) -> dict[str, float | int]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: object) -> CodeGPTConfig:
-        """Parse a dict (unknown keys and bad values: ConfigError)."""
-        if not isinstance(d, dict):
-            raise ConfigError(f"codegpt config must be an object, got {type(d).__name__}")
-        names = {f.name for f in dataclasses.fields(cls)}
-        bad = sorted(set(d) - names)
-        if bad:
-            raise ConfigError(f"codegpt: unknown keys {bad}; valid: {', '.join(sorted(names))}")
-        try:
-            return cls(**d).validate()
-        except TypeError as e:
-            raise ConfigError(f"codegpt: {e}") from None
 
 
 # ---------------------------------------------------------------------------- path features

@@ -25,7 +25,6 @@ unpickled, ``config.json`` written last with the SHA-256 of every tensor file)::
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import time
@@ -49,10 +48,10 @@ from .checkpoint import (
     file_sha256,
     load_train_state,
 )
-from .codegpt import CodeGPT, CodeGPTConfig, path_features
-from .config import _from_dict
+from .codegpt import CodeGPT, path_features
 from .errors import CheckpointError, ConfigError, TrainingDataError
 from .resume import _optimizer_state, _restore_optimizer
+from .t2m_config import T2M_PRESETS, T2MConfig, T2MTrainConfig, t2m_preset
 from .t2m_data import CodeClip, CodeSet, load_code_set
 
 __all__ = [
@@ -70,115 +69,6 @@ __all__ = [
 
 T2M_FORMAT = "habitsim.models.codegpt"
 _VERSION = 1
-
-
-@dataclass(frozen=True)
-class T2MTrainConfig:
-    """Schedule of :func:`train_codegpt`.
-
-    Attributes:
-        steps: optimiser steps in all.
-        batch_size: clips per step.
-        lr: peak learning rate; lr_final: the cosine's end value.
-        warmup_steps: linear warm-up from lr / warmup_steps.
-        weight_decay: AdamW's decoupled weight decay.
-        checkpoint_every: steps between resumable checkpoints (and at the end).
-        val_every: steps between validation records (and at the end).
-        seed: seed of the weights, the dropout and the batch sampler.
-        threads: torch CPU threads while training (None: leave torch's setting).
-    """
-
-    steps: int = 12000
-    batch_size: int = 32
-    lr: float = 3e-4
-    lr_final: float = 3e-5
-    warmup_steps: int = 200
-    weight_decay: float = 0.01
-    checkpoint_every: int = 500
-    val_every: int = 500
-    seed: int = 0
-    threads: int | None = 2
-
-    def validate(self) -> T2MTrainConfig:
-        checks = [
-            (self.steps >= 1, f"steps must be ≥ 1, got {self.steps}"),
-            (self.batch_size >= 1, f"batch_size must be ≥ 1, got {self.batch_size}"),
-            (self.lr > 0 and self.lr_final >= 0, "lr must be > 0 and lr_final ≥ 0"),
-            (self.warmup_steps >= 0, f"warmup_steps must be ≥ 0, got {self.warmup_steps}"),
-            (self.weight_decay >= 0, f"weight_decay must be ≥ 0, got {self.weight_decay}"),
-            (self.checkpoint_every >= 1, "checkpoint_every must be ≥ 1"),
-            (self.val_every >= 1, "val_every must be ≥ 1"),
-            (self.seed >= 0, f"seed must be ≥ 0, got {self.seed}"),
-            (self.threads is None or self.threads >= 1, "threads must be ≥ 1 or None"),
-        ]
-        for ok, msg in checks:
-            if not ok:
-                raise ConfigError(f"t2m train: {msg}")
-        return self
-
-
-@dataclass(frozen=True)
-class T2MConfig:
-    """A text-to-motion configuration: preset name, model shape, schedule."""
-
-    name: str = "default"
-    model: CodeGPTConfig = field(default_factory=CodeGPTConfig)
-    train: T2MTrainConfig = field(default_factory=T2MTrainConfig)
-
-    def validate(self) -> T2MConfig:
-        self.model.validate()
-        self.train.validate()
-        return self
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: Any) -> T2MConfig:
-        """Parse :meth:`to_dict`'s output (ConfigError on unknown keys or bad values)."""
-        return _from_dict(cls, d, "t2m config").validate()
-
-    def replace(self, **changes: Any) -> T2MConfig:
-        """A copy with dotted keys replaced: ``cfg.replace(**{"train.steps": 10})``."""
-        d = self.to_dict()
-        for key, value in changes.items():
-            node = d
-            *parents, last = key.split(".")
-            for p in parents:
-                if not isinstance(node.get(p), dict):
-                    raise ConfigError(f"unknown t2m config key {key!r}")
-                node = node[p]
-            if last not in node:
-                raise ConfigError(f"unknown t2m config key {key!r}; valid here: {', '.join(node)}")
-            node[last] = value
-        return T2MConfig.from_dict(d)
-
-
-def _tiny() -> T2MConfig:
-    """Seconds on one core: tests and smoke runs."""
-    return T2MConfig(
-        "tiny",
-        CodeGPTConfig(d_model=32, layers=1, heads=2, ff=64, dropout=0.1, max_steps=48),
-        T2MTrainConfig(
-            steps=20, batch_size=4, warmup_steps=2, checkpoint_every=10, val_every=10, threads=1
-        ),
-    )
-
-
-def _default() -> T2MConfig:
-    """Sized for ≤ 2.5 h on 2 CPU cores (docs/text_to_motion.md has the measured rate)."""
-    return T2MConfig("default")
-
-
-#: Preset name → factory.
-T2M_PRESETS: dict[str, Callable[[], T2MConfig]] = {"tiny": _tiny, "default": _default}
-
-
-def t2m_preset(name: str) -> T2MConfig:
-    """The configuration of a preset (ConfigError listing the valid names)."""
-    if name not in T2M_PRESETS:
-        raise ConfigError(f"unknown t2m preset {name!r}; valid: {', '.join(T2M_PRESETS)}")
-    return T2M_PRESETS[name]().validate()
 
 
 # ---------------------------------------------------------------------------- checkpoints
