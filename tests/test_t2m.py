@@ -48,7 +48,7 @@ def code_set(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
     root = tmp_path_factory.mktemp("t2m")
     ds = root / "data"
-    build_dataset(ds, clips_per_species=5, species=["dog", "cat"], workers=1, progress=False)
+    build_dataset(ds, clips_per_species=11, species=["dog", "cat"], workers=1, progress=False)
     caption_dataset(ds, seed=0)
     build_code_set(ds, root / "codes", embed=fake_embed, text_model="fake-bow")
     return root / "codes"
@@ -57,7 +57,9 @@ def code_set(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def trained(code_set: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("ckpt") / "t2m"
-    cfg = t2m_preset("tiny").replace(**{"train.steps": 6, "train.checkpoint_every": 3})
+    cfg = t2m_preset("tiny").replace(
+        **{"train.steps": 6, "train.checkpoint_every": 3, "train.val_every": 2}
+    )
     train_codegpt(code_set, out, cfg, log=lambda s: None)
     return out
 
@@ -95,8 +97,11 @@ def test_code_set_holds_every_captioned_clip_and_resumes(code_set: Path, tmp_pat
     assert all(np.array_equal(before[k], after[k]) for k in ("codes", "path", "text"))
 
 
-def test_code_set_bad_input(tmp_path: Path, code_set: Path) -> None:
+def test_code_set_bad_input(tmp_path: Path, code_set: Path, small_dataset: Path) -> None:
     data = Path(json.loads((code_set / CODES_NAME).read_text())["dataset"])
+    with pytest.raises(CodeSetError):  # a data set without captions.json
+        build_code_set(small_dataset, tmp_path / "z", embed=fake_embed, text_model="bow")
+    assert not (tmp_path / "z" / CODES_NAME).exists()
     with pytest.raises(CodeSetError):
         build_code_set(data, tmp_path / "x", embed=fake_embed)  # no text_model name
     with pytest.raises(CodeSetError):
@@ -116,7 +121,9 @@ def test_path_features_round_trip() -> None:
 def test_training_is_seeded_and_resumes_to_the_same_weights(
     code_set: Path, trained: Path, tmp_path: Path
 ) -> None:
-    cfg = t2m_preset("tiny").replace(**{"train.steps": 6, "train.checkpoint_every": 3})
+    cfg = t2m_preset("tiny").replace(
+        **{"train.steps": 6, "train.checkpoint_every": 3, "train.val_every": 2}
+    )
     wa = load_codegpt(trained).model.state_dict()
     # interrupted after 2 steps, resumed to 6 == 6 straight steps
     r = tmp_path / "r"
@@ -140,6 +147,14 @@ def test_training_is_seeded_and_resumes_to_the_same_weights(
         )
     with pytest.raises(ConfigError):
         t2m_preset("huge")
+
+
+def test_the_best_validation_step_is_kept(code_set: Path, trained: Path) -> None:
+    assert load_code_set(code_set).split("val")  # the data set has val clips
+    hist = json.loads((trained / "config.json").read_text())["training"]["history"]
+    best = json.loads((trained / "best" / "config.json").read_text())["training"]
+    assert best["step"] == min(hist, key=lambda h: h["val_ce"])["step"]
+    assert load_codegpt(trained / "best").model.levels == 4
 
 
 def test_generate_length_species_and_labels(trained: Path) -> None:

@@ -36,8 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="train the text-to-motion transformer on a code set",
         description=(
             "Train the transformer over codes on a code set's train clips (val clips for "
-            "the validation records); default ≤ 2.5 h on 2 CPU cores, tiny in seconds. "
-            "Checkpoints every 500 steps; --resume continues an interrupted run."
+            "the validation records and CKPT/best); default about 25 min on one CPU thread, "
+            "tiny in seconds. Checkpoints every 500 steps; --resume continues a run."
         ),
     )
     p.add_argument("--codes", required=True, type=Path, metavar="CODES", help="code set folder")

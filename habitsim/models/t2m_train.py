@@ -21,6 +21,8 @@ unpickled, ``config.json`` written last with the SHA-256 of every tensor file)::
     model.safetensors        every parameter and buffer of CodeGPT
     train_state.safetensors  optimiser moments and RNG states (resuming only)
     train_state.json
+    best/                    config.json + model.safetensors of the step with the lowest
+                             validation code cross-entropy (when the code set has val clips)
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ from .t2m_data import CodeClip, CodeSet, load_code_set
 
 __all__ = [
     "T2M_FORMAT",
+    "BEST_DIR",
     "T2M_PRESETS",
     "T2MTrainConfig",
     "T2MConfig",
@@ -68,6 +71,9 @@ __all__ = [
 ]
 
 T2M_FORMAT = "habitsim.models.codegpt"
+#: Sub-folder of a training run's checkpoint that holds the weights of its lowest
+#: validation code cross-entropy so far (only with val clips; no training state).
+BEST_DIR = "best"
 _VERSION = 1
 
 
@@ -411,6 +417,7 @@ def train_codegpt(
                 }
 
             end = t.steps if stop_at is None else max(start, min(int(stop_at), t.steps))
+            best = min((h["val_ce"] for h in history if "val_ce" in h), default=math.inf)
             model.train()
             run: dict[str, float] = {}
             n_run, t_run = 0, time.perf_counter()
@@ -439,6 +446,9 @@ def train_codegpt(
                     history.append(rec)
                     metrics = {k: v for k, v in rec.items() if k.startswith("val_")}
                     log(" ".join(f"{k}={v}" for k, v in rec.items()))
+                    if rec.get("val_ce", math.inf) < best:
+                        best = rec["val_ce"]
+                        save_codegpt(out / BEST_DIR, model, cfg, meta(done))
                     run, n_run, t_run = {}, 0, time.perf_counter()
                 if done % t.checkpoint_every == 0 or done in (t.steps, end):
                     tensors, opt_js = _optimizer_state(opt)
