@@ -20,7 +20,11 @@ Modules: :mod:`~habitsim.models.config` (typed configs and presets),
 :mod:`~habitsim.models.resume` and :mod:`~habitsim.models.finetune`),
 :mod:`~habitsim.models.recipe` (staged presets: the shipped model's stages),
 :mod:`~habitsim.models.checkpoint`, :mod:`~habitsim.models.transfer`,
-:mod:`~habitsim.models.evaluate`.
+:mod:`~habitsim.models.evaluate`; text to motion: :mod:`~habitsim.models.t2m_data`
+(the code set), :mod:`~habitsim.models.t2m_config`, :mod:`~habitsim.models.codegpt` (the
+transformer),
+:mod:`~habitsim.models.t2m_train`, :mod:`~habitsim.models.t2m`,
+:mod:`~habitsim.models.t2m_eval`.
 """
 
 from __future__ import annotations
@@ -52,6 +56,19 @@ _EXPORTS = {
     "ModelError": "errors",
     "TextEncoderError": "errors",
     "TrainingDataError": "errors",
+    "CodeSetError": "errors",
+    "GenerationRequestError": "errors",
+    "text_to_motion": "t2m",
+    "T2MOptions": "t2m",
+    "build_code_set": "t2m_data",
+    "load_code_set": "t2m_data",
+    "CodeGPT": "codegpt",
+    "CodeGPTConfig": "t2m_config",
+    "T2MConfig": "t2m_config",
+    "t2m_preset": "t2m_config",
+    "train_codegpt": "t2m_train",
+    "load_codegpt": "t2m_train",
+    "prompt_agreement": "t2m_eval",
     "UnknownMethodError": "errors",
     "REFERENCE_CLIPS": "evaluate",
     "reconstruction_error": "evaluate",
@@ -120,6 +137,19 @@ __all__ = [
     "MethodNotAvailableError",
     "TextEncoderError",
     "TrainingDataError",
+    "CodeSetError",
+    "GenerationRequestError",
+    "text_to_motion",
+    "T2MOptions",
+    "build_code_set",
+    "load_code_set",
+    "CodeGPT",
+    "CodeGPTConfig",
+    "T2MConfig",
+    "t2m_preset",
+    "train_codegpt",
+    "load_codegpt",
+    "prompt_agreement",
 ]
 
 

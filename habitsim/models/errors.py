@@ -12,6 +12,8 @@ __all__ = [
     "TextEncoderError",
     "TrainingDataError",
     "ConfigError",
+    "CodeSetError",
+    "GenerationRequestError",
 ]
 
 
@@ -38,3 +40,21 @@ class TextEncoderError(ModelError):
 
 class TrainingDataError(ModelError):
     """A training data set that is empty or lacks the species / splits training needs."""
+
+
+class CodeSetError(ModelError):
+    """A text-to-motion code set that is missing, unreadable or cannot be built (no
+    captions, no captioned clip, embeddings of the wrong shape)."""
+
+
+class GenerationRequestError(ModelError):
+    """A text-to-motion request the model cannot serve.
+
+    Attributes:
+        code: what is wrong: ``empty_text``, ``text_too_long``, ``length_out_of_range``,
+            ``bad_sampling`` (temperature, top-k or guidance outside their ranges).
+    """
+
+    def __init__(self, code: str, message: str):
+        self.code = code
+        super().__init__(message)
