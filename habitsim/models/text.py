@@ -90,6 +90,10 @@ def load_text_encoder(name: str = DEFAULT_TEXT_MODEL):  # -> SentenceTransformer
             "text embeddings need sentence-transformers (pip install sentence-transformers)"
         ) from e
     try:
+        from transformers.utils import logging as hf_logging
+
+        hf_logging.disable_progress_bar()  # no "Loading weights" bar in the console
+        hf_logging.set_verbosity_error()
         return SentenceTransformer(path, device="cpu")
     except Exception as e:  # noqa: BLE001 - any loader failure becomes one typed error
         raise TextEncoderError(
