@@ -44,7 +44,7 @@ import torch
 from torch import nn
 
 from habitsim.errors import HabitsimError
-from habitsim.fileio import atomic_write, atomic_write_text, make_dirs
+from habitsim.fileio import atomic_write, atomic_write_text, make_dirs, output_transaction
 from habitsim.motion import FEATURE_DIM, Motion
 from habitsim.rotations import quat_fix_continuity, quat_mul, quat_slerp
 from habitsim.threads import one_thread
@@ -672,14 +672,17 @@ def save_evaluator(
     wall_time_s: float,
     final_loss: float,
 ) -> Path:
-    """Write weights (safetensors), ``config.json`` and ``README.md`` atomically."""
+    """Write weights (safetensors), ``config.json`` and ``README.md``: all three or none.
+
+    Raises:
+        OutputPathError: the folder cannot be written; OutputWriteError: a write failed
+            (a full disk), the folder keeps what it held before.
+    """
     from safetensors.torch import save
 
     out = make_dirs(out_dir, "evaluator folder")
     state = {k: v.detach().contiguous() for k, v in model.state_dict().items()}
     blob = save(state, metadata={"format": "pt", "kind": "habitsim.evaluator"})
-    with atomic_write(out / _WEIGHTS) as fh:
-        fh.write(blob)
     import habitsim
 
     meta = {
@@ -706,8 +709,11 @@ def save_evaluator(
         "torch_version": torch.__version__,
         "habitsim_version": habitsim.__version__,
     }
-    atomic_write_text(out / _CONFIG, json.dumps(meta, indent=2, sort_keys=True) + "\n")
-    atomic_write_text(out / _README, _readme(meta))
+    with output_transaction():  # the three files together or none (a full disk)
+        with atomic_write(out / _WEIGHTS) as fh:
+            fh.write(blob)
+        atomic_write_text(out / _CONFIG, json.dumps(meta, indent=2, sort_keys=True) + "\n")
+        atomic_write_text(out / _README, _readme(meta))
     for name in (_WEIGHTS, _CONFIG, _README):  # package data: readable by everyone
         os.chmod(out / name, 0o644)
     _load_cached.cache_clear()

@@ -93,7 +93,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from habitsim.errors import brief
+from habitsim.errors import OutputWriteError, brief, brief_path
 from habitsim.fileio import atomic_write, atomic_write_text, check_writable, json_safe, make_dirs
 from habitsim.folders import claim_output_folder
 
@@ -263,6 +263,8 @@ def run_benchmark(
         OutputFolderError: ``cfg.out`` holds files habitsim did not write, or an earlier
             run without ``resume`` / ``overwrite``.
         OutputBusyError: another run is writing into ``cfg.out``.
+        OutputWriteError: an output failed while being written (a full disk); the rows
+            already written stay, ``resume`` continues.
     """
 
     t0 = time.perf_counter()
@@ -275,7 +277,13 @@ def run_benchmark(
     ) as claim:
         if claim.earlier is not None:
             _check_resume(cfg)
-        return _run(cfg, tasks, t0, executor, workers, scheduler, progress, report, log)
+        try:
+            return _run(cfg, tasks, t0, executor, workers, scheduler, progress, report, log)
+        except OutputWriteError as e:  # a full disk: the finished rows stay
+            raise OutputWriteError(
+                f"{e}. The pairs already evaluated are kept in {brief_path(out / 'rows')}; "
+                "once the output can be written, run again with --resume to continue"
+            ) from None
 
 
 def _run(

@@ -12,7 +12,14 @@ from collections.abc import Iterable, Iterator
 
 
 class HabitsimError(Exception):
-    """Root of every error raised on purpose by habitsim."""
+    """Root of every error raised on purpose by habitsim.
+
+    Attributes:
+        exit_code: what the command line exits with on it: 2 for bad input (the default),
+            1 for work that failed (:class:`OutputWriteError`).
+    """
+
+    exit_code: int = 2
 
 
 class UnknownSpeciesError(HabitsimError, KeyError):
@@ -95,6 +102,15 @@ class MethodUnavailable(HabitsimError):
 class OutputPathError(HabitsimError, OSError):
     """An output path that cannot be written: a file where a folder should be, a folder
     where a file should be, a read-only folder, a full disk."""
+
+
+class OutputWriteError(OutputPathError):
+    """An output that failed while it was being written, after the work was done: a full
+    disk (``ENOSPC``), a quota reached (``EDQUOT``), a file system gone read-only
+    (``EROFS``), permission taken away (``EACCES``). Nothing half-written is left under
+    the output's name; the command line exits with code 1 (failed work, not bad input)."""
+
+    exit_code = 1
 
 
 class OutputFolderError(HabitsimError, ValueError):

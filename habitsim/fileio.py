@@ -22,12 +22,12 @@ import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, cast
 
 import numpy as np
 
 from .errors import OutputPathError, brief_path
-from .folders import _guard, _output_error, _record_write
+from .folders import _guard, _output_error, _record_write, write_failure
 
 #: Staged (temporary, destination) pairs of the innermost :func:`output_transaction`.
 _STAGED: contextvars.ContextVar[list[tuple[str, Path]] | None] = contextvars.ContextVar(
@@ -171,7 +171,7 @@ def _commit(staged: list[tuple[str, Path]]) -> None:
         for tmp, _ in staged:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)
-        raise _output_error(dest, e) from None
+        raise _output_error(dest, e, writing=True) from None
     for _, old in done:
         if old is not None:
             with contextlib.suppress(OSError):
@@ -179,16 +179,20 @@ def _commit(staged: list[tuple[str, Path]]) -> None:
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[str]:
+def atomic_path(path: str | Path, suffix: str = ".tmp", *, sync: bool = True) -> Iterator[str]:
     """A temporary file name next to ``path`` for writers that need a name, not a handle
-    (ffmpeg); it is renamed over ``path`` when the block ends normally (or staged, inside
-    an :func:`output_transaction`) and removed on any exception.
+    (ffmpeg). When the block ends normally the file is flushed to the disk (``fsync``;
+    not with ``sync=False``, for a writer that did it) and renamed over ``path`` (or
+    staged, inside an :func:`output_transaction`); on any exception it is removed.
 
     Inside a claimed output folder the path is listed in the folder's record before the
     file appears (see :func:`claim_output_folder`).
 
     Raises:
         OutputPathError: the folder cannot be created or written.
+        OutputWriteError: a write into the file inside the block (an ``OSError`` without
+            a file name: a full disk, a quota reached), the flush or the rename failed;
+            the temporary file is removed.
         OutputFolderError: see :func:`check_writable`.
     """
     path = Path(path)
@@ -205,42 +209,68 @@ def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[str]:
     os.umask(umask)
     try:
         yield tmp
-        os.chmod(tmp, 0o666 & ~umask)
-        staged = _STAGED.get()
-        if staged is not None:
-            staged.append((tmp, path))
-            return
         try:
+            if sync:
+                _fsync_file(tmp)
+            os.chmod(tmp, 0o666 & ~umask)
+            staged = _STAGED.get()
+            if staged is not None:
+                staged.append((tmp, path))
+                return
             os.replace(tmp, path)
         except OSError as e:
-            raise _output_error(path, e) from None
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
+            raise _output_error(path, e, writing=True) from None
+    except BaseException as e:
+        with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if write_failure(e):  # the writer's own write into ``tmp`` (pygltflib, …)
+            raise _output_error(path, cast(OSError, e), writing=True) from None
         raise
+
+
+def _fsync_file(name: str) -> None:
+    """Flush a file another program wrote (ffmpeg) to the disk."""
+    fd = os.open(name, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 @contextlib.contextmanager
 def atomic_write(path: str | Path, mode: str = "wb") -> Iterator[IO]:
     """Open a temporary file next to ``path``; rename it over ``path`` on success.
 
-    On any exception the temporary file is removed and ``path`` is left untouched, so no
-    half-written output is ever left on disk. Inside an :func:`output_transaction` the
-    rename waits for the end of the transaction.
+    The file is flushed to the disk (``fsync``) before the rename. On any exception the
+    temporary file is removed and ``path`` is left untouched, so no half-written output
+    is ever left on disk. Inside an :func:`output_transaction` the rename waits for the
+    end of the transaction.
 
     Raises:
         OutputPathError: the folder cannot be created or written.
+        OutputWriteError: a write into the file, its flush or its rename failed (a full
+            disk, a quota reached, a file system gone read-only).
     """
-    with atomic_path(path) as tmp:
+    with atomic_path(path, sync=False) as tmp:
         try:
             text: dict[str, Any] = {} if "b" in mode else {"encoding": "utf-8"}
             fh = open(tmp, mode, **text)
         except OSError as e:
-            raise _output_error(Path(path), e) from None
-        with fh:
+            raise _output_error(Path(path), e, writing=True) from None
+        try:
             yield fh
-            fh.flush()
-            os.fsync(fh.fileno())
+        except BaseException as e:
+            with contextlib.suppress(OSError):
+                fh.close()  # may try to flush the buffer again
+            if write_failure(e):
+                raise _output_error(Path(path), cast(OSError, e), writing=True) from None
+            raise
+        try:
+            with fh:
+                fh.flush()
+                os.fsync(fh.fileno())
+        except OSError as e:
+            raise _output_error(Path(path), e, writing=True) from None
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:

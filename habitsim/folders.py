@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import errno
 import fcntl
 import json
 import os
@@ -34,6 +35,7 @@ from .errors import (
     OutputBusyError,
     OutputFolderError,
     OutputPathError,
+    OutputWriteError,
     brief,
     brief_path,
 )
@@ -50,14 +52,53 @@ __all__ = [
 ]
 
 
-def _output_error(path: Path, e: OSError, what: str = "output") -> OutputPathError:
+#: What ``errno`` of a failed write says to do about it.
+_REMEDIES = {
+    errno.ENOSPC: "free space on that disk or write elsewhere",
+    errno.EDQUOT: "free space within your disk quota or write elsewhere",
+    errno.EFBIG: "write to a file system that takes files this large",
+    errno.EIO: "check the disk, or write elsewhere",
+    errno.EROFS: "the file system is read-only: write to a writable one",
+    errno.EACCES: "write into a folder you may write into",
+    errno.EPERM: "write into a folder you may write into",
+}
+#: Errnos that mean the disk could not take the bytes: a failed write wherever it occurs.
+_NO_ROOM = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO})
+
+
+def _output_error(
+    path: Path, e: OSError, what: str = "output", *, writing: bool = False
+) -> OutputPathError:
+    """The typed error of an ``OSError`` on an output path: an :class:`OutputWriteError`
+    (exit code 1) for a write that failed on its way (``writing``, or a full disk), else
+    an :class:`OutputPathError` (exit code 2: a destination that cannot be written)."""
+    if isinstance(e, OutputPathError):
+        return e
     reason = e.strerror or type(e).__name__
+    remedy = _REMEDIES.get(e.errno or 0, "choose a path habitsim can write")
+    if writing or e.errno in _NO_ROOM:
+        return OutputWriteError(
+            f"{what} {brief_path(path)}: writing it failed ({reason}); nothing was left "
+            f"under that name; {remedy}"
+        )
     anc = path.parent
     while not anc.exists() and anc.parent != anc:
         anc = anc.parent
     if anc.exists() and not anc.is_dir():
         reason = f"{brief_path(anc)} is a file where a folder should be"
-    return OutputPathError(f"{what} {brief_path(path)}: cannot be written ({reason})")
+        remedy = "remove that file or choose another path"
+    return OutputPathError(f"{what} {brief_path(path)}: cannot be written ({reason}); {remedy}")
+
+
+def write_failure(e: BaseException) -> bool:
+    """Whether ``e`` is the ``OSError`` of a write into an open file that failed for want
+    of room or of permission (no file name attached: not an ``open`` of another file)."""
+    return (
+        isinstance(e, OSError)
+        and not isinstance(e, OutputPathError)
+        and e.filename is None
+        and (e.errno in _NO_ROOM or e.errno in _REMEDIES)
+    )
 
 
 #: Record in an output folder of every file habitsim wrote there: a header line (a JSON
@@ -177,13 +218,17 @@ def _record_write(path: Path) -> None:
         return
     rec, rel, _ = found
     try:
-        fd = os.open(rec, os.O_WRONLY | os.O_APPEND | os.O_NOFOLLOW)
+        fd = os.open(rec, os.O_RDWR | os.O_APPEND | os.O_NOFOLLOW)
     except OSError as e:
         raise _output_error(rec, e) from None
+    line = (json.dumps(rel) + "\n").encode("utf-8")
     try:
-        os.write(fd, (json.dumps(rel) + "\n").encode("utf-8"))
+        end = os.fstat(fd).st_size
+        if end and os.pread(fd, 1, end - 1) != b"\n":
+            line = b"\n" + line  # a line torn by a failed write stays on its own
+        os.write(fd, line)
     except OSError as e:
-        raise _output_error(rec, e) from None
+        raise _output_error(rec, e, writing=True) from None
     finally:
         os.close(fd)
 
@@ -194,12 +239,17 @@ def _new_record(root: Path, command: str, keep: list[str] | None = None) -> None
     header = {"kind": _RECORD_KIND, "format_version": 1, "command": command}
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{WRITTEN_NAME}.", suffix=".tmp", dir=root)
+    except OSError as e:
+        raise _output_error(rec, e) from None
+    try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(json.dumps(header) + "\n")
             fh.writelines(json.dumps(r) + "\n" for r in sorted(keep or []))
         os.replace(tmp, rec)
     except OSError as e:
-        raise _output_error(rec, e) from None
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise _output_error(rec, e, writing=True) from None
     _RECORDS.pop(str(rec), None)
 
 

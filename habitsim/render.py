@@ -37,7 +37,7 @@ from typing import Any, BinaryIO, cast
 import mujoco
 import numpy as np
 
-from .errors import HabitsimError
+from .errors import HabitsimError, OutputWriteError, brief_path
 from .fileio import atomic_path, atomic_write
 
 __all__ = [
@@ -559,11 +559,24 @@ def save_video(
 
 def _write_mp4(frames: Iterable[np.ndarray], fps: float, path: Path, opts: RenderOptions) -> Path:
     """Stream frames into ffmpeg (libx264 at ``opts.preset``; it encodes in its own
-    process while the next frames are drawn), into a temporary file renamed when complete."""
-    import imageio.v2 as iio
+    process while the next frames are drawn), into a temporary file renamed only once
+    the encoder has finished it.
 
+    imageio-ffmpeg does not report how ffmpeg ended, so the finished file is read back
+    (:func:`imageio_ffmpeg.count_frames_and_secs`: its packets, not decoded): a file
+    that does not hold every frame sent, or cannot be read (ffmpeg stopped on a full
+    disk before writing the index), is an :class:`~habitsim.errors.OutputWriteError`.
+
+    Raises:
+        OutputWriteError: ffmpeg stopped taking frames, or left an incomplete file; the
+            temporary file is removed and nothing appears under ``path``.
+    """
+    import imageio.v2 as iio
+    import imageio_ffmpeg
+
+    sent = 0
     with atomic_path(path, suffix=".mp4") as tmp:
-        with iio.get_writer(
+        writer = iio.get_writer(
             tmp,
             format="FFMPEG",
             mode="I",
@@ -571,10 +584,29 @@ def _write_mp4(frames: Iterable[np.ndarray], fps: float, path: Path, opts: Rende
             codec="libx264",
             macro_block_size=8,
             ffmpeg_params=["-preset", opts.preset],
-        ) as w:
+        )
+        with writer as w:
             for f in frames:
-                w.append_data(f)  # type: ignore[attr-defined]  # imageio's stub: base class
+                try:
+                    w.append_data(f)  # type: ignore[attr-defined]  # imageio's stub: base class
+                except OSError:  # imageio-ffmpeg: the pipe into ffmpeg broke
+                    raise _encoder_failed(path, f"it stopped after {sent} frames") from None
+                sent += 1
+        try:
+            got = imageio_ffmpeg.count_frames_and_secs(tmp)[0]
+        except (RuntimeError, OSError):
+            raise _encoder_failed(path, "the file it wrote cannot be read") from None
+        if got != sent:
+            raise _encoder_failed(path, f"the file it wrote holds {got} of {sent} frames")
     return path
+
+
+def _encoder_failed(path: Path, what: str) -> OutputWriteError:
+    return OutputWriteError(
+        f"video {brief_path(path)}: the video encoder (ffmpeg) did not finish: {what}; "
+        "nothing was left under that name; check the disk has free space and the folder "
+        "is writable (ffmpeg's own message is printed above), or write elsewhere"
+    )
 
 
 def render_video(

@@ -3,14 +3,15 @@ none transactions."""
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
 import pytest
 from helpers import files_under
 
-from habitsim.errors import OutputPathError
-from habitsim.fileio import atomic_write_text, check_writable, output_transaction
+from habitsim.errors import OutputPathError, OutputWriteError
+from habitsim.fileio import atomic_write, atomic_write_text, check_writable, output_transaction
 
 
 def test_check_writable_file_where_a_folder_should_be(tmp_path: Path) -> None:
@@ -107,3 +108,54 @@ def test_make_dirs_read_only_even_for_root(tmp_path: Path, monkeypatch) -> None:
     monkeypatch.setattr(Path, "mkdir", denied)
     with pytest.raises(OutputPathError, match="Permission denied"):
         make_dirs(tmp_path / "x" / "y", "checkpoint folder")
+
+
+def _no_space(*args, **kwargs):
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+@pytest.mark.parametrize("where", ["write", "fsync", "replace"])
+def test_a_full_disk_while_writing_is_typed_and_leaves_nothing(
+    tmp_path: Path, monkeypatch, where: str
+) -> None:
+    (tmp_path / "r.json").write_text("old")
+    if where == "fsync":
+        monkeypatch.setattr(os, "fsync", _no_space)
+    elif where == "replace":
+        monkeypatch.setattr(os, "replace", _no_space)
+    with pytest.raises(OutputWriteError) as e:
+        with atomic_write(tmp_path / "r.json", "w") as fh:
+            fh.write("new")
+            if where == "write":
+                _no_space()
+    assert e.value.exit_code == 1 and e.value.errno is None
+    assert files_under(tmp_path) == ["r.json"] and (tmp_path / "r.json").read_text() == "old"
+
+
+def test_an_error_of_another_file_inside_a_write_is_not_an_output_error(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError):
+        with atomic_write(tmp_path / "r.json", "w"):
+            open(tmp_path / "missing.txt")  # noqa: SIM115 - an input the writer reads
+    assert files_under(tmp_path) == []
+
+
+def test_a_full_disk_in_a_transaction_keeps_the_old_files(tmp_path: Path, monkeypatch) -> None:
+    for name in ("a", "b"):
+        (tmp_path / name).write_text("old")
+    real = os.replace
+    calls = []
+
+    def second_fails(src, dst):
+        calls.append(dst)
+        if len(calls) == 2:
+            _no_space()
+        real(src, dst)
+
+    monkeypatch.setattr(os, "replace", second_fails)
+    with pytest.raises(OutputWriteError):
+        with output_transaction():
+            atomic_write_text(tmp_path / "a", "new")
+            atomic_write_text(tmp_path / "b", "new")
+    monkeypatch.undo()
+    assert files_under(tmp_path) == ["a", "b"]
+    assert {(tmp_path / n).read_text() for n in "ab"} == {"old"}

@@ -144,3 +144,12 @@ def test_a_run_that_fails_before_writing_leaves_no_folder(tmp_path: Path) -> Non
         atomic_write_text(out / "partial.json", "{}")
         raise ValueError("failed later")
     assert is_written(out / "partial.json")
+
+
+def test_a_record_line_torn_by_a_full_disk_does_not_hide_the_next(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    with claim_output_folder(out, command="eval"):
+        with open(out / WRITTEN_NAME, "a") as fh:
+            fh.write('"torn.js')  # the disk filled in the middle of a line
+        atomic_write_text(out / "next.json", "{}")
+        assert is_written(out / "next.json")

@@ -3,10 +3,12 @@
 Each command group lives in its own module exposing ``register(subparsers)``; the module
 adds its commands, each with ``set_defaults(func=...)`` taking the parsed namespace and
 returning an exit code. Every :class:`~habitsim.errors.HabitsimError` becomes a one-line
-``error: ...`` message on stderr and exit code 2. Output into a pipe closed early
-(``habitsim species list | head -1``) ends the command quietly with exit code 141 (128 +
-SIGPIPE, as a shell reports it), without a traceback. Shared option conventions (lists of
-names, ``--check``) are in :mod:`habitsim.cli.conventions`.
+``error: ...`` message on stderr and its ``exit_code``: 2 for bad input, 1 for an output
+that failed while being written (:class:`~habitsim.errors.OutputWriteError`: a full
+disk). Output into a pipe closed early (``habitsim species list | head -1``) ends the
+command quietly with exit code 141 (128 + SIGPIPE, as a shell reports it), without a
+traceback. Shared option conventions (lists of names, ``--check``) are in
+:mod:`habitsim.cli.conventions`.
 """
 
 from __future__ import annotations
@@ -94,7 +96,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _closed_pipe()
     except HabitsimError as e:
         print(f"error: {bounded(str(e))}", file=sys.stderr)
-        return 2
+        return e.exit_code
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

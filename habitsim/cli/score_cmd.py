@@ -143,11 +143,14 @@ def _report(ns: argparse.Namespace, res: ScoreResult) -> int:
     for r in res.errors:
         print(f"{r['file']}: {r['status']}: {r['error']}: {r['note']}")
     if ns.out is not None:
-        written = res.write(ns.out)
-        if ns.report:
-            from ..evaluation.score_report import write_score_report
+        from ..fileio import output_transaction
 
-            written += write_score_report(res, ns.out)
+        with output_transaction():  # the tables and the report: all or none
+            written = res.write(ns.out)
+            if ns.report:
+                from ..evaluation.score_report import write_score_report
+
+                written += write_score_report(res, ns.out)
         for path in written:
             print(f"wrote {path}")
     done = len(res.rows) - len(res.errors)

@@ -124,13 +124,20 @@ def _finetune_config(init: str, cfg):
 
 
 def _train(ns: argparse.Namespace) -> int:
+    from ..errors import OutputWriteError, brief_path
     from ..folders import claim_output_folder
 
     # one training run at a time in CKPT; --resume / --overwrite as for the checkpoint
     with claim_output_folder(
         ns.out, command="train", overwrite=ns.overwrite, resume=ns.resume, log=print
     ):
-        return _train_in(ns)
+        try:
+            return _train_in(ns)
+        except OutputWriteError as e:  # a full disk: the last whole checkpoint stays
+            raise OutputWriteError(
+                f"{e}. The last complete checkpoint in {brief_path(ns.out)} is kept; once "
+                "the output can be written, run again with --resume to continue from it"
+            ) from None
 
 
 def _train_in(ns: argparse.Namespace) -> int:

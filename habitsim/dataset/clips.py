@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DatasetError, HabitsimError
+from ..errors import DatasetError, HabitsimError, OutputPathError
 from ..gaits import GENERATOR_VERSION, generate
 from ..motion import Motion, load_motion
 from ..species import FEET
@@ -70,7 +70,8 @@ def _make_clip(root: str, job: ClipJob, resume: bool) -> tuple[dict[str, Any], b
     """Generate (or, resuming, reuse) one clip, measure it and return its manifest entry.
 
     Runs in worker processes; every failure comes back as a :class:`DatasetError`
-    naming the clip (plain exceptions pickle reliably; some typed ones do not).
+    naming the clip (plain exceptions pickle reliably; some typed ones do not), except a
+    clip that could not be written (:class:`OutputPathError`, its path in the message).
     """
     path = Path(root) / job.path
     try:
@@ -111,6 +112,8 @@ def _make_clip(root: str, job: ClipJob, resume: bool) -> tuple[dict[str, Any], b
             fps=job.fps,
             measured=_measure(m),
         )
+    except OutputPathError:  # a clip that could not be written (a full disk): as it is
+        raise
     except Exception as e:  # noqa: BLE001 - re-raised typed, with the clip named
         raise DatasetError(
             f"clip {job.path} (species {job.species}, action {job.action}, seed {job.seed}) "

@@ -23,7 +23,7 @@ from typing import Any
 
 import torch
 
-from ..fileio import atomic_write, atomic_write_text, make_dirs
+from ..fileio import atomic_write, atomic_write_text, make_dirs, output_transaction
 from .config import Config
 from .errors import CheckpointError, ConfigError
 from .features import FEATURE_VERSION
@@ -111,17 +111,12 @@ def save_checkpoint(
         train_state: (tensors, json) of the optimiser / RNG state, to resume training.
     """
     out = make_dirs(out_dir, "checkpoint folder")  # OutputPathError, not a raw OSError
-    files: dict[str, str] = {}
-    with atomic_write(out / MODEL_FILE) as fh:
-        fh.write(_state_bytes(model.state_dict()))
-    files[MODEL_FILE] = file_sha256(out / MODEL_FILE)
+    blobs = {MODEL_FILE: _state_bytes(model.state_dict())}
     if train_state is not None:
         tensors, js = train_state
-        with atomic_write(out / STATE_FILE) as fh:
-            fh.write(_state_bytes(tensors))
-        files[STATE_FILE] = file_sha256(out / STATE_FILE)
-        atomic_write_text(out / STATE_JSON, json.dumps(js))
-        files[STATE_JSON] = file_sha256(out / STATE_JSON)
+        blobs[STATE_FILE] = _state_bytes(tensors)
+        blobs[STATE_JSON] = json.dumps(js).encode("utf-8")
+    files = {name: hashlib.sha256(data).hexdigest() for name, data in blobs.items()}
     doc = {
         "format": CHECKPOINT_FORMAT,
         "format_version": CHECKPOINT_VERSION,
@@ -132,7 +127,13 @@ def save_checkpoint(
         **{k: v for k, v in meta.items() if k not in ("text", "files")},
         "files": files,
     }
-    atomic_write_text(out / CONFIG_FILE, json.dumps(doc, indent=2, sort_keys=False) + "\n")
+    # all files or none: a failed write (a full disk) leaves the previous checkpoint whole,
+    # so a resumed training continues from it
+    with output_transaction():
+        for name, data in blobs.items():
+            with atomic_write(out / name) as fh:
+                fh.write(data)
+        atomic_write_text(out / CONFIG_FILE, json.dumps(doc, indent=2, sort_keys=False) + "\n")
     _readable(out, [MODEL_FILE, CONFIG_FILE, *([STATE_FILE, STATE_JSON] if train_state else [])])
     return out
 
