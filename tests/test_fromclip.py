@@ -78,6 +78,7 @@ def test_files_written_and_the_model_stands(made) -> None:
     assert sp.mass_kg == pytest.approx(k * np.sqrt(0.55 * made.measure.hip_height) ** b, rel=1e-3)
 
 
+@pytest.mark.slow  # a transfer and a model compile: about 6 s
 def test_user_species_usable_like_a_catalog_one(made, monkeypatch) -> None:
     from habitsim.qpos import load_species_model, motion_to_qpos
 
