@@ -51,9 +51,8 @@ def bone_girth_keys() -> dict[str, str | None]:
     return keys
 
 
-@functools.cache
-def _bone_masses(name: str) -> np.ndarray:
-    sp = load_species(name)
+@functools.lru_cache(maxsize=256)
+def _bone_masses(sp: Species) -> np.ndarray:
     skel = get_skeleton(sp)
     lengths = skel.bone_lengths
     vol = np.zeros(len(JOINT_NAMES))
@@ -69,7 +68,7 @@ def _bone_masses(name: str) -> np.ndarray:
 
 def bone_masses(species: str | Species) -> np.ndarray:
     """(J,) mass [kg] of the bone ending at each joint; sums to the species' mass."""
-    return _bone_masses(load_species(species).name)
+    return _bone_masses(load_species(species))
 
 
 def center_of_mass(species: str | Species, positions: np.ndarray) -> np.ndarray:

@@ -38,6 +38,33 @@ class SpeciesFileError(HabitsimError, ValueError):
     """A species TOML file that is missing fields or holds inconsistent numbers."""
 
 
+class SpeciesNameError(HabitsimError, ValueError):
+    """A name a new species cannot take: not a lower-case identifier, or (the subclass
+    :class:`SpeciesNameClashError`) already taken."""
+
+
+class SpeciesNameClashError(SpeciesNameError):
+    """A species name found twice: a user species named like a built-in one, or in two
+    user catalog folders. Attributes: ``name`` and ``places`` (where each one is)."""
+
+    def __init__(self, name: str, places: Iterable[str], hint: str = ""):
+        self.name = name
+        self.places = list(places)
+        text = f"species name {name!r} clashes: it is {' and '.join(self.places)}"
+        super().__init__(text + (f"; {hint}" if hint else ""))
+
+
+class ClipMeasureError(HabitsimError, ValueError):
+    """A clip a species cannot be measured from (``habitsim species from-clip``). The
+    attribute ``code`` says what is missing: ``"legs"`` (four legs not found),
+    ``"short"`` (too few frames or seconds to show a stride), ``"body"`` (no spine
+    joint ahead of the hips, or a zero-length segment)."""
+
+    def __init__(self, code: str, message: str):
+        self.code = code
+        super().__init__(message)
+
+
 class InvalidMotionError(HabitsimError, ValueError):
     """Motion arrays of the wrong shape, non-finite values or inconsistent metadata."""
 

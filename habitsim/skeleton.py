@@ -143,12 +143,14 @@ class Skeleton:
         joint_names: the 30 joint names (same for every species).
         parents: parent index per joint (-1 for the root).
         offsets: (J, 3) canonical-pose offset of each joint from its parent [m].
+        species_info: the :class:`Species` it was made of (None: loaded by name).
     """
 
     species: str
     joint_names: tuple[str, ...]
     parents: tuple[int, ...]
     offsets: np.ndarray
+    species_info: Species | None = None
 
     @property
     def num_joints(self) -> int:
@@ -179,7 +181,7 @@ class Skeleton:
 
     @functools.cached_property
     def _standing(self) -> tuple[np.ndarray, np.ndarray]:
-        sp = load_species(self.species)
+        sp = self.species_info or load_species(self.species)
         g = standing_global_pitch(sp)
         ang = np.zeros(self.num_joints)
         ang[_INDEX["pelvis"]] = g["trunk"]
@@ -213,13 +215,14 @@ class Skeleton:
 
 
 def get_skeleton(species: str | Species) -> Skeleton:
-    """The skeleton of a catalog species (cached per species name)."""
-    return _skeleton(load_species(species).name)
+    """The skeleton of a species (cached per loaded :class:`Species`: a user species
+    whose file changed is loaded anew, and gets a skeleton of its new numbers)."""
+    return _skeleton(load_species(species))
 
 
-@functools.cache
-def _skeleton(name: str) -> Skeleton:
-    return Skeleton(name, JOINT_NAMES, PARENTS, _offsets(load_species(name)))
+@functools.lru_cache(maxsize=256)
+def _skeleton(sp: Species) -> Skeleton:
+    return Skeleton(sp.name, JOINT_NAMES, PARENTS, _offsets(sp), sp)
 
 
 def _check_fk_shapes(root_shape: tuple[int, ...], q_shape: tuple[int, ...], j: int) -> None:

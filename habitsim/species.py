@@ -25,13 +25,20 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from .errors import SpeciesFileError, UnknownSpeciesError, brief
+from .errors import (
+    SpeciesFileError,
+    SpeciesNameClashError,
+    SpeciesNameError,
+    UnknownSpeciesError,
+    brief,
+)
 
 __all__ = [
     "POSTURES",
@@ -47,6 +54,10 @@ __all__ = [
     "load_species",
     "load_species_file",
     "species_names",
+    "USER_CATALOG_ENV",
+    "user_catalog_dirs",
+    "user_species",
+    "check_new_species_name",
     "all_species",
     "training_species",
     "held_out_species",
@@ -193,6 +204,9 @@ class Species:
     description: str
     sources: tuple[str, ...]
     path: Path | None = field(default=None, compare=False)
+    #: the user catalog folder the species was read from (None: the built-in catalog);
+    #: its MuJoCo models are in ``<user_catalog>/<name>/``
+    user_catalog: Path | None = field(default=None, compare=False)
 
     # ---- derived sizes (one source of truth: segment lengths + posture) -------------
     @property
@@ -256,6 +270,7 @@ class Species:
             "cousin": self.cousin,
             "outlier": self.outlier,
             "gaits": sorted(self.gaits),
+            "catalog": "built-in" if self.user_catalog is None else str(self.user_catalog),
         }
 
 
@@ -304,7 +319,7 @@ def _pair(v: Any, where: str) -> tuple[float, float]:
     return lo, hi
 
 
-def _parse(data: dict[str, Any], path: Path | None) -> Species:
+def _parse(data: dict[str, Any], path: Path | None, user_catalog: Path | None = None) -> Species:
     where = str(path) if path else "<species>"
     name = _req(data, "name", where)
     if not isinstance(name, str) or not name.isidentifier() or name.lower() != name:
@@ -415,6 +430,7 @@ def _parse(data: dict[str, Any], path: Path | None) -> Species:
         description=" ".join(desc.split()),
         sources=tuple(sources),
         path=path,
+        user_catalog=user_catalog,
     )
     _check_limits_hold_posture(sp, where)
     return sp
@@ -470,8 +486,12 @@ def _check_limits_hold_posture(sp: Species, where: str) -> None:
             )
 
 
-def load_species_file(path: str | Path) -> Species:
+def load_species_file(path: str | Path, user_catalog: str | Path | None = None) -> Species:
     """Load and validate one species TOML file.
+
+    Args:
+        path: the TOML file.
+        user_catalog: the user catalog folder it belongs to (None: not one).
 
     Raises:
         SpeciesFileError: unreadable TOML, a missing key or inconsistent numbers.
@@ -481,7 +501,7 @@ def load_species_file(path: str | Path) -> Species:
         data = tomllib.loads(p.read_text(encoding="utf-8"))
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise SpeciesFileError(f"{p}: cannot read species file: {e}") from e
-    return _parse(data, p)
+    return _parse(data, p, None if user_catalog is None else Path(user_catalog))
 
 
 @functools.cache
@@ -502,35 +522,185 @@ def _catalog() -> dict[str, Species]:
     return out
 
 
-def species_names() -> list[str]:
-    """Names of every species in the catalog, sorted."""
-    return sorted(_catalog())
+# ------------------------------------------------------------------ user catalogs
+#: Environment variable naming the user catalog folders (several joined by ``os.pathsep``),
+#: searched after the built-in catalog.
+USER_CATALOG_ENV = "HABITSIM_SPECIES_PATH"
+
+
+def user_catalog_dirs() -> list[Path]:
+    """The user catalog folders of ``$HABITSIM_SPECIES_PATH``, in search order."""
+    raw = os.environ.get(USER_CATALOG_ENV, "")
+    return [Path(p).expanduser() for p in raw.split(os.pathsep) if p.strip()]
+
+
+@functools.lru_cache(maxsize=256)
+def _user_file(path: str, folder: str, stamp: tuple[int, int]) -> Species:
+    """A user species file, parsed once per (path, modification time, size)."""
+    del stamp  # part of the cache key only
+    sp = load_species_file(path, user_catalog=folder)
+    stem = Path(path).stem
+    if sp.name != stem:
+        raise SpeciesFileError(
+            f"{path}: a user species file must be named after its species "
+            f"({sp.name}.toml), not {stem}.toml"
+        )
+    _check_user_species(sp)
+    return sp
+
+
+def _check_user_species(sp: Species) -> None:
+    """A user species names a built-in training species as its cousin, if any."""
+    cat = _catalog()
+    if sp.cousin is not None and (sp.cousin not in cat or cat[sp.cousin].held_out):
+        raise SpeciesFileError(
+            f"{sp.path}: cousin {sp.cousin!r} must be a training species of the built-in "
+            f"catalog: {', '.join(s.name for s in cat.values() if not s.held_out)}"
+        )
+
+
+def _read_user(path: Path, folder: Path) -> Species:
+    st = path.stat()
+    return _user_file(str(path), str(folder), (st.st_mtime_ns, st.st_size))
+
+
+def _user_files(dirs: list[Path]) -> dict[str, list[tuple[Path, Path]]]:
+    """``{name: [(file, folder), …]}`` of every ``*.toml`` in the user folders."""
+    found: dict[str, list[tuple[Path, Path]]] = {}
+    for d in dirs:
+        if not d.is_dir():
+            continue
+        for f in sorted(d.glob("*.toml")):
+            if f.is_file() and not f.name.startswith("."):
+                found.setdefault(f.stem, []).append((f, d))
+    return found
+
+
+def _clash_places(name: str, files: list[tuple[Path, Path]]) -> list[str]:
+    places = ["a built-in species"] if name in _catalog() else []
+    return places + [f"in user catalog {d}" for _, d in files]
+
+
+def user_species(dirs: list[Path] | None = None) -> list[Species]:
+    """Every species of the user catalog folders (default :func:`user_catalog_dirs`),
+    sorted by name.
+
+    Raises:
+        SpeciesNameClashError: a user species named like a built-in one, or found in two
+            folders.
+        SpeciesFileError: a user file that does not load.
+    """
+    found = _user_files(user_catalog_dirs() if dirs is None else dirs)
+    out = []
+    for name, files in sorted(found.items()):
+        places = _clash_places(name, files)
+        if len(places) > 1:
+            raise SpeciesNameClashError(
+                name, places, "rename or remove the user species file (NAME.toml, NAME/)"
+            )
+        out.append(_read_user(*files[0]))
+    return out
+
+
+def check_new_species_name(name: object, folder: str | Path, replace: bool = False) -> str:
+    """Check that a new user species may be called ``name`` in the user catalog
+    ``folder``.
+
+    Args:
+        name: the name asked for.
+        folder: the user catalog folder it is to be written to.
+        replace: an existing species of that name in ``folder`` may be replaced.
+
+    Returns:
+        The name.
+
+    Raises:
+        SpeciesNameError: not a lower-case identifier (letters, digits, ``_``).
+        SpeciesNameClashError: the name of a built-in species, or of a user species in
+            another folder of ``$HABITSIM_SPECIES_PATH`` (or in ``folder`` without
+            ``replace``).
+    """
+    if not isinstance(name, str) or not name.isidentifier() or name.lower() != name:
+        raise SpeciesNameError(
+            f"species name {brief(name)} is not valid: use a lower-case identifier "
+            "(letters, digits and _, not starting with a digit), e.g. mydog"
+        )
+    target = Path(folder).expanduser()
+    if name in _catalog():
+        raise SpeciesNameClashError(
+            name,
+            ["a built-in species"],
+            "choose another name (built-in: " + ", ".join(species_names()) + ")",
+        )
+    dirs = [target, *[d for d in user_catalog_dirs() if d.resolve() != target.resolve()]]
+    files = _user_files(dirs).get(name, [])
+    places = [
+        f"in user catalog {d}"
+        for f, d in files
+        if not (replace and d.resolve() == target.resolve())
+    ]
+    if places:
+        hint = "choose another name" + ("" if replace else ", or replace it (--overwrite)")
+        raise SpeciesNameClashError(name, places, hint)
+    return name
+
+
+def _user_lookup(name: str) -> Species | None:
+    """The user species ``name`` (None: in no user folder)."""
+    if not name.isidentifier():
+        return None
+    files = [(d / f"{name}.toml", d) for d in user_catalog_dirs() if (d / f"{name}.toml").is_file()]
+    if not files:
+        return None
+    if len(files) > 1:
+        raise SpeciesNameClashError(name, _clash_places(name, files), "keep one of them")
+    return _read_user(*files[0])
+
+
+def species_names(include_user: bool = False) -> list[str]:
+    """Names of every species in the built-in catalog (and, with ``include_user``, of
+    the user catalogs), sorted."""
+    if not include_user:
+        return sorted(_catalog())
+    return sorted([*_catalog(), *(s.name for s in user_species())])
 
 
 def load_species(name: str | Species) -> Species:
-    """The catalog species called ``name`` (a :class:`Species` passes through).
+    """The species called ``name``: the built-in catalog first, then the user catalog
+    folders of ``$HABITSIM_SPECIES_PATH`` (a :class:`Species` passes through).
 
     Raises:
         UnknownSpeciesError: with the list of known names.
+        SpeciesNameClashError: the name is in two user folders.
     """
     if isinstance(name, Species):
         return name
     cat = _catalog()
-    if not isinstance(name, str) or name not in cat:
-        raise UnknownSpeciesError(name, cat)
-    return cat[name]
+    if isinstance(name, str) and name in cat:
+        return cat[name]
+    found = _user_lookup(name) if isinstance(name, str) else None
+    if found is None:
+        known = list(cat)
+        for d in user_catalog_dirs():
+            known += [f.stem for f in d.glob("*.toml")] if d.is_dir() else []
+        raise UnknownSpeciesError(name, sorted(set(known)))
+    return found
 
 
-def all_species() -> list[Species]:
-    """Every catalog species, sorted by name."""
-    return [v for _, v in sorted(_catalog().items())]
+def all_species(include_user: bool = False) -> list[Species]:
+    """Every built-in species (and, with ``include_user``, every user species), sorted
+    by name."""
+    out = dict(_catalog())
+    if include_user:
+        out.update({s.name: s for s in user_species()})
+    return [v for _, v in sorted(out.items())]
 
 
 def training_species() -> list[Species]:
-    """Species whose motions may be used for training (``held_out = false``)."""
+    """Built-in species whose motions may be used for training (``held_out = false``)."""
     return [s for s in all_species() if not s.held_out]
 
 
 def held_out_species() -> list[Species]:
-    """Species never used for training."""
+    """Built-in species never used for training."""
     return [s for s in all_species() if s.held_out]

@@ -305,6 +305,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.bvh_mapping",
             "habitsim.source",
             "habitsim.bvh_mapping.export",
+            "habitsim.fromclip",
             "habitsim.render",
             "habitsim.workers",
             "habitsim.threads",
@@ -312,7 +313,13 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ),
     (
         "physics",
-        ("habitsim.mjcf_models", "habitsim.qpos", "habitsim.mjutils", "habitsim.controllers"),
+        (
+            "habitsim.mjcf_models",
+            "habitsim.qpos",
+            "habitsim.mjutils",
+            "habitsim.controllers",
+            "habitsim.fromclip.make",
+        ),
     ),
     ("metrics", ("habitsim.metrics",)),
     (

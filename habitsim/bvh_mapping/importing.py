@@ -114,19 +114,21 @@ def _in_place(motion: Motion, options: InPlaceOptions | None) -> bool:
 
 def map_joints(
     bvh: BVHData,
-    species: str | Species,
+    species: str | Species | None,
     joint_map: str | Path | Mapping[str, str] | None = None,
     units: str | float | None = None,
     up: str | None = None,
     options: MappingOptions | None = None,
 ) -> JointMapping:
     """The joint mapping and frame conversion :func:`import_bvh` uses for a source
-    skeleton, without retargeting its motion (arguments as :func:`import_bvh`'s).
+    skeleton, without retargeting its motion (arguments as :func:`import_bvh`'s; a
+    ``species`` of None detects the units against a 0.5 m leg, as for a rig that makes a
+    new species).
 
     Raises:
         SkeletonMappingError: unmappable skeleton or invalid joint map.
     """
-    sp = load_species(species)
+    sp = load_species(species) if species is not None else None
     options = options or MappingOptions()
     notes: list[str] = []
     codes: list[MappingNote] = []

@@ -1,4 +1,6 @@
-"""``habitsim species list`` and ``habitsim species show``: browse the species catalog."""
+"""``habitsim species list``, ``habitsim species show``: browse the species catalog (the
+built-in one and the user catalogs of ``$HABITSIM_SPECIES_PATH``);
+``habitsim species from-clip``: make a user species from one motion-capture clip."""
 
 from __future__ import annotations
 
@@ -6,9 +8,11 @@ import argparse
 import json
 import math
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
-from ..species import Species, all_species, load_species
+from ..species import POSTURES, Species, all_species, load_species
+from .conventions import add_source_options, source_options
 
 _COLUMNS = (
     "name",
@@ -41,12 +45,67 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the species as a JSON object")
     p.set_defaults(func=_cmd_show)
 
+    p = sub.add_parser(
+        "from-clip",
+        help="make a user species from one motion-capture clip",
+        description=(
+            "Measure the animal a BVH/glTF clip shows (segment lengths, standing posture, "
+            "hip and shoulder heights), write its species file into a user catalog folder "
+            "with its MuJoCo models, and check that the model stands (docs/species.md)."
+        ),
+    )
+    p.add_argument("clip", type=Path, metavar="REF", help="the clip: .bvh, .glb or .gltf")
+    p.add_argument("--name", required=True, help="the new species' name (lower-case identifier)")
+    p.add_argument(
+        "--mass",
+        type=float,
+        default=None,
+        metavar="KG",
+        help="body mass in kg (default: the catalog's allometric rule, docs/species.md)",
+    )
+    p.add_argument(
+        "--posture",
+        choices=POSTURES,
+        default=None,
+        help="posture class (default: classified from the leg angles)",
+    )
+    p.add_argument(
+        "--like",
+        default=None,
+        metavar="SPECIES",
+        help="built-in training species to borrow girths, joint limits, gaits and habits "
+        "from (default: the nearest of the same posture)",
+    )
+    p.add_argument(
+        "--description",
+        default=None,
+        metavar="TEXT",
+        help="plain-language habit description, 15 words or more (default: the borrowed "
+        "species' description, with the measured size)",
+    )
+    p.add_argument(
+        "--catalog",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="user catalog folder to write into (default: the first folder of "
+        "$HABITSIM_SPECIES_PATH)",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a user species of that name in the catalog folder",
+    )
+    p.add_argument("--json", action="store_true", help="print the report as a JSON object")
+    add_source_options(p, of="the clip", loop=False)
+    p.set_defaults(func=_cmd_from_clip)
+
 
 # ------------------------------------------------------------------ list
 
 
 def _held_out_text(sp: Species) -> str:
-    parts = []
+    parts = [] if sp.user_catalog is None else [f"user ({sp.user_catalog})"]
     if sp.held_out:
         parts.append(f"held out (cousin {sp.cousin})")
     if sp.outlier:
@@ -84,7 +143,7 @@ def format_table(rows: Sequence[tuple[str, ...]], header: tuple[str, ...] = _COL
 
 
 def _cmd_list(ns: argparse.Namespace) -> int:
-    species = all_species()
+    species = all_species(include_user=True)
     if ns.json:
         print(json.dumps([sp.summary() for sp in species], indent=2))
     else:
@@ -132,6 +191,7 @@ def species_details(sp: Species) -> dict[str, Any]:
         },
         "description": sp.description,
         "sources": list(sp.sources),
+        "user_catalog": str(sp.user_catalog) if sp.user_catalog else None,
         "path": str(sp.path) if sp.path else None,
     }
 
@@ -195,4 +255,66 @@ def _cmd_show(ns: argparse.Namespace) -> int:
         *[f"  - {s}" for s in sp.sources],
     ]
     print("\n".join(out))
+    return 0
+
+
+# ------------------------------------------------------------------ from-clip
+
+
+def _cmd_from_clip(ns: argparse.Namespace) -> int:
+    from ..fromclip.make import species_from_clip
+
+    r = species_from_clip(
+        ns.clip,
+        ns.name,
+        catalog=ns.catalog,
+        mass_kg=ns.mass,
+        posture=ns.posture,
+        like=ns.like,
+        description=ns.description,
+        source=source_options(ns),
+        replace=ns.overwrite,
+    )
+    sp, d, m = r.species, r.draft, r.measure
+    measured = {k: round(v, 4) for k, v in m.measured.items()}
+    report: dict[str, Any] = {
+        "name": sp.name,
+        "file": str(r.file),
+        "models": str(r.models),
+        "seconds": round(r.seconds, 2),
+        "mapping": m.mapping.frame.describe() if m.mapping.frame else m.mapping.method,
+        "measured_m": measured,
+        "estimated": list(d.estimated),
+        "hip_height_m": {"clip": round(m.hip_height, 4), "species": round(sp.hip_height, 4)},
+        "shoulder_height_m": {
+            "clip": round(m.shoulder_height, 4),
+            "species": round(sp.shoulder_height, 4),
+        },
+        "posture": sp.posture,
+        "posture_from": d.posture_from,
+        "mass_kg": sp.mass_kg,
+        "mass_from": d.mass_from,
+        "cousin": d.cousin,
+        "limits_widened": list(d.widened),
+        "stand": r.stand.describe(),
+    }
+    if ns.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    how = "given" if d.posture_from == "given" else f"legs nearest the {d.posture_from}'s"
+    lines = [
+        f"{sp.name}: written {r.file} and {r.models}/ in {r.seconds:.1f} s",
+        f"  clip {m.source}: {m.frames} frames at {m.fps:g} Hz; {report['mapping']}",
+        "  measured [m]: " + ", ".join(f"{k} {v:g}" for k, v in measured.items()),
+        "  from " + d.cousin + ": " + (", ".join(d.estimated) or "no segment"),
+        f"  hip height {m.hip_height:.3f} m on the clip, {sp.hip_height:.3f} m standing; "
+        f"shoulder {m.shoulder_height:.3f} / {sp.shoulder_height:.3f} m",
+        f"  posture {sp.posture} ({how}), mass {sp.mass_kg:g} kg ({d.mass_from}), "
+        f"borrows from {d.cousin}",
+        "  stands on home: " + r.stand.describe(),
+        f"  use it: HABITSIM_SPECIES_PATH={r.file.parent} habitsim species show {sp.name}",
+    ]
+    if d.widened:
+        lines.insert(5, "  joint limits widened to hold the standing pose: " + ", ".join(d.widened))
+    print("\n".join(lines))
     return 0

@@ -214,9 +214,20 @@ def _embeddings(ck: LoadedCheckpoint, names: list[str]) -> dict[str, np.ndarray]
         try:
             out.update(species_embeddings(missing, ck.config.model.text.model))
         except TextEncoderError as e:
-            raise TextEncoderError(
-                f"the checkpoint has no text embedding of {', '.join(missing)} and {e}"
-            ) from e
+            # a species made from a clip without the text model: its cousin's embedding
+            for name in missing:
+                cousin = load_species(name).cousin
+                if cousin in out:
+                    _LOG.info("%s: no text model here; using its cousin %s's", name, cousin)
+                    out[name] = out[cousin]
+            left = [n for n in missing if n not in out]
+            if left:
+                raise TextEncoderError(
+                    f"the checkpoint has no text embedding of {', '.join(left)} and {e}; "
+                    "install the text extra (pip install 'habitsim[text]') to embed its "
+                    "description, or give the species a catalog neighbour (habitsim species "
+                    "from-clip --like SPECIES)"
+                ) from e
     return out
 
 
