@@ -26,10 +26,10 @@ turn_left → stop → sit. The clip is built in one piece:
 
 Allowed transitions (:func:`allowed_transitions`): between neighbours on the species'
 speed ladder (walk, then trot / pace / amble, then canter, then gallop / bound, as far
-as the species has them); turns to and from a walk or the ladder's second gait, and
+as the species has them); turns to and from a walk or a trot / pace / amble, and
 between left and right; ``stop`` from those and from a turn; after ``stop``, ``idle`` or
 ``sit``; after ``idle``, ``sit``, or, when the chain starts with it, a start at a walk or
-the second gait. ``sit`` ends a chain.
+a trot / pace / amble. ``sit`` ends a chain.
 """
 
 from __future__ import annotations
@@ -85,7 +85,7 @@ def allowed_transitions(species: str | Species) -> dict[str, list[str]]:
     sp = load_species(species)
     have = set(available_actions(sp))
     ladder = speed_ladder(sp)
-    slow = ladder[:2]
+    slow = [a for a in ladder if a in _LADDER[:4]][:2]  # the walk and a trot / pace / amble
     turns = [t for t in _TURNS if t in have]
     out: dict[str, list[str]] = {}
     for i, a in enumerate(ladder):
@@ -322,7 +322,8 @@ def _signals(sp: Species, plan: list[_Step], tg: np.ndarray, opts: GeneratorOpti
                 rests.append((-math.inf if rest_from is None else rest_from, bnd))
                 rest_from = None
         else:
-            fm = 0.5 * float(_stride_frequency(sp, speed[i - 1]) + _stride_frequency(sp, speed[i]))
+            # at the slower gait's strides: its feet keep up with the change of footfall
+            fm = float(min(_stride_frequency(sp, speed[i - 1]), _stride_frequency(sp, speed[i])))
             half = 0.5 * opts.chain_transition_strides / max(fm, f0)
             t0, t1 = bnd - half, bnd + half
             e = _ease(tg, t0, t1)

@@ -48,7 +48,7 @@ class GeneratorOptions:
             flexion angles in range span ± this [rad].
         limit_offset_count: number of those offsets, evenly spaced [count].
         chain_transition_strides: a chained clip's change of gait or of turn rate takes
-            this many strides (at the mean stride frequency of the two gaits) [strides].
+            this many strides (at the slower gait's stride frequency) [strides].
         chain_stop_strides: a chained stop (or start) speeds down (up) over this many
             strides of the gait it leaves (joins) [strides].
         chain_blend_s: the trunk eases between locomotion and a chained idle / sit over
@@ -72,7 +72,7 @@ class GeneratorOptions:
     foot_compliance_rad: float = 0.6
     limit_offset_rad: float = 0.6
     limit_offset_count: int = 25
-    chain_transition_strides: float = 1.5
+    chain_transition_strides: float = 1.2
     chain_stop_strides: float = 2.0
     chain_blend_s: float = 0.3
     chain_segment_s: tuple[float, float] = (1.0, 2.5)
