@@ -129,3 +129,120 @@ def test_data_set_captions_file(tmp_path, capsys) -> None:
     with pytest.raises(MotionFileError, match="cannot read captions"):
         load_captions(tmp_path / "deep.json")
     assert (ds / CAPTIONS_NAME).is_file()
+
+
+# ---------------------------------------------------------------------------- chains
+
+
+def _chained(species: str, steps: list[tuple[str, float]], seed: int = 3):
+    from habitsim.gaits import chain_min_duration, generate_chain
+
+    steps = [(a, max(d, chain_min_duration(species, a))) for a, d in steps]
+    return generate_chain(species, steps, seed=seed)
+
+
+@pytest.fixture(scope="module")
+def chained() -> dict[str, object]:
+    return {
+        "up": _chained("horse", [("walk", 3.2), ("trot", 2.0), ("canter", 2.0), ("gallop", 2.0)]),
+        "sit": _chained("dog", [("walk", 2.0), ("turn_left", 2.0), ("stop", 3.5), ("sit", 3.0)]),
+        "right": _chained("cat", [("idle", 2.0), ("walk", 2.0), ("turn_right", 2.0)]),
+        "down": _chained("dog", [("gallop", 2.0), ("trot", 2.0), ("walk", 2.0)]),
+    }
+
+
+def test_facts_of_a_chain_equal_the_generators_segments(chained) -> None:
+    for m in chained.values():
+        f = clip_facts(m)
+        segs = m.metadata["chain"]["segments"]
+        assert [c.action for c in f.chain] == [s["action"] for s in segs]
+        assert [c.gait for c in f.chain] == [s["gait"] for s in segs]
+        for c, s in zip(f.chain, segs, strict=True):
+            assert c.start_s == pytest.approx(s["start_s"], abs=0.05)
+            assert c.end_s == pytest.approx(s["end_s"], abs=0.05)
+        assert f.source == "generator" and f.action is not None
+        assert f.to_dict()["chain"][0][0] == segs[0]["action"]
+    up = clip_facts(chained["up"]).chain
+    assert [c.speed_mps for c in up] == sorted(c.speed_mps for c in up)
+    assert clip_facts(chained["sit"]).chain[1].turn_deg > 20
+
+
+_WORDS = {
+    "walk": ("walk", "stroll", "stepping along", "steps along"),
+    "trot": ("trot",),
+    "canter": ("canter", "lope"),
+    "gallop": ("gallop", "flat out"),
+    "turn_left": ("left",),
+    "turn_right": ("right",),
+    "stop": ("stop", "halt", "pull"),
+    "sit": ("sit", "haunches"),
+    "idle": ("stand", "wait", "pause"),
+}
+
+
+def _positions(text: str, steps: list[str]) -> list[int]:
+    """Where each step is first named, searching on from the one before."""
+    out, at = [], 0
+    low = text.lower()
+    for s in steps:
+        hits = [low.find(w, at) for w in _WORDS[s]]
+        hits = [h for h in hits if h >= 0]
+        out.append(min(hits) if hits else -1)
+        at = out[-1] + 1 if hits else at
+    return out
+
+
+def test_chain_captions_name_the_steps_in_order(chained) -> None:
+    for m in chained.values():
+        f = clip_facts(m)
+        steps = [c.action for c in f.chain]
+        for cap in captions(f, seed=2, options=CaptionOptions(per_clip=12)):
+            pos = _positions(cap.text, steps)
+            assert -1 not in pos, (cap.text, steps)
+            assert pos == sorted(pos), (cap.text, steps)
+
+
+def test_chain_captions_make_no_false_claims(chained) -> None:
+    right = clip_facts(chained["right"])
+    down = clip_facts(chained["down"])
+    for seed in range(20):
+        for cap in captions(right, seed=seed):
+            assert "left" not in cap.text.lower()
+        for cap in captions(down, seed=seed):
+            low = cap.text.lower()
+            assert not any(w in low for w in ("breaks into", "picks up", "speeds up", "moves up"))
+
+
+def test_chain_captions_vary_and_are_seeded(chained) -> None:
+    from collections import Counter
+
+    import numpy as np
+
+    from habitsim.captions.sequences import chain_caption
+
+    f = clip_facts(chained["sit"])
+    rng = np.random.default_rng(0)
+    templates = Counter(
+        chain_caption(f, "a dog", str(rng.choice(FORMS)), int(rng.integers(1, 4)), rng)[1]
+        for _ in range(400)
+    )
+    assert max(templates.values()) / 400 <= 0.35, templates
+    assert captions(f, seed=4) == captions(f, seed=4)
+    assert captions(f, seed=4) != captions(f, seed=5)
+
+
+def test_chain_read_from_the_timeline_without_metadata(chained) -> None:
+    m = chained["sit"]
+    bare = type(m)(
+        species=m.species,
+        fps=m.fps,
+        root_positions=m.root_positions,
+        rotations=m.rotations,
+        contacts=m.contacts,
+        metadata={},
+    )
+    f = clip_facts(bare)
+    assert f.source == "timeline"
+    acts = [c.action for c in f.chain]
+    assert acts[-1] == "sit" and acts[0] in ("walk", "turn_left")
+    assert captions(f, seed=0)

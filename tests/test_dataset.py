@@ -305,6 +305,7 @@ def test_clip_failure_names_the_clip_and_writes_no_manifest(
         ({"clips_per_species": -2}, "clips_per_species"),
         ({"clips_per_species": 1.5}, "clips_per_species"),
         ({"clips_per_species": True}, "clips_per_species"),
+        ({"chains_per_species": -1}, "chains_per_species"),
         ({"seed": -1}, "seed"),
         ({"workers": 0}, "workers"),
         ({"fps": 0.0}, "fps"),
@@ -546,3 +547,30 @@ def test_build_leaves_files_habitsim_did_not_write(tmp_path: Path) -> None:
     build_dataset(out, overwrite=True, seed=1, **kw)
     assert theirs.read_text() == "not habitsim's"
     assert load_manifest(out).seed == 1
+
+
+# ---------------------------------------------------------------------------- chains
+
+
+def test_chained_clips_follow_the_others(tmp_path: Path) -> None:
+    out = tmp_path / "d"
+    b = build(out, species=["cat"], clips_per_species=2, chains_per_species=2)
+    chains = [c for c in b.manifest.clips if c.action == "chain"]
+    assert [c.index for c in chains] == [2, 3]
+    assert len({c.pair_key for c in chains}) == 2 and all("cat" in c.pair_key for c in chains)
+    assert json.loads((out / MANIFEST_NAME).read_text())["chains_per_species"] == 2
+    assert load_manifest(out).chains_per_species == 2
+    for c in chains:
+        m = load_motion(out / c.path)
+        steps = m.metadata["chain"]["segments"]
+        assert 2 <= len(steps) <= 5 and c.gait == m.metadata["gait"]
+        assert c.measured["skate_mm"] is not None and c.measured["penetration_mm"] < 0.5
+    # the single-action clips are those of a build without chains
+    plain = plan_clips(["cat"], 2, SEED, 30.0)
+    assert [j.path for j in plain] == [c.path for c in b.manifest.clips[:2]]
+
+
+def test_no_chains_by_default(built: Built) -> None:
+    root, b = built
+    assert all(c.action != "chain" for c in b.manifest.clips)
+    assert "chains_per_species" not in json.loads((root / MANIFEST_NAME).read_text())

@@ -6,11 +6,12 @@ number, turning, direction, duration, start and end pose, its activity timeline)
 keeps a data set's captions in one file beside its manifest. See docs/captions.md.
 """
 
-from .facts import ClipFacts, FactsOptions, SegmentFacts, clip_facts
+from .facts import ChainStep, ClipFacts, FactsOptions, SegmentFacts, clip_facts
 from .phrasing import FORMS, LEVELS, Caption, CaptionOptions, captions, speed_class
 
 __all__ = [
     "Caption",
+    "ChainStep",
     "CaptionOptions",
     "ClipFacts",
     "FORMS",

@@ -15,7 +15,11 @@ skeleton: synthetic, imported or transferred) and returns :class:`ClipFacts`:
 * **direction**: forward or backward (the root's travel against the pelvis' heading);
 * **duration** and the **start and end pose** (the first and last segment of the
   timeline: standing, sitting, lying, moving);
-* the timeline's **segments** (a clip that chains activities: walks, then trots).
+* the timeline's **segments** (a clip that chains activities: walks, then trots);
+* the **chain** of actions (:class:`ChainStep`): a chained clip's steps from its
+  generator metadata (``metadata["chain"]``, :func:`habitsim.gaits.generate_chain`), or,
+  for a clip without a generator action, the timeline's segments read as actions when
+  they are two or more; each step's speed and turn measured over its own span.
 
 Every figure is measured on the motion; generator metadata only names the action.
 """
@@ -24,7 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -36,7 +40,7 @@ from ..rotations import heading_yaw
 if TYPE_CHECKING:  # pragma: no cover
     from ..motion import Motion
 
-__all__ = ["ClipFacts", "FactsOptions", "SegmentFacts", "clip_facts"]
+__all__ = ["ChainStep", "ClipFacts", "FactsOptions", "SegmentFacts", "clip_facts"]
 
 
 @dataclass(frozen=True)
@@ -80,6 +84,41 @@ class SegmentFacts:
 
 
 @dataclass(frozen=True)
+class ChainStep:
+    """One step of a clip that chains actions.
+
+    Attributes:
+        action: ``walk``, ``trot``, ``pace``, ``amble``, ``canter``, ``gallop``,
+            ``bound``, ``turn_left``, ``turn_right``, ``walk_backward``, ``stop``,
+            ``idle``, ``sit`` or ``lie``.
+        gait: the species gait (``rotary_gallop``, ``stand``, …), None if unknown.
+        start_s, end_s: its span [s].
+        speed_mps: the root's mean horizontal speed over it [m/s].
+        froude: v² / (g·h) of that speed.
+        turn_deg: the pelvis heading's change over it [deg], left positive.
+    """
+
+    action: str
+    gait: str | None
+    start_s: float
+    end_s: float
+    speed_mps: float
+    froude: float
+    turn_deg: float
+
+    def to_list(self) -> list[object]:
+        """JSON-ready ``[action, gait, start_s, end_s, speed_mps, turn_deg]`` (rounded)."""
+        return [
+            self.action,
+            self.gait,
+            round(self.start_s, 2),
+            round(self.end_s, 2),
+            round(self.speed_mps, 3),
+            round(self.turn_deg, 1),
+        ]
+
+
+@dataclass(frozen=True)
 class ClipFacts:
     """What a caption may say of a clip (see the module docstring).
 
@@ -103,6 +142,8 @@ class ClipFacts:
         segments: the whole timeline.
         jump_height_m: the root's rise above its median height, for a jump [m].
         source: ``generator`` (action from the clip's metadata) or ``timeline``.
+        chain: the steps of a clip that chains actions (empty: one action); ``action``
+            is then its longest locomotion step's (or first step's) action.
     """
 
     species: str
@@ -121,6 +162,7 @@ class ClipFacts:
     segments: tuple[SegmentFacts, ...]
     jump_height_m: float | None
     source: str
+    chain: tuple[ChainStep, ...] = ()
 
     @property
     def travels(self) -> bool:
@@ -148,6 +190,7 @@ class ClipFacts:
             ],
             "jump_height_m": None if self.jump_height_m is None else round(self.jump_height_m, 3),
             "source": self.source,
+            **({"chain": [c.to_list() for c in self.chain]} if self.chain else {}),
         }
 
 
@@ -182,6 +225,85 @@ def _inferred_action(
     if all(s.activity == Activity.STANDING for s in segs):
         return "idle", "stand"
     return None, None
+
+
+def _step(
+    action: str, gait: str | None, a: int, b: int, motion: Motion, yaw: np.ndarray
+) -> ChainStep:
+    """A chain step measured over frames [a, b)."""
+    root = motion.root_positions
+    b = max(min(b, motion.num_frames), a + 2)
+    secs = (b - 1 - a) / motion.fps
+    path = float(np.linalg.norm(np.diff(root[a:b, :2], axis=0), axis=-1).sum())
+    v = path / max(secs, 1e-9)
+    sp = motion.species_info
+    turn = math.degrees(float(yaw[b - 1] - yaw[a]))
+    return ChainStep(
+        action, gait, a / motion.fps, b / motion.fps, v, v * v / (GRAVITY * sp.hip_height), turn
+    )
+
+
+def _chain_from_metadata(motion: Motion, yaw: np.ndarray) -> tuple[ChainStep, ...]:
+    chain = motion.metadata.get("chain") if isinstance(motion.metadata, dict) else None
+    segs = chain.get("segments") if isinstance(chain, dict) else None
+    if not isinstance(segs, list):
+        return ()
+    out = []
+    for s in segs:
+        if not (isinstance(s, dict) and isinstance(s.get("action"), str)):
+            return ()
+        a = int(round(float(s["start_s"]) * motion.fps))
+        b = int(round(float(s["end_s"]) * motion.fps))
+        gait = s.get("gait")
+        out.append(_step(s["action"], gait if isinstance(gait, str) else None, a, b, motion, yaw))
+    return tuple(out)
+
+
+def _chain_from_timeline(
+    motion: Motion, tl_segments: list[Any], yaw: np.ndarray, opts: FactsOptions
+) -> tuple[ChainStep, ...]:
+    """The timeline's segments as actions (two or more of them, else none)."""
+    sp = motion.species_info
+    tau = math.sqrt(sp.hip_height / GRAVITY)
+    steps: list[tuple[str, str | None, int, int]] = []
+    for s in tl_segments:
+        act = str(s.activity)
+        if act == Activity.LOCOMOTION:
+            gait = s.gait
+            name = None
+            for a in ("gallop", "bound", "canter", "amble", "pace", "trot", "walk"):
+                if gait is not None and a in gait:
+                    name = a
+                    break
+            if s.backward:
+                name = "walk_backward"
+            elif name in (None, "walk"):
+                secs = max((s.stop - s.start) / motion.fps, 1e-9)
+                rate = math.radians(_step("walk", gait, s.start, s.stop, motion, yaw).turn_deg)
+                nd = rate / secs * tau
+                name = (
+                    ("turn_left" if nd > 0 else "turn_right")
+                    if abs(nd) >= opts.turning_rate_nd
+                    else name
+                )
+            if name is None:
+                continue
+            step = (name, gait, s.start, s.stop)
+        elif act == Activity.STANDING:
+            step = ("idle", "stand", s.start, s.stop)
+        elif act == Activity.SITTING:
+            step = ("sit", "sit", s.start, s.stop)
+        elif act == Activity.LYING:
+            step = ("lie", "lie", s.start, s.stop)
+        else:
+            continue  # a transition: it belongs to the steps on either side
+        if steps and steps[-1][0] == step[0]:
+            steps[-1] = (step[0], steps[-1][1], steps[-1][2], step[3])
+        else:
+            steps.append(step)
+    if len(steps) < 2:
+        return ()
+    return tuple(_step(a, g, s0, s1, motion, yaw) for a, g, s0, s1 in steps)
 
 
 def clip_facts(motion: Motion, options: FactsOptions | None = None) -> ClipFacts:
@@ -231,13 +353,17 @@ def clip_facts(motion: Motion, options: FactsOptions | None = None) -> ClipFacts
 
     action: str | None
     gait: str | None
+    chain: tuple[ChainStep, ...] = ()
     if isinstance(meta_action, str) and meta_action in ACTIONS:
         action, source = meta_action, "generator"
         named = motion.metadata.get("gait")
         gait = named if isinstance(named, str) else None
+    elif meta_action == "chain" and (chain := _chain_from_metadata(motion, yaw)):
+        action, gait, source = _chain_action(chain), None, "generator"
     else:
         action, gait = _inferred_action(segments, backward, turning, moving)
         source = "timeline"
+        chain = _chain_from_timeline(motion, list(tl.segments), yaw, opts)
     jump = None
     if action == "jump":
         z = root[:, 2]
@@ -259,4 +385,14 @@ def clip_facts(motion: Motion, options: FactsOptions | None = None) -> ClipFacts
         segments,
         jump,
         source,
+        chain,
     )
+
+
+def _chain_action(chain: tuple[ChainStep, ...]) -> str | None:
+    """The action of a chain's longest locomotion step (else of its first step)."""
+    from ..gaits import ACTIONS, LOCOMOTION_ACTIONS
+
+    loco = [c for c in chain if c.action in LOCOMOTION_ACTIONS]
+    pick = max(loco, key=lambda c: c.end_s - c.start_s) if loco else chain[0]
+    return pick.action if pick.action in ACTIONS else None

@@ -413,16 +413,28 @@ def _render(p: _Parts, form: str, rng: np.random.Generator) -> str:
     return s
 
 
+def _chain_text(facts: ClipFacts, form: str, level: int, rng: np.random.Generator) -> str:
+    """A caption of a clip that chains actions (:mod:`habitsim.captions.sequences`)."""
+    from .sequences import chain_caption
+
+    name = str(rng.choice(_animal_names(facts)))
+    subject = f"{_article(name)} {name}" if rng.random() < 0.7 else f"the {name}"
+    return chain_caption(facts, subject, form, level, rng)[0]
+
+
 def captions(
     facts: ClipFacts, seed: int = 0, options: CaptionOptions | None = None
 ) -> list[Caption]:
     """``options.per_clip`` distinct captions of a clip, each true of ``facts``.
 
+    A clip whose facts hold a chain of two or more steps gets captions that name the
+    steps in order (:mod:`habitsim.captions.sequences`).
+
     Raises:
         CaptionError: the clip shows no action habitsim can name (``facts.action`` is
             None), or not enough distinct captions could be drawn.
     """
-    if facts.action is None:
+    if facts.action is None and len(facts.chain) < 2:
         raise CaptionError(
             f"no caption for a {facts.species} clip that shows none of the generator's "
             "actions (its timeline: "
@@ -440,7 +452,10 @@ def captions(
             # spread over the levels: the first three captions take one level each
             level = int(LEVELS[k]) if k < 3 and w[k] > 0 else int(rng.choice(LEVELS, p=w))
             form = str(rng.choice(FORMS))
-            text = _render(_parts(facts, level, rng), form, rng)
+            if len(facts.chain) >= 2:
+                text = _chain_text(facts, form, level, rng)
+            else:
+                text = _render(_parts(facts, level, rng), form, rng)
             text = re.sub(r"\s+", " ", text).strip()
             if text.lower() not in seen:
                 seen.add(text.lower())

@@ -34,6 +34,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="clips per species (default 40)",
     )
+    p.add_argument(
+        "--chains",
+        type=int,
+        default=0,
+        metavar="N",
+        help="chained clips per species (2-4 actions run into one another; default 0)",
+    )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="build seed (default 0)")
     add_list_option(p, "--species", help="species (default: the whole catalog)")
     p.add_argument("--workers", type=int, metavar="W", help="worker processes (default: CPU count)")
@@ -63,7 +70,9 @@ def format_summary(build: DatasetBuild) -> str:
     held = [s["name"] for s in man.species if s["held_out"]]
     lines = [
         f"data set {man.root}: {len(man.clips)} clips of {len(man.species)} species "
-        f"({man.clips_per_species} per species, seed {man.seed}, {man.fps:g} fps)",
+        f"({man.clips_per_species} per species"
+        + (f" and {man.chains_per_species} chained" if man.chains_per_species else "")
+        + f", seed {man.seed}, {man.fps:g} fps)",
         f"  splits: train {counts['train']}, val {counts['val']}, test {counts['test']}"
         + (f" (held out, test only: {', '.join(held)})" if held else ""),
         f"  {build.generated} generated, {build.reused} reused"
@@ -78,6 +87,7 @@ def _synth(ns: argparse.Namespace) -> int:
     build = build_dataset(
         ns.out,
         clips_per_species=ns.clips_per_species,
+        chains_per_species=ns.chains,
         seed=ns.seed,
         species=parse_species(ns.species),
         workers=ns.workers,

@@ -39,6 +39,13 @@ which other species are in the build):
   clips, about 80/10/10 per species, and clips with the same ``pair_key`` are in the
   same split in every training species (no pair straddles train and test).
 
+* **Chained clips** (``chains_per_species``, default 0): after a species' other clips,
+  clips of action ``chain`` that run 2–4 actions into one another
+  (:func:`habitsim.gaits.generate_chain`, steps :func:`habitsim.gaits.draw_chain` of
+  (species, seed)); seeds from ``SeedSequence([seed, crc32("chain"), k])``, split as an
+  action numbered 13, ``pair_key`` ``"chain:<species>:<seed>"`` (a species' own: the
+  steps depend on its gaits). Without them a build is what it was.
+
 Because a clip depends only on (seed, fps, species, action, k), a build with fewer
 clips or species is a subset of a bigger one, and resuming a build with another
 ``clips_per_species`` or species list reuses every clip the two have in common.
@@ -57,6 +64,7 @@ from .build import build_dataset, check_resumable
 from .manifest import iter_clips, load_manifest
 from .planning import clip_seed, clip_split, plan_clips
 from .records import (
+    CHAIN_ACTION,
     DATASET_KIND,
     IMPORTED_KIND,
     MANIFEST_FORMAT_VERSION,
@@ -78,6 +86,7 @@ from .records import (
 from .stats import format_stats_table, stats_rows
 
 __all__ = [
+    "CHAIN_ACTION",
     "MANIFEST_NAME",
     "MANIFEST_FORMAT_VERSION",
     "SPLITS",

@@ -117,6 +117,7 @@ def build_dataset(
     out_dir: str | Path,
     *,
     clips_per_species: int = 40,
+    chains_per_species: int = 0,
     seed: int = 0,
     species: str | Iterable[str] | None = None,
     workers: int | None = None,
@@ -130,6 +131,8 @@ def build_dataset(
     Args:
         out_dir: data set folder (created if missing).
         clips_per_species: clips per species (≥ 1), actions spread evenly.
+        chains_per_species: chained clips per species (≥ 0; 2–4 seeded random steps
+            each, :func:`habitsim.gaits.draw_chain`), after the others.
         seed: build seed (≥ 0); every clip seed derives from it.
         species: species names (default: every catalog species).
         workers: worker processes (default ``os.cpu_count()``); the result does not
@@ -156,6 +159,9 @@ def build_dataset(
     """
     t0 = time.perf_counter()
     clips_per_species = _check_int("clips_per_species", clips_per_species, 1, MAX_CLIPS_PER_SPECIES)
+    chains_per_species = _check_int(
+        "chains_per_species", chains_per_species, 0, MAX_CLIPS_PER_SPECIES
+    )
     seed = _check_int("seed", seed, 0, MAX_SEED)
     number = isinstance(fps, int | float) and not isinstance(fps, bool)
     if not (number and math.isfinite(fps) and fps > 0):
@@ -176,7 +182,7 @@ def build_dataset(
     else:
         check_resumable(out, seed=seed, fps=fps)
 
-    jobs = plan_clips(names, clips_per_species, seed, fps)
+    jobs = plan_clips(names, clips_per_species, seed, fps, chains_per_species)
     with claim_output_folder(
         out,
         command="data synth",
@@ -253,6 +259,7 @@ def build_dataset(
                 for n in names
             ),
             clips=clips,
+            chains_per_species=chains_per_species,
         )
         rows = stats_rows(manifest)
         atomic_write_text(out / STATS_CSV_NAME, _stats_csv(rows))

@@ -11,10 +11,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import DatasetError, HabitsimError, OutputPathError
-from ..gaits import GENERATOR_VERSION, generate
+from ..gaits import GENERATOR_VERSION, draw_chain, generate, generate_chain
 from ..motion import Motion, load_motion
 from ..species import FEET
-from .records import MEASURED_KEYS, ClipEntry, ClipJob
+from .records import CHAIN_ACTION, MEASURED_KEYS, ClipEntry, ClipJob
 
 
 def _finite(x: Any) -> float | None:
@@ -85,7 +85,11 @@ def _make_clip(root: str, job: ClipJob, resume: bool) -> tuple[dict[str, Any], b
                 m = None
         generated = m is None
         if m is None:
-            clip = generate(job.species, job.action, seed=job.seed, fps=job.fps)
+            if job.action == CHAIN_ACTION:
+                steps = draw_chain(job.species, job.seed)
+                clip = generate_chain(job.species, steps, seed=job.seed, fps=job.fps)
+            else:
+                clip = generate(job.species, job.action, seed=job.seed, fps=job.fps)
             clip.metadata["pair_key"] = job.pair_key
             clip.save(path)
             # Measure the file as written, so a resumed build measures the same numbers.

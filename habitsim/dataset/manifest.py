@@ -140,7 +140,16 @@ def load_manifest(
         generator_version=int(data["generator_version"]),
         species=tuple(species),
         clips=tuple(clips),
+        chains_per_species=_chains(data, mpath),
     )
+
+
+def _chains(data: dict[str, Any], mpath: Path) -> int:
+    """The manifest's ``chains_per_species`` (0 when absent: a build without chains)."""
+    n = data.get("chains_per_species", 0)
+    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+        raise DatasetError(f"{mpath}: 'chains_per_species' must be an integer ≥ 0, got {brief(n)}")
+    return n
 
 
 def iter_clips(

@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import DatasetError, brief
 from ..gaits import ACTIONS, available_actions
 from ..species import all_species, load_species
-from .records import _SPLIT_AT, _SPLIT_PERIOD, ClipJob
+from .records import _SPLIT_AT, _SPLIT_PERIOD, CHAIN_ACTION, ClipJob
 
 
 def clip_seed(seed: int, action: str, pair_index: int) -> int:
@@ -30,7 +30,8 @@ def clip_split(action: str, pair_index: int, held_out: bool) -> str:
     """Split of a clip (see the module docstring for the rule)."""
     if held_out:
         return "test"
-    pos = (pair_index * len(ACTIONS) + ACTIONS.index(action)) % _SPLIT_PERIOD
+    number = ACTIONS.index(action) if action in ACTIONS else len(ACTIONS)
+    pos = (pair_index * len(ACTIONS) + number) % _SPLIT_PERIOD
     return _SPLIT_AT.get(pos, "train")
 
 
@@ -60,9 +61,19 @@ def _resolve_species(species: str | Iterable[str] | None) -> list[str]:
 
 
 def plan_clips(
-    species: Sequence[str], clips_per_species: int, seed: int, fps: float
+    species: Sequence[str],
+    clips_per_species: int,
+    seed: int,
+    fps: float,
+    chains_per_species: int = 0,
 ) -> list[ClipJob]:
-    """Every clip a build of these species makes, by species then index."""
+    """Every clip a build of these species makes, by species then index.
+
+    After a species' ``clips_per_species`` single-action clips come its
+    ``chains_per_species`` chained clips (action ``chain``, indices continuing), the k-th
+    seeded ``clip_seed(seed, "chain", k)``; its steps are
+    :func:`habitsim.gaits.draw_chain` of (species, that seed).
+    """
     jobs: list[ClipJob] = []
     for name in species:
         sp = load_species(name)
@@ -77,6 +88,19 @@ def plan_clips(
                     k,
                     clip_seed(seed, action, k),
                     clip_split(action, k, sp.held_out),
+                    sp.held_out,
+                    float(fps),
+                )
+            )
+        for k in range(chains_per_species):
+            jobs.append(
+                ClipJob(
+                    sp.name,
+                    CHAIN_ACTION,
+                    clips_per_species + k,
+                    k,
+                    clip_seed(seed, CHAIN_ACTION, k),
+                    clip_split(CHAIN_ACTION, k, sp.held_out),
                     sp.held_out,
                     float(fps),
                 )

@@ -46,6 +46,8 @@ MEASURED_KEYS: tuple[str, ...] = (
     "penetration_mm",
     "float_mm",
 )
+#: ``action`` of a chained clip (:func:`habitsim.gaits.generate_chain`) in a manifest.
+CHAIN_ACTION = "chain"
 _CLIP_NAME = re.compile(r"^[a-z][a-z0-9_]*_\d{4}\.npz$")
 
 
@@ -83,7 +85,10 @@ class ClipJob:
 
     @property
     def pair_key(self) -> str:
-        """Equal for clips of different species that are the same motion."""
+        """Equal for clips of different species that are the same motion (a chained clip
+        is its species' own: ``chain:<species>:<seed>``)."""
+        if self.action == CHAIN_ACTION:
+            return f"{self.action}:{self.species}:{self.seed}"
         return f"{self.action}:{self.seed}"
 
 
@@ -187,6 +192,7 @@ class DatasetManifest:
         generator_version: :data:`habitsim.gaits.GENERATOR_VERSION` of the clips.
         species: per species ``{"name", "held_out", "cousin", "actions"}``, sorted by name.
         clips: the clip entries, by species then index.
+        chains_per_species: chained clips generated per species (after the others).
     """
 
     root: Path
@@ -196,6 +202,7 @@ class DatasetManifest:
     generator_version: int
     species: tuple[dict[str, Any], ...]
     clips: tuple[ClipEntry, ...]
+    chains_per_species: int = 0
 
     @property
     def species_names(self) -> list[str]:
@@ -238,7 +245,7 @@ class DatasetManifest:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON object written to ``manifest.json``."""
-        return {
+        out: dict[str, Any] = {
             "kind": DATASET_KIND,
             "format_version": MANIFEST_FORMAT_VERSION,
             "generator_version": self.generator_version,
@@ -254,6 +261,9 @@ class DatasetManifest:
             "num_clips": len(self.clips),
             "clips": [c.to_dict() for c in self.clips],
         }
+        if self.chains_per_species:
+            out["chains_per_species"] = self.chains_per_species
+        return out
 
 
 @dataclass(frozen=True)

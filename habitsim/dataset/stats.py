@@ -25,13 +25,18 @@ def stats_rows(manifest: DatasetManifest) -> list[StatsRow]:
     """Per species × action means of the clips' measured statistics.
 
     Rows are ordered by species name, then action in :data:`~habitsim.gaits.ACTIONS`
-    order. ``*_target`` columns are the generator's planned values.
+    order (chained clips, action ``chain``, last). ``*_target`` columns are the
+    generator's planned values.
     """
     groups: dict[tuple[str, str], list[ClipEntry]] = {}
     for c in manifest.clips:
         groups.setdefault((c.species, c.action), []).append(c)
     rows = []
-    for sp, action in sorted(groups, key=lambda key: (key[0], ACTIONS.index(key[1]))):
+
+    def order(key: tuple[str, str]) -> tuple[str, int]:
+        return key[0], ACTIONS.index(key[1]) if key[1] in ACTIONS else len(ACTIONS)
+
+    for sp, action in sorted(groups, key=order):
         cs = groups[(sp, action)]
 
         def m(key: str, cs: list[ClipEntry] = cs) -> float:

@@ -152,7 +152,8 @@ class LegPlan:
         swing_s: (T, 4) swing progress in [0, 1] (0 in stance).
         foot_extra: (T, 4) extra foot inclination [rad] added to the modulated one.
         girdle_extra: (T, 4) extra girdle flexion [rad].
-        sweep_gain: multiply the girdle / foot sweep gains by this (0 = rigid legs).
+        sweep_gain: multiply the girdle / foot sweep gains by this (0 = rigid legs); a
+            number or a (T,) array (a chained clip eases from walking into a sit).
     """
 
     targets: np.ndarray
@@ -161,7 +162,7 @@ class LegPlan:
     # None: zeros (T, 4), set by __post_init__
     foot_extra: np.ndarray = None  # type: ignore[assignment]
     girdle_extra: np.ndarray = None  # type: ignore[assignment]
-    sweep_gain: float = 1.0
+    sweep_gain: float | np.ndarray = 1.0
 
     def __post_init__(self) -> None:
         t = self.targets.shape[0]
@@ -197,7 +198,7 @@ def _leg_shape(
     fwd /= np.maximum(np.linalg.norm(fwd, axis=-1, keepdims=True), 1e-9)
     rel = plan.targets[:, k] - groot
     sweep = np.arctan2(np.sum(rel * fwd, -1), -rel[:, 2])
-    g = plan.sweep_gain
+    g = np.asarray(plan.sweep_gain, dtype=float)
     o = options
     gflex = (
         geo.girdle_flex0

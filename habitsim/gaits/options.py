@@ -47,6 +47,15 @@ class GeneratorOptions:
         limit_offset_rad: the foot-inclination offsets searched to keep a leg's
             flexion angles in range span ± this [rad].
         limit_offset_count: number of those offsets, evenly spaced [count].
+        chain_transition_strides: a chained clip's change of gait or of turn rate takes
+            this many strides (at the slower gait's stride frequency) [strides].
+        chain_stop_strides: a chained stop (or start) speeds down (up) over this many
+            strides of the gait it leaves (joins) [strides].
+        chain_blend_s: the trunk eases between locomotion and a chained idle / sit over
+            this long [s].
+        chain_segment_s: range a drawn chain's segment lengths are drawn in, above each
+            action's shortest [s] (:func:`~habitsim.gaits.chain.draw_chain`).
+        chain_steps: range of the number of segments of a drawn chain [count].
     """
 
     duration_range_s: tuple[float, float] = (2.0, 6.0)
@@ -63,13 +72,26 @@ class GeneratorOptions:
     foot_compliance_rad: float = 0.6
     limit_offset_rad: float = 0.6
     limit_offset_count: int = 25
+    chain_transition_strides: float = 1.2
+    chain_stop_strides: float = 2.0
+    chain_blend_s: float = 0.3
+    chain_segment_s: tuple[float, float] = (1.0, 2.5)
+    chain_steps: tuple[int, int] = (2, 4)
 
     def __post_init__(self) -> None:
         for name in ("duration_range_s", "turn_rate_nd_range"):
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo <= hi):
                 raise GaitError(f"{name} must be finite with 0 < lo ≤ hi, got {(lo, hi)!r}")
-        positive = ("feasible_stance_error_m", "swing_ramp", "fold_margin", "limit_offset_rad")
+        positive = (
+            "feasible_stance_error_m",
+            "swing_ramp",
+            "fold_margin",
+            "limit_offset_rad",
+            "chain_transition_strides",
+            "chain_stop_strides",
+            "chain_blend_s",
+        )
         for name in positive:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
@@ -82,6 +104,14 @@ class GeneratorOptions:
             raise GaitError(f"retry_shrink must lie in (0, 1], got {self.retry_shrink!r}")
         if self.swing_ramp > 0.5 or self.reach_margin >= 1.0:
             raise GaitError("swing_ramp must be ≤ 0.5 and reach_margin < 1")
+        lo_s, hi_s = self.chain_segment_s
+        if not (math.isfinite(lo_s) and math.isfinite(hi_s) and 0.0 <= lo_s <= hi_s):
+            raise GaitError(
+                f"chain_segment_s must be finite with 0 ≤ lo ≤ hi, got {(lo_s, hi_s)!r}"
+            )
+        lo_n, hi_n = self.chain_steps
+        if not (2 <= lo_n <= hi_n <= 8):
+            raise GaitError(f"chain_steps must satisfy 2 ≤ lo ≤ hi ≤ 8, got {(lo_n, hi_n)!r}")
         if self.max_attempts < 1 or self.limit_offset_count < 1:
             raise GaitError("max_attempts and limit_offset_count must be ≥ 1")
 
