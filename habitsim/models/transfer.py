@@ -43,7 +43,7 @@ from __future__ import annotations
 import functools
 import logging
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..errors import InvalidMotionError
+from ..errors import HabitReferenceError, InvalidMotionError
 from ..motion import Motion, resample_motion
 from ..species import load_species
 from ..stance.conform import ConformReport, conform
@@ -72,6 +72,7 @@ from .features import (
     features_to_motion,
     uncanonicalize,
 )
+from .habit_fit import HabitFitOptions, HabitLatent
 from .text import Retrieval, retrieve_neighbour
 
 __all__ = [
@@ -269,6 +270,7 @@ def _run_network(
     seed: int | None,
     temperature: float,
     reconstruct: bool = False,
+    habit: HabitLatent | None = None,
 ) -> tuple[Motion, dict[str, Any]]:
     model = ck.model
     window = ck.config.model.window
@@ -283,7 +285,10 @@ def _run_network(
     habit_sp: str | None = None
     retrieval: Retrieval | None = None
     z = None
-    if model.cfg.use_z:
+    if model.cfg.use_z and habit is not None:  # found from reference clips
+        habit_sp = habit.habit_species
+        z = torch.from_numpy(habit.z)[None].expand(k, -1)
+    elif model.cfg.use_z:
         habit_sp, retrieval = habit_species_for(ck, to)
         if reconstruct:
             z = model.posterior(x, [habit_sp] * k)[0]
@@ -309,6 +314,8 @@ def _run_network(
         "windows": k,
         "checkpoint": str(ck.path) if ck.path else None,
     }
+    if habit is not None:
+        info["habit_from"] = habit.to_metadata()
     return out, info
 
 
@@ -338,6 +345,7 @@ def network_method(variant: str) -> Callable[..., Motion]:
         temperature: float = 1.0,
         plant: bool = True,
         policy: ConformPolicy | None = None,
+        habit: HabitLatent | None = None,
         **_: Any,
     ) -> Motion:
         return network_transfer(
@@ -349,6 +357,7 @@ def network_method(variant: str) -> Callable[..., Motion]:
             temperature=temperature,
             plant=plant,
             policy=policy,
+            habit=habit,
         )[0]
 
     run.__name__ = f"transfer_{variant}"
@@ -365,6 +374,7 @@ def network_transfer(
     temperature: float = 1.0,
     plant: bool = True,
     policy: ConformPolicy | None = None,
+    habit: HabitLatent | None = None,
 ) -> tuple[Motion, ConformReport]:
     """The learned method ``variant``'s transfer (what :func:`network_method` runs) with
     the typed :class:`~habitsim.stance.report.ConformReport` of its conform step (its
@@ -380,7 +390,9 @@ def network_transfer(
             f"method {variant!r} needs a {variant!r} checkpoint; {ck.path} is a "
             f"{ck.config.model.variant!r} one"
         )
-    out, info = _run_network(ck, motion, load_species(to).name, seed=seed, temperature=temperature)
+    out, info = _run_network(
+        ck, motion, load_species(to).name, seed=seed, temperature=temperature, habit=habit
+    )
     info = {"method": variant, "from": motion.species, "to": out.species, "seed": seed, **info}
     return conform(out, motion, info, plant, policy)
 
@@ -396,6 +408,8 @@ def transfer(
     temperature: float = 1.0,
     plant: bool = True,
     policy: ConformPolicy | None = None,
+    habit_from: Sequence[Motion | str | Path] | None = None,
+    habit_options: HabitFitOptions | None = None,
 ) -> Motion:
     """Transfer a motion onto another species, keeping the target's habits.
 
@@ -414,6 +428,11 @@ def transfer(
         policy: the knobs and switches of conforming the decoded motion to its source
             (stance labels, bounds, levelling, planting; None: the defaults of
             :class:`~habitsim.stance.policy.ConformPolicy`).
+        habit_from: reference clips (motions or ``.npz`` files) of the target species:
+            the habit latent is found from them (:func:`habitsim.models.habit_fit.
+            habit_from_clips`) instead of drawn from a prior; a learned method with z_c only.
+        habit_options: how that latent is found (None: the defaults of
+            :class:`~habitsim.models.habit_fit.HabitFitOptions`).
 
     Returns:
         A :class:`~habitsim.motion.Motion` on ``to``'s skeleton at the source's frame
@@ -429,6 +448,8 @@ def transfer(
         MethodNotAvailableError: no checkpoint for the method's variant.
         MethodUnavailable: the method cannot serve this pair (``ground_truth``).
         CheckpointError: the checkpoint cannot be loaded.
+        HabitReferenceError: ``habit_from`` clips of another species than ``to`` (code
+            ``species``, naming both), none, or a method without a habit latent.
     """
     entry = METHODS[method]  # UnknownMethodError listing the registered ones
     if not isinstance(motion, Motion):
@@ -446,6 +467,8 @@ def transfer(
                 dict(motion.metadata),
             )
     options: dict[str, Any] = {} if policy is None else {"policy": policy}
+    if habit_from is not None:
+        options["habit"] = _habit_latent(entry, tgt, habit_from, checkpoint, habit_options)
     return run_method(
         entry,
         motion,
@@ -456,6 +479,40 @@ def transfer(
         plant=plant,
         **options,
     )
+
+
+def _habit_latent(
+    entry: TransferMethod,
+    target: str,
+    clips: Sequence[Motion | str | Path],
+    checkpoint: str | Path | None,
+    options: HabitFitOptions | None,
+) -> HabitLatent:
+    """The habit latent of ``transfer(habit_from=clips)`` (see :func:`transfer`)."""
+    from ..motion import load_motion
+    from .habit_fit import habit_from_clips
+
+    if entry.variant is None:
+        raise HabitReferenceError(
+            "method",
+            f"method {entry.name!r} has no habit latent to take from a clip; use a learned "
+            "one with z_c (habit, habit_ema, habit_only)",
+        )
+    if not clips:
+        raise HabitReferenceError("empty", "habit_from needs at least one reference clip")
+    motions = [c if isinstance(c, Motion) else load_motion(c) for c in clips]
+    names = [
+        f"clip {i + 1}" if isinstance(c, Motion) else Path(c).name for i, c in enumerate(clips)
+    ]
+    for name, m in zip(names, motions, strict=True):
+        if load_species(m.species).name != target:
+            raise HabitReferenceError(
+                "species",
+                f"habit reference {name} is a {m.species} motion but the target is {target}: "
+                f"the reference clips must be on the {target}'s skeleton",
+            )
+    ck = resolve_checkpoint(entry.variant, checkpoint)
+    return habit_from_clips(motions, ck, options, names)
 
 
 def reconstruct(
