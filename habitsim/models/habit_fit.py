@@ -1,6 +1,6 @@
 """A habit latent z_c found from reference clips of a species (issue 49).
 
-:func:`habit_from_clips` turns one or several clips of one species (K-shot) into a
+:func:`habitsim.models.transfer.habit_from_clips` turns one or several clips of one species (K-shot) into a
 :class:`HabitLatent`, in one of two ways (:attr:`HabitFitOptions.method`):
 
 * ``encoder``: the mean of the habit posterior's means μ_φ(m) over every window of the
@@ -11,9 +11,10 @@
 * ``fit`` (test-time fitting): z is optimised by Adam, the network frozen, to minimise
   the reconstruction error of every window of the clips through encode → quantize →
   decode with that z (the codes do not depend on z, so they are found once). It starts
-  from the encoder mean (``init="encoder"``) or from the centre F(0) of the habit
-  species' flow prior (``init="prior"``: the image of the base Gaussian's mean), and
-  keeps the z of the lowest error seen. No random draw: same clips and options ⇒ same z
+  from the centre F(0) of the habit species' flow prior (``init="prior"``: the image of
+  the base Gaussian's mean) or from the encoder mean (``init="encoder"``), and keeps the
+  z of the lowest objective seen (the error, plus ``prior_weight`` times the prior's
+  negative log-likelihood per dimension). No random draw: same clips and options ⇒ same z
   (on one CPU thread, :func:`habitsim.threads.one_thread`).
 
 The latent then drives a transfer: ``transfer(motion, to, habit_from=[clip, ...])``.
@@ -21,22 +22,17 @@ The latent then drives a transfer: ``transfer(motion, to, habit_from=[clip, ...]
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
 from ..errors import HabitReferenceError
-from ..motion import Motion
-from ..species import load_species
 from ..threads import one_thread
 from .checkpoint import LoadedCheckpoint
-from .features import canonical_window, clip_arrays
 
-__all__ = ["HabitFitOptions", "HabitLatent", "habit_from_clips", "fit_latent"]
+__all__ = ["HabitFitOptions", "HabitLatent", "fit_latent"]
 
 _METHODS = ("encoder", "fit")
 _INITS = ("encoder", "prior")
@@ -44,7 +40,7 @@ _INITS = ("encoder", "prior")
 
 @dataclass(frozen=True)
 class HabitFitOptions:
-    """How :func:`habit_from_clips` finds the habit latent.
+    """How :func:`~habitsim.models.transfer.habit_from_clips` finds the habit latent.
 
     Attributes:
         method: ``fit`` (test-time fitting through the frozen decoder) or ``encoder``
@@ -56,13 +52,17 @@ class HabitFitOptions:
         habit_species: the training species whose posterior encoder and prior serve
             (None: the clips' species if the checkpoint knows it, else its retrieval
             neighbour). Setting it treats a training species as if it were unseen.
+        prior_weight: weight (≥ 0) of −log p_c(z) / z_dim, the habit species' flow
+            prior, added to the fit's error: it keeps z among the habits seen in
+            training (0: reconstruction only).
     """
 
     method: str = "fit"
-    init: str = "encoder"
+    init: str = "prior"
     steps: int = 200
     lr: float = 0.05
     habit_species: str | None = None
+    prior_weight: float = 0.0
 
     def validate(self) -> None:
         """Raises:
@@ -75,6 +75,10 @@ class HabitFitOptions:
         if self.init not in _INITS:
             raise HabitReferenceError(
                 "options", f"habit fit init {self.init!r}; valid: {', '.join(_INITS)}"
+            )
+        if not np.isfinite(self.prior_weight) or self.prior_weight < 0:
+            raise HabitReferenceError(
+                "options", f"habit fit prior_weight={self.prior_weight}: must be ≥ 0"
             )
         if self.steps < 0 or not np.isfinite(self.lr) or self.lr <= 0:
             raise HabitReferenceError(
@@ -124,21 +128,6 @@ class HabitLatent:
         }
 
 
-def _windows(ck: LoadedCheckpoint, motions: Sequence[Motion]) -> torch.Tensor:
-    """Every model window (B, T, F) of every clip, each in its own heading frame."""
-    from .transfer import _resample, _window_starts
-
-    window = ck.config.model.window
-    out = []
-    for m in motions:
-        arrays = clip_arrays(_resample(m, ck.fps))
-        out += [
-            canonical_window(arrays, s, window)[0]
-            for s in _window_starts(arrays.num_frames, window)
-        ]
-    return torch.from_numpy(np.stack(out))
-
-
 def _recon_loss(
     ck: LoadedCheckpoint,
     x: torch.Tensor,
@@ -146,14 +135,13 @@ def _recon_loss(
     path: torch.Tensor | None,
     species: str,
     z: torch.Tensor,
+    text: torch.Tensor | None,
 ) -> torch.Tensor:
     """Mean squared reconstruction error [σ²] of windows x (B, T, F) decoded from their
-    codes with the one latent z (z_dim,)."""
-    from .transfer import _text_rows
-
+    codes with the one latent z (z_dim,); ``text``: the species' raw text embeddings
+    (B, text_dim) when the model does not store them (else None)."""
     model = ck.model
     b = x.shape[0]
-    text = _text_rows(ck, species, b) if model.cfg.use_g else None
     cond = model.condition([species] * b, z[None].expand(b, -1), text)
     y = model.decode(codes, cond, path)
     return (((y - x) / model.feat_std) ** 2).mean()
@@ -161,15 +149,28 @@ def _recon_loss(
 
 def fit_latent(
     ck: LoadedCheckpoint,
-    motions: Sequence[Motion],
+    x: torch.Tensor,
+    species: str,
     habit_species: str,
     options: HabitFitOptions,
-) -> tuple[np.ndarray, float, float, int]:
-    """The latent of ``motions`` with a loaded checkpoint (what :func:`habit_from_clips`
-    computes): (z (z_dim,), start loss, loss, windows)."""
+    text: torch.Tensor | None = None,
+) -> tuple[np.ndarray, float, float]:
+    """The habit latent of raw windows of one species (what
+    :func:`habitsim.models.transfer.habit_from_clips` computes).
+
+    Args:
+        ck: the loaded checkpoint (a variant with z_c).
+        x: every window of the reference clips (B, T, F), each in its heading frame.
+        species: the clips' species (its text embedding conditions the decoder).
+        habit_species: the training species whose posterior encoder / prior serve.
+        options: how.
+        text: ``species``' raw text embeddings (B, text_dim) when the checkpoint does not
+            store them (None: it does, or the variant uses no text).
+
+    Returns:
+        (z (z_dim,), reconstruction error with the start latent, with z) [σ²].
+    """
     model = ck.model
-    species = motions[0].species
-    x = _windows(ck, motions)
     with one_thread():
         with torch.no_grad():
             codes = model.quantize(model.encode(x), sample=False, update=False).quantized
@@ -179,88 +180,24 @@ def fit_latent(
             else:
                 prior = model.priors[habit_species]
                 z0 = prior(torch.zeros(1, model.cfg.habit.z_dim))[0][0]
-            start = float(_recon_loss(ck, x, codes, path, species, z0))
+            start = float(_recon_loss(ck, x, codes, path, species, z0, text))
         best, best_loss = z0.clone(), start
         if options.method == "fit":
             z = z0.clone().requires_grad_(True)
             opt = torch.optim.Adam([z], lr=options.lr)
-            for _ in range(options.steps):
-                loss = _recon_loss(ck, x, codes, path, species, z)
-                if float(loss.detach()) < best_loss:
-                    best, best_loss = z.detach().clone(), float(loss.detach())
-                (grad,) = torch.autograd.grad(loss, z)  # the network's own grads untouched
+            best_obj = float("inf")
+            for step in range(options.steps + 1):
+                recon = _recon_loss(ck, x, codes, path, species, z, text)
+                obj = recon
+                if options.prior_weight > 0:
+                    nll = -model.prior_log_prob(z[None], [habit_species])[0] / z.shape[0]
+                    obj = recon + options.prior_weight * nll
+                if float(obj.detach()) < best_obj:  # keep the best z seen, the start's too
+                    best, best_loss = z.detach().clone(), float(recon.detach())
+                    best_obj = float(obj.detach())
+                if step == options.steps:
+                    break
+                (grad,) = torch.autograd.grad(obj, z)  # the network's own grads untouched
                 z.grad = grad
                 opt.step()
-            with torch.no_grad():
-                last = float(_recon_loss(ck, x, codes, path, species, z))
-            if last < best_loss:
-                best, best_loss = z.detach().clone(), last
-    return best.numpy().astype(np.float32), start, best_loss, int(x.shape[0])
-
-
-def habit_from_clips(
-    motions: Sequence[Motion],
-    checkpoint: str | Path | None = None,
-    options: HabitFitOptions | None = None,
-    names: Sequence[str] | None = None,
-) -> HabitLatent:
-    """The habit latent shown by one or several clips of one species.
-
-    Args:
-        motions: K ≥ 1 reference clips, all of one species (any frame rate, any length;
-            a clip shorter than a window is padded as in a transfer).
-        checkpoint: checkpoint folder (None: the default ``habit`` one).
-        options: how (None: :class:`HabitFitOptions` defaults: fitted from the encoder
-            mean).
-        names: a name per clip for the record (None: ``clip 1`` …).
-
-    Returns:
-        The :class:`HabitLatent` (z and how it was found).
-
-    Raises:
-        HabitReferenceError: no clip (``empty``), clips of several species (``species``),
-            options out of range (``options``), or a model without a habit latent
-            (``method``).
-        UnknownSpeciesError: ``options.habit_species`` is no training species.
-    """
-    from .transfer import habit_species_for, load_model
-
-    opts = options or HabitFitOptions()
-    opts.validate()
-    if not motions:
-        raise HabitReferenceError("empty", "habit_from needs at least one reference clip")
-    species = load_species(motions[0].species).name
-    other = [m.species for m in motions if load_species(m.species).name != species]
-    if other:
-        raise HabitReferenceError(
-            "species",
-            f"reference clips of several species: {species} and {other[0]}; "
-            "give clips of one species",
-        )
-    clip_names = (
-        tuple(names) if names is not None else tuple(f"clip {i + 1}" for i in range(len(motions)))
-    )
-    ck = load_model(checkpoint)
-    if not ck.model.cfg.use_z:
-        raise HabitReferenceError(
-            "method",
-            f"the {ck.config.model.variant!r} checkpoint has no habit latent; use one of a "
-            "variant with z_c (habit, habit_ema, habit_only)",
-        )
-    if opts.habit_species is not None:
-        ck.model._check_species([opts.habit_species])
-        hs = opts.habit_species
-    else:
-        hs = habit_species_for(ck, species)[0]
-    z, start, loss, windows = fit_latent(ck, list(motions), hs, opts)
-    return HabitLatent(
-        z=z,
-        species=species,
-        habit_species=hs,
-        method=opts.method,
-        init=opts.init if opts.method == "fit" else "-",
-        clips=clip_names,
-        windows=windows,
-        loss_start=start,
-        loss=loss,
-    )
+    return best.numpy().astype(np.float32), start, best_loss

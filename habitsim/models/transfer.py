@@ -72,7 +72,7 @@ from .features import (
     features_to_motion,
     uncanonicalize,
 )
-from .habit_fit import HabitFitOptions, HabitLatent
+from .habit_fit import HabitFitOptions, HabitLatent, fit_latent
 from .text import Retrieval, retrieve_neighbour
 
 __all__ = [
@@ -90,6 +90,7 @@ __all__ = [
     "load_model",
     "shipped_checkpoint",
     "habit_species_for",
+    "habit_from_clips",
 ]
 
 _LOG = logging.getLogger("habitsim.models")
@@ -490,7 +491,6 @@ def _habit_latent(
 ) -> HabitLatent:
     """The habit latent of ``transfer(habit_from=clips)`` (see :func:`transfer`)."""
     from ..motion import load_motion
-    from .habit_fit import habit_from_clips
 
     if entry.variant is None:
         raise HabitReferenceError(
@@ -513,6 +513,87 @@ def _habit_latent(
             )
     ck = resolve_checkpoint(entry.variant, checkpoint)
     return habit_from_clips(motions, ck, options, names)
+
+
+def _clip_windows(ck: LoadedCheckpoint, motions: Sequence[Motion]) -> torch.Tensor:
+    """Every model window (B, T, F) of every clip, each in its own heading frame."""
+    window = ck.config.model.window
+    out = []
+    for m in motions:
+        arrays = clip_arrays(_resample(m, ck.fps))
+        out += [
+            canonical_window(arrays, s, window)[0]
+            for s in _window_starts(arrays.num_frames, window)
+        ]
+    return torch.from_numpy(np.stack(out))
+
+
+def habit_from_clips(
+    motions: Sequence[Motion],
+    checkpoint: str | Path | None = None,
+    options: HabitFitOptions | None = None,
+    names: Sequence[str] | None = None,
+) -> HabitLatent:
+    """The habit latent shown by one or several clips of one species.
+
+    Args:
+        motions: K ≥ 1 reference clips, all of one species (any frame rate, any length;
+            a clip shorter than a window is padded as in a transfer).
+        checkpoint: checkpoint folder (None: the default ``habit`` one).
+        options: how (None: :class:`HabitFitOptions` defaults: fitted from the
+            prior's centre).
+        names: a name per clip for the record (None: ``clip 1`` …).
+
+    Returns:
+        The :class:`HabitLatent` (z and how it was found).
+
+    Raises:
+        HabitReferenceError: no clip (``empty``), clips of several species (``species``),
+            options out of range (``options``), or a model without a habit latent
+            (``method``).
+        UnknownSpeciesError: ``options.habit_species`` is no training species.
+    """
+    opts = options or HabitFitOptions()
+    opts.validate()
+    if not motions:
+        raise HabitReferenceError("empty", "habit_from needs at least one reference clip")
+    species = load_species(motions[0].species).name
+    other = [m.species for m in motions if load_species(m.species).name != species]
+    if other:
+        raise HabitReferenceError(
+            "species",
+            f"reference clips of several species: {species} and {other[0]}; "
+            "give clips of one species",
+        )
+    clip_names = (
+        tuple(names) if names is not None else tuple(f"clip {i + 1}" for i in range(len(motions)))
+    )
+    ck = load_model(checkpoint)
+    if not ck.model.cfg.use_z:
+        raise HabitReferenceError(
+            "method",
+            f"the {ck.config.model.variant!r} checkpoint has no habit latent; use one of a "
+            "variant with z_c (habit, habit_ema, habit_only)",
+        )
+    if opts.habit_species is not None:
+        ck.model._check_species([opts.habit_species])
+        hs = opts.habit_species
+    else:
+        hs = habit_species_for(ck, species)[0]
+    x = _clip_windows(ck, motions)
+    text = _text_rows(ck, species, x.shape[0]) if ck.model.cfg.use_g else None
+    z, start, loss = fit_latent(ck, x, species, hs, opts, text)
+    return HabitLatent(
+        z=z,
+        species=species,
+        habit_species=hs,
+        method=opts.method,
+        init=opts.init if opts.method == "fit" else "-",
+        clips=clip_names,
+        windows=int(x.shape[0]),
+        loss_start=start,
+        loss=loss,
+    )
 
 
 def reconstruct(
