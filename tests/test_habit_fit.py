@@ -11,8 +11,7 @@ from helpers import run_cli
 
 from habitsim.errors import HabitReferenceError
 from habitsim.gaits import generate
-from habitsim.models import transfer
-from habitsim.models import HabitFitOptions, habit_from_clips
+from habitsim.models import HabitFitOptions, habit_from_clips, transfer
 from habitsim.motion import Motion, load_motion
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")

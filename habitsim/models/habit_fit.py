@@ -1,7 +1,7 @@
 """A habit latent z_c found from reference clips of a species (issue 49).
 
-:func:`habitsim.models.transfer.habit_from_clips` turns one or several clips of one species (K-shot) into a
-:class:`HabitLatent`, in one of two ways (:attr:`HabitFitOptions.method`):
+:func:`habitsim.models.transfer.habit_from_clips` turns one or several clips of one
+species (K-shot) into a :class:`HabitLatent`, in one of two ways (:attr:`HabitFitOptions.method`):
 
 * ``encoder``: the mean of the habit posterior's means μ_φ(m) over every window of the
   clips. The posterior encoders are per species; the one used is the clips' species' own
@@ -54,7 +54,7 @@ class HabitFitOptions:
             neighbour). Setting it treats a training species as if it were unseen.
         prior_weight: weight (≥ 0) of −log p_c(z) / z_dim, the habit species' flow
             prior, added to the fit's error: it keeps z among the habits seen in
-            training (0: reconstruction only).
+            training (0: reconstruction only; 0.1 by the figures of docs/transfer.md).
     """
 
     method: str = "fit"
@@ -62,7 +62,7 @@ class HabitFitOptions:
     steps: int = 200
     lr: float = 0.05
     habit_species: str | None = None
-    prior_weight: float = 0.0
+    prior_weight: float = 0.1
 
     def validate(self) -> None:
         """Raises:
