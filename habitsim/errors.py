@@ -69,6 +69,23 @@ class InvalidMotionError(HabitsimError, ValueError):
     """Motion arrays of the wrong shape, non-finite values or inconsistent metadata."""
 
 
+class HabitReferenceError(HabitsimError, ValueError):
+    """Reference clips a habit latent cannot be found from (``habit_from``): a clip of
+    another species than the target's, clips of several species, none at all, or too
+    short for one window; or habit-fitting options out of range.
+
+    Attributes:
+        code: what is wrong: ``"species"`` (a clip of another species; the message names
+            both), ``"empty"`` (no clip), ``"method"`` (the transfer method has no habit
+            latent) or ``"options"`` (a :class:`~habitsim.models.habit_fit.HabitFitOptions`
+            field out of range).
+    """
+
+    def __init__(self, code: str, message: str):
+        self.code = code
+        super().__init__(message)
+
+
 class MotionFileError(HabitsimError, ValueError):
     """A motion file (.npz) that cannot be read: wrong keys, version or corrupt data."""
 

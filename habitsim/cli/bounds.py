@@ -34,6 +34,7 @@ BOUNDS: dict[str, tuple[float | None, float | None, str]] = {
     "repeats": (1, 100_000, "repeats"),
     "steps": (1, 10_000_000, "training steps"),
     "epochs": (1, 100_000, "training epochs"),
+    "habit_steps": (0, 100_000, "Adam steps of fitting the habit latent"),
 }
 
 

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .conventions import add_source_options, source_options
+
+if TYPE_CHECKING:
+    from ..models.habit_fit import HabitFitOptions
 
 
 def _description() -> str:
@@ -74,6 +78,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--temperature", type=float, default=1.0, help="prior sampling temperature (default 1)"
     )
+    p.add_argument(
+        "--habit-from",
+        type=Path,
+        nargs="+",
+        metavar="REF.npz",
+        help="reference clip(s) of the target species: the habit latent is fitted to them "
+        "(K clips: one latent fitted on all) instead of drawn from the target's prior",
+    )
+    p.add_argument(
+        "--habit-steps",
+        type=int,
+        default=200,
+        metavar="N",
+        help="Adam steps of fitting the habit latent to the --habit-from clips (default 200; "
+        "0: the habit encoder's mean)",
+    )
     p.add_argument("--list-methods", action="store_true", help="list the transfer methods and exit")
     p.set_defaults(func=_transfer)
 
@@ -103,6 +123,11 @@ def _transfer(ns: argparse.Namespace) -> int:
     kinds = (".bvh", ".glb", ".gltf") if ns.rig is not None else (".bvh",)
     if ns.bvh is not None and ns.bvh.suffix.lower() not in kinds:
         raise MotionFileError(f"--bvh must end in {' or '.join(kinds)}, got {ns.bvh.name!r}")
+    bad = [r.name for r in ns.habit_from or () if r.suffix != ".npz"]
+    if bad:
+        raise MotionFileError(
+            f"--habit-from takes .npz motions of the target species, got {bad[0]!r}"
+        )
     if ns.rig is not None and ns.bvh is None:
         raise MotionFileError("--rig needs --bvh OUT.bvh (the file written on the rig)")
     from ..fileio import output_transaction
@@ -148,6 +173,8 @@ def _transfer_outputs(ns: argparse.Namespace) -> int:
         seed=ns.seed,
         checkpoint=ns.checkpoint,
         temperature=ns.temperature,
+        habit_from=ns.habit_from,
+        habit_options=_habit_options(ns.habit_steps),
     )
     rec = TransferRecord.from_metadata(out.metadata)
     if rec is not None and rec.retrieval is not None:
@@ -158,6 +185,13 @@ def _transfer_outputs(ns: argparse.Namespace) -> int:
         print(
             f"trunk pitched {lv.pitch_deg:+.1f}° before planting: the decoded fore stance "
             f"toes stood {abs(dz):.3f} leg lengths {'below' if dz < 0 else 'above'} the hind ones"
+        )
+    habit = None if rec is None else dict(rec.entries).get("habit_from")
+    if habit is not None:
+        print(
+            f"habit latent {habit['method']} from {habit['k']} clip(s) "
+            f"({', '.join(habit['clips'])}): reconstruction error {habit['fit_loss_start']:.4f} "
+            f"-> {habit['fit_loss']:.4f}"
         )
     how = None if rec is None else rec.contacts
     if how is not None and how.method == "duty":
@@ -182,3 +216,10 @@ def _transfer_outputs(ns: argparse.Namespace) -> int:
             msg += f", {ns.bvh}"
     print(msg)
     return 0
+
+
+def _habit_options(steps: int) -> HabitFitOptions:
+    """``--habit-steps``: the fit's steps (0: the habit encoder's mean, no fit)."""
+    from ..models.habit_fit import HabitFitOptions
+
+    return HabitFitOptions(steps=steps) if steps > 0 else HabitFitOptions(method="encoder")

@@ -92,10 +92,16 @@ _EXPORTS = {
     "register_method": "transfer",
     "shipped_checkpoint": "transfer",
     "transfer": "transfer",
+    "habit_from_clips": "transfer",
+    "HabitFitOptions": "habit_fit",
+    "HabitLatent": "habit_fit",
 }
 
 __all__ = [
     "transfer",
+    "habit_from_clips",
+    "HabitFitOptions",
+    "HabitLatent",
     "reconstruct",
     "network_method",
     "network_transfer",

@@ -43,7 +43,7 @@ from __future__ import annotations
 import functools
 import logging
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..errors import InvalidMotionError
+from ..errors import HabitReferenceError, InvalidMotionError
 from ..motion import Motion, resample_motion
 from ..species import load_species
 from ..stance.conform import ConformReport, conform
@@ -72,6 +72,7 @@ from .features import (
     features_to_motion,
     uncanonicalize,
 )
+from .habit_fit import HabitFitOptions, HabitLatent, fit_latent
 from .text import Retrieval, retrieve_neighbour
 
 __all__ = [
@@ -89,6 +90,7 @@ __all__ = [
     "load_model",
     "shipped_checkpoint",
     "habit_species_for",
+    "habit_from_clips",
 ]
 
 _LOG = logging.getLogger("habitsim.models")
@@ -269,6 +271,7 @@ def _run_network(
     seed: int | None,
     temperature: float,
     reconstruct: bool = False,
+    habit: HabitLatent | None = None,
 ) -> tuple[Motion, dict[str, Any]]:
     model = ck.model
     window = ck.config.model.window
@@ -283,7 +286,10 @@ def _run_network(
     habit_sp: str | None = None
     retrieval: Retrieval | None = None
     z = None
-    if model.cfg.use_z:
+    if model.cfg.use_z and habit is not None:  # found from reference clips
+        habit_sp = habit.habit_species
+        z = torch.from_numpy(habit.z)[None].expand(k, -1)
+    elif model.cfg.use_z:
         habit_sp, retrieval = habit_species_for(ck, to)
         if reconstruct:
             z = model.posterior(x, [habit_sp] * k)[0]
@@ -309,6 +315,8 @@ def _run_network(
         "windows": k,
         "checkpoint": str(ck.path) if ck.path else None,
     }
+    if habit is not None:
+        info["habit_from"] = habit.to_metadata()
     return out, info
 
 
@@ -338,6 +346,7 @@ def network_method(variant: str) -> Callable[..., Motion]:
         temperature: float = 1.0,
         plant: bool = True,
         policy: ConformPolicy | None = None,
+        habit: HabitLatent | None = None,
         **_: Any,
     ) -> Motion:
         return network_transfer(
@@ -349,6 +358,7 @@ def network_method(variant: str) -> Callable[..., Motion]:
             temperature=temperature,
             plant=plant,
             policy=policy,
+            habit=habit,
         )[0]
 
     run.__name__ = f"transfer_{variant}"
@@ -365,6 +375,7 @@ def network_transfer(
     temperature: float = 1.0,
     plant: bool = True,
     policy: ConformPolicy | None = None,
+    habit: HabitLatent | None = None,
 ) -> tuple[Motion, ConformReport]:
     """The learned method ``variant``'s transfer (what :func:`network_method` runs) with
     the typed :class:`~habitsim.stance.report.ConformReport` of its conform step (its
@@ -380,7 +391,9 @@ def network_transfer(
             f"method {variant!r} needs a {variant!r} checkpoint; {ck.path} is a "
             f"{ck.config.model.variant!r} one"
         )
-    out, info = _run_network(ck, motion, load_species(to).name, seed=seed, temperature=temperature)
+    out, info = _run_network(
+        ck, motion, load_species(to).name, seed=seed, temperature=temperature, habit=habit
+    )
     info = {"method": variant, "from": motion.species, "to": out.species, "seed": seed, **info}
     return conform(out, motion, info, plant, policy)
 
@@ -396,6 +409,8 @@ def transfer(
     temperature: float = 1.0,
     plant: bool = True,
     policy: ConformPolicy | None = None,
+    habit_from: Sequence[Motion | str | Path] | None = None,
+    habit_options: HabitFitOptions | None = None,
 ) -> Motion:
     """Transfer a motion onto another species, keeping the target's habits.
 
@@ -414,6 +429,11 @@ def transfer(
         policy: the knobs and switches of conforming the decoded motion to its source
             (stance labels, bounds, levelling, planting; None: the defaults of
             :class:`~habitsim.stance.policy.ConformPolicy`).
+        habit_from: reference clips (motions or ``.npz`` files) of the target species:
+            the habit latent is found from them (:func:`habitsim.models.habit_fit.
+            habit_from_clips`) instead of drawn from a prior; a learned method with z_c only.
+        habit_options: how that latent is found (None: the defaults of
+            :class:`~habitsim.models.habit_fit.HabitFitOptions`).
 
     Returns:
         A :class:`~habitsim.motion.Motion` on ``to``'s skeleton at the source's frame
@@ -429,6 +449,8 @@ def transfer(
         MethodNotAvailableError: no checkpoint for the method's variant.
         MethodUnavailable: the method cannot serve this pair (``ground_truth``).
         CheckpointError: the checkpoint cannot be loaded.
+        HabitReferenceError: ``habit_from`` clips of another species than ``to`` (code
+            ``species``, naming both), none, or a method without a habit latent.
     """
     entry = METHODS[method]  # UnknownMethodError listing the registered ones
     if not isinstance(motion, Motion):
@@ -446,6 +468,8 @@ def transfer(
                 dict(motion.metadata),
             )
     options: dict[str, Any] = {} if policy is None else {"policy": policy}
+    if habit_from is not None:
+        options["habit"] = _habit_latent(entry, tgt, habit_from, checkpoint, habit_options)
     return run_method(
         entry,
         motion,
@@ -455,6 +479,120 @@ def transfer(
         temperature=temperature,
         plant=plant,
         **options,
+    )
+
+
+def _habit_latent(
+    entry: TransferMethod,
+    target: str,
+    clips: Sequence[Motion | str | Path],
+    checkpoint: str | Path | None,
+    options: HabitFitOptions | None,
+) -> HabitLatent:
+    """The habit latent of ``transfer(habit_from=clips)`` (see :func:`transfer`)."""
+    from ..motion import load_motion
+
+    if entry.variant is None:
+        raise HabitReferenceError(
+            "method",
+            f"method {entry.name!r} has no habit latent to take from a clip; use a learned "
+            "one with z_c (habit, habit_ema, habit_only)",
+        )
+    if not clips:
+        raise HabitReferenceError("empty", "habit_from needs at least one reference clip")
+    motions = [c if isinstance(c, Motion) else load_motion(c) for c in clips]
+    names = [
+        f"clip {i + 1}" if isinstance(c, Motion) else Path(c).name for i, c in enumerate(clips)
+    ]
+    for name, m in zip(names, motions, strict=True):
+        if load_species(m.species).name != target:
+            raise HabitReferenceError(
+                "species",
+                f"habit reference {name} is a {m.species} motion but the target is {target}: "
+                f"the reference clips must be on the {target}'s skeleton",
+            )
+    ck = resolve_checkpoint(entry.variant, checkpoint)
+    return habit_from_clips(motions, ck, options, names)
+
+
+def _clip_windows(ck: LoadedCheckpoint, motions: Sequence[Motion]) -> torch.Tensor:
+    """Every model window (B, T, F) of every clip, each in its own heading frame."""
+    window = ck.config.model.window
+    out = []
+    for m in motions:
+        arrays = clip_arrays(_resample(m, ck.fps))
+        out += [
+            canonical_window(arrays, s, window)[0]
+            for s in _window_starts(arrays.num_frames, window)
+        ]
+    return torch.from_numpy(np.stack(out))
+
+
+def habit_from_clips(
+    motions: Sequence[Motion],
+    checkpoint: str | Path | None = None,
+    options: HabitFitOptions | None = None,
+    names: Sequence[str] | None = None,
+) -> HabitLatent:
+    """The habit latent shown by one or several clips of one species.
+
+    Args:
+        motions: K ≥ 1 reference clips, all of one species (any frame rate, any length;
+            a clip shorter than a window is padded as in a transfer).
+        checkpoint: checkpoint folder (None: the default ``habit`` one).
+        options: how (None: :class:`HabitFitOptions` defaults: fitted from the
+            prior's centre).
+        names: a name per clip for the record (None: ``clip 1`` …).
+
+    Returns:
+        The :class:`HabitLatent` (z and how it was found).
+
+    Raises:
+        HabitReferenceError: no clip (``empty``), clips of several species (``species``),
+            options out of range (``options``), or a model without a habit latent
+            (``method``).
+        UnknownSpeciesError: ``options.habit_species`` is no training species.
+    """
+    opts = options or HabitFitOptions()
+    opts.validate()
+    if not motions:
+        raise HabitReferenceError("empty", "habit_from needs at least one reference clip")
+    species = load_species(motions[0].species).name
+    other = [m.species for m in motions if load_species(m.species).name != species]
+    if other:
+        raise HabitReferenceError(
+            "species",
+            f"reference clips of several species: {species} and {other[0]}; "
+            "give clips of one species",
+        )
+    clip_names = (
+        tuple(names) if names is not None else tuple(f"clip {i + 1}" for i in range(len(motions)))
+    )
+    ck = load_model(checkpoint)
+    if not ck.model.cfg.use_z:
+        raise HabitReferenceError(
+            "method",
+            f"the {ck.config.model.variant!r} checkpoint has no habit latent; use one of a "
+            "variant with z_c (habit, habit_ema, habit_only)",
+        )
+    if opts.habit_species is not None:
+        ck.model._check_species([opts.habit_species])
+        hs = opts.habit_species
+    else:
+        hs = habit_species_for(ck, species)[0]
+    x = _clip_windows(ck, motions)
+    text = _text_rows(ck, species, x.shape[0]) if ck.model.cfg.use_g else None
+    z, start, loss = fit_latent(ck, x, species, hs, opts, text)
+    return HabitLatent(
+        z=z,
+        species=species,
+        habit_species=hs,
+        method=opts.method,
+        init=opts.init if opts.method == "fit" else "-",
+        clips=clip_names,
+        windows=int(x.shape[0]),
+        loss_start=start,
+        loss=loss,
     )
 
 
