@@ -82,6 +82,7 @@ def test_r_precision_hand_computed() -> None:
         r_precision(text, motion[:3])
 
 
+@pytest.mark.slow
 def test_training_improves_retrieval_and_round_trips(captioned: Path, tmp_path: Path) -> None:
     out = tmp_path / "ev"
     rep = train_t2m_evaluator(captioned, out, TINY, embed=fake_embed, log=None)

@@ -172,6 +172,7 @@ def run_t2m(
     checkpoint: str | Path | None = None,
     options: T2MBenchOptions | None = None,
     embed: Embedder | None = None,
+    generator_embed: Embedder | None = None,
 ) -> T2MBenchResult:
     """Measure ground truth and (with ``checkpoint``) the generator (module docstring).
 
@@ -180,7 +181,9 @@ def run_t2m(
         data: captioned data set (default: the one the checkpoint's code set was built from).
         checkpoint: text-to-motion checkpoint (None: the ground-truth row only).
         options: protocol settings.
-        embed: sentence embedder for the evaluator's text encoder and the generator.
+        embed: sentence embedder of the evaluator's text encoder (default: its text model).
+        generator_embed: sentence embedder of the generator (default: ``embed`` when
+            given, else the checkpoint's text model).
 
     Raises:
         BenchT2MError: neither data nor checkpoint, too few clips for one batch.
@@ -226,7 +229,7 @@ def run_t2m(
                         seed=opts.seed + i,
                         guidance=float(g),
                         checkpoint=checkpoint,
-                        embed=embed,
+                        embed=generator_embed if generator_embed is not None else embed,
                     )
                 )
             rows.append(_row("generator", float(g), zt, ev.embed_motions(gen), ref, opts)[0])
