@@ -279,7 +279,8 @@ class T2MTrainReport:
         steps: optimiser steps.
         final_loss: mean InfoNCE loss of the last 10 % of steps.
         retrieval: R-precision top-1/2/3 of each split's clips (first caption each, one
-            batch of up to ``batch_size`` clips), e.g. ``{"train": [..], "val": [..]}``.
+            seeded random batch of up to ``batch_size`` clips), e.g.
+            ``{"train": [..], "val": [..]}``.
         wall_time_s: training time [s].
     """
 
@@ -411,9 +412,11 @@ def _retrieval(
     ev: T2MEvaluator, motions: Sequence[Motion], vecs: Sequence[np.ndarray], cfg: T2MEvaluatorConfig
 ) -> list[float]:
     n = min(len(motions), cfg.batch_size)
-    zm = ev.embed_motions(motions[:n])
+    pick = np.random.default_rng(cfg.seed).permutation(len(motions))[:n]
+    zm = ev.embed_motions([motions[i] for i in pick])
+    tv = np.stack([vecs[i] for i in pick]).astype(np.float32)
     with torch.no_grad():
-        zt = ev.model.encode_text(torch.from_numpy(np.stack(vecs[:n]).astype(np.float32))).numpy()
+        zt = ev.model.encode_text(torch.from_numpy(tv)).numpy()
     return [round(float(v), 4) for v in r_precision(zt, zm)]
 
 
