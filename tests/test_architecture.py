@@ -554,6 +554,8 @@ CONSTANT_NAMES: dict[tuple[str, str], str] = {
     ("habitsim/models/transfer.py", "PRIOR_DRAWS_KEPT"): "a cache's size (a limit)",
     ("habitsim/models/t2m_data.py", "_FORMAT"): _FORMAT + " (code set version)",
     ("habitsim/models/t2m_train.py", "_VERSION"): _FORMAT + " (text-to-motion checkpoint version)",
+    ("evaluation/t2m_evaluator.py", "CONFIG_FORMAT_VERSION"): _FORMAT
+    + " (text–motion evaluator config version)",
     ("habitsim/gait_stats.py", "GALLOP_FROUDE"): _METRIC + " (the trot → gallop Froude number)",
     ("habitsim/gait_stats.py", "PEAK_SPAN_S"): _METRIC + " (the span of the peak Froude number)",
     ("habitsim/bvh_mapping/result.py", "CONFIDENCE_WARN"): "a report's warning threshold",

@@ -32,7 +32,7 @@ _GROUPS: list[tuple[str | None, str, tuple[str, ...]]] = [
         ("synth_cmd", "bvh_cmd", "captions_cmd"),
     ),
     ("motion", "inspect motion files", ("motion_cmd",)),
-    ("t2m", "text to motion: code set, training, generation", ("t2m_cmd",)),
+    ("t2m", "text to motion: code set, training, generation, evaluator", ("t2m_cmd",)),
     ("models", "per-species MuJoCo (MJCF) models", ("models_cmd",)),
     ("bench", "benchmarks that print figures", ("bench_cmd",)),
     (

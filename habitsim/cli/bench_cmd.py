@@ -27,6 +27,7 @@ from . import (
     bench_refine,
     bench_render,
     bench_sim,
+    bench_t2m,
     bench_train,
     bench_variants,
 )
@@ -47,6 +48,7 @@ _EXTRA = (
     bench_inplace,
     bench_variants,
     bench_render,
+    bench_t2m,
 )
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``codes``, ``train`` and ``generate`` to the ``t2m`` command group."""
+    """Add ``codes``, ``train``, ``generate`` and ``train-evaluator`` to ``t2m``."""
     from ..models.t2m_config import T2M_PRESETS
 
     p = sub.add_parser(
@@ -79,6 +79,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--top-k", type=int, metavar="K", help="draw among the K likeliest codes")
     p.set_defaults(func=_generate)
 
+    p = sub.add_parser(
+        "train-evaluator",
+        help="train the text–motion evaluator (bench t2m measures with it)",
+        description=(
+            "Train a motion encoder and a text encoder into one embedding (symmetric "
+            "InfoNCE) on the (caption, clip) pairs of the train clips of a captioned data "
+            "set, apart from the generator; writes OUT/model.safetensors + OUT/config.json."
+        ),
+    )
+    p.add_argument("--data", required=True, type=Path, metavar="DIR", help="captioned data set")
+    p.add_argument("--out", required=True, type=Path, metavar="OUT", help="evaluator folder")
+    p.add_argument("--steps", type=int, metavar="N", help="optimiser steps (default 600)")
+    p.add_argument("--seed", type=int, metavar="S", help="seed (default 0)")
+    p.set_defaults(func=_train_evaluator)
+
 
 def _codes(ns: argparse.Namespace) -> int:
     from ..models.t2m_data import build_code_set
@@ -141,4 +156,23 @@ def _generate(ns: argparse.Namespace) -> int:
     )
     if info["retrieval"]:
         print(f"  {info['retrieval']['explanation']}")
+    return 0
+
+
+def _train_evaluator(ns: argparse.Namespace) -> int:
+    from ..evaluation.t2m_evaluator import T2MEvaluatorConfig, train_t2m_evaluator
+
+    changes: dict[str, int] = {}
+    if ns.steps is not None:
+        changes["steps"] = ns.steps
+    if ns.seed is not None:
+        changes["seed"] = ns.seed
+    cfg = T2MEvaluatorConfig.from_dict({**T2MEvaluatorConfig().to_dict(), **changes})
+    res = train_t2m_evaluator(ns.data, ns.out, cfg, log=None)
+    print(
+        f"evaluator {res.out_dir}: {res.pairs} train clips, {res.steps} steps, "
+        f"loss {res.final_loss:.3f}, {res.wall_time_s:.0f} s"
+    )
+    for split, rp in res.retrieval.items():
+        print(f"  {split:5s} R-precision top-1/2/3 " + " ".join(f"{v:.3f}" for v in rp))
     return 0
