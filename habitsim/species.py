@@ -25,13 +25,13 @@ from __future__ import annotations
 
 import functools
 import math
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from .errors import SpeciesFileError, UnknownSpeciesError, brief
+from .jsonfile import load_toml
 
 __all__ = [
     "POSTURES",
@@ -477,10 +477,7 @@ def load_species_file(path: str | Path) -> Species:
         SpeciesFileError: unreadable TOML, a missing key or inconsistent numbers.
     """
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise SpeciesFileError(f"{p}: cannot read species file: {e}") from e
+    data = load_toml(p, "species file", error=SpeciesFileError)
     return _parse(data, p)
 
 

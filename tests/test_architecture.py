@@ -284,6 +284,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.errors",
             "habitsim.physics_constants",
             "habitsim.fileio",
+            "habitsim.jsonfile",
             "habitsim.rotations",
             "habitsim.skeleton",
             "habitsim.species",
