@@ -300,6 +300,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.gaits",
             "habitsim.transfer_methods",
             "habitsim.bvh",
+            "habitsim.gltf_container",
             "habitsim.gltf",
             "habitsim.gltf_export",
             "habitsim.bvh_mapping",
