@@ -78,6 +78,14 @@ _SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*:")
 # ---------------------------------------------------------------------- raw JSON checks
 
 
+def _shown(v: Any) -> str:
+    """A field's value for a message: a number as it is, anything else by its type only
+    (a message never quotes the file's text)."""
+    if isinstance(v, int | float) and not isinstance(v, bool):
+        return brief(v, 40)
+    return f"a {type(v).__name__}"
+
+
 class _Checker:
     """Type checks of the raw glTF JSON, raising :class:`GLTFError` with the field's
     JSON path."""
@@ -118,12 +126,12 @@ class _Checker:
             return
         if isinstance(v, bool) or not isinstance(v, int) or v < lo or (hi is not None and v > hi):
             rng = f"{lo} to {hi}" if hi is not None else f"≥ {lo}"
-            self.fail(f"{where}.{key}", f"is {brief(v, 40)}; valid: an integer {rng}")
+            self.fail(f"{where}.{key}", f"is {_shown(v)}; valid: an integer {rng}")
 
     def index(self, obj: dict[str, Any], key: str, where: str, of: str, required: bool) -> None:
         n = self.counts[of]
         if n == 0 and obj.get(key) is not None:
-            self.fail(f"{where}.{key}", f"is {brief(obj[key], 40)}; the file has no {of}")
+            self.fail(f"{where}.{key}", f"is {_shown(obj[key])}; the file has no {of}")
         self.int_(obj, key, where, 0, n - 1, required)
 
     def str_(self, obj: dict[str, Any], key: str, where: str, required: bool = False) -> None:
@@ -168,7 +176,7 @@ class _Checker:
                 self.fail(f"{w}.componentType", f"is {a['componentType']}; valid: {list(_DTYPES)}")
             self.str_(a, "type", w, required=True)
             if a["type"] not in _NCOMP:
-                self.fail(f"{w}.type", f"is {brief(a['type'], 40)}; valid: {', '.join(_NCOMP)}")
+                self.fail(f"{w}.type", f"is not one of {', '.join(_NCOMP)}")
             if a.get("normalized") is not None and not isinstance(a["normalized"], bool):
                 self.fail(f"{w}.normalized", "valid: true or false")
         for i, n in enumerate(d.get("nodes", [])):
@@ -285,7 +293,7 @@ class GLTFFile:
             raise self.error(f"not a readable GLB file (GLB version {version}; valid: 2)")
         if length > len(data):
             raise self.error(
-                "not a readable GLB file (its header declares more bytes than the file holds: truncated?)"
+                "not a readable GLB file (truncated: its header declares more bytes)"
             )
         pos, chunks = 12, []
         while pos + 8 <= length:
@@ -340,7 +348,7 @@ class GLTFFile:
     def _external(self, i: int, uri: str, need: int) -> bytes:
         """The first ``need`` bytes of the file a relative buffer URI names, refused when it
         leaves the glTF file's folder."""
-        where = f"buffers[{i}].uri {brief(uri, 60)}"
+        where = f"buffers[{i}].uri"
         rel = urllib.parse.unquote(uri)
         pp = PurePosixPath(rel)
         if (
@@ -371,6 +379,8 @@ class GLTFFile:
                 raise self.error(f"{where}: no such file beside the glTF file")
             with target.open("rb") as fh:
                 return fh.read(need)
+        except GLTFError:
+            raise
         except (OSError, ValueError, RuntimeError) as e:  # RuntimeError: a symlink loop
             reason = getattr(e, "strerror", None) or type(e).__name__
             raise self.error(f"{where}: cannot read ({reason})") from None

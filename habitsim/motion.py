@@ -438,8 +438,8 @@ def _check_metadata_fields(meta: dict[str, Any], p: Path) -> None:
         if not ok:
             what = "a finite number" if kind == "number" else f"{kind} or null"
             raise MotionFileError(
-                f"{brief_path(p)}: metadata_json field {key!r} is {type(v).__name__} "
-                f"{brief(v, 40)}; valid: {what}"
+                f"{brief_path(p)}: metadata_json field {key!r} is a {type(v).__name__}; "
+                f"valid: {what}"
             )
 
 

@@ -528,3 +528,16 @@ def test_synth_into_existing_read_only_folder_even_for_root(tmp_path: Path, monk
     with pytest.raises(OutputPathError, match="Permission denied"):
         build_dataset(tmp_path / "d", clips_per_species=1, species=["cat"], workers=1)
     assert files_under(tmp_path) == ["d"]
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        '{"kind": "habitsim.dataset", "seed": ' + "9" * 5000 + "}",  # a raw ValueError before
+        "[" * 100_000 + "]" * 100_000,
+    ],
+)
+def test_manifest_out_of_bounds_is_typed(tmp_path: Path, text: str) -> None:
+    (tmp_path / "manifest.json").write_text(text)
+    with pytest.raises(DatasetError):
+        load_manifest(tmp_path)
