@@ -248,12 +248,14 @@ class GLTFFile:
                     f"{opt.max_file_bytes} bytes"
                 )
             with p.open("rb") as fh:
-                data = fh.read(opt.max_file_bytes + 1)
+                data = fh.read(size + 1)
         except FileNotFoundError:
             raise GLTFError(f"{brief_path(p)}: no such glTF file") from None
         except OSError as e:
             reason = e.strerror or type(e).__name__
             raise GLTFError(f"{brief_path(p)}: cannot read glTF file ({reason})") from None
+        if len(data) > opt.max_file_bytes:  # grew while being read
+            raise GLTFError(f"{brief_path(p)}: larger than {opt.max_file_bytes} bytes")
         self._blob: bytes | None = None
         if data[:4] == _GLB_MAGIC:
             text = self._glb(data)

@@ -167,7 +167,7 @@ def _read(path: str | Path, what: str, error: type[HabitsimError], lim: Document
                 f"{lim.max_bytes} bytes)"
             )
         with p.open("rb") as fh:
-            raw = fh.read(lim.max_bytes + 1)
+            raw = fh.read(size + 1)  # (not the limit: read() allocates what it is asked)
     except FileNotFoundError:
         raise error(f"{brief_path(p)}: cannot read {what} (no such file)") from None
     except OSError as e:

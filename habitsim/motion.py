@@ -438,7 +438,7 @@ def _check_metadata_fields(meta: dict[str, Any], p: Path) -> None:
         if not ok:
             what = "a finite number" if kind == "number" else f"{kind} or null"
             raise MotionFileError(
-                f"{brief_path(p)}: metadata_json field {key!r} is a {type(v).__name__}; "
+                f"{brief_path(p)}: metadata_json field {key!r} is of type {type(v).__name__}; "
                 f"valid: {what}"
             )
 
