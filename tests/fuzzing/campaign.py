@@ -279,7 +279,7 @@ class Workspace:
     def path(self, suffix: str) -> Path:
         """A fresh file path in the scratch folder."""
         self._n += 1
-        return self.root / "cases" / f"c{self._n}{suffix}"
+        return self.root / "cases" / f"c{self._n}_{os.getpid()}{suffix}"  # forked runs too
 
     def close(self) -> None:
         if self._own:
