@@ -25,7 +25,7 @@ import urllib.parse
 import warnings
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import pygltflib
@@ -106,7 +106,7 @@ class _Checker:
         if self.counts["nodes"] > max_nodes:
             self.fail("nodes", f"{self.counts['nodes']} nodes; valid: at most {max_nodes}")
 
-    def fail(self, where: str, msg: str) -> None:
+    def fail(self, where: str, msg: str) -> NoReturn:
         raise GLTFError(f"{self.source}: {where} {msg}")
 
     def int_(
@@ -294,10 +294,8 @@ class GLTFFile:
         if version != 2:
             raise self.error(f"not a readable GLB file (GLB version {version}; valid: 2)")
         if length > len(data):
-            raise self.error(
-                "not a readable GLB file (truncated: its header declares more bytes)"
-            )
-        pos, chunks = 12, []
+            raise self.error("not a readable GLB file (truncated: its header declares more bytes)")
+        pos, chunks = 12, list[tuple[int, memoryview]]()
         while pos + 8 <= length:
             n, kind = struct.unpack_from("<II", data, pos)
             if pos + 8 + n > length:

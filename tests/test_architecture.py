@@ -527,6 +527,7 @@ CONSTANT_MODULES: dict[str, str] = {
     "habitsim/refine/layout.py": _DEFINES + " (the NLP's variable layout)",
     "habitsim/metrics/": _METRIC,
     "habitsim/gltf.py": _FORMAT + " (end-site length, a rotation's uniformity tolerance)",
+    "habitsim/gltf_container.py": _FORMAT + " (GLB chunk types, the spec's largest byte stride)",
     "evaluation/bench/": _TARGET,
     "evaluation/distribution.py": _METRIC + " (pair counts, numerical tolerances)",
     "evaluation/config.py": _FORMAT + "; the default run's size",

@@ -1126,10 +1126,10 @@ def campaign(
                 )
                 raw.append((case, exc, tb))
             if progress and (i + 1) % 500 == 0:
-                bad = {o: sum(c[o] for c in counts.values()) for o in OUTCOMES[2:]}
+                failed = {o: sum(c[o] for c in counts.values()) for o in OUTCOMES[2:]}
                 print(
                     f"  {i + 1}/{n} inputs, "
-                    + ", ".join(f"{v} {o}" for o, v in bad.items())
+                    + ", ".join(f"{v} {o}" for o, v in failed.items())
                     + f", {time.perf_counter() - t0:.0f} s",
                     file=sys.stderr,
                     flush=True,
