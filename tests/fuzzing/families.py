@@ -8,6 +8,7 @@ and a runner (``run_*``: read the input the way a user's file is read); the camp
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import json
 import random
@@ -125,7 +126,19 @@ def write_glb(path: Path, doc: dict[str, Any], blob: bytes) -> None:
 
 
 def _time_accessors(doc: dict[str, Any]) -> list[int]:
-    return sorted({s["input"] for a in doc.get("animations", []) for s in a["samplers"]})
+    """The key-time accessors of the document that earlier mutations left readable."""
+    accs, views = doc.get("accessors") or [], doc.get("bufferViews") or []
+    out = set()
+    for a in doc.get("animations") or []:
+        for s in a.get("samplers") or []:
+            i = s.get("input") if isinstance(s, dict) else None
+            if type(i) is int and 0 <= i < len(accs):
+                acc = accs[i]
+                v, n = acc.get("bufferView"), acc.get("count")
+                if type(v) is int and 0 <= v < len(views) and type(n) is int and n > 0:
+                    if all(type(x.get("byteOffset", 0)) is int for x in (acc, views[v])):
+                        out.add(i)
+    return sorted(out)
 
 
 def make_gltf(ws: Any, rnd: random.Random) -> tuple[Path, Any, float]:
@@ -136,50 +149,56 @@ def make_gltf(ws: Any, rnd: random.Random) -> tuple[Path, Any, float]:
     folder = ws.path("")
     folder.mkdir(parents=True)
     for _ in range(rnd.randint(1, 3)):
-        op = rnd.randrange(8)
-        if op <= 2:  # a field of an entry set to a hostile value
-            array = rnd.choice(list(GLTF_FIELDS))
-            if doc.get(array):
-                entry = rnd.choice(doc[array])
-                entry[rnd.choice(GLTF_FIELDS[array])] = rnd.choice(GLTF_VALUES)
-        elif op == 3 and doc.get("animations"):  # an animation's sampler or channel
-            a = rnd.choice(doc["animations"])
-            if rnd.random() < 0.5 and a["samplers"]:
-                s = rnd.choice(a["samplers"])
-                s[rnd.choice(["input", "output", "interpolation"])] = rnd.choice(GLTF_VALUES)
-            elif a["channels"]:
-                c = rnd.choice(a["channels"])
-                if rnd.random() < 0.5:
-                    c["sampler"] = rnd.choice(GLTF_VALUES)
+        # (a mutation that meets an earlier one's wreckage is skipped)
+        with contextlib.suppress(TypeError, AttributeError, KeyError, IndexError, ValueError):
+            op = rnd.randrange(8)
+            if op <= 2:  # a field of an entry set to a hostile value
+                array = rnd.choice(list(GLTF_FIELDS))
+                if doc.get(array):
+                    entry = rnd.choice(doc[array])
+                    entry[rnd.choice(GLTF_FIELDS[array])] = rnd.choice(GLTF_VALUES)
+            elif op == 3 and doc.get("animations"):  # an animation's sampler or channel
+                a = rnd.choice(doc["animations"])
+                if rnd.random() < 0.5 and a["samplers"]:
+                    s = rnd.choice(a["samplers"])
+                    s[rnd.choice(["input", "output", "interpolation"])] = rnd.choice(GLTF_VALUES)
+                elif a["channels"]:
+                    c = rnd.choice(a["channels"])
+                    if rnd.random() < 0.5:
+                        c["sampler"] = rnd.choice(GLTF_VALUES)
+                    else:
+                        c["target"][rnd.choice(["node", "path"])] = rnd.choice(GLTF_VALUES)
+            elif op == 4 and _time_accessors(doc):  # key times: huge, negative, non-finite
+                acc = doc["accessors"][rnd.choice(_time_accessors(doc))]
+                view = doc["bufferViews"][acc["bufferView"]]
+                off = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+                k = rnd.randrange(acc["count"])
+                v = rnd.choice([1e6, 1e9, 3e38, -1e6, float("nan"), float("inf"), 0.0])
+                if 0 <= off + 4 * k <= len(blob) - 4:
+                    struct.pack_into("<f", blob, off + 4 * k, v)
+                acc.pop("max", None)
+            elif op == 5 and all(isinstance(n, dict) for n in doc.get("nodes") or [None]):
+                # node hierarchy: a cycle, a second parent, a long chain
+                nodes = doc["nodes"]
+                kind = rnd.randrange(3)
+                if kind == 0:
+                    i = rnd.randrange(len(nodes))
+                    nodes[i].setdefault("children", []).append(i)
+                elif kind == 1:
+                    i, j = rnd.randrange(len(nodes)), rnd.randrange(len(nodes))
+                    nodes[i].setdefault("children", []).append(j)
                 else:
-                    c["target"][rnd.choice(["node", "path"])] = rnd.choice(GLTF_VALUES)
-        elif op == 4:  # key times: huge, negative, non-finite, decreasing
-            acc = doc["accessors"][rnd.choice(_time_accessors(doc))]
-            view = doc["bufferViews"][acc["bufferView"]]
-            off = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-            k = rnd.randrange(acc["count"])
-            v = rnd.choice([1e6, 1e9, 3e38, -1e6, float("nan"), float("inf"), 0.0])
-            struct.pack_into("<f", blob, off + 4 * k, v)
-            acc.pop("max", None)
-        elif op == 5:  # node hierarchy: a cycle, a second parent, a long chain
-            nodes = doc["nodes"]
-            kind = rnd.randrange(3)
-            if kind == 0:
-                i = rnd.randrange(len(nodes))
-                nodes[i].setdefault("children", []).append(i)
-            elif kind == 1:
-                i, j = rnd.randrange(len(nodes)), rnd.randrange(len(nodes))
-                nodes[i].setdefault("children", []).append(j)
-            else:
-                n0, length = len(nodes), rnd.choice([1000, 20_000])
-                nodes[-1].setdefault("children", []).append(n0)
-                for k in range(length):
-                    nodes.append({"children": [n0 + k + 1]} if k + 1 < length else {})
-                doc["skins"][0]["joints"] = doc["skins"][0]["joints"] + list(range(n0, n0 + length))
-        elif op == 6:  # deep or big JSON somewhere
-            doc["extras"] = rnd.choice([_deep(rnd.choice([70, 5000]), "l"), "BIG"])
-        else:  # the container cut or flipped (after writing)
-            doc["__cut__"] = rnd.choice(["cut", "flip"])
+                    n0, length = len(nodes), rnd.choice([1000, 20_000])
+                    nodes[-1].setdefault("children", []).append(n0)
+                    for k in range(length):
+                        nodes.append({"children": [n0 + k + 1]} if k + 1 < length else {})
+                    doc["skins"][0]["joints"] = doc["skins"][0]["joints"] + list(
+                        range(n0, n0 + length)
+                    )
+            elif op == 6:  # deep or big JSON somewhere
+                doc["extras"] = rnd.choice([_deep(rnd.choice([70, 5000]), "l"), "BIG"])
+            else:  # the container cut or flipped (after writing)
+                doc["__cut__"] = rnd.choice(["cut", "flip"])
     cut = doc.pop("__cut__", None)
     if as_gltf:
         bin_name = "data.bin"
