@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import base64
 import binascii
+import dataclasses
 import math
 import re
 import struct
@@ -46,6 +47,8 @@ class GLTFReadOptions:
         max_json_bytes: largest JSON document [bytes] (32 MiB; a rig's is a few hundred
             kB).
         max_nodes: most nodes in the document.
+        max_other_objects: most entries of the arrays the reader does not use (meshes,
+            materials, images, …), which pygltflib decodes at ~1 ms each.
         max_samples: most frames × sampled nodes of one read (the clip resampled at
             ``fps``: 1,000,000 is e.g. a 60-joint rig for 9 minutes at 30 Hz, ~300 MB of
             arrays); also the most values of an accessor without a buffer view.
@@ -55,6 +58,7 @@ class GLTFReadOptions:
     max_json_bytes: int = 32 << 20
     max_nodes: int = 100_000
     max_samples: int = 1_000_000
+    max_other_objects: int = 5_000
 
 
 _DTYPES: dict[int, np.dtype] = {
@@ -223,6 +227,34 @@ class _Checker:
 
 # ---------------------------------------------------------------------- the file
 
+#: The arrays :class:`_Checker` checks; built straight into pygltflib's dataclasses
+#: (their generic decoder costs ~1 ms an object: a 20,000-node file took half a minute).
+_CHECKED = ("buffers", "bufferViews", "accessors", "nodes", "skins", "animations")
+
+
+def _make(cls: type, d: dict[str, Any]) -> Any:
+    names = {f.name for f in dataclasses.fields(cls)}
+    return cls(**{k: v for k, v in d.items() if k in names})
+
+
+def _fill_checked(doc: pygltflib.GLTF2, raw: dict[str, Any]) -> None:
+    """Set the checked arrays of ``doc`` from the raw (checked) JSON."""
+    g = pygltflib
+    doc.buffers = [_make(g.Buffer, d) for d in raw.get("buffers", [])]
+    doc.bufferViews = [_make(g.BufferView, d) for d in raw.get("bufferViews", [])]
+    doc.accessors = [_make(g.Accessor, d) for d in raw.get("accessors", [])]
+    doc.nodes = [_make(g.Node, d) for d in raw.get("nodes", [])]
+    doc.skins = [_make(g.Skin, d) for d in raw.get("skins", [])]
+    anims = []
+    for a in raw.get("animations", []):
+        channels = [
+            _make(g.AnimationChannel, {**c, "target": _make(g.AnimationChannelTarget, c["target"])})
+            for c in a["channels"]
+        ]
+        samplers = [_make(g.AnimationSampler, s) for s in a["samplers"]]
+        anims.append(_make(g.Animation, {**a, "channels": channels, "samplers": samplers}))
+    doc.animations = anims
+
 
 class GLTFFile:
     """A glTF / GLB file read within :class:`GLTFReadOptions`: the pygltflib document
@@ -271,10 +303,19 @@ class GLTFFile:
         if not isinstance(raw, dict):
             raise GLTFError(f"{brief_path(p)}: the {kind} document is not a JSON object")
         _Checker(self.source, raw, opt.max_nodes).check()
+        others = sum(len(v) for k, v in raw.items() if k not in _CHECKED and isinstance(v, list))
+        if others > opt.max_other_objects:
+            raise GLTFError(
+                f"{brief_path(p)}: {others} meshes, materials and other objects; valid: at most "
+                f"{opt.max_other_objects} (GLTFReadOptions.max_other_objects)"
+            )
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                doc = pygltflib.GLTF2.from_dict(raw, infer_missing=True)
+                doc = pygltflib.GLTF2.from_dict(
+                    {k: v for k, v in raw.items() if k not in _CHECKED}, infer_missing=True
+                )
+                _fill_checked(doc, raw)
         except Exception as e:  # noqa: BLE001 - the library raises many kinds on bad input
             raise GLTFError(
                 f"{brief_path(p)}: not a readable {kind} document ({type(e).__name__} in a "
