@@ -16,7 +16,9 @@ file would be, and its outcome counted:
 * ``raw`` — any other exception: a bug, shown with its input and traceback;
 * ``hang`` — still running after the per-input time limit (:class:`FuzzLimits`), killed;
 * ``memory`` — a ``MemoryError`` under the per-input memory limit (4 × the input's size
-  + :attr:`FuzzLimits.memory_mb`, as the readers promise in docs/formats.md).
+  + :attr:`FuzzLimits.memory_mb`, as the readers promise in docs/formats.md; an
+  address-space limit, not applied to the command-line targets, whose libraries reserve
+  address space they never use: their peak memory is reported instead).
 
 Each input runs in a forked child process with those limits (``FuzzLimits.isolate``), so
 a hang or a memory blow-up is counted, not suffered; the child's peak memory above the
@@ -959,6 +961,12 @@ def run_case(ws: Workspace, case: Case) -> tuple[str, BaseException | None]:
     return "ok", None
 
 
+#: Targets run without the address-space limit: the heavy commands' libraries (IPOPT,
+#: BLAS thread pools, torch) reserve address space they never touch, and fail or spin
+#: under it; their peak memory is still measured and reported.
+_NO_AS_LIMIT = ("cli", "heavy")
+
+
 class ChildFailure(Exception):
     """A raw exception, hang or crash of a forked input, as the parent sees it:
     ``kind`` is the child's exception type (or ``hang`` / ``crash``)."""
@@ -1002,7 +1010,8 @@ def run_isolated(
         os.close(r)
         code = 0
         try:
-            resource.setrlimit(resource.RLIMIT_AS, (vm + budget, resource.RLIM_INFINITY))
+            if case.target not in _NO_AS_LIMIT:
+                resource.setrlimit(resource.RLIMIT_AS, (vm + budget, resource.RLIM_INFINITY))
             base = _status_kb("VmRSS")
             outcome, exc = run_case(ws, case)
             grown = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - base) / 1024
