@@ -45,6 +45,7 @@ from torch import nn
 
 from habitsim.errors import HabitsimError
 from habitsim.fileio import atomic_write, atomic_write_text, make_dirs, output_transaction
+from habitsim.jsonfile import load_json
 from habitsim.motion import FEATURE_DIM, Motion
 from habitsim.rotations import quat_fix_continuity, quat_mul, quat_slerp
 from habitsim.threads import one_thread
@@ -382,10 +383,7 @@ def _read_config(folder: Path) -> tuple[EvaluatorConfig, dict[str, Any]]:
         raise EvaluatorError(
             f"{folder}: no {_CONFIG}; an evaluator folder holds {_WEIGHTS} + {_CONFIG}"
         )
-    try:
-        raw = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise EvaluatorError(f"{p}: not valid JSON ({e})") from e
+    raw = load_json(p, "evaluator config", error=EvaluatorError)
     if not isinstance(raw, dict) or raw.get("kind") != "habitsim.evaluator":
         raise EvaluatorError(f"{p}: not a habitsim evaluator config (kind != 'habitsim.evaluator')")
     if raw.get("format_version") != CONFIG_FORMAT_VERSION:

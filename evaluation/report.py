@@ -24,7 +24,6 @@ from __future__ import annotations
 import base64
 import html
 import io
-import json
 import math
 import os
 from collections.abc import Sequence
@@ -36,6 +35,7 @@ import numpy as np
 from habitsim.errors import HabitsimError
 from habitsim.fileio import atomic_write, atomic_write_text, check_writable, make_dirs
 from habitsim.folders import remove_written
+from habitsim.jsonfile import load_json
 from habitsim.species import FEET
 
 __all__ = ["ReportError", "write_report", "SUMMARY_PLOT_METRICS"]
@@ -312,15 +312,15 @@ figcaption{font-size:12px;color:#555}
 def _load_run(out: Path) -> tuple[dict[str, Any], dict[str, Any], list[dict[str, Any]]]:
     from .tables import load_rows
 
-    try:
-        run = json.loads((out / "run.json").read_text(encoding="utf-8"))
-        summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
-    except FileNotFoundError as e:
-        raise ReportError(
-            f"{out} is not a finished benchmark run (missing {Path(e.filename).name})"
-        ) from e
-    except json.JSONDecodeError as e:
-        raise ReportError(f"{out}: unreadable run files ({e})") from e
+    for name in ("run.json", "summary.json"):
+        if not (out / name).is_file():
+            raise ReportError(f"{out} is not a finished benchmark run (missing {name})")
+    run = load_json(out / "run.json", "run file", error=ReportError)
+    summary = load_json(out / "summary.json", "run summary", error=ReportError)
+    if not isinstance(run, dict) or not isinstance(run.get("config"), dict):
+        raise ReportError(f"{out / 'run.json'}: not a benchmark run file (no 'config' object)")
+    if not isinstance(summary, dict):
+        raise ReportError(f"{out / 'summary.json'}: not a run summary (not a JSON object)")
     return run["config"], summary, load_rows(out)
 
 

@@ -96,6 +96,7 @@ from typing import Any
 from habitsim.errors import OutputWriteError, brief, brief_path
 from habitsim.fileio import atomic_write, atomic_write_text, check_writable, json_safe, make_dirs
 from habitsim.folders import claim_output_folder
+from habitsim.jsonfile import load_json
 
 from .config import (
     DEFAULT_CLIPS_PER_SOURCE,
@@ -215,12 +216,12 @@ def _check_resume(cfg: EvalConfig) -> None:
     if not run.is_file():
         return
     try:
-        old = json.loads(run.read_text(encoding="utf-8"))["config"]
-        if not isinstance(old, dict):
-            raise TypeError("'config' is not a JSON object")
-    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError, RecursionError) as e:
-        reason = "nested too deep" if isinstance(e, RecursionError) else brief(str(e), 200)
-        raise EvalError(f"{run}: unreadable ({reason}); pass --overwrite to start over") from None
+        doc = load_json(run, "run file", error=EvalError)
+    except EvalError as e:
+        raise EvalError(f"{e}; pass --overwrite to start over") from None
+    old = doc.get("config") if isinstance(doc, dict) else None
+    if not isinstance(old, dict):
+        raise EvalError(f"{run}: no 'config' object; pass --overwrite to start over")
     new = cfg.to_dict()
     diff = [k for k in EvalConfig.RESUME_KEYS if old.get(k) != new.get(k)]
     if diff:

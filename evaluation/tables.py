@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -14,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from habitsim.errors import brief
 from habitsim.fileio import atomic_write, atomic_write_text
+from habitsim.jsonfile import load_json
 
 from .config import EvalError
 
@@ -103,12 +102,9 @@ def load_rows(out: str | Path) -> list[dict[str, Any]]:
     rows = []
     for p in sorted(folder.glob("*.json")):
         try:
-            row = json.loads(p.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError, OSError) as e:
-            reason = "nested too deep" if isinstance(e, RecursionError) else brief(str(e), 200)
-            raise EvalError(
-                f"{p}: unreadable row file ({reason}); delete it to recompute the pair"
-            ) from None
+            row = load_json(p, "row file", error=EvalError)
+        except EvalError as e:
+            raise EvalError(f"{e}; delete it to recompute the pair") from None
         if (
             not isinstance(row, dict)
             or not isinstance(row.get("key"), str)

@@ -235,3 +235,9 @@ def brief_path(path: object, limit: int = 160) -> str:
 class MetadataError(HabitsimError, ValueError):
     """A motion's metadata entry (``metadata["import"]``, ``metadata["transfer"]``) with
     a missing or malformed field; the message names the field."""
+
+
+class JSONFileError(HabitsimError, ValueError):
+    """A JSON or TOML document that cannot be read: too large, nested too deep, an
+    integer with too many digits, not UTF-8 or not well-formed (:mod:`habitsim.jsonfile`;
+    readers raise their own error class with the same message)."""

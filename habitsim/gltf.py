@@ -48,21 +48,22 @@ from __future__ import annotations
 
 import math
 import re
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pygltflib
 from scipy.spatial.transform import Rotation, Slerp
 
 from .bvh import END_SITE_SUFFIX, BVHData
 from .errors import GLTFError
+from .gltf_container import GLTFFile as _File
+from .gltf_container import GLTFReadOptions
 from .rotations import quat_to_euler
 
 __all__ = [
     "END_SITE_FRACTION",
     "GLTFAnimationInfo",
+    "GLTFReadOptions",
     "list_gltf_animations",
     "read_gltf",
 ]
@@ -75,16 +76,6 @@ _CHANNELS = ("Xposition", "Yposition", "Zposition") + tuple(f"{a}rotation" for a
 #: Relative spread of a scale vector below which it counts as uniform.
 _UNIFORM_TOL = 1e-4
 
-_DTYPES: dict[int, np.dtype] = {
-    5120: np.dtype("<i1"),
-    5121: np.dtype("<u1"),
-    5122: np.dtype("<i2"),
-    5123: np.dtype("<u2"),
-    5125: np.dtype("<u4"),
-    5126: np.dtype("<f4"),
-}
-_NORM_DIV = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
-_NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _PATH_COMP = {"translation": 3, "rotation": 4, "scale": 3}
 _INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
 
@@ -118,107 +109,6 @@ def _short(items: list[str], limit: int = 12) -> str:
     return ", ".join(shown) + more
 
 
-class _File:
-    """A loaded glTF file: the pygltflib document and the bytes of each buffer."""
-
-    def __init__(self, path: str | Path):
-        p = Path(path)
-        self.source = str(p)
-        try:
-            head = p.open("rb").read(4)
-        except FileNotFoundError:
-            raise GLTFError(f"{p}: no such glTF file") from None
-        except OSError as e:
-            raise GLTFError(f"{p}: cannot read glTF file ({e})") from e
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                if head == b"glTF":
-                    doc = pygltflib.GLTF2.load_binary(p)
-                else:
-                    doc = pygltflib.GLTF2.load_json(p)
-        except Exception as e:  # noqa: BLE001 - the library raises many kinds on bad input
-            kind = "GLB" if head == b"glTF" else "glTF JSON"
-            msg = str(e).splitlines()[0][:160] if str(e) else type(e).__name__
-            raise GLTFError(f"{p}: not a readable {kind} file ({msg})") from e
-        if doc is None:
-            raise GLTFError(f"{p}: GLB file without a JSON chunk")
-        self.doc = doc
-        self._buffers: dict[int, bytes] = {}
-
-    def error(self, msg: str) -> GLTFError:
-        return GLTFError(f"{self.source}: {msg}")
-
-    def buffer(self, i: int) -> bytes:
-        if i not in self._buffers:
-            if not 0 <= i < len(self.doc.buffers):
-                raise self.error(f"buffer {i} does not exist ({len(self.doc.buffers)} buffers)")
-            buf = self.doc.buffers[i]
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    data = self.doc.get_data_from_buffer_uri(buf.uri)
-            except (OSError, ValueError) as e:
-                raise self.error(f"buffer {i}: cannot read its data ({e})") from e
-            if data is None:
-                raise self.error(
-                    f"buffer {i}: data not found (uri {str(buf.uri)[:60]!r}; a .gltf needs its "
-                    ".bin beside it, a .glb its BIN chunk)"
-                )
-            if buf.byteLength is not None and len(data) < buf.byteLength:
-                raise self.error(
-                    f"buffer {i} holds {len(data)} bytes but declares {buf.byteLength} "
-                    "(truncated file?)"
-                )
-            self._buffers[i] = bytes(data)
-        return self._buffers[i]
-
-    def accessor(self, idx: int | None, what: str) -> np.ndarray:
-        """(count, components) float64 values of an accessor (normalized ints scaled)."""
-        acc_list = self.doc.accessors
-        if idx is None or not 0 <= idx < len(acc_list):
-            raise self.error(f"{what}: accessor {idx} does not exist ({len(acc_list)} accessors)")
-        acc = acc_list[idx]
-        if acc.sparse is not None:
-            raise self.error(
-                f"{what}: accessor {idx} is sparse; sparse accessors are not supported"
-            )
-        dtype = _DTYPES.get(acc.componentType)
-        ncomp = _NCOMP.get(acc.type)
-        if dtype is None or ncomp is None:
-            raise self.error(
-                f"{what}: accessor {idx} has component type {acc.componentType} / type "
-                f"{acc.type!r}; valid: {sorted(_DTYPES)} / {', '.join(_NCOMP)}"
-            )
-        count = int(acc.count or 0)
-        if acc.bufferView is None:
-            return np.zeros((count, ncomp))
-        views = self.doc.bufferViews
-        if not 0 <= acc.bufferView < len(views):
-            raise self.error(f"{what}: bufferView {acc.bufferView} does not exist")
-        view = views[acc.bufferView]
-        data = self.buffer(view.buffer)
-        elem = dtype.itemsize * ncomp
-        stride = view.byteStride or elem
-        v_start = int(view.byteOffset or 0)
-        v_end = v_start + int(view.byteLength)
-        start = v_start + int(acc.byteOffset or 0)
-        need = start + (count - 1) * stride + elem if count else start
-        if v_end > len(data) or need > v_end:
-            raise self.error(
-                f"{what}: accessor {idx} needs bytes up to {need} of buffer {view.buffer}, which "
-                f"holds {len(data)} (bufferView ends at {v_end}; truncated or corrupt buffer?)"
-            )
-        arr = np.ndarray(
-            (count, ncomp), dtype=dtype, buffer=data, offset=start, strides=(stride, dtype.itemsize)
-        ).astype(np.float64)
-        if acc.normalized and acc.componentType in _NORM_DIV:
-            arr = np.maximum(arr / _NORM_DIV[acc.componentType], -1.0)
-        if not np.all(np.isfinite(arr)):
-            raise self.error(f"{what}: accessor {idx} holds non-finite values")
-        return arr
-
-
 # ---------------------------------------------------------------------- nodes
 
 
@@ -232,12 +122,17 @@ def _parents(f: _File) -> list[int]:
             if par[c] >= 0 or c == i:
                 raise f.error(f"node {c} has two parents ({par[c]} and {i}): not a tree")
             par[c] = i
-    for i in range(len(nodes)):  # cycle check
-        j, steps = i, 0
-        while j >= 0:
-            j, steps = par[j], steps + 1
-            if steps > len(nodes):
-                raise f.error(f"the node hierarchy has a cycle through node {i}")
+    done = [False] * len(nodes)  # cycle check: each node walked up once
+    for i in range(len(nodes)):
+        path: dict[int, None] = {}
+        j = i
+        while j >= 0 and not done[j]:
+            if j in path:
+                raise f.error(f"the node hierarchy has a cycle through node {j}")
+            path[j] = None
+            j = par[j]
+        for k in path:
+            done[k] = True
     return par
 
 
@@ -246,6 +141,7 @@ def _rest_trs(f: _File, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n = f.doc.nodes[i]
     if n.matrix is not None and not np.allclose(n.matrix, np.eye(4).ravel()):
         m = np.asarray(n.matrix, dtype=np.float64).reshape(4, 4).T  # column-major in glTF
+        # (16 finite numbers: checked by GLTFFile)
         a = m[:3, :3]
         s = np.linalg.norm(a, axis=0)
         if np.any(s < 1e-12):
@@ -281,11 +177,11 @@ def _rest_above(f: _File, above: list[int]) -> tuple[Rotation, np.ndarray, float
 def _uniform(f: _File, i: int, s: np.ndarray) -> np.ndarray:
     """(F,) uniform scale from (F, 3) scales of node ``i``, or GLTFError."""
     lo, hi = s.min(axis=1), s.max(axis=1)
-    bad = (hi - lo > _UNIFORM_TOL * np.maximum(np.abs(hi), 1e-12)) | (lo < 0)
+    bad = (hi - lo > _UNIFORM_TOL * np.maximum(np.abs(hi), 1e-12)) | (lo <= 0)
     if np.any(bad):
         k = int(np.flatnonzero(bad)[0])
         raise f.error(
-            f"node {i} ({f.doc.nodes[i].name}) has non-uniform or negative scale "
+            f"node {i} ({f.doc.nodes[i].name}) has non-uniform, zero or negative scale "
             f"{np.round(s[k], 6).tolist()}; only uniform positive scale can be expressed as "
             "joint rotations and translations (apply the scale to the rig before exporting)"
         )
@@ -342,11 +238,14 @@ def _target_nodes(a) -> set[int]:
     }
 
 
-def list_gltf_animations(path: str | Path) -> list[GLTFAnimationInfo]:
+def list_gltf_animations(
+    path: str | Path, options: GLTFReadOptions | None = None
+) -> list[GLTFAnimationInfo]:
     """The animations of a glTF / GLB file.
 
     Args:
         path: the ``.glb`` or ``.gltf`` file.
+        options: the reader's limits (None: :class:`GLTFReadOptions` defaults).
 
     Returns:
         One :class:`GLTFAnimationInfo` per animation, in file order (empty if none).
@@ -354,7 +253,7 @@ def list_gltf_animations(path: str | Path) -> list[GLTFAnimationInfo]:
     Raises:
         GLTFError: missing, unreadable or corrupt file.
     """
-    f = _File(path)
+    f = _File(path, options)
     joints = {j for s in f.doc.skins for j in (s.joints or [])}
     out = []
     for i, a in enumerate(f.doc.animations):
@@ -428,28 +327,31 @@ def _joint_set(f: _File, skin_i: int, par: list[int]) -> tuple[int, list[int]]:
     if bad:
         raise f.error(f"skin {skin_i} lists joints {bad[:5]} that are not nodes")
 
-    def chain(j: int) -> list[int]:  # j and its ancestors, nearest first
-        out = [j]
-        while par[out[-1]] >= 0:
-            out.append(par[out[-1]])
-        return out
-
-    common = chain(joints[0])
-    for j in joints[1:]:
-        anc = set(chain(j))
-        common = [c for c in common if c in anc]
-    if not common:
+    # The nodes on a path from a skin joint to the top, each walked once.
+    marked: set[int] = set()
+    kids: dict[int, list[int]] = {}
+    for j in joints:
+        c = j
+        while c >= 0 and c not in marked:
+            marked.add(c)
+            if par[c] >= 0:
+                kids.setdefault(par[c], []).append(c)
+            c = par[c]
+    tops = [c for c in marked if par[c] < 0]
+    if len(tops) != 1:
         raise f.error(
             f"skin {skin_i}: its joints have no common ancestor node (several separate "
             "skeletons); cannot make one hierarchy"
         )
-    root = common[0]
-    keep = {root}
-    for j in joints:
-        for c in chain(j):
-            if c == root:
-                break
-            keep.add(c)
+    # Their lowest common ancestor: down from the top while the path does not branch.
+    root, jset = tops[0], set(joints)
+    while root not in jset and len(kids.get(root, [])) == 1:
+        root = kids[root][0]
+    c, above = par[root], set()
+    while c >= 0:
+        above.add(c)
+        c = par[c]
+    keep = marked - above
     return root, sorted(keep)
 
 
@@ -493,7 +395,12 @@ def _rig_nodes(f: _File, ai: int) -> tuple[list[int], int, list[int], list[int],
     return par, root, order, above, keep_set
 
 
-def read_gltf(path: str | Path, animation: str | int | None = None, fps: float = 30.0) -> BVHData:
+def read_gltf(
+    path: str | Path,
+    animation: str | int | None = None,
+    fps: float = 30.0,
+    options: GLTFReadOptions | None = None,
+) -> BVHData:
     """Read one skinned animation of a glTF 2.0 file as BVH data (see the module docstring).
 
     Args:
@@ -502,6 +409,7 @@ def read_gltf(path: str | Path, animation: str | int | None = None, fps: float =
         animation: the animation's name or index; None = the first one. See
             :func:`list_gltf_animations`.
         fps: sampling rate [Hz] (> 0).
+        options: the reader's limits (None: :class:`GLTFReadOptions` defaults).
 
     Returns:
         :class:`~habitsim.bvh.BVHData` in the file's units and axes, six channels per
@@ -510,13 +418,16 @@ def read_gltf(path: str | Path, animation: str | int | None = None, fps: float =
     Raises:
         GLTFError: missing / unreadable / corrupt file, truncated buffer, no skin, no
             animation, unknown animation name or index (the message lists the valid ones),
-            non-uniform scale on a joint with children, invalid ``fps``.
+            non-uniform scale on a joint with children, invalid ``fps``, a field of the
+            wrong type or out of range, a buffer URI outside the file's folder, a clip
+            whose frames × sampled nodes exceed ``options.max_samples``.
     """
     if isinstance(fps, bool) or not isinstance(fps, int | float) or not math.isfinite(fps):
         raise GLTFError(f"fps must be a positive number, got {fps!r}")
     if fps <= 0:
         raise GLTFError(f"fps must be a positive number, got {fps!r}")
-    f = _File(path)
+    opt = options or GLTFReadOptions()
+    f = _File(path, opt)
     doc = f.doc
     if not doc.skins:
         raise f.error("no skin in the file: read_gltf needs a skinned (rigged) model with joints")
@@ -526,7 +437,15 @@ def read_gltf(path: str | Path, animation: str | int | None = None, fps: float =
 
     # Sample every node that matters.
     lo, hi = _times(f, anim, ai)
-    n_frames = int(math.floor((hi - lo) * fps + 1e-6)) + 1
+    span = (hi - lo) * fps  # frames - 1, bounded before anything is allocated
+    n_nodes = len(order) + len(above)
+    if not span + 1 <= opt.max_samples / n_nodes:
+        raise f.error(
+            f"animation {_anim_label(ai, anim)} lasts {hi - lo:.6g} s: {span + 1:.6g} frames at "
+            f"{fps:g} Hz x {n_nodes} nodes; valid: at most {opt.max_samples} samples "
+            "(GLTFReadOptions.max_samples; a lower fps or a shorter clip)"
+        )
+    n_frames = int(math.floor(span + 1e-6)) + 1
     t = lo + np.arange(n_frames) / fps
     trs: dict[int, list[np.ndarray]] = {}
     for i in order + above:
@@ -619,13 +538,20 @@ def read_gltf(path: str | Path, animation: str | int | None = None, fps: float =
             offsets.append(END_SITE_FRACTION * rest_off[k])
             channels.append(())
             end.append(True)
+    frames = np.concatenate(cols, axis=1)
+    offsets_arr = np.asarray(offsets, dtype=np.float64).reshape(-1, 3)
+    if not (np.all(np.isfinite(frames)) and np.all(np.isfinite(offsets_arr))):
+        raise f.error(
+            "the rig's transforms overflow (a translation or scale too large for float64); "
+            "valid: finite joint positions"
+        )
     return BVHData(
         names=tuple(names),
         parents=tuple(parents),
-        offsets=np.asarray(offsets, dtype=np.float64).reshape(-1, 3),
+        offsets=offsets_arr,
         channels=tuple(channels),
         is_end_site=tuple(end),
         frame_time=1.0 / float(fps),
-        frames=np.concatenate(cols, axis=1),
+        frames=frames,
         source=f.source,
     )

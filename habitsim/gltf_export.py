@@ -24,7 +24,6 @@ from .bvh import BVHData
 from .errors import GLTFError
 from .fileio import atomic_path
 from .gltf import (
-    _File,
     _joint_names,
     _rest_above,
     _rest_trs,
@@ -32,6 +31,7 @@ from .gltf import (
     _select_animation,
     _uniform,
 )
+from .gltf_container import GLTFFile as _File
 
 __all__ = ["add_gltf_animation", "GLTF_SUFFIXES"]
 
@@ -116,6 +116,7 @@ def add_gltf_animation(
         if not doc.buffers:
             doc.buffers.append(pygltflib.Buffer(byteLength=0))
     else:
+        f.data_uri_buffers()  # external files read within the folder check, not by pygltflib
         doc.convert_buffers(pygltflib.BufferFormat.DATAURI)
         blob, buffer = bytearray(), len(doc.buffers)
     first = len(doc.accessors)

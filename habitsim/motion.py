@@ -19,6 +19,7 @@ key                 dtype/shape  meaning
 from __future__ import annotations
 
 import json
+import math
 import zipfile
 import zlib
 from dataclasses import dataclass, field
@@ -29,6 +30,7 @@ import numpy as np
 
 from .errors import InvalidMotionError, MotionFileError, brief, brief_path
 from .fileio import atomic_write
+from .jsonfile import DocumentLimits, loads_json
 from .rotations import quat_fix_continuity, quat_slerp
 from .skeleton import JOINT_NAMES, Skeleton, get_skeleton
 from .species import Species, load_species
@@ -57,6 +59,27 @@ MAX_FILE_BYTES = 256 << 20
 #: Deepest nesting of ``metadata_json`` and longest text of a string field.
 MAX_METADATA_DEPTH = 32
 MAX_TEXT_CHARS = 1 << 20
+#: Types of the top-level ``metadata_json`` fields that habitsim reads back (other
+#: fields are kept as they are): a string, an integer, a finite real number or an object;
+#: every field but the numbers may be null.
+METADATA_FIELD_KINDS: dict[str, str] = {
+    **dict.fromkeys(("action", "gait", "generator", "bvh_file", "pair_key", "species"), "string"),
+    **dict.fromkeys(("seed", "frames", "generator_version"), "integer"),
+    **dict.fromkeys(
+        (
+            "fps",
+            "duration_s",
+            "speed_mps",
+            "froude",
+            "duty_factor",
+            "turn_rate",
+            "turn_rate_nd",
+            "stride_frequency_hz",
+        ),
+        "number",
+    ),
+    **dict.fromkeys(("params", "footfall", "import", "transfer", "refine", "mapping"), "object"),
+}
 #: Per-frame feature size of the paper's representation: J·4 quaternions + J·3 velocities.
 FEATURE_DIM = len(JOINT_NAMES) * 7
 #: Actions that a sagittal reflection turns into one another (:meth:`Motion.mirrored`).
@@ -398,19 +421,26 @@ def _number(data: dict[str, np.ndarray], key: str, p: Path) -> float:
     return float(v[()])
 
 
-def _depth(obj: Any) -> int:
-    """Nesting depth of a JSON value (iterative: a deep value cannot exhaust the stack)."""
-    deepest, stack = 0, [(obj, 1)]
-    while stack:
-        o, d = stack.pop()
-        deepest = max(deepest, d)
-        if d > MAX_METADATA_DEPTH:
-            break
-        if isinstance(o, dict):
-            stack.extend((x, d + 1) for x in o.values())
-        elif isinstance(o, list):
-            stack.extend((x, d + 1) for x in o)
-    return deepest
+def _check_metadata_fields(meta: dict[str, Any], p: Path) -> None:
+    """Refuse a ``metadata_json`` field of :data:`METADATA_FIELD_KINDS` of the wrong type."""
+    for key, kind in METADATA_FIELD_KINDS.items():
+        if key not in meta:
+            continue
+        v = meta[key]
+        if kind == "number":
+            ok = isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+        elif v is None:
+            ok = True
+        elif kind == "integer":
+            ok = isinstance(v, int) and not isinstance(v, bool)
+        else:
+            ok = isinstance(v, str if kind == "string" else dict)
+        if not ok:
+            what = "a finite number" if kind == "number" else f"{kind} or null"
+            raise MotionFileError(
+                f"{brief_path(p)}: metadata_json field {key!r} is of type {type(v).__name__}; "
+                f"valid: {what}"
+            )
 
 
 def load_motion(path: str | Path) -> Motion:
@@ -491,21 +521,17 @@ def load_motion(path: str | Path) -> Motion:
     meta: dict[str, Any] = {}
     if "metadata_json" in data:
         text = _text(data, "metadata_json", p)
-        try:
-            meta = json.loads(text)
-        except (json.JSONDecodeError, RecursionError) as e:
-            reason = "nested too deep" if isinstance(e, RecursionError) else brief(str(e))
-            raise MotionFileError(
-                f"{brief_path(p)}: metadata_json is not valid JSON ({reason})"
-            ) from None
+        meta = loads_json(
+            text,
+            f"{brief_path(p)}: metadata_json",
+            error=MotionFileError,
+            options=DocumentLimits(max_bytes=4 * MAX_TEXT_CHARS, max_depth=MAX_METADATA_DEPTH),
+        )
         if not isinstance(meta, dict):
             raise MotionFileError(
                 f"{brief_path(p)}: metadata_json must be a JSON object, got {type(meta).__name__}"
             )
-        if _depth(meta) > MAX_METADATA_DEPTH:
-            raise MotionFileError(
-                f"{brief_path(p)}: metadata_json nested more than {MAX_METADATA_DEPTH} levels deep"
-            )
+        _check_metadata_fields(meta, p)
     for key in ("root_positions", "rotations", "contacts"):
         if key in data and data[key].dtype.kind not in "biuf":
             raise MotionFileError(

@@ -26,7 +26,6 @@ from __future__ import annotations
 import functools
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -39,6 +38,7 @@ from .errors import (
     UnknownSpeciesError,
     brief,
 )
+from .jsonfile import load_toml
 
 __all__ = [
     "POSTURES",
@@ -497,10 +497,7 @@ def load_species_file(path: str | Path, user_catalog: str | Path | None = None) 
         SpeciesFileError: unreadable TOML, a missing key or inconsistent numbers.
     """
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise SpeciesFileError(f"{p}: cannot read species file: {e}") from e
+    data = load_toml(p, "species file", error=SpeciesFileError)
     return _parse(data, p, None if user_catalog is None else Path(user_catalog))
 
 

@@ -28,6 +28,7 @@ from typing import Any
 
 from .errors import HabitsimError
 from .fileio import atomic_write_text, make_dirs
+from .jsonfile import load_json
 from .motion import Motion
 
 __all__ = [
@@ -275,15 +276,12 @@ class _Golden:
 
 
 def _read_golden(path: Path) -> _Golden:
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
+    if not path.exists():
         raise GoldenMissingError(
             f"golden file {path} does not exist; run pytest with --habitsim-update-goldens "
             "(or call write_golden) to record it"
-        ) from None
-    except json.JSONDecodeError as e:
-        raise HabitsimError(f"golden file {path} is not valid JSON: {e}") from None
+        )
+    data = load_json(path, "golden file", error=HabitsimError)
     if not isinstance(data, dict) or "figures" not in data:
         raise HabitsimError(f"golden file {path} has no 'figures' object")
     return _Golden(

@@ -485,3 +485,31 @@ def test_unknown_source_type(tmp_path):
     p.write_text("x")
     with pytest.raises(SkeletonMappingError, match=r"valid: \.bvh, \.glb, \.gltf"):
         read_source(p)
+
+
+@pytest.mark.parametrize(
+    "name, content",
+    [
+        ("deep.json", '{"map": ' + "[" * 100_000 + "]" * 100_000 + "}"),
+        ("deep.toml", "map = " + "[" * 5_000 + "]" * 5_000 + "\n"),
+        ("big.json", '{"map": {"pelvis": ' + "9" * 5_000 + "}}"),
+    ],
+)
+def test_map_file_out_of_bounds_is_typed(tmp_path, name, content):
+    p = tmp_path / name
+    p.write_text(content)
+    with pytest.raises(SkeletonMappingError):
+        load_joint_map(p)
+
+
+def test_zero_size_skeleton_is_typed(walk):
+    from foreign_rig import blender_rig
+
+    rig = blender_rig(walk.slice(0, 10))
+    flat = dataclasses.replace(
+        rig, offsets=np.zeros_like(rig.offsets), frames=np.zeros_like(rig.frames)
+    )
+    with pytest.raises(SkeletonMappingError):
+        import_bvh(flat, "dog")
+    with pytest.raises(SkeletonMappingError):  # math.log(0) of the unit guess before
+        detect_frame(flat, {"pelvis": flat.names[0]})

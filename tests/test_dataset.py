@@ -574,3 +574,16 @@ def test_no_chains_by_default(built: Built) -> None:
     root, b = built
     assert all(c.action != "chain" for c in b.manifest.clips)
     assert "chains_per_species" not in json.loads((root / MANIFEST_NAME).read_text())
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        '{"kind": "habitsim.dataset", "seed": ' + "9" * 5000 + "}",  # a raw ValueError before
+        "[" * 100_000 + "]" * 100_000,
+    ],
+)
+def test_manifest_out_of_bounds_is_typed(tmp_path: Path, text: str) -> None:
+    (tmp_path / "manifest.json").write_text(text)
+    with pytest.raises(DatasetError):
+        load_manifest(tmp_path)

@@ -173,3 +173,9 @@ def test_evaluator_unwritable(unwritable: Path, small_dataset: Path) -> None:
         )
     _typed_output_error(ei.value)
     assert not unwritable.exists()
+
+
+def test_evaluator_config_out_of_bounds_is_typed(tmp_path: Path) -> None:
+    (tmp_path / "config.json").write_text('{"kind": "habitsim.evaluator", "x": ' + "9" * 5000 + "}")
+    with pytest.raises(EvaluatorError):
+        load_evaluator(tmp_path)

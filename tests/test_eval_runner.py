@@ -343,6 +343,8 @@ def test_cli_clips_per_source_must_be_a_count(tmp_path: Path, capsys) -> None:
         "row_no_key",
         "row_wrong_key",
         "row_deep",
+        "run_big_int",
+        "row_big_int",
     ],
 )
 def test_eval_resume_tampered_state(
@@ -370,6 +372,10 @@ def test_eval_resume_tampered_state(
         rows[0].write_text(json.dumps({"key": 5, "status": "ok"}))
     elif tamper == "row_deep":
         rows[0].write_text(deep)
+    elif tamper == "run_big_int":  # past Python's int-conversion limit: a raw ValueError
+        run.write_text('{"config": {"seed": ' + "9" * 5000 + "}}")
+    elif tamper == "row_big_int":
+        rows[0].write_text('{"key": "k", "n": ' + "9" * 5000 + "}")
     code, err = run_cli(
         ["eval", "--data", small_dataset, "--out", out, *EVAL_ARGS, "--resume"], capsys
     )

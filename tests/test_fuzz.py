@@ -162,9 +162,19 @@ def test_fuzz_tool_prints_counts_by_outcome(capsys) -> None:
     assert code == 0, out
     assert "fuzz: 12 inputs, seed 0" in out and "target: 0 raw tracebacks" in out
     header = next(ln for ln in out.splitlines() if ln.startswith("target "))
-    assert header.split() == ["target", "inputs", "ok", "typed", "raw"]
+    assert header.split() == [
+        "target",
+        "inputs",
+        "ok",
+        "typed",
+        "raw",
+        "hang",
+        "memory",
+        "peak",
+        "MB",
+    ]
     total = next(ln for ln in out.splitlines() if ln.startswith("total"))
-    assert total.split()[1] == "12" and total.split()[4] == "0"
+    assert total.split()[1] == "12" and total.split()[4:7] == ["0", "0", "0"]
 
 
 def test_fuzz_tool_check_exit_code(monkeypatch, capsys) -> None:

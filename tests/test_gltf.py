@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import math
+import struct
 from importlib import resources
 from pathlib import Path
 
@@ -13,7 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from habitsim.bvh_mapping import import_bvh
 from habitsim.errors import GLTFError, HabitsimError
-from habitsim.gltf import END_SITE_FRACTION, list_gltf_animations, read_gltf
+from habitsim.gltf import END_SITE_FRACTION, GLTFReadOptions, list_gltf_animations, read_gltf
 
 FOX = Path(str(resources.files("habitsim.examples") / "Fox.glb"))
 
@@ -387,3 +389,84 @@ def test_fox_under_a_scale_node_is_in_metres(tmp_path):
     _, mapping = import_bvh(d_m, "dog")
     assert mapping.frame.units == "m" and mapping.frame.up == "+y"
     assert mapping.joints["lh_hip"] == "b_LeftLeg01_015"
+
+
+# ---------------------------------------------------------------------- hostile files
+
+
+def _doc_and_blob(tmp_path: Path) -> tuple[dict, bytes]:
+    """The tiny rig's JSON document (a dict) and its BIN chunk."""
+    g = pygltflib.GLTF2.load_binary(_tiny(tmp_path, name="src.glb"))
+    return json.loads(g.to_json()), bytes(g.binary_blob())
+
+
+def _glb(path: Path, doc: dict, blob: bytes) -> Path:
+    """Write ``doc`` and ``blob`` as a GLB file (the container written by hand, so the
+    document may break every rule)."""
+    js = json.dumps(doc).encode()
+    js += b" " * (-len(js) % 4)
+    blob += b"\0" * (-len(blob) % 4)
+    body = struct.pack("<I4s", len(js), b"JSON") + js + struct.pack("<I4s", len(blob), b"BIN\0")
+    body += blob
+    path.write_bytes(struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body)
+    return path
+
+
+@pytest.mark.parametrize(
+    "where, key, value",
+    [
+        ("bufferViews", "buffer", None),  # a null buffer
+        ("buffers", "byteLength", None),  # a null byteLength
+        ("accessors", "byteOffset", -8),  # a negative offset passed the bounds check
+        ("accessors", "count", -1),  # a negative count
+        ("accessors", "componentType", 5130),  # a double: not a glTF component type
+        ("bufferViews", "byteStride", -4),
+        ("nodes", "matrix", [1.0, 0.0, 0.0]),  # a matrix of the wrong length
+        ("nodes", "children", ["j1"]),
+    ],
+)
+def test_hostile_fields_are_typed_errors(tmp_path, where, key, value):
+    doc, blob = _doc_and_blob(tmp_path)
+    doc[where][0][key] = value
+    msg = _err(_glb(tmp_path / "bad.glb", doc, blob), "bend")
+    assert f"{where}[0].{key}" in msg
+    assert "j1'" not in msg  # a string of the file is never quoted
+
+
+def test_huge_key_time_refused_before_resampling(tmp_path):
+    doc, blob = _doc_and_blob(tmp_path)
+    times = bytearray(blob)
+    struct.pack_into("<f", times, 8, 1e9)  # the third key of "bend" at 1e9 s
+    with pytest.raises(GLTFError, match="max_samples"):
+        read_gltf(_glb(tmp_path / "long.glb", doc, bytes(times)), "bend")
+    # the limit is an option: the tiny clip itself (61 frames x 4 nodes) is over 100
+    with pytest.raises(GLTFError, match="max_samples"):
+        read_gltf(_tiny(tmp_path), "bend", options=GLTFReadOptions(max_samples=100))
+
+
+def _gltf_with_uri(folder: Path, blob: bytes, uri: str) -> Path:
+    g = pygltflib.GLTF2.load_binary(_tiny(folder.parent, name="uri_src.glb"))
+    doc = json.loads(g.to_json())
+    doc["buffers"] = [{"uri": uri, "byteLength": len(blob)}]
+    folder.mkdir(exist_ok=True)
+    p = folder / "rig.gltf"
+    p.write_text(json.dumps(doc))
+    return p
+
+
+def test_buffer_uris_stay_inside_the_folder(tmp_path):
+    _, blob = _doc_and_blob(tmp_path)
+    secret = tmp_path / "secret.bin"
+    secret.write_bytes(blob)
+    rig = tmp_path / "rig"
+    (rig / "data.bin").parent.mkdir()
+    (rig / "data.bin").write_bytes(blob)
+    read_gltf(_gltf_with_uri(rig, blob, "data.bin"), "bend")  # beside the file: read
+    (rig / "link.bin").symlink_to(secret)
+    for uri in ("../secret.bin", str(secret), "%2E%2E/secret.bin", "link.bin", "file:///x"):
+        msg = _err(_gltf_with_uri(rig, blob, uri), "bend")
+        assert "refused" in msg and str(len(blob)) not in msg
+
+
+def test_zero_scale_refused(tmp_path):
+    assert "scale" in _err(_tiny(tmp_path, armature_scale=(0.0, 0.0, 0.0)), "bend")

@@ -751,3 +751,11 @@ def test_speed_variant_plays_the_clip_faster_with_its_labels():
     v0 = np.linalg.norm(np.diff(m.root_positions[:, :2], axis=0), axis=1).mean()
     v1 = np.linalg.norm(np.diff(fast.root_positions[:, :2], axis=0), axis=1).mean()
     assert v1 / v0 == pytest.approx(1.25, rel=0.03)
+
+
+def test_checkpoint_config_out_of_bounds_is_typed(tmp_path) -> None:
+    from habitsim.models.checkpoint import load_checkpoint
+
+    (tmp_path / "config.json").write_text('{"format": "x", "steps": ' + "9" * 5000 + "}")
+    with pytest.raises(CheckpointError):
+        load_checkpoint(tmp_path)

@@ -60,6 +60,14 @@ NPZ_CASES = {
     "metadata_deep": dict(metadata_json=np.array("[" * 100_000 + "]" * 100_000)),
     "metadata_deep_object": dict(metadata_json=np.array('{"a":' + "[" * 200 + "]" * 200 + "}")),
     "metadata_bytes": dict(metadata_json=np.array(b"{}")),
+    # an integer past Python's 4,300-digit conversion limit (a raw ValueError before)
+    "metadata_big_int": dict(metadata_json=np.array('{"seed": ' + "9" * 5000 + "}")),
+    # fields habitsim reads back, of the wrong type
+    "metadata_fps_str": dict(metadata_json=np.array('{"fps": "30"}')),
+    "metadata_froude_str": dict(metadata_json=np.array('{"froude": "fast"}')),
+    "metadata_seed_float": dict(metadata_json=np.array('{"seed": 1.5}')),
+    "metadata_params_list": dict(metadata_json=np.array('{"params": [1]}')),
+    "metadata_action_number": dict(metadata_json=np.array('{"action": 3}')),
 }
 
 
@@ -167,3 +175,21 @@ def test_motion_absurd_but_finite(kw) -> None:
         rp = np.full((3, 3), kw["root"], dtype=object if isinstance(kw["root"], str) else float)
     with pytest.raises(HabitsimError):
         Motion("dog", kw.get("fps", 30.0), rp, np.repeat(rot[None], 3, axis=0))
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        "metadata_big_int",
+        "metadata_fps_str",
+        "metadata_froude_str",
+        "metadata_seed_float",
+        "metadata_params_list",
+        "metadata_action_number",
+    ],
+)
+def test_npz_metadata_is_a_motion_file_error(tmp_path: Path, arrays, case: str) -> None:
+    from habitsim.motion import load_motion
+
+    with pytest.raises(MotionFileError):
+        load_motion(write_npz(tmp_path, arrays, **NPZ_CASES[case]))

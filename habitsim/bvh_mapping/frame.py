@@ -313,6 +313,11 @@ def detect_frame(
         if leg is None or leg <= 0:
             ext = pos[0].max(axis=0) - pos[0].min(axis=0)
             leg = float(ext.max()) / 2.0
+        if not (math.isfinite(leg) and leg > 0):
+            raise SkeletonMappingError(
+                "cannot detect the file's units: the skeleton has no size (every joint at "
+                "the same place in the first frame); pass units='m', 'cm' or 'mm' (--units)"
+            )
         plausible = [u for u in DETECTED_UNITS if 0.02 <= leg * UNIT_SCALES[u] <= 4.0]
         if len(plausible) == 1:
             uname = plausible[0]

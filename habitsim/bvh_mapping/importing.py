@@ -6,6 +6,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
+import numpy as np
+
 from ..bvh import BVHData, read_bvh
 from ..errors import SkeletonMappingError
 from ..motion import Motion
@@ -227,6 +229,12 @@ def import_bvh(
         if isinstance(path, BVHData)
         else read_source(path, animation=animation, fps=fps, strict=strict)
     )
+    offsets = np.asarray(bvh.offsets, dtype=np.float64)
+    if len(bvh.names) > 1 and not (np.all(np.isfinite(offsets)) and np.any(offsets[1:])):
+        raise SkeletonMappingError(
+            f"{bvh.source}: every joint offset below the root is zero (or not finite), so the "
+            "skeleton has no size; valid: a rig with at least one non-zero bone"
+        )
     plain = (units is None or (isinstance(units, str) and units.lower() == "m")) and (
         up is None or _parse_up(up) == "+z"
     )

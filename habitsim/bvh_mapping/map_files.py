@@ -3,14 +3,13 @@ source mapping against a source skeleton."""
 
 from __future__ import annotations
 
-import json
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from ..bvh import BVHData
 from ..errors import SkeletonMappingError
+from ..jsonfile import load_json, load_toml
 from ..skeleton import JOINT_NAMES
 
 
@@ -54,15 +53,8 @@ def load_joint_map(path: str | Path) -> dict[str, Any]:
         raise SkeletonMappingError(
             f"{p}: unknown joint-map file type {p.suffix!r}; valid: .json, .toml"
         )
-    try:
-        text = p.read_text(encoding="utf-8")
-        data = json.loads(text) if kind == ".json" else tomllib.loads(text)
-    except FileNotFoundError:
-        raise SkeletonMappingError(f"{p}: no such joint-map file") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, ValueError) as e:
-        raise SkeletonMappingError(
-            f"{p}: cannot read joint-map {kind[1:].upper()} ({str(e)[:200]})"
-        ) from e
+    load = load_json if kind == ".json" else load_toml
+    data = load(p, f"joint-map {kind[1:].upper()}", error=SkeletonMappingError)
     if not isinstance(data, dict):
         raise SkeletonMappingError(f"{p}: a joint map must be a table/object with a 'map' key")
     unknown = sorted(set(data) - {"map", "units", "up", "extends"})

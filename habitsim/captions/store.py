@@ -20,6 +20,7 @@ from typing import Any
 
 from ..errors import CaptionError, MotionFileError
 from ..fileio import atomic_write_text
+from ..jsonfile import load_json
 from .facts import clip_facts
 from .phrasing import Caption, CaptionOptions, captions
 
@@ -109,12 +110,9 @@ def load_captions(path: str | Path) -> CaptionSet:
     if p.is_dir():
         p = p / CAPTIONS_NAME
     try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as e:
-        raise MotionFileError(
-            f"{p}: cannot read captions ({type(e).__name__}); write them with "
-            "`habitsim data captions DIR`"
-        ) from None
+        doc = load_json(p, "captions", error=MotionFileError)
+    except MotionFileError as e:
+        raise MotionFileError(f"{e}; write them with `habitsim data captions DIR`") from None
     if not isinstance(doc, dict) or doc.get("kind") != _KIND or doc.get("format") != _FORMAT:
         raise MotionFileError(f"{p}: not a habitsim captions file (kind {_KIND!r}, format 1)")
     raw, skipped, seed = doc.get("clips"), doc.get("skipped", {}), doc.get("seed")

@@ -8,10 +8,11 @@ reference clips (:data:`habitsim.models.evaluate.REFERENCE_CLIPS`) in its config
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
+from ..errors import JSONFileError
+from ..jsonfile import loads_json
 from ..models.config import FinetuneConfig
 
 
@@ -104,8 +105,8 @@ def _parse_set(items: list[str]) -> dict[str, object]:
             raise ConfigError(f"--set expects KEY=VALUE, got {it!r}")
         k, v = it.split("=", 1)
         try:
-            out[k.strip()] = json.loads(v)
-        except json.JSONDecodeError:
+            out[k.strip()] = loads_json(v, f"--set {k.strip()}")
+        except JSONFileError:  # not JSON (or too big for it): the text itself
             out[k.strip()] = v
     return out
 

@@ -17,6 +17,7 @@ from ..errors import DatasetError, brief
 from ..fileio import atomic_write_text, check_writable, make_dirs
 from ..folders import claim_output_folder, is_written, remove_written
 from ..gaits import GENERATOR_VERSION, available_actions
+from ..jsonfile import load_json
 from ..species import load_species
 from .clips import _make_clip
 from .manifest import _read_manifest_json
@@ -76,8 +77,8 @@ def _check_overwritable(out: Path) -> None:
     if not mpath.exists():
         return
     try:
-        data = json.loads(mpath.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        data = load_json(mpath, "manifest", error=DatasetError)
+    except DatasetError:
         data = None
     if not isinstance(data, dict) or data.get("kind") != DATASET_KIND:
         raise DatasetError(

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterable, Iterator
 from pathlib import Path, PurePosixPath
 from typing import Any
 
 from ..errors import DatasetError, brief
 from ..folders import check_inside
+from ..jsonfile import load_json
 from ..motion import Motion, load_motion
 from .records import (
     DATASET_KIND,
@@ -22,11 +22,7 @@ from .records import (
 
 
 def _read_manifest_json(path: Path, kinds: tuple[str, ...] = (DATASET_KIND,)) -> dict[str, Any]:
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
-        reason = "nested too deep" if isinstance(e, RecursionError) else brief(str(e), 200)
-        raise DatasetError(f"{path}: not a readable manifest ({reason})") from None
+    data = load_json(path, "manifest", error=DatasetError)
     if not isinstance(data, dict) or data.get("kind") not in kinds:
         raise DatasetError(
             f"{path}: not a habitsim data set manifest of kind {' or '.join(map(repr, kinds))}"

@@ -24,6 +24,7 @@ from typing import Any
 import torch
 
 from ..fileio import atomic_write, atomic_write_text, make_dirs, output_transaction
+from ..jsonfile import load_json
 from .config import Config
 from .errors import CheckpointError, ConfigError
 from .features import FEATURE_VERSION
@@ -167,10 +168,7 @@ def read_checkpoint_config(path: str | Path) -> tuple[Config, dict[str, Any]]:
         raise CheckpointError(
             f"{p}: missing {CONFIG_FILE} (folder holds: {', '.join(present) or 'nothing'})"
         )
-    try:
-        doc = json.loads(cfg_path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise CheckpointError(f"{cfg_path}: not valid JSON ({e})") from e
+    doc = load_json(cfg_path, "checkpoint config", error=CheckpointError)
     if not isinstance(doc, dict) or doc.get("format") != CHECKPOINT_FORMAT:
         fmt = doc.get("format") if isinstance(doc, dict) else None
         raise CheckpointError(f"{cfg_path}: not a habitsim model checkpoint (format {fmt!r})")
@@ -299,10 +297,7 @@ def load_train_state(
     js_path = p / STATE_JSON
     if file_sha256(js_path) != files.get(STATE_JSON):
         raise CheckpointError(f"{js_path}: corrupt or replaced (SHA-256 mismatch)")
-    try:
-        js = json.loads(js_path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as e:
-        raise CheckpointError(f"{js_path}: not valid JSON ({e})") from e
+    js = load_json(js_path, "training state", error=CheckpointError)
     return tensors, js
 
 
@@ -318,7 +313,7 @@ def export_checkpoint(src: str | Path, dst: str | Path, note: dict[str, Any] | N
 
     src, dst = Path(src), Path(dst)
     load_checkpoint(src)  # refuse to export a broken checkpoint
-    doc = json.loads((src / CONFIG_FILE).read_text(encoding="utf-8"))
+    doc = load_json(src / CONFIG_FILE, "checkpoint config", error=CheckpointError)
     doc["files"] = {MODEL_FILE: doc["files"][MODEL_FILE]}
     doc.update(note or {})
     make_dirs(dst, "checkpoint folder")

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..fileio import atomic_write_text
+from ..jsonfile import load_json
 from .checkpoint import CONFIG_FILE, _readable
 from .config import Config, finetune_schedule
 from .errors import CheckpointError, ConfigError
@@ -230,7 +231,7 @@ def _record_recipe(
     rows: list[dict[str, Any]] = []
     walls: list[int] = []
     for st, cfg, folder in zip(stages, configs, folders, strict=True):
-        doc = json.loads((folder / CONFIG_FILE).read_text(encoding="utf-8"))
+        doc = load_json(folder / CONFIG_FILE, "checkpoint config", error=CheckpointError)
         walls.append(round(float(doc["training"]["wall_time_s"])))
         rows.append(
             {
@@ -249,7 +250,7 @@ def _record_recipe(
         "threads": configs[-1].train.threads,
     }
     p = out / CONFIG_FILE
-    doc = json.loads(p.read_text(encoding="utf-8"))
+    doc = load_json(p, "checkpoint config", error=CheckpointError)
     doc["recipe"] = recipe
     atomic_write_text(p, json.dumps(doc, indent=2) + "\n")
     _readable(out, [CONFIG_FILE])

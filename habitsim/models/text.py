@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..jsonfile import load_json
 from ..species import Species, load_species
 from .errors import TextEncoderError
 
@@ -152,7 +153,6 @@ def _packaged(model: str) -> dict[str, np.ndarray]:
     Every shipped checkpoint holds the embeddings of the catalog descriptions it was
     trained with (and their hashes), so the catalog never needs the text model at run time.
     """
-    import json
 
     from safetensors import SafetensorError, safe_open
 
@@ -167,7 +167,7 @@ def _packaged(model: str) -> dict[str, np.ndarray]:
         return out
     for cfg in sorted(root.glob("*/config.json")):
         try:
-            doc = json.loads(cfg.read_text(encoding="utf-8"))
+            doc = load_json(cfg, "checkpoint config")
             text = doc["text"]
             if text.get("model") != model:
                 continue

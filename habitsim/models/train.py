@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..jsonfile import load_json
 from ..species import training_species
 from .checkpoint import (
     CONFIG_FILE,
@@ -411,7 +412,7 @@ def train(
 def record_metrics(out_dir: str | Path, metrics: dict[str, Any]) -> None:
     """Merge ``metrics`` into the ``metrics`` of a checkpoint's ``config.json``."""
     p = Path(out_dir) / CONFIG_FILE
-    doc = json.loads(p.read_text(encoding="utf-8"))
+    doc = load_json(p, "checkpoint config", error=CheckpointError)
     doc.setdefault("metrics", {}).update(metrics)
     from ..fileio import atomic_write_text
     from .checkpoint import _readable

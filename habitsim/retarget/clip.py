@@ -10,6 +10,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from ..jsonfile import loads_json
 from .errors import RetargetError
 
 __all__ = ["RobotClip", "load_robot_clip", "track_clip", "CLIP_VERSION"]
@@ -86,7 +87,7 @@ def load_robot_clip(path: str | Path) -> RobotClip:
                 fps=float(z["fps"]),
                 contacts=z["contacts"].astype(bool),
                 feet=tuple(str(f) for f in z["feet"]),
-                metadata=json.loads(str(z["metadata"])),
+                metadata=loads_json(str(z["metadata"]), f"{p}: metadata", error=RetargetError),
             )
     except (OSError, ValueError, KeyError) as e:
         raise RetargetError(f"cannot read robot clip {str(p)!r}: {e}") from e

@@ -3,12 +3,14 @@ its counts by outcome.
 
 ::
 
-    python -m fuzzing [--n 10000] [--seed 0] [--targets bvh,npz,...] [--show 5] [--check]
+    python -m fuzzing [--n 10000] [--seed 0] [--targets bvh,npz,...] [--show 5]
+                      [--time-limit 120] [--memory-mb 300] [--check]
 
-Prints the counts by outcome per target (``ok``, ``typed``, ``raw``), the table's
-legend, the first raw exceptions with their inputs, and the verdict of the target
-"0 raw tracebacks" (``met`` or ``MISSED``). ``--check`` makes a missed target exit with
-code 1; bad arguments are ``error: …`` and exit code 2.
+Prints the counts by outcome per target (``ok``, ``typed``, ``raw``, ``hang``,
+``memory``) with each target's peak memory, the table's legend, the first failures with
+their inputs, and the verdict of the target "0 raw tracebacks, hangs or memory
+blow-ups" (``met`` or ``MISSED``). ``--check`` makes a missed target exit with code 1;
+bad arguments are ``error: …`` and exit code 2.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from habitsim.cli.bounds import check_bounds
 from habitsim.cli.conventions import add_check_option, add_list_option, check_exit
 from habitsim.errors import ArgumentRangeError, HabitsimError, brief
 
-from .campaign import TARGETS, campaign, print_campaign
+from .campaign import TARGETS, FuzzLimits, campaign, print_campaign
 
 #: Most inputs of one campaign (10,000 take about 5 minutes on one core).
 MAX_INPUTS = 1_000_000
@@ -51,6 +53,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--show", type=int, default=5, metavar="K", help="raw exceptions to show (default 5)"
     )
+    p.add_argument(
+        "--time-limit",
+        type=float,
+        default=120.0,
+        metavar="S",
+        help="seconds an input may run before it counts as a hang (default 120)",
+    )
+    p.add_argument(
+        "--memory-mb",
+        type=float,
+        default=300.0,
+        metavar="M",
+        help="memory an input may take beyond 4 x its size, in MB (default 300)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress notes on stderr")
     add_check_option(p)
     return p
@@ -66,14 +82,27 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ArgumentRangeError(f"--n {brief(ns.n)}; valid: 1 to {MAX_INPUTS} (fuzzed inputs)")
         if not 0 <= ns.show <= 1000:
             raise ArgumentRangeError(f"--show {brief(ns.show)}; valid: 0 to 1000 (raw exceptions)")
-        res = campaign(ns.n, ns.seed, ns.targets, keep=ns.show, progress=not ns.no_progress)
+        if not 0.1 <= ns.time_limit <= 3600:
+            raise ArgumentRangeError(f"--time-limit {brief(ns.time_limit)}; valid: 0.1 to 3600 s")
+        if not 50 <= ns.memory_mb <= 16384:
+            raise ArgumentRangeError(f"--memory-mb {brief(ns.memory_mb)}; valid: 50 to 16384 MB")
+        limits = FuzzLimits(time_s=ns.time_limit, memory_mb=ns.memory_mb)
+        res = campaign(
+            ns.n, ns.seed, ns.targets, keep=ns.show, progress=not ns.no_progress, limits=limits
+        )
     except HabitsimError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     print_campaign(res, ns.n, ns.seed)
-    raw = res.total["raw"]
-    print(f"target: 0 raw tracebacks — {raw} raw: {'met' if raw == 0 else 'MISSED'}")
-    return check_exit([f"{raw} raw traceback(s)"] if raw else [], ns.check)
+    t = res.total
+    bad = t["raw"] + t["hang"] + t["memory"]
+    print(
+        f"target: 0 raw tracebacks, hangs or memory blow-ups — {t['raw']} raw, {t['hang']} "
+        f"hang, {t['memory']} memory: {'met' if bad == 0 else 'MISSED'}"
+    )
+    return check_exit(
+        [f"{bad} raw traceback(s), hang(s) or memory blow-up(s)"] if bad else [], ns.check
+    )
 
 
 if __name__ == "__main__":

@@ -13,7 +13,24 @@ file would be, and its outcome counted:
 * ``ok`` — read (or the command ran) without an error;
 * ``typed`` — refused with a :class:`~habitsim.errors.HabitsimError` (for the command
   line: ``error: …`` and exit code 2, or an argparse usage error);
-* ``raw`` — any other exception: a bug, shown with its input and traceback.
+* ``raw`` — any other exception: a bug, shown with its input and traceback;
+* ``hang`` — still running after the per-input time limit (:class:`FuzzLimits`), killed;
+* ``memory`` — a ``MemoryError`` under the per-input memory limit (4 × the input's size
+  + :attr:`FuzzLimits.memory_mb`, as the readers promise in docs/formats.md; an
+  address-space limit, not applied to the command-line targets, whose libraries reserve
+  address space they never use: their peak memory is reported instead).
+
+Each input runs in a forked child process with those limits (``FuzzLimits.isolate``), so
+a hang or a memory blow-up is counted, not suffered; the child's peak memory above the
+campaign's own is reported per target.
+
+Families: BVH text, BVH imports, ``.npz`` motions (arrays swapped, zips cut), species
+TOML, data-set manifests, command lines, heavy commands on absurd motions, and the
+structure-aware ones of :mod:`fuzzing.families`: glTF documents (indices, counts, offsets,
+strides, component types, nulls, negative numbers, huge key times, node cycles and long
+chains, buffer URIs with ``..`` or absolute paths, cut or flipped containers), JSON and
+TOML documents out of bounds (deep, recursive tables, big integers) for every JSON/TOML
+reader, and motion metadata of the wrong types.
 
 The same generators drive the hypothesis tests of ``tests/test_fuzz.py`` (there with a
 small, bounded number of examples); this module runs the long campaign.
@@ -24,9 +41,13 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 import random
 import re
+import resource
+import select
 import shutil
+import signal
 import sys
 import tempfile
 import time
@@ -43,11 +64,15 @@ import numpy as np
 
 from habitsim.errors import HabitsimError
 
+from . import families
+
 __all__ = [
     "TARGETS",
     "Case",
     "Workspace",
     "CampaignResult",
+    "FuzzLimits",
+    "OUTCOMES",
     "make_case",
     "run_case",
     "campaign",
@@ -56,14 +81,37 @@ __all__ = [
 
 #: Inputs of each kind, in the proportions of a campaign.
 TARGETS: dict[str, float] = {
-    "bvh": 0.30,
-    "bvh_import": 0.08,
-    "npz": 0.27,
-    "species": 0.17,
-    "manifest": 0.10,
-    "cli": 0.08,
-    "heavy": 0.03,
+    "bvh": 0.20,
+    "bvh_import": 0.06,
+    "npz": 0.17,
+    "species": 0.10,
+    "manifest": 0.07,
+    "cli": 0.06,
+    "heavy": 0.02,
+    "gltf": 0.16,
+    "docs": 0.10,
+    "npz_meta": 0.06,
 }
+#: How an input can end (the columns of the table).
+OUTCOMES = ("ok", "typed", "raw", "hang", "memory")
+
+
+@dataclass(frozen=True)
+class FuzzLimits:
+    """Per-input limits of a campaign.
+
+    Attributes:
+        time_s: wall time after which an input counts as ``hang`` [s] (the heavy
+            commands' small budgets take a few seconds).
+        memory_mb: memory an input may take beyond 4 × its size [MB] (docs/formats.md).
+        isolate: run each input in a forked child (False: in this process, without the
+            limits; what the hypothesis tests do).
+    """
+
+    time_s: float = 120.0
+    memory_mb: float = 300.0
+    isolate: bool = True
+
 
 #: Hostile number-like tokens.
 NUMBERS = [
@@ -224,6 +272,8 @@ class Workspace:
         )
         self.dataset = data
         self.manifest_seed = json.loads((data / "manifest.json").read_text(encoding="utf-8"))
+        self.gltf_doc, self.gltf_blob = families.gltf_seed()
+        families.preload()  # imported here, not under a child's memory limit
         self.blocker = self.root / "blocker"
         self.blocker.write_text("a file where a folder should be")
         self._n = 0
@@ -231,7 +281,7 @@ class Workspace:
     def path(self, suffix: str) -> Path:
         """A fresh file path in the scratch folder."""
         self._n += 1
-        return self.root / "cases" / f"c{self._n}{suffix}"
+        return self.root / "cases" / f"c{self._n}_{os.getpid()}{suffix}"  # forked runs too
 
     def close(self) -> None:
         if self._own:
@@ -792,6 +842,12 @@ def make_case(target: str, ws: Workspace, rnd: random.Random) -> Case:
     if target == "heavy":
         argv, note = _heavy_argv(ws, rnd)
         return Case(target, argv, note)
+    if target == "gltf":
+        return Case(target, families.make_gltf(ws, rnd))
+    if target == "docs":
+        return Case(target, families.make_doc(ws, rnd))
+    if target == "npz_meta":
+        return Case(target, families.make_npz_meta(ws, rnd))
     raise HabitsimError(f"unknown fuzz target {target!r}; valid: {', '.join(TARGETS)}")
 
 
@@ -882,11 +938,15 @@ _RUNNERS: dict[str, Callable[[Workspace, Case], None]] = {
     "manifest": _run_manifest,
     "cli": _run_cli,
     "heavy": _run_cli,
+    "gltf": families.run_gltf,
+    "docs": families.run_doc,
+    "npz_meta": families.run_npz_meta,
 }
 
 
 def run_case(ws: Workspace, case: Case) -> tuple[str, BaseException | None]:
-    """Run one input; ``("ok" | "typed" | "raw", the exception or None)``."""
+    """Run one input in this process; ``("ok" | "typed" | "raw" | "memory", the exception
+    or None)``."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -894,9 +954,116 @@ def run_case(ws: Workspace, case: Case) -> tuple[str, BaseException | None]:
                 _RUNNERS[case.target](ws, case)
     except HabitsimError as e:
         return "typed", e
+    except MemoryError as e:
+        return "memory", e
     except Exception as e:  # noqa: BLE001 - what the campaign is looking for
         return "raw", e
     return "ok", None
+
+
+#: Targets run without the address-space limit: the heavy commands' libraries (IPOPT,
+#: BLAS thread pools, torch) reserve address space they never touch, and fail or spin
+#: under it; their peak memory is still measured and reported.
+_NO_AS_LIMIT = ("cli", "heavy")
+
+
+class ChildFailure(Exception):
+    """A raw exception, hang or crash of a forked input, as the parent sees it:
+    ``kind`` is the child's exception type (or ``hang`` / ``crash``)."""
+
+    def __init__(self, outcome: str, kind: str, message: str, tb: str = ""):
+        super().__init__(message)
+        self.outcome, self.kind, self.tb = outcome, kind, tb
+
+
+def _input_bytes(case: Case) -> int:
+    """The size of an input [bytes]: its file's, or its text's."""
+    d = case.data
+    if isinstance(d, tuple):
+        d = next((x for x in d if isinstance(x, Path)), None)
+    if isinstance(d, Path):
+        with contextlib.suppress(OSError):
+            return d.stat().st_size
+        return 0
+    return len(d) if isinstance(d, str) else 0
+
+
+def _status_kb(field: str) -> int:
+    """A field of /proc/self/status [KiB] (0 where there is none)."""
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith(field + ":"):
+                return int(line.split()[1])
+    return 0
+
+
+def run_isolated(
+    ws: Workspace, case: Case, limits: FuzzLimits
+) -> tuple[str, BaseException | None, float]:
+    """Run one input in a forked child under ``limits``: (outcome, the exception or None,
+    the child's peak memory above this process's [MB])."""
+    budget = int(4 * _input_bytes(case) + limits.memory_mb * 2**20)
+    vm = _status_kb("VmSize") * 1024
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: run, report as JSON, leave without any clean-up
+        os.close(r)
+        code = 0
+        try:
+            if case.target not in _NO_AS_LIMIT:
+                resource.setrlimit(resource.RLIMIT_AS, (vm + budget, resource.RLIM_INFINITY))
+            base = _status_kb("VmRSS")
+            outcome, exc = run_case(ws, case)
+            grown = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - base) / 1024
+            tb = "" if exc is None else "".join(traceback.format_exception(exc)[-4:])
+            kind = "" if exc is None else type(exc).__name__
+            msg = "" if exc is None else str(exc)[:500]
+            data = json.dumps(
+                {"outcome": outcome, "kind": kind, "message": msg, "tb": tb, "mb": grown}
+            )
+            with os.fdopen(w, "wb") as fh:
+                fh.write(data.encode())
+        except BaseException:  # noqa: BLE001 - the child must never return to the caller
+            code = 3
+        os._exit(code)
+    os.close(w)
+    chunks, deadline, hung = [], time.monotonic() + limits.time_s, False
+    with os.fdopen(r, "rb") as fh:
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([fh], [], [], left)[0]:
+                hung = True
+                os.kill(pid, signal.SIGKILL)
+                break
+            chunk = os.read(fh.fileno(), 1 << 16)
+            if not chunk:
+                break
+            chunks.append(chunk)
+    _, status = os.waitpid(pid, 0)
+    peak = float("nan")  # unknown unless the child reports it
+    if hung:
+        return (
+            "hang",
+            ChildFailure("hang", "hang", f"still running after {limits.time_s:g} s"),
+            peak,
+        )
+    try:
+        res = json.loads(b"".join(chunks))
+    except ValueError:
+        sig = os.WTERMSIG(status) if os.WIFSIGNALED(status) else None
+        return (
+            "raw",
+            ChildFailure("raw", "crash", f"the child died (signal {sig}, status {status})"),
+            peak,
+        )
+    peak = max(0.0, float(res.get("mb", 0.0)))
+    if res["outcome"] == "ok":
+        return "ok", None, peak
+    return (
+        res["outcome"],
+        ChildFailure(res["outcome"], res["kind"], res["message"], res["tb"]),
+        peak,
+    )
 
 
 @dataclass
@@ -906,6 +1073,7 @@ class CampaignResult:
     counts: dict[str, Counter]
     raw: list[tuple[Case, BaseException, str]]
     seconds: float
+    peak_mb: dict[str, float] | None = None
 
     @property
     def total(self) -> Counter:
@@ -915,11 +1083,13 @@ class CampaignResult:
         return t
 
     def table(self) -> str:
-        lines = [f"{'target':12s} {'inputs':>7s} {'ok':>7s} {'typed':>7s} {'raw':>7s}"]
+        peak = self.peak_mb or {}
+        head = f"{'target':12s} {'inputs':>7s} " + " ".join(f"{o:>7s}" for o in OUTCOMES)
+        lines = [head + f" {'peak MB':>8s}"]
         for name, c in [*self.counts.items(), ("total", self.total)]:
-            lines.append(
-                f"{name:12s} {sum(c.values()):7d} {c['ok']:7d} {c['typed']:7d} {c['raw']:7d}"
-            )
+            top = max(peak.values(), default=0.0) if name == "total" else peak.get(name, 0.0)
+            row = f"{name:12s} {sum(c.values()):7d} " + " ".join(f"{c[o]:7d}" for o in OUTCOMES)
+            lines.append(row + f" {top:8.0f}")
         return "\n".join(lines)
 
 
@@ -930,8 +1100,11 @@ def campaign(
     keep: int = 5,
     progress: bool = False,
     workspace: Workspace | None = None,
+    limits: FuzzLimits | None = None,
 ) -> CampaignResult:
-    """Run ``n`` fuzzed inputs (targets drawn in the proportions of :data:`TARGETS`)."""
+    """Run ``n`` fuzzed inputs (targets drawn in the proportions of :data:`TARGETS`), each
+    under ``limits`` (None: :class:`FuzzLimits` defaults)."""
+    lim = limits or FuzzLimits()
     names = targets or list(TARGETS)
     bad = [t for t in names if t not in TARGETS]
     if bad:
@@ -939,6 +1112,7 @@ def campaign(
     weights = [TARGETS[t] for t in names]
     rnd = random.Random(seed)
     counts: dict[str, Counter] = {t: Counter() for t in names}
+    peak: dict[str, float] = dict.fromkeys(names, 0.0)
     raw: list[tuple[Case, BaseException, str]] = []
     t0 = time.perf_counter()
     ws = workspace or Workspace()
@@ -946,22 +1120,35 @@ def campaign(
         for i in range(n):
             target = rnd.choices(names, weights)[0]
             case = make_case(target, ws, random.Random(rnd.getrandbits(64)))
-            outcome, exc = run_case(ws, case)
+            if lim.isolate:
+                outcome, exc, mb = run_isolated(ws, case, lim)
+                peak[target] = max(peak[target], mb)
+            else:
+                outcome, exc = run_case(ws, case)
             counts[target][outcome] += 1
-            if outcome == "raw" and len(raw) < keep:
-                assert exc is not None  # run_case returns the raw exception
-                raw.append((case, exc, "".join(traceback.format_exception(exc)[-4:])))
+            if outcome in ("raw", "hang", "memory") and len(raw) < keep:
+                assert exc is not None  # a failed run returns its exception
+                tb = (
+                    exc.tb
+                    if isinstance(exc, ChildFailure)
+                    else "".join(traceback.format_exception(exc)[-4:])
+                )
+                raw.append((case, exc, tb))
             if progress and (i + 1) % 500 == 0:
+                failed = {o: sum(c[o] for c in counts.values()) for o in OUTCOMES[2:]}
                 print(
-                    f"  {i + 1}/{n} inputs, {sum(c['raw'] for c in counts.values())} raw",
+                    f"  {i + 1}/{n} inputs, "
+                    + ", ".join(f"{v} {o}" for o, v in failed.items())
+                    + f", {time.perf_counter() - t0:.0f} s",
                     file=sys.stderr,
+                    flush=True,
                 )
             if (i + 1) % 200 == 0:  # keep the scratch folder small
                 shutil.rmtree(ws.root / "cases", ignore_errors=True)
     finally:
         if workspace is None:
             ws.close()
-    return CampaignResult(counts, raw, time.perf_counter() - t0)
+    return CampaignResult(counts, raw, time.perf_counter() - t0, peak if lim.isolate else None)
 
 
 def _describe(case: Case) -> str:
@@ -978,7 +1165,10 @@ def _describe(case: Case) -> str:
 LEGEND = (
     "inputs: fuzzed inputs of that target; ok: read (or the command ran) without an error; "
     "typed: refused with a HabitsimError (error: ..., exit code 2, or a usage error); "
-    "raw: any other exception, a bug (shown below the table with its input)."
+    "raw: any other exception, a bug (shown below the table with its input); "
+    "hang: still running at the time limit; memory: a MemoryError under the memory limit "
+    "(4 x the input's size + the budget); peak MB: the largest memory one input took "
+    "beyond the campaign's own."
 )
 
 
@@ -991,4 +1181,9 @@ def print_campaign(res: CampaignResult, n: int, seed: int) -> None:
     print(res.table())
     print(format_legend(LEGEND))
     for case, exc, tb in res.raw:
-        print(f"\nraw {type(exc).__name__} on a {case.target} input: {_describe(case)}\n{tb}")
+        if isinstance(exc, ChildFailure):
+            outcome, kind = exc.outcome, exc.kind
+        else:
+            outcome = "memory" if isinstance(exc, MemoryError) else "raw"
+            kind = type(exc).__name__
+        print(f"\n{outcome} {kind} on a {case.target} input: {_describe(case)}\n{exc}\n{tb}")
