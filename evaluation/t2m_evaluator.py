@@ -35,6 +35,7 @@ import torch
 from torch import nn
 
 from habitsim.fileio import atomic_write, atomic_write_text, make_dirs, output_transaction
+from habitsim.jsonfile import load_json
 from habitsim.motion import Motion
 from habitsim.threads import one_thread
 
@@ -465,10 +466,7 @@ def load_t2m_evaluator(path: str | Path) -> T2MEvaluator:
             f"{folder}: not a text–motion evaluator folder (it holds {_WEIGHTS} + {_CONFIG}; "
             "train one with `habitsim t2m train-evaluator`)"
         )
-    try:
-        raw = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as e:
-        raise EvaluatorError(f"{p}: not valid JSON ({type(e).__name__})") from None
+    raw = load_json(p, "text–motion evaluator config", error=EvaluatorError)
     if not isinstance(raw, dict) or raw.get("kind") != _KIND:
         raise EvaluatorError(f"{p}: not a text–motion evaluator config (kind != {_KIND!r})")
     if raw.get("format_version") != CONFIG_FORMAT_VERSION:

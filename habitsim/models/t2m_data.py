@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from ..fileio import atomic_write, atomic_write_text, make_dirs
+from ..jsonfile import load_json, loads_json
 from .errors import CodeSetError
 
 __all__ = [
@@ -172,8 +173,10 @@ def _read_clip(path: Path, source: str, split: str, species: str) -> CodeClip:
         with safe_open(str(path), framework="numpy") as fh:
             meta = fh.metadata() or {}
             arrays = {k: fh.get_tensor(k) for k in ("codes", "path", "text")}
-        captions = tuple(json.loads(meta.get("captions", "[]")))
-    except (SafetensorError, OSError, ValueError, KeyError, TypeError) as e:
+        captions = tuple(
+            loads_json(meta.get("captions", "[]"), f"{path}: captions", error=CodeSetError)
+        )
+    except (SafetensorError, OSError, ValueError, KeyError, TypeError, CodeSetError) as e:
         raise CodeSetError(
             f"{path}: not a readable code clip ({type(e).__name__}); rebuild the code set "
             "with `build_code_set` (it re-encodes what is missing or broken)"
@@ -380,12 +383,9 @@ def load_code_set(path: str | Path) -> CodeSet:
     root = p.parent if p.name == CODES_NAME else p
     idx = root / CODES_NAME
     try:
-        doc = json.loads(idx.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as e:
-        raise CodeSetError(
-            f"{idx}: cannot read a code set ({type(e).__name__}); build one with "
-            "`build_code_set(DATASET, OUT)`"
-        ) from None
+        doc = load_json(idx, "code set index", error=CodeSetError)
+    except CodeSetError as e:
+        raise CodeSetError(f"{e}; build one with `build_code_set(DATASET, OUT)`") from None
     need = ("fps", "rate", "levels", "num_codes", "path_dim", "text_dim", "text_model", "vq")
     if not isinstance(doc, dict) or doc.get("kind") != CODES_KIND or doc.get("format") != _FORMAT:
         raise CodeSetError(f"{idx}: not a habitsim code set (kind {CODES_KIND!r}, format 1)")

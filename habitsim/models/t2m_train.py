@@ -39,6 +39,7 @@ import numpy as np
 import torch
 
 from ..fileio import atomic_write, atomic_write_text, make_dirs
+from ..jsonfile import load_json
 from .checkpoint import (
     CONFIG_FILE,
     MODEL_FILE,
@@ -154,12 +155,9 @@ def save_codegpt(
 def _read_doc(p: Path) -> tuple[T2MConfig, dict[str, Any]]:
     cfg_path = p / CONFIG_FILE
     try:
-        doc = json.loads(cfg_path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as e:
-        raise CheckpointError(
-            f"{cfg_path}: cannot read a text-to-motion checkpoint ({type(e).__name__}); "
-            "train one with `train_codegpt`"
-        ) from None
+        doc = load_json(cfg_path, "text-to-motion checkpoint config", error=CheckpointError)
+    except CheckpointError as e:
+        raise CheckpointError(f"{e}; train one with `train_codegpt`") from None
     if not isinstance(doc, dict) or doc.get("format") != T2M_FORMAT:
         fmt = doc.get("format") if isinstance(doc, dict) else None
         raise CheckpointError(
