@@ -179,6 +179,19 @@ class Habits:
     swing_height: float
     trunk_sway: float
 
+    def table(self) -> dict[str, float]:
+        """The numbers as a species file's ``[habits]`` table writes them (angles in
+        degrees, rounded to 1e-3)."""
+        deg = math.degrees
+        return {
+            "stride_frequency_coeff_hz": self.stride_frequency_coeff_hz,
+            "spine_flex_deg": round(deg(self.spine_flex), 3),
+            "head_bob_deg": round(deg(self.head_bob), 3),
+            "tail_sway_deg": round(deg(self.tail_sway), 3),
+            "swing_height": self.swing_height,
+            "trunk_sway": self.trunk_sway,
+        }
+
 
 @dataclass(frozen=True, eq=False)
 class Species:

@@ -181,14 +181,7 @@ def species_details(sp: Species) -> dict[str, Any]:
             }
             for g, gh in sp.gaits.items()
         },
-        "habits": {
-            "stride_frequency_coeff_hz": h.stride_frequency_coeff_hz,
-            "spine_flex_deg": round(deg(h.spine_flex), 3),
-            "head_bob_deg": round(deg(h.head_bob), 3),
-            "tail_sway_deg": round(deg(h.tail_sway), 3),
-            "swing_height": h.swing_height,
-            "trunk_sway": h.trunk_sway,
-        },
+        "habits": h.table(),
         "description": sp.description,
         "sources": list(sp.sources),
         "user_catalog": str(sp.user_catalog) if sp.user_catalog else None,

@@ -331,14 +331,7 @@ def draft_species(
             }
             for g, gh in nb.gaits.items()
         },
-        "habits": {
-            "stride_frequency_coeff_hz": h.stride_frequency_coeff_hz,
-            "spine_flex_deg": round(deg(h.spine_flex), 3),
-            "head_bob_deg": round(deg(h.head_bob), 3),
-            "tail_sway_deg": round(deg(h.tail_sway), 3),
-            "swing_height": h.swing_height,
-            "trunk_sway": h.trunk_sway,
-        },
+        "habits": h.table(),
     }
     limits, widened = _widen(nb, data, o.limit_margin_deg)
     data["joint_limits"] = limits
