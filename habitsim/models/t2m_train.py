@@ -56,6 +56,7 @@ from .errors import CheckpointError, ConfigError, TrainingDataError
 from .resume import _optimizer_state, _restore_optimizer
 from .t2m_config import T2M_PRESETS, T2MConfig, T2MTrainConfig, t2m_preset
 from .t2m_data import CodeClip, CodeSet, load_code_set
+from .train import warmup_cosine
 
 __all__ = [
     "T2M_FORMAT",
@@ -210,12 +211,8 @@ class T2MTrainResult:
 
 
 def lr_at(step: int, t: T2MTrainConfig) -> float:
-    """Learning rate of optimiser step ``step`` (0-based)."""
-    if t.warmup_steps and step < t.warmup_steps:
-        return t.lr * (step + 1) / t.warmup_steps
-    span = max(1, t.steps - 1 - t.warmup_steps)
-    frac = min(1.0, (step - t.warmup_steps) / span)
-    return t.lr_final + 0.5 * (t.lr - t.lr_final) * (1.0 + math.cos(math.pi * frac))
+    """Learning rate of optimiser step ``step`` (0-based): warm-up, then cosine."""
+    return warmup_cosine(step, t.steps, t.warmup_steps, t.lr, t.lr_final)
 
 
 class _Batches:

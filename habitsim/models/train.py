@@ -97,15 +97,21 @@ class TrainResult:
     history: list[dict[str, Any]] = field(default_factory=list)
 
 
+def warmup_cosine(step: int, steps: int, warmup: int, lr: float, lr_final: float) -> float:
+    """Learning rate of optimiser step ``step`` (0-based) of ``steps``: linear warm-up over
+    ``warmup`` steps to ``lr``, then a cosine down to ``lr_final`` at the last step."""
+    if warmup and step < warmup:
+        return lr * (step + 1) / warmup
+    span = max(1, steps - 1 - warmup)
+    frac = min(1.0, (step - warmup) / span)
+    return lr_final + 0.5 * (lr - lr_final) * (1.0 + math.cos(math.pi * frac))
+
+
 def lr_at(step: int, cfg: Config) -> float:
     """Learning rate of optimiser step ``step`` (0-based)."""
     t = cfg.train
-    if t.warmup_steps and step < t.warmup_steps:
-        return t.lr * (step + 1) / t.warmup_steps
-    if t.lr_schedule == "cosine":
-        span = max(1, t.steps - 1 - t.warmup_steps)
-        frac = min(1.0, (step - t.warmup_steps) / span)
-        return t.lr_final + 0.5 * (t.lr - t.lr_final) * (1.0 + math.cos(math.pi * frac))
+    if t.lr_schedule == "cosine" or (t.warmup_steps and step < t.warmup_steps):
+        return warmup_cosine(step, t.steps, t.warmup_steps, t.lr, t.lr_final)
     return t.lr if step < t.lr_drop * t.steps else t.lr_final
 
 
