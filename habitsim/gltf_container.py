@@ -32,7 +32,7 @@ import numpy as np
 import pygltflib
 
 from .errors import GLTFError, brief, brief_path
-from .jsonfile import DocumentLimits, loads_json
+from .jsonfile import DocumentLimits, loads_json, read_bounded
 
 __all__ = ["GLTFReadOptions", "GLTFFile"]
 
@@ -270,24 +270,9 @@ class GLTFFile:
         p = Path(path)
         self.path = p
         self.source = str(p)
-        try:
-            size = p.stat().st_size
-            if not p.is_file():
-                raise GLTFError(f"{brief_path(p)}: not a file")
-            if size > opt.max_file_bytes:
-                raise GLTFError(
-                    f"{brief_path(p)}: {size} bytes; valid: a glTF file of at most "
-                    f"{opt.max_file_bytes} bytes"
-                )
-            with p.open("rb") as fh:
-                data = fh.read(size + 1)
-        except FileNotFoundError:
-            raise GLTFError(f"{brief_path(p)}: no such glTF file") from None
-        except OSError as e:
-            reason = e.strerror or type(e).__name__
-            raise GLTFError(f"{brief_path(p)}: cannot read glTF file ({reason})") from None
-        if len(data) > opt.max_file_bytes:  # grew while being read
-            raise GLTFError(f"{brief_path(p)}: larger than {opt.max_file_bytes} bytes")
+        if not p.exists():
+            raise GLTFError(f"{brief_path(p)}: no such glTF file")
+        data = read_bounded(p, "glTF file", GLTFError, opt.max_file_bytes)
         self._blob: bytes | None = None
         if data[:4] == _GLB_MAGIC:
             text = self._glb(data)

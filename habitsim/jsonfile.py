@@ -30,7 +30,15 @@ import numpy as np
 
 from .errors import HabitsimError, JSONFileError, brief_path
 
-__all__ = ["DocumentLimits", "load_json", "loads_json", "loads_toml", "load_toml", "depth"]
+__all__ = [
+    "DocumentLimits",
+    "load_json",
+    "loads_json",
+    "loads_toml",
+    "load_toml",
+    "depth",
+    "read_bounded",
+]
 
 
 @dataclass(frozen=True)
@@ -155,16 +163,22 @@ def loads_json(
         raise error(f"{source}: not a readable JSON document ({type(e).__name__})") from None
 
 
-def _read(path: str | Path, what: str, error: type[HabitsimError], lim: DocumentLimits) -> bytes:
+def read_bounded(path: str | Path, what: str, error: type[HabitsimError], max_bytes: int) -> bytes:
+    """The bytes of the file ``path`` when it holds at most ``max_bytes`` (read without
+    asking for more than the file's size + 1).
+
+    Raises:
+        error: a missing or unreadable file, not a file, or one over ``max_bytes``.
+    """
     p = Path(path)
     try:
         size = p.stat().st_size
         if not p.is_file():
             raise error(f"{brief_path(p)}: cannot read {what} (not a file)")
-        if size > lim.max_bytes:
+        if size > max_bytes:
             raise error(
                 f"{brief_path(p)}: cannot read {what} ({size} bytes; valid: at most "
-                f"{lim.max_bytes} bytes)"
+                f"{max_bytes} bytes)"
             )
         with p.open("rb") as fh:
             raw = fh.read(size + 1)  # (not the limit: read() allocates what it is asked)
@@ -173,8 +187,8 @@ def _read(path: str | Path, what: str, error: type[HabitsimError], lim: Document
     except OSError as e:
         reason = e.strerror or type(e).__name__
         raise error(f"{brief_path(p)}: cannot read {what} ({reason})") from None
-    if len(raw) > lim.max_bytes:  # grew while being read
-        raise error(f"{brief_path(p)}: cannot read {what} (over {lim.max_bytes} bytes)")
+    if len(raw) > max_bytes:  # grew while being read
+        raise error(f"{brief_path(p)}: cannot read {what} (over {max_bytes} bytes)")
     return raw
 
 
@@ -200,7 +214,7 @@ def load_json(
         error: missing or unreadable file, or any failure of :func:`loads_json`.
     """
     lim = options or DocumentLimits()
-    raw = _read(path, what, error, lim)
+    raw = read_bounded(path, what, error, lim.max_bytes)
     return loads_json(raw, f"{brief_path(path)}: cannot read {what}", error=error, options=lim)
 
 
@@ -270,5 +284,5 @@ def load_toml(
         error: missing or unreadable file, or any failure of :func:`loads_toml`.
     """
     lim = options or DocumentLimits()
-    raw = _read(path, what, error, lim)
+    raw = read_bounded(path, what, error, lim.max_bytes)
     return loads_toml(raw, f"{brief_path(path)}: cannot read {what}", error=error, options=lim)
