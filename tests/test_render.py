@@ -196,3 +196,14 @@ def test_floor_box_frame_looks_like_the_plane(dog) -> None:
     same = np.abs(box[low] - plane[low]).mean()
     assert same < 1.0, same
     assert np.abs(box[low] - bare[low]).mean() > same  # a visible change moves the figure
+
+
+def test_skybox_only_when_asked(dog) -> None:
+    q = _home(dog)
+    plain = render.render_frames(dog, q, width=W, height=H)[0]
+    sky = render.render_frames(
+        dog, q, width=W, height=H, options=render.RenderOptions(skybox=True)
+    )[0]
+    top = slice(0, H // 10)  # above the horizon
+    assert plain[top].max() == 0
+    assert sky[top].mean() > 10

@@ -5,8 +5,8 @@ A clip of ``frames`` frames at ``fps`` is drawn and written the way ``habitsim t
 with :class:`habitsim.render.RenderOptions`' defaults): a species' synthetic trot on its
 standing model by default, or a robot's trot (:func:`habitsim.retarget.trot`) with
 ``robot``. Optionally the same frames are timed with MuJoCo's own renderer settings
-(shadows, reflections, 4× anti-aliasing, every frame, libx264's ``medium``) on the
-first ``before_frames`` frames, scaled to the clip.
+(shadows, reflections, 4× anti-aliasing, the skybox, the floor as MuJoCo draws it, every
+frame, libx264's ``medium``) on the first ``before_frames`` frames, scaled to the clip.
 
 Target of issue 50: a 480-frame clip at the default size renders at ≥ 4× real time.
 """
@@ -116,6 +116,7 @@ def run_render(options: RenderBenchOptions | None = None) -> RenderBenchResult:
             video_fps=None,
             preset="medium",
             floor_box=False,
+            skybox=True,
         )
         settings.append(("MuJoCo's own", own, min(o.before_frames, len(qpos))))
     rows = []
