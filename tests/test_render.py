@@ -127,13 +127,14 @@ def test_video_is_drawn_at_the_video_rate_with_scene_flags(dog, tmp_path) -> Non
     with Image.open(path) as gif:
         assert gif.n_frames == 3
         assert gif.info["duration"] == 40
-    samples = int(dog.vis.quality.offsamples)
+    samples, shadow_map = int(dog.vis.quality.offsamples), int(dog.vis.quality.shadowsize)
     plain = render.render_frames(dog, q[:1], width=W, height=H)[0]
     shaded = render.render_frames(
         dog, q[:1], width=W, height=H, options=render.RenderOptions(shadows=True, multisamples=4)
     )[0]
     assert np.abs(plain.astype(int) - shaded.astype(int)).sum() > 0
     assert int(dog.vis.quality.offsamples) == samples
+    assert int(dog.vis.quality.shadowsize) == shadow_map
 
 
 def test_bench_render_prints_figures_and_its_target(capsys) -> None:
