@@ -127,13 +127,14 @@ def test_video_is_drawn_at_the_video_rate_with_scene_flags(dog, tmp_path) -> Non
     with Image.open(path) as gif:
         assert gif.n_frames == 3
         assert gif.info["duration"] == 40
-    samples = int(dog.vis.quality.offsamples)
+    samples, shadow_map = int(dog.vis.quality.offsamples), int(dog.vis.quality.shadowsize)
     plain = render.render_frames(dog, q[:1], width=W, height=H)[0]
     shaded = render.render_frames(
         dog, q[:1], width=W, height=H, options=render.RenderOptions(shadows=True, multisamples=4)
     )[0]
     assert np.abs(plain.astype(int) - shaded.astype(int)).sum() > 0
     assert int(dog.vis.quality.offsamples) == samples
+    assert int(dog.vis.quality.shadowsize) == shadow_map
 
 
 def test_bench_render_prints_figures_and_its_target(capsys) -> None:
@@ -150,3 +151,60 @@ def test_bench_render_prints_figures_and_its_target(capsys) -> None:
     assert defaults["frames_drawn"] == 10  # a 50 Hz clip drawn at 25 frames a second
     assert defaults["x_real_time"] > 0 and doc["targets"][0]["verdict"] in ("met", "MISSED")
     assert run_cli(["bench", "render", "--species", "hores"], capsys)[0] == 2
+
+
+def test_floor_box_replaces_the_infinite_plane_and_keeps_its_pattern(dog) -> None:
+    """The floor plane becomes a thin box in the scene only: its top where the plane is,
+    reaching the far clipping distance, its centre under the body on whole texture periods
+    (so the checker does not slide), and a textured plane stretched over is left alone."""
+    import mujoco
+
+    floors = {i for i in range(dog.ngeom) if dog.geom_type[i] == mujoco.mjtGeom.mjGEOM_PLANE}
+    boxes = render._floor_boxes(dog, floors)
+    assert set(boxes) == floors
+    d = mujoco.MjData(dog)
+    d.qpos[:] = _home(dog)[0]
+    d.qpos[:2] = (3.37, -1.21)  # the body away from the origin, off the texture's period
+    mujoco.mj_forward(dog, d)
+    scn = mujoco.MjvScene(dog, maxgeom=1000)
+    opt, cam = mujoco.MjvOption(), mujoco.MjvCamera()
+    mujoco.mjv_updateScene(dog, d, opt, None, cam, mujoco.mjtCatBit.mjCAT_ALL, scn)
+    plane = [scn.geoms[i] for i in range(scn.ngeom) if scn.geoms[i].objid in floors]
+    z0 = plane[0].pos[2]
+    render._box_floors(scn, boxes, d.xpos[1])
+    box = [scn.geoms[i] for i in range(scn.ngeom) if scn.geoms[i].objid in floors][0]
+    assert box.type == mujoco.mjtGeom.mjGEOM_BOX
+    assert box.pos[2] + box.size[2] == pytest.approx(z0)
+    far = dog.vis.map.zfar * dog.stat.extent
+    assert box.size[0] == pytest.approx(far) and box.size[1] == pytest.approx(far)
+    period = 2.0 / dog.mat_texrepeat[dog.geom_matid[min(floors)]]
+    for k in range(2):
+        assert abs(box.pos[k] - d.xpos[1][k]) <= period[k] / 2 + 1e-9
+        assert box.pos[k] / period[k] == pytest.approx(round(box.pos[k] / period[k]))
+    stretched = dog.__copy__()
+    stretched.mat_texuniform[dog.geom_matid[min(floors)]] = 0
+    assert render._floor_boxes(stretched, floors) == {}
+
+
+def test_floor_box_frame_looks_like_the_plane(dog) -> None:
+    q = _home(dog)
+    box = render.render_frames(dog, q, width=W, height=H)[0].astype(int)
+    plane = render.render_frames(
+        dog, q, width=W, height=H, options=render.RenderOptions(floor_box=False)
+    )[0].astype(int)
+    bare = render.render_frames(dog, q, width=W, height=H, species="dog")[0].astype(int)
+    low = slice(H // 2, H)  # the floor under the body; the horizon may differ (haze)
+    same = np.abs(box[low] - plane[low]).mean()
+    assert same < 1.0, same
+    assert np.abs(box[low] - bare[low]).mean() > same  # a visible change moves the figure
+
+
+def test_skybox_only_when_asked(dog) -> None:
+    q = _home(dog)
+    plain = render.render_frames(dog, q, width=W, height=H)[0]
+    sky = render.render_frames(
+        dog, q, width=W, height=H, options=render.RenderOptions(skybox=True)
+    )[0]
+    top = slice(0, H // 10)  # above the horizon
+    assert plain[top].max() == 0
+    assert sky[top].mean() > 10

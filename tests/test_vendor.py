@@ -156,3 +156,19 @@ def test_cli_models_vendor(tmp_path, capsys):
             ["models", "vendor", "r.xml", "--out", "o", "--shape", shape]
         )
         assert ns.shape == shape
+
+
+def test_an_unreadable_collision_mesh_is_fitted_to_a_visual_mesh_of_its_body(tmp_path, capsys):
+    """The trunk's collision mesh file is gone but its visual shell (a sphere of radius
+    0.1) reads: the trunk's primitive is fitted to the shell, and the command says so."""
+    src = _robot(tmp_path / "src")
+    (src.parent / "meshes" / "trunk.stl").unlink()
+    rep = vendor_robot(src, tmp_path / "out")
+    assert rep.stand_ins == [("trunk_col", "shell")]
+    copy = mujoco.MjModel.from_xml_path(str(rep.out))
+    g = copy.geom("trunk_col")
+    assert g.type[0] != mujoco.mjtGeom.mjGEOM_MESH
+    assert max(g.size) == pytest.approx(0.1, rel=0.05)  # the shell's size, not the box's
+    np.testing.assert_allclose(g.pos, 0.0, atol=1e-6)  # where the shell is
+    assert main(["models", "vendor", str(src), "--out", str(tmp_path / "cli")]) == 0
+    assert "trunk_col: its collision mesh cannot be read" in capsys.readouterr().out

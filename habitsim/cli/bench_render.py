@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from dataclasses import asdict
 
 from .conventions import add_check_option, check_exit
@@ -64,6 +65,7 @@ def _bench_render(ns: argparse.Namespace) -> int:
                 {
                     "subject": res.subject,
                     "rows": [asdict(r) for r in res.rows],
+                    "load_average": res.load_average,
                     "targets": [t.to_dict() for t in checks],
                 }
             )
@@ -77,8 +79,9 @@ def _bench_render(ns: argparse.Namespace) -> int:
             print(
                 f"  {r.setting:13s} {r.frames_drawn:4.0f} frames drawn: draw "
                 f"{r.draw_s:6.1f} s, encode {r.encode_s:5.1f} s; video {r.total_s:6.1f} s "
-                f"= {r.x_real_time:.2f}x real time"
+                f"= {r.x_real_time:.2f}x real time (CPU {r.cpu_s:.1f} s with the encoder)"
             )
+        print(f"  load average {res.load_average:.1f} on {os.cpu_count()} CPUs")
         for t in checks:
             print(f"target: {t.name}: {t.shown} ({t.target}: {t.verdict})")
     return check_exit([t.name for t in checks if t.verdict == "MISSED"], ns.check)

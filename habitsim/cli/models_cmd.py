@@ -55,6 +55,8 @@ def _vendor(ns: argparse.Namespace) -> int:
         f"{len(rep.assets_removed)} assets removed"
         + (f"; licence {rep.licence}" if rep.licence else "; no licence file found beside it")
     )
+    for geom, mesh in rep.stand_ins:
+        print(f"  {geom}: its collision mesh cannot be read; fitted to the visual mesh {mesh}")
     return 0
 
 

@@ -8,7 +8,9 @@ collides nor is collided with: ``contype == conaffinity == 0``), replaces every 
 mesh geom by a primitive fitted to its mesh by MuJoCo's compiler (the ``mesh`` attribute
 on a box, capsule or sphere geom; ``fitaabb`` and ``fitscale`` as :class:`VendorOptions`
 says) and removes the mesh and file texture assets, so that the MJCF written holds no
-reference to another file. Includes are merged into the one file.
+reference to another file. Includes are merged into the one file. A colliding mesh whose
+file cannot be read is fitted instead to the largest readable visual mesh of its body
+(:attr:`VendorReport.stand_ins`).
 
 The inertials do not move: a body whose mass came from its meshes' volume (no
 ``<inertial>``, ``inertiafromgeom``) keeps the mass and inertia the meshes gave it, written
@@ -73,6 +75,8 @@ class VendorReport:
         assets_removed: the mesh and texture assets removed.
         inertia_without_visuals: bodies whose inertia comes from their geoms and whose
             visual mesh files were missing: their inertia is that of the geoms left.
+        stand_ins: per colliding mesh geom whose file could not be read, (name, the
+            visual mesh of its body its primitive was fitted to instead).
     """
 
     out: Path
@@ -81,6 +85,7 @@ class VendorReport:
     fitted: list[tuple[str, str, tuple[float, float, float]]] = field(default_factory=list)
     assets_removed: list[str] = field(default_factory=list)
     inertia_without_visuals: list[str] = field(default_factory=list)
+    stand_ins: list[tuple[str, str]] = field(default_factory=list)
 
 
 def _load(path: Path) -> mujoco.MjSpec:
@@ -137,6 +142,69 @@ def _fits(
     return m.geom_size[ids].copy(), m.geom_pos[ids].copy(), m.geom_quat[ids].copy()
 
 
+def _mesh_box(spec: mujoco.MjSpec, name: str) -> float | None:
+    """Volume of the bounding box of mesh asset ``name`` as MuJoCo reads it from its file
+    (in a copy of ``spec`` holding no other mesh), or None when it cannot be read."""
+    trial = spec.copy()
+    for g in [g for g in trial.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH]:
+        g.type, g.meshname = mujoco.mjtGeom.mjGEOM_SPHERE, ""  # the bodies keep a mass
+        g.size = np.array([0.01, 0.0, 0.0])
+    for m in [m for m in trial.meshes if m.name != name]:
+        trial.delete(m)
+    try:
+        model = trial.compile()
+    except ValueError:
+        return None
+    verts = model.mesh_vert[: int(model.mesh_vertnum[0])]
+    return float(np.prod(np.ptp(verts, axis=0))) if len(verts) else None
+
+
+def _stand_ins(spec: mujoco.MjSpec, report: VendorReport) -> None:
+    """A colliding mesh whose file cannot be read (missing, a format left out of the
+    download) is fitted instead to the largest readable visual mesh of its body, placed
+    as that visual geom is (``report.stand_ins``); with none, a :class:`VendorError`."""
+    trial = spec.copy()
+    for g in [g for g in trial.geoms if _visual_mesh(g)]:
+        trial.delete(g)
+    used = {g.meshname for g in trial.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH}
+    for m in [m for m in trial.meshes if m.name not in used]:
+        trial.delete(m)
+    try:
+        trial.compile()
+        return  # every collision mesh reads: nothing to stand in
+    except ValueError:
+        pass
+    geoms = list(spec.geoms)
+    readable: dict[str, float | None] = {}
+
+    def box(name: str) -> float | None:
+        if name not in readable:
+            readable[name] = _mesh_box(spec, name)
+        return readable[name]
+
+    for i, g in enumerate(geoms):
+        if g.type != mujoco.mjtGeom.mjGEOM_MESH or _visual_mesh(g) or box(g.meshname):
+            continue
+        label = g.name or f"{g.parent.name}/#{i}"
+        visuals = [v for v in geoms if _visual_mesh(v) and v.parent == g.parent]
+        sized = [(box(v.meshname) or 0.0, k, v) for k, v in enumerate(visuals)]
+        sized = [s for s in sized if s[0] > 0]
+        if not sized:
+            raise VendorError(
+                f"the collision mesh {g.meshname!r} of geom {label} cannot be read and no "
+                f"visual mesh of body {g.parent.name!r} can stand in for it; put its file "
+                "where the model says (or replace the geom by a primitive by hand)"
+            )
+        _, _, v = max(sized, key=lambda s: (s[0], -s[1]))
+        report.stand_ins.append((label, v.meshname))
+        g.meshname = v.meshname
+        g.pos = v.pos.copy()
+        g.quat = v.quat.copy()
+        g.alt.type = v.alt.type
+        for attr in ("axisangle", "euler", "xyaxes", "zaxis"):
+            setattr(g.alt, attr, getattr(v.alt, attr).copy())
+
+
 def vendor_robot(
     path: str | Path, out_dir: str | Path, options: VendorOptions | None = None
 ) -> VendorReport:
@@ -178,14 +246,6 @@ def vendor_robot(
     except ValueError:  # visual mesh files left out of the download: not needed
         full = None
     report = VendorReport(out=out)
-    for i, g in enumerate(list(spec.geoms)):
-        if _visual_mesh(g):
-            report.dropped.append(g.name or f"{g.parent.name}/#{i}")
-            spec.delete(g)
-    used = {g.meshname for g in spec.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH}
-    for mesh in [m for m in spec.meshes if m.name not in used]:
-        report.assets_removed.append(f"mesh {mesh.name}")
-        spec.delete(mesh)
     removed = set()
     for tex in list(spec.textures):
         if tex.file or any(tex.cubefiles):
@@ -194,6 +254,15 @@ def vendor_robot(
             spec.delete(tex)
     for mat in spec.materials:
         mat.textures = ["" if t in removed else t for t in mat.textures]
+    _stand_ins(spec, report)
+    for i, g in enumerate(list(spec.geoms)):
+        if _visual_mesh(g):
+            report.dropped.append(g.name or f"{g.parent.name}/#{i}")
+            spec.delete(g)
+    used = {g.meshname for g in spec.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH}
+    for mesh in [m for m in spec.meshes if m.name not in used]:
+        report.assets_removed.append(f"mesh {mesh.name}")
+        spec.delete(mesh)
     try:
         m0 = spec.compile()
     except ValueError as e:
@@ -210,7 +279,18 @@ def vendor_robot(
                 "its body before vendoring"
             )
     kinds = ["box", "capsule", "sphere"] if opts.shape == "auto" else [opts.shape]
-    fitted = {k: _fits(spec, k, colliding, opts) for k in kinds} if colliding else {}
+    fitted = {}
+    for k in kinds if colliding else []:
+        try:
+            fitted[k] = _fits(spec, k, colliding, opts)
+        except ValueError:  # e.g. a capsule along a sphere-like mesh has no length
+            continue
+    kinds = [k for k in kinds if k in fitted]
+    if colliding and not kinds:
+        raise VendorError(
+            f"no {' or '.join(_GEOM) if opts.shape == 'auto' else opts.shape} fits the "
+            f"collision meshes of {str(src)!r}; try another --shape"
+        )
     for n, gid in enumerate(colliding):
         vol = _mesh_volume(m0, int(m0.geom_dataid[gid]))
         best = min(
