@@ -107,3 +107,12 @@ def test_outputs_of_another_method_for_a_user_species(user_env: Path, tmp_path: 
         (tmp_path / species / "c1.npz").write_bytes(b"")
     stray = stray_outputs(MethodOutputs("mine", str(tmp_path)), {"c1"})
     assert stray == ["nosuch/c1.npz"]
+
+
+def test_demo_checks_its_targets_before_any_work(user_env: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "demo"
+    argv = ["demo", "--out", str(out), "--no-progress", "--workers", "1"]
+    assert main([*argv, "--targets", "cat,userdgo"]) == 2
+    err = capsys.readouterr().err
+    assert "userdgo" in err and "userdog" in err and "tiger" in err
+    assert not out.exists()  # refused before the data set was built
