@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from habitsim import render
+from habitsim import render, render_side
 from habitsim.qpos import load_species_model
 
 pytestmark = [
@@ -169,7 +169,7 @@ def _run(model, q: np.ndarray, fps: float = 30.0, species: str = "dog"):
 def test_side_by_side_panels_and_the_shorter_run_holds(dog, tmp_path) -> None:
     cat = load_species_model("cat")
     a, b = _run(dog, _home(dog, 3)), _run(cat, _home(cat, 1), species="cat")
-    frames, fps = render.side_by_side_frames([a, b], width=W, height=H)
+    frames, fps = render_side.side_by_side_frames([a, b], width=W, height=H)
     got = list(frames)
     assert fps == 30.0 and len(got) == 3 and got[0].shape == (H, 2 * W, 3)
     alone = [
@@ -180,9 +180,9 @@ def test_side_by_side_panels_and_the_shorter_run_holds(dog, tmp_path) -> None:
     ]
     assert np.array_equal(got[2][:, W:], alone[0])  # the cat's last frame held
     assert not np.array_equal(got[0][:, :W], got[0][:, W:])  # two bodies, two panels
-    path = render.render_side_by_side([a, b], tmp_path / "pair.gif", width=W, height=H)
+    path = render_side.render_side_by_side([a, b], tmp_path / "pair.gif", width=W, height=H)
     assert path.is_file()
     with pytest.raises(render.RenderError):
-        render.side_by_side_frames([a], width=W, height=H)
+        render_side.side_by_side_frames([a], width=W, height=H)
     with pytest.raises(render.RenderError, match="one video rate"):
-        render.side_by_side_frames([a, _run(cat, _home(cat, 2), fps=24.0)], width=W, height=H)
+        render_side.side_by_side_frames([a, _run(cat, _home(cat, 2), fps=24.0)], width=W, height=H)

@@ -26,7 +26,7 @@ or not at all (a failure leaves none of them).
   runs.
 * ``--beside OTHER.npz`` (with ``--video``): OTHER is tracked too, with the same options,
   and the video shows the two runs side by side, this one on the left
-  (:func:`habitsim.render.render_side_by_side`); ``--out``, ``--report`` and ``--json``
+  (:func:`habitsim.render_side.render_side_by_side`); ``--out``, ``--report`` and ``--json``
   stay this run's, OTHER's summary line follows.
 * ``--controller``: ``mpc`` by default (convex MPC on the stance forces, trunk and swing
   legs, the controller the README recommends: a synthetic walk of every training species
@@ -203,7 +203,7 @@ def _track_outputs(ns: argparse.Namespace) -> int:
     if ns.report:
         atomic_write_text(ns.report, json.dumps(report, indent=2, allow_nan=False) + "\n")
     if ns.video and other is not None:
-        from ..render import render_side_by_side
+        from ..render_side import render_side_by_side
 
         render_side_by_side([result, other[1]], ns.video)
     elif ns.video:
