@@ -149,12 +149,12 @@ def dataset_clip_ids(data: str | Path) -> set[str]:
 
 def stray_outputs(outputs: MethodOutputs, clip_ids: set[str]) -> list[str]:
     """The files under ``outputs.folder`` that follow no pair of the contract: not in a
-    folder named after a catalog species, not named after a clip id of ``clip_ids``, or
+    folder named after a species (built-in or user), not named after a clip id of ``clip_ids``, or
     of another type (paths relative to the folder, sorted)."""
     from habitsim.species import species_names
 
     root = Path(outputs.folder)
-    known = set(species_names())
+    known = set(species_names(include_user=True))
     bad = []
     for f in sorted(root.rglob("*")):
         if not f.is_file() or f.name.startswith("."):

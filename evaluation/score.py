@@ -364,14 +364,16 @@ def motion_files(inputs: Iterable[str | Path], follow_symlinks: bool = False) ->
 
 def bvh_species(bvh: BVHData) -> str | None:
     """The species of a habitsim-written BVH (habitsim's joint names and hierarchy): the
-    catalog species whose skeleton has its bone offsets (None: another rig, or offsets
-    of no catalog species)."""
+    species (built-in, then user) whose skeleton has its bone offsets (None: another rig,
+    or offsets of no known species)."""
     from habitsim.bvh_mapping.identity import identity_root_scale, is_habitsim_bvh
     from habitsim.species import load_species, species_names
 
     if not is_habitsim_bvh(bvh):
         return None
-    for name in species_names():
+    built_in = species_names()
+    user = [n for n in species_names(include_user=True) if n not in built_in]
+    for name in built_in + user:
         if identity_root_scale(bvh, load_species(name)) == 1.0:
             return name
     return None

@@ -35,7 +35,8 @@ def _reference_features(
     cfg: EvalConfig, targets: Sequence[str]
 ) -> tuple[np.ndarray, list[str], list[str]]:
     """Evaluator features, species and clip paths of the real clips of the targets
-    (cached in the run folder)."""
+    (cached in the run folder); a target without clips in the data set (a user species)
+    has none."""
     from habitsim.dataset import iter_clips
 
     from .evaluator import load_evaluator
@@ -60,7 +61,8 @@ def _reference_features(
                 return (z["features"], [str(s) for s in z["species"]], [str(c) for c in z["clips"]])
     motions, species, clips = [], [], []
     splits = [x.strip() for x in cfg.reference_split.split(",") if x.strip()]
-    for t in sorted(targets):
+    in_data = set(man.species_names)  # a user species has no clips of its own in it
+    for t in sorted(x for x in targets if x in in_data):
         have: list[str | None] = [sp for sp in splits if man.select(split=sp, species=t)]
         for sp in have or [None]:
             for e, m in iter_clips(man, split=sp, species=t):

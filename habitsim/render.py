@@ -598,7 +598,7 @@ def save_video(
     if frames.ndim != 4 or frames.shape[-1] != 3 or len(frames) == 0:
         raise RenderError(f"frames must have shape (T, H, W, 3) with T > 0, got {frames.shape}")
     if suffix == ".mp4":
-        return _write_mp4(frames, fps, path, options or RenderOptions())
+        return write_mp4(frames, fps, path, options or RenderOptions())
     duration_ms = max(int(round(1000.0 / float(fps))), 20)
     if _has("PIL"):
         from PIL import Image
@@ -621,7 +621,7 @@ def save_video(
     return path
 
 
-def _write_mp4(frames: Iterable[np.ndarray], fps: float, path: Path, opts: RenderOptions) -> Path:
+def write_mp4(frames: Iterable[np.ndarray], fps: float, path: Path, opts: RenderOptions) -> Path:
     """Stream frames into ffmpeg (libx264 at ``opts.preset``; it encodes in its own
     process while the next frames are drawn), into a temporary file renamed only once
     the encoder has finished it.
@@ -723,7 +723,7 @@ def render_video(
         "options": opts,
     }
     if path.suffix.lower() == ".mp4":
-        return _write_mp4(iter_frames(model, q[::step], **kw), fps / step, path, opts)
+        return write_mp4(iter_frames(model, q[::step], **kw), fps / step, path, opts)
     return save_video(render_frames(model, q[::step], **kw), fps / step, path, opts)
 
 

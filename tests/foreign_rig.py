@@ -5,6 +5,7 @@ carries."""
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 
@@ -430,3 +431,19 @@ BLENDER_EXPECTED = {
         for seg, stem in (("hip", "thigh"), ("knee", "shin"), ("hock", "foot"), ("toe", "toe"))
     },
 }
+
+
+def user_dog(folder: Path, name: str = "mydog", seed: int = 3, scale: float = 1.0) -> Path:
+    """A user species ``name`` made by ``species from-clip`` from a synthetic dog walk
+    written as a foreign rig (its lengths times ``scale``) into ``folder``; returns its
+    user catalog ``folder / "catalog"`` (point ``$HABITSIM_SPECIES_PATH`` at it)."""
+    import habitsim
+    from habitsim.fromclip.make import species_from_clip
+    from habitsim.source import SourceOptions
+
+    walk = habitsim.generate("dog", "walk", seed=seed, duration_s=2.0)
+    rig = folder / f"{name}_walk.bvh"
+    rig.write_text(_foreign_rig(walk, CM=CM * scale).to_text(), encoding="utf-8")
+    catalog = folder / "catalog"
+    species_from_clip(rig, name, catalog=catalog, source=SourceOptions(units="cm"))
+    return catalog

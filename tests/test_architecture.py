@@ -309,6 +309,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.bvh_mapping.export",
             "habitsim.fromclip",
             "habitsim.render",
+            "habitsim.render_side",
             "habitsim.workers",
             "habitsim.threads",
         ),

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from habitsim import render
+from habitsim import render, render_side
 from habitsim.qpos import load_species_model
 
 pytestmark = [
@@ -208,3 +208,37 @@ def test_skybox_only_when_asked(dog) -> None:
     top = slice(0, H // 10)  # above the horizon
     assert plain[top].max() == 0
     assert sky[top].mean() > 10
+def _run(model, q: np.ndarray, fps: float = 30.0, species: str = "dog"):
+    from types import SimpleNamespace
+
+    return SimpleNamespace(
+        model=model,
+        qpos=q,
+        fps=fps,
+        reference_qpos=q,
+        contacts=None,
+        reference_contacts=None,
+        species=species,
+    )
+
+
+def test_side_by_side_panels_and_the_shorter_run_holds(dog, tmp_path) -> None:
+    cat = load_species_model("cat")
+    a, b = _run(dog, _home(dog, 3)), _run(cat, _home(cat, 1), species="cat")
+    frames, fps = render_side.side_by_side_frames([a, b], width=W, height=H)
+    got = list(frames)
+    assert fps == 30.0 and len(got) == 3 and got[0].shape == (H, 2 * W, 3)
+    alone = [
+        np.array(f)
+        for f in render.iter_frames(
+            cat, _home(cat, 1), width=W, height=H, reference=_home(cat, 1), species="cat"
+        )
+    ]
+    assert np.array_equal(got[2][:, W:], alone[0])  # the cat's last frame held
+    assert not np.array_equal(got[0][:, :W], got[0][:, W:])  # two bodies, two panels
+    path = render_side.render_side_by_side([a, b], tmp_path / "pair.gif", width=W, height=H)
+    assert path.is_file()
+    with pytest.raises(render.RenderError):
+        render_side.side_by_side_frames([a], width=W, height=H)
+    with pytest.raises(render.RenderError, match="one video rate"):
+        render_side.side_by_side_frames([a, _run(cat, _home(cat, 2), fps=24.0)], width=W, height=H)

@@ -351,3 +351,38 @@ def test_sim_package_keeps_every_public_name() -> None:
 
     assert S.track is track_fn and callable(S.track)
     assert S._species_model("dog", False) is S.species_model("dog")
+
+
+def _pair(tmp_path):
+    from habitsim.gaits import generate
+
+    a = generate("dog", "walk", seed=0, duration_s=0.3).save(tmp_path / "a.npz")
+    b = generate("cat", "walk", seed=0, duration_s=0.2).save(tmp_path / "b.npz")
+    return a, b
+
+
+def test_cli_beside_needs_a_video(tmp_path, capsys) -> None:
+    from habitsim.cli import main
+
+    a, b = _pair(tmp_path)
+    assert main(["track", str(a), "--beside", str(b)]) == 2
+    assert "--video" in capsys.readouterr().err
+
+
+@pytest.mark.slow  # two tracking runs and a 1280-pixel-wide video: about 15 s
+def test_cli_beside_writes_the_two_runs_side_by_side(tmp_path, capsys) -> None:
+    from PIL import Image
+
+    from habitsim import render
+    from habitsim.cli import main
+
+    if not render.render_available():
+        pytest.skip("no OpenGL backend for off-screen rendering")
+    a, b = _pair(tmp_path)
+    video = tmp_path / "pair.gif"
+    argv = ["track", str(a), "--beside", str(b), "--controller", "servo", "--video", str(video)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "track " in out and "beside: " in out and "cat" in out
+    with Image.open(video) as im:
+        assert im.size == (1280, 480) and im.n_frames == 9  # 0.3 s at 30 fps, the cat's held

@@ -277,3 +277,25 @@ def test_command_line(code_set: Path, trained: Path, tmp_path: Path, monkeypatch
         == 2
     )
     assert not bad.exists()
+
+
+def test_a_user_species_is_generated_on_its_own_skeleton(
+    trained: Path, tmp_path: Path, monkeypatch
+) -> None:
+    from foreign_rig import user_dog
+
+    from habitsim.skeleton import get_skeleton
+    from habitsim.species import USER_CATALOG_ENV, load_species
+
+    monkeypatch.setenv(USER_CATALOG_ENV, str(user_dog(tmp_path, "clipdog", scale=1.2)))
+    m = _gen(trained, species="clipdog", seconds=2.0)
+    info = m.metadata["text_to_motion"]
+    assert m.species == "clipdog" and info["species"] == "clipdog"
+    assert info["code_species"] in ("cat", "dog") and info["habit_species"] in ("cat", "dog")
+    assert info["retrieval"]["neighbour"] == info["habit_species"]
+    own, dog = load_species("clipdog").segments, load_species("dog").segments
+    assert own["trunk"] == pytest.approx(1.2 * dog["trunk"], rel=0.05)  # its rig's
+    assert not np.allclose(m.skeleton.offsets, get_skeleton("dog").offsets)
+    with pytest.raises(UnknownSpeciesError) as e:
+        _gen(trained, species="clipcat")
+    assert "clipdog" in e.value.known and "dog" in e.value.known

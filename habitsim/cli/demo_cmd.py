@@ -75,7 +75,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--targets",
         default=["cat", "bear", "tiger"],
         metavar="SPECIES",
-        help="target species of the transfer stage (default cat,bear,tiger)",
+        help="target species of the transfer stage, built-in or user (default cat,bear,tiger)",
     )
     p.add_argument(
         "--no-video",
@@ -113,8 +113,11 @@ def _check_outputs(ns: argparse.Namespace) -> None:
 
 def _demo(ns: argparse.Namespace) -> int:
     from ..folders import claim_output_folder
+    from ..species import load_species
 
     t0 = time.perf_counter()
+    # the targets (built-in or user species) before the data set's minutes of work
+    ns.targets = [load_species(t).name for t in split_names(ns.targets)]
     _check_outputs(ns)
     # one demo at a time in --out; an earlier demo (or data set build) there continues;
     # a folder holding files habitsim did not write is refused

@@ -57,12 +57,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="make a motion of a species from a sentence",
         description=(
             "Generate a motion of SPECIES doing what TEXT says with a trained transformer "
-            "(classifier-free guidance; a held-out species borrows a habit by retrieval) "
+            "(classifier-free guidance; a held-out or user species borrows a habit by "
+            "retrieval and is built on its own skeleton) "
             "and write it as a .npz motion file."
         ),
     )
     p.add_argument("text", metavar="TEXT", help='the prompt, e.g. "a dog trots to the left"')
-    p.add_argument("species", metavar="SPECIES", help="catalog species")
+    p.add_argument("species", metavar="SPECIES", help="species (built-in or user)")
     p.add_argument("--checkpoint", type=Path, metavar="CKPT", help="transformer checkpoint")
     p.add_argument("--out", required=True, type=Path, metavar="FILE", help="output .npz")
     p.add_argument("--seconds", type=float, default=4.0, help="clip length [s] (default 4)")

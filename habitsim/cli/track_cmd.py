@@ -24,6 +24,10 @@ or not at all (a failure leaves none of them).
   colour, the input drawn as a translucent ghost beside it, stance feet marked
   (:func:`habitsim.render.render_tracking`). The writer is checked before the simulation
   runs.
+* ``--beside OTHER.npz`` (with ``--video``): OTHER is tracked too, with the same options,
+  and the video shows the two runs side by side, this one on the left
+  (:func:`habitsim.render_side.render_side_by_side`); ``--out``, ``--report`` and ``--json``
+  stay this run's, OTHER's summary line follows.
 * ``--controller``: ``mpc`` by default (convex MPC on the stance forces, trunk and swing
   legs, the controller the README recommends: a synthetic walk of every training species
   survives it unassisted); ``servo`` (in-engine position servos, no balance: most clips
@@ -38,6 +42,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -75,6 +80,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--video", metavar="V.mp4", help="render a video (.mp4 or .gif)")
     p.add_argument(
+        "--beside",
+        metavar="OTHER.npz",
+        help="also track OTHER.npz (same options) and put its run to the right of this "
+        "one in --video; its summary is printed after this one's",
+    )
+    p.add_argument(
         "--control-hz",
         type=float,
         metavar="HZ",
@@ -106,14 +117,16 @@ def _finite(v: Any) -> Any:
     return v
 
 
-def track_report(ns: argparse.Namespace) -> tuple[dict[str, Any], Any]:
-    """Run the tracking of ``ns.input`` and build the JSON report (and the result)."""
+def track_report(ns: argparse.Namespace, path: str | None = None) -> tuple[dict[str, Any], Any]:
+    """Run the tracking of ``path`` (default ``ns.input``) and build the JSON report (and
+    the result)."""
     from ..metrics.dynamic import dynamic_metrics
     from ..metrics.kinematic import kinematic_metrics
     from ..motion import load_motion
     from ..sim import track
 
-    motion = source_options(ns).shape(load_motion(ns.input), what=str(ns.input))
+    path = ns.input if path is None else path
+    motion = source_options(ns).shape(load_motion(path), what=str(path))
     result = track(
         motion,
         controller=ns.controller,
@@ -122,7 +135,7 @@ def track_report(ns: argparse.Namespace) -> tuple[dict[str, Any], Any]:
         settle_s=ns.settle,
         stop_on_fall=not ns.no_stop,
     )
-    report: dict[str, Any] = {"input": str(ns.input)}
+    report: dict[str, Any] = {"input": str(path)}
     report.update(result.report())
     report["reference_dynamic"] = dynamic_metrics(motion)
     report["simulated_kinematic"] = kinematic_metrics(result.motion(), contacts=result.contacts)
@@ -167,6 +180,10 @@ def _summary(report: dict[str, Any]) -> str:
 def _track(ns: argparse.Namespace) -> int:
     from ..fileio import output_transaction
 
+    if ns.beside and not ns.video:
+        from ..errors import ArgumentRangeError
+
+        raise ArgumentRangeError("--beside puts a second run in the video: give --video too")
     if ns.video:
         from ..render import check_video_writer
 
@@ -180,11 +197,16 @@ def _track_outputs(ns: argparse.Namespace) -> int:
     from ..fileio import atomic_write_text
 
     report, result = track_report(ns)
+    other = track_report(ns, ns.beside) if ns.beside else None
     if ns.out:
         result.motion().save(ns.out)
     if ns.report:
         atomic_write_text(ns.report, json.dumps(report, indent=2, allow_nan=False) + "\n")
-    if ns.video:
+    if ns.video and other is not None:
+        from ..render_side import render_side_by_side
+
+        render_side_by_side([result, other[1]], ns.video)
+    elif ns.video:
         from ..render import render_tracking
 
         render_tracking(result, ns.video)
@@ -192,4 +214,10 @@ def _track_outputs(ns: argparse.Namespace) -> int:
         print(json.dumps(report, allow_nan=False))
     else:
         print(_summary(report))
+    if other is not None:
+        # the other run's summary (on stderr under --json: stdout holds one JSON object)
+        print(
+            "beside: " + _summary(other[0]).removeprefix("track "),
+            file=sys.stderr if ns.json else sys.stdout,
+        )
     return 0
