@@ -10,8 +10,14 @@ from typing import Any
 
 import numpy as np
 
-from .render import RenderError, RenderOptions, check_video_writer, iter_frames, save_video
-from .render import write_mp4  # the streaming MP4 writer
+from .render import (
+    RenderError,
+    RenderOptions,
+    check_video_writer,
+    iter_frames,
+    save_video,
+    write_mp4,  # the streaming MP4 writer
+)
 
 __all__ = ["render_side_by_side", "side_by_side_frames"]
 
