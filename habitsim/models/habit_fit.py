@@ -36,6 +36,7 @@ __all__ = ["HabitFitOptions", "HabitLatent", "fit_latent"]
 
 _METHODS = ("encoder", "fit")
 _INITS = ("encoder", "prior")
+_OBJECTIVES = ("frames", "stats")
 
 
 @dataclass(frozen=True)
@@ -55,6 +56,10 @@ class HabitFitOptions:
         prior_weight: weight (≥ 0) of −log p_c(z) / z_dim, the habit species' flow
             prior, added to the fit's error: it keeps z among the habits seen in
             training (0: reconstruction only; 0.1 by the figures of docs/transfer.md).
+        objective: what the fit's error compares: ``frames`` (every feature of every
+            frame of the decoded windows against the clips') or ``stats`` (each
+            feature's mean and standard deviation over all the clips' frames: the
+            habit's statistics, not the clip's particular frames).
     """
 
     method: str = "fit"
@@ -63,6 +68,7 @@ class HabitFitOptions:
     lr: float = 0.05
     habit_species: str | None = None
     prior_weight: float = 0.1
+    objective: str = "frames"
 
     def validate(self) -> None:
         """Raises:
@@ -75,6 +81,11 @@ class HabitFitOptions:
         if self.init not in _INITS:
             raise HabitReferenceError(
                 "options", f"habit fit init {self.init!r}; valid: {', '.join(_INITS)}"
+            )
+        if self.objective not in _OBJECTIVES:
+            raise HabitReferenceError(
+                "options",
+                f"habit fit objective {self.objective!r}; valid: {', '.join(_OBJECTIVES)}",
             )
         if not np.isfinite(self.prior_weight) or self.prior_weight < 0:
             raise HabitReferenceError(
@@ -136,14 +147,20 @@ def _recon_loss(
     species: str,
     z: torch.Tensor,
     text: torch.Tensor | None,
+    objective: str = "frames",
 ) -> torch.Tensor:
-    """Mean squared reconstruction error [σ²] of windows x (B, T, F) decoded from their
-    codes with the one latent z (z_dim,); ``text``: the species' raw text embeddings
-    (B, text_dim) when the model does not store them (else None)."""
+    """Mean squared error [σ²] of windows x (B, T, F) decoded from their codes with the
+    one latent z (z_dim,): frame by frame (``frames``), or of each feature's mean and
+    standard deviation over every frame (``stats``); ``text``: the species' raw text
+    embeddings (B, text_dim) when the model does not store them (else None)."""
     model = ck.model
     b = x.shape[0]
     cond = model.condition([species] * b, z[None].expand(b, -1), text)
     y = model.decode(codes, cond, path)
+    if objective == "stats":
+        ys = (y / model.feat_std).flatten(0, 1)
+        xs = (x / model.feat_std).flatten(0, 1)
+        return ((ys.mean(0) - xs.mean(0)) ** 2).mean() + ((ys.std(0) - xs.std(0)) ** 2).mean()
     return (((y - x) / model.feat_std) ** 2).mean()
 
 
@@ -180,14 +197,14 @@ def fit_latent(
             else:
                 prior = model.priors[habit_species]
                 z0 = prior(torch.zeros(1, model.cfg.habit.z_dim))[0][0]
-            start = float(_recon_loss(ck, x, codes, path, species, z0, text))
+            start = float(_recon_loss(ck, x, codes, path, species, z0, text, options.objective))
         best, best_loss = z0.clone(), start
         if options.method == "fit":
             z = z0.clone().requires_grad_(True)
             opt = torch.optim.Adam([z], lr=options.lr)
             best_obj = float("inf")
             for step in range(options.steps + 1):
-                recon = _recon_loss(ck, x, codes, path, species, z, text)
+                recon = _recon_loss(ck, x, codes, path, species, z, text, options.objective)
                 obj = recon
                 if options.prior_weight > 0:
                     nll = -model.prior_log_prob(z[None], [habit_species])[0] / z.shape[0]

@@ -91,6 +91,8 @@ __all__ = [
     "shipped_checkpoint",
     "habit_species_for",
     "habit_from_clips",
+    "unseen_neighbour",
+    "prior_latent",
 ]
 
 _LOG = logging.getLogger("habitsim.models")
@@ -204,6 +206,28 @@ def habit_species_for(ck: LoadedCheckpoint, target: str) -> tuple[str, Retrieval
     r = retrieve_neighbour(target, list(model.species), emb, ck.config.model.text.morphology_weight)
     _LOG.info(r.explain())
     return r.neighbour, r
+
+
+def unseen_neighbour(ck: LoadedCheckpoint, target: str) -> Retrieval:
+    """The retrieval neighbour of ``target`` among the checkpoint's training species other
+    than ``target`` itself: what a held-out target gets, also for a training species
+    treated as unseen (the benchmark of one-shot habits, ``habitsim bench oneshot``)."""
+    others = [s for s in ck.model.species if s != target]
+    emb = _embeddings(ck, [target, *others])
+    return retrieve_neighbour(target, others, emb, ck.config.model.text.morphology_weight)
+
+
+def prior_latent(
+    ck: LoadedCheckpoint, species: str, habit_species: str, seed: int | None = 0
+) -> HabitLatent:
+    """The habit latent a transfer to ``species`` draws from ``habit_species``' flow prior
+    with ``seed`` (temperature 1), as a :class:`HabitLatent` (method ``prior``) that
+    :func:`network_method`'s ``habit=`` takes: the retrieval (a neighbour's prior) and
+    the oracle (the species' own) of ``habitsim bench oneshot``."""
+    ck.model._check_species([habit_species])
+    z = _prior_draw(ck, habit_species, seed, 1.0)[0].numpy().astype(np.float32)
+    nan = float("nan")
+    return HabitLatent(z, species, habit_species, "prior", "-", (), 0, nan, nan)
 
 
 def _embeddings(ck: LoadedCheckpoint, names: list[str]) -> dict[str, np.ndarray]:
