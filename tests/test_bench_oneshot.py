@@ -53,7 +53,9 @@ def _result(retrieval: float, k1: float, k10: float, oracle: float) -> OneshotRe
         res.rows.append(PairRow("cat", col, "dog walk", "walk", 50.0, v, predicted="cat"))
     res.fits["cat"] = {"oracle": {"method": "prior"}}
     res.summaries = {
-        c: column_summary([r for r in res.rows if r.column == c], ("cat",)) for c in res.columns
+        "all": {
+            c: column_summary([r for r in res.rows if r.column == c], ("cat",)) for c in res.columns
+        }
     }
     return res
 
@@ -78,13 +80,15 @@ def test_tiny_run_has_every_column_and_ground_truth() -> None:
     assert (
         fit["k"] == 1 and fit["habit_species"] == "dog" and fit["fit_loss"] < fit["fit_loss_start"]
     )
+    assert set(res.summaries) == {"all", "trained"}  # the checkpoint trained on the cat
     for col in ("retrieval", "K=1", "oracle"):
-        s = res.summaries[col]
+        s = res.summaries["all"][col]
         assert s["pairs"] == 2 and 0 < s["pose_pct"] < s["paired_pct"]
         assert s["judged"] == 2 and math.isfinite(s["fid"]) and 0 <= s["one_nna"] <= 1
     k1 = [r.pose_pct for r in res.rows if r.column == "K=1"]
     oracle = [r.pose_pct for r in res.rows if r.column == "oracle"]
     assert k1 != oracle  # the latent changes the transfer
+    assert res.per_species["cat"]["K=1"] == pytest.approx(sum(k1) / 2)
     assert [t.name for t in oneshot_checks(res, opts)] == [
         "K=1 pose MPJPE below retrieval's",
         "K=1 habit accuracy",

@@ -196,18 +196,20 @@ class OneshotResult:
         real_rows: the rows of the real references (no ground truth).
         neighbours: species → its retrieval neighbour.
         fits: species → column → the latent's record (clips, windows, fit errors).
-        summaries: column → :func:`column_summary` over ``rows``.
+        summaries: group → column → :func:`column_summary` of the group's rows with
+            FID, Intra-FID and 1-NNA: ``all`` species, those the checkpoint ``trained``
+            on (with an oracle), those it ``held out``.
+        per_species: species → column → root-relative paired MPJPE [% of leg length].
         real_summaries: reference name → column → summary over its rows.
-        features: (column, species) → evaluator features of the transfers; the ground
-            truths under column ``truth``.
-        known: the species the evaluator classifies.
+        columns: the columns run.
     """
 
     rows: list[PairRow] = field(default_factory=list)
     real_rows: list[PairRow] = field(default_factory=list)
     neighbours: dict[str, str] = field(default_factory=dict)
     fits: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
-    summaries: dict[str, dict[str, float]] = field(default_factory=dict)
+    summaries: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
+    per_species: dict[str, dict[str, float]] = field(default_factory=dict)
     real_summaries: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
     columns: tuple[str, ...] = ()
 
@@ -229,6 +231,7 @@ class OneshotResult:
                 "neighbours": self.neighbours,
                 "fits": self.fits,
                 "summaries": self.summaries,
+                "per_species": self.per_species,
                 "real_summaries": self.real_summaries,
                 "rows": [r.__dict__ for r in self.rows],
                 "real_rows": [r.__dict__ for r in self.real_rows],
@@ -438,24 +441,31 @@ def _score(
         rows.append(row)
 
 
-def _distribution(ev: Any, result: OneshotResult, feats: dict[tuple[str, str], np.ndarray]) -> None:
-    """FID, Intra-FID and 1-NNA of every column against the ground truths."""
+def _group_summary(
+    result: OneshotResult,
+    feats: dict[tuple[str, str], np.ndarray],
+    species: list[str],
+    known: tuple[str, ...],
+) -> dict[str, dict[str, float]]:
+    """Per column, :func:`column_summary` of the rows of ``species`` with FID,
+    Intra-FID (per species) and 1-NNA (balanced) against their ground truths."""
     from habitsim.evaluation.distribution import fid, intra_fid, one_nna
 
-    species = sorted({s for _, s in feats})
-    real = np.concatenate([feats[("truth", s)] for s in species])
-    real_l = [s for s in species for _ in range(len(feats[("truth", s)]))]
+    out = {}
     for col in result.columns:
+        rows = [r for r in result.rows if r.column == col and r.species in species]
         have = [s for s in species if (col, s) in feats]
-        if not have:
+        if not rows or not have:
             continue
+        summ = column_summary(rows, known)
         gen = np.concatenate([feats[(col, s)] for s in have])
         gen_l = [s for s in have for _ in range(len(feats[(col, s)]))]
         truth = np.concatenate([feats[("truth", s)] for s in have])
-        summ = result.summaries[col]
         summ["fid"] = fid(gen, truth) if len(gen) >= 2 else math.nan
-        summ["intra_fid"] = intra_fid(gen, gen_l, real, real_l)
+        summ["intra_fid"] = intra_fid(gen, gen_l, truth, gen_l)
         summ["one_nna"] = one_nna(truth, gen, balance=True)
+        out[col] = summ
+    return out
 
 
 def run_oneshot(options: OneshotOptions) -> OneshotResult:
@@ -502,10 +512,21 @@ def run_oneshot(options: OneshotOptions) -> OneshotResult:
             feats[(col, target)] = ev.predict(outs).features
             for i in order:
                 _physics(result.rows[start + i], srcs[i], latent, options)
-    for col in cols:
-        result.summaries[col] = column_summary([r for r in result.rows if r.column == col], known)
-    if result.rows:
-        _distribution(ev, result, feats)
+    done = list(result.neighbours)
+    trained = [sp for sp in done if "oracle" in result.fits[sp]]
+    for group, members in (
+        ("all", done),
+        ("trained", trained),
+        ("held out", [sp for sp in done if sp not in trained]),
+    ):
+        if members:
+            result.summaries[group] = _group_summary(result, feats, members, known)
+    for sp in done:
+        result.per_species[sp] = {
+            col: _mean([r.pose_pct for r in result.rows if r.species == sp and r.column == col])
+            for col in cols
+            if (col, sp) in feats
+        }
     for ref in options.real:
         _run_real(ck, ev, ref, options, result, known)
     return result
@@ -565,7 +586,7 @@ def oneshot_checks(result: OneshotResult, options: OneshotOptions) -> list[Targe
     latent): K = 1 at least 25 % below retrieval's, with habit accuracy ≥ 0.9; K = 10
     within 15 % of the oracle's (over the species with an oracle). A column not run is
     left out."""
-    s = result.summaries
+    s = result.summaries.get("all", {})
     checks = []
     k1, ret = s.get("K=1"), s.get("retrieval")
     if k1 is not None and ret is not None and ret["pairs"]:

@@ -22,6 +22,13 @@ _LEGEND = (
 )
 
 
+_GROUPS = {
+    "all": "every species",
+    "trained": "species the checkpoint trained on (treated as unseen; oracle: its own prior)",
+    "held out": "species the checkpoint holds out (no oracle)",
+}
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``oneshot`` to the ``bench`` command group."""
     from ..evaluation.bench.oneshot import DEFAULT_SPECIES
@@ -67,6 +74,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--prior-weight", type=float, metavar="W", help="fit prior weight (default the fit's)"
+    )
+    p.add_argument(
+        "--habit-objective",
+        choices=("frames", "stats"),
+        help="what the fit compares (default the fit's)",
+    )
+    p.add_argument(
+        "--fit-text",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="also fit the text embedding as a mix of the species' own and the training "
+        "species' (default the fit's)",
     )
     p.add_argument(
         "--physics",
@@ -134,6 +153,10 @@ def _bench_oneshot(ns: argparse.Namespace) -> int:
         fit = replace(fit, steps=ns.habit_steps, method="fit" if ns.habit_steps else "encoder")
     if ns.prior_weight is not None:
         fit = replace(fit, prior_weight=ns.prior_weight)
+    if ns.habit_objective is not None:
+        fit = replace(fit, objective=ns.habit_objective)
+    if ns.fit_text is not None:
+        fit = replace(fit, fit_text=ns.fit_text)
     real = []
     if ns.real_dog is not None:
         a, b = ns.real_dog_span or (0.0, 4.0)
@@ -161,7 +184,12 @@ def _bench_oneshot(ns: argparse.Namespace) -> int:
         print(json.dumps({**res.to_dict(), "targets": [t.to_dict() for t in checks]}))
     else:
         near = ", ".join(f"{s}→{n}" for s, n in res.neighbours.items())
-        _table(res.summaries, f"synthetic ({len(res.neighbours)} species; neighbours {near})")
+        print(f"species taken as unseen → their retrieval neighbour: {near}")
+        for group, summ in res.summaries.items():
+            _table(summ, f"synthetic, {_GROUPS[group]}")
+        print("pose MPJPE per species [% leg]: " + ", ".join(res.columns))
+        for sp, per in res.per_species.items():
+            print(f"  {sp:10s} " + " ".join(_f(per.get(c), "6.2f") for c in res.columns))
         for name, summ in res.real_summaries.items():
             _table(summ, f"real reference: {name}")
         print(f"  {_LEGEND}")

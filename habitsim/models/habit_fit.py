@@ -22,7 +22,7 @@ The latent then drives a transfer: ``transfer(motion, to, habit_from=[clip, ...]
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -69,6 +69,8 @@ class HabitFitOptions:
     habit_species: str | None = None
     prior_weight: float = 0.1
     objective: str = "frames"
+    fit_text: bool = False
+    text_start_share: float = 0.9
 
     def validate(self) -> None:
         """Raises:
@@ -86,6 +88,10 @@ class HabitFitOptions:
             raise HabitReferenceError(
                 "options",
                 f"habit fit objective {self.objective!r}; valid: {', '.join(_OBJECTIVES)}",
+            )
+        if not 0.0 < self.text_start_share < 1.0:
+            raise HabitReferenceError(
+                "options", f"text_start_share={self.text_start_share}: must be in (0, 1)"
             )
         if not np.isfinite(self.prior_weight) or self.prior_weight < 0:
             raise HabitReferenceError(
@@ -113,6 +119,9 @@ class HabitLatent:
         loss_start: reconstruction error of the clips' windows with the start latent
             (mean squared error in training-σ units).
         loss: the same with :attr:`z`.
+        text: the fitted raw text embedding g_c (text_dim,) the decoder takes instead
+            of the species' own (None: its own; ``fit_text``).
+        text_weights: the mix of that embedding (species → weight; {} without).
     """
 
     z: np.ndarray
@@ -124,6 +133,8 @@ class HabitLatent:
     windows: int
     loss_start: float
     loss: float
+    text: np.ndarray | None = None
+    text_weights: dict[str, float] = field(default_factory=dict)
 
     def to_metadata(self) -> dict[str, Any]:
         """The JSON entry a transfer writes as ``metadata["transfer"]["habit_from"]``."""
@@ -136,6 +147,11 @@ class HabitLatent:
             "windows": self.windows,
             "fit_loss_start": round(self.loss_start, 6),
             "fit_loss": round(self.loss, 6),
+            **(
+                {"text_weights": {k: round(v, 4) for k, v in self.text_weights.items()}}
+                if self.text_weights
+                else {}
+            ),
         }
 
 
@@ -164,6 +180,17 @@ def _recon_loss(
     return (((y - x) / model.feat_std) ** 2).mean()
 
 
+def _text_candidates(
+    ck: LoadedCheckpoint, species: str, text: torch.Tensor | None
+) -> tuple[list[str], torch.Tensor]:
+    """The species and its raw text embedding first, then every other training species'
+    (names, (S, text_dim))."""
+    model = ck.model
+    own = text[0] if text is not None else model.text_embedding([species])[0]
+    others = [s for s in model.species if s != species]
+    return [species, *others], torch.cat([own[None], model.text_embedding(others)])
+
+
 def fit_latent(
     ck: LoadedCheckpoint,
     x: torch.Tensor,
@@ -171,7 +198,7 @@ def fit_latent(
     habit_species: str,
     options: HabitFitOptions,
     text: torch.Tensor | None = None,
-) -> tuple[np.ndarray, float, float]:
+) -> tuple[np.ndarray, float, float, np.ndarray | None, dict[str, float]]:
     """The habit latent of raw windows of one species (what
     :func:`habitsim.models.transfer.habit_from_clips` computes).
 
@@ -185,9 +212,11 @@ def fit_latent(
             store them (None: it does, or the variant uses no text).
 
     Returns:
-        (z (z_dim,), reconstruction error with the start latent, with z) [σ²].
+        (z (z_dim,), reconstruction error with the start latent, with z [σ²], the fitted
+        raw text embedding (None without ``fit_text``), its mix weights).
     """
     model = ck.model
+    mix = options.fit_text and options.method == "fit" and model.cfg.use_g
     with one_thread():
         with torch.no_grad():
             codes = model.quantize(model.encode(x), sample=False, update=False).quantized
@@ -198,23 +227,44 @@ def fit_latent(
                 prior = model.priors[habit_species]
                 z0 = prior(torch.zeros(1, model.cfg.habit.z_dim))[0][0]
             start = float(_recon_loss(ck, x, codes, path, species, z0, text, options.objective))
-        best, best_loss = z0.clone(), start
+            names, table = _text_candidates(ck, species, text) if mix else ([], torch.zeros(0))
+            w0 = torch.zeros(len(names))
+            if mix:  # the own embedding's share text_start_share, the others' equal
+                share = options.text_start_share
+                w0[0] = float(np.log(share * (len(names) - 1) / (1.0 - share)))
+        best, best_loss, best_w = z0.clone(), start, w0.clone()
         if options.method == "fit":
             z = z0.clone().requires_grad_(True)
-            opt = torch.optim.Adam([z], lr=options.lr)
+            w = w0.clone().requires_grad_(mix)
+            params = [z, w] if mix else [z]
+            opt = torch.optim.Adam(params, lr=options.lr)
             best_obj = float("inf")
+            b = x.shape[0]
             for step in range(options.steps + 1):
-                recon = _recon_loss(ck, x, codes, path, species, z, text, options.objective)
+                g = (w.softmax(0) @ table)[None].expand(b, -1) if mix else text
+                recon = _recon_loss(ck, x, codes, path, species, z, g, options.objective)
                 obj = recon
                 if options.prior_weight > 0:
                     nll = -model.prior_log_prob(z[None], [habit_species])[0] / z.shape[0]
                     obj = recon + options.prior_weight * nll
                 if float(obj.detach()) < best_obj:  # keep the best z seen, the start's too
                     best, best_loss = z.detach().clone(), float(recon.detach())
+                    best_w = w.detach().clone()
                     best_obj = float(obj.detach())
                 if step == options.steps:
                     break
-                (grad,) = torch.autograd.grad(obj, z)  # the network's own grads untouched
-                z.grad = grad
+                grads = torch.autograd.grad(obj, params)  # the network's own grads untouched
+                for p, gr in zip(params, grads, strict=True):
+                    p.grad = gr
                 opt.step()
-    return best.numpy().astype(np.float32), start, best_loss
+    if not mix:
+        return best.numpy().astype(np.float32), start, best_loss, None, {}
+    weights = best_w.softmax(0)
+    g_fit = (weights @ table).numpy().astype(np.float32)
+    return (
+        best.numpy().astype(np.float32),
+        start,
+        best_loss,
+        g_fit,
+        {n: float(v) for n, v in zip(names, weights.tolist(), strict=True)},
+    )

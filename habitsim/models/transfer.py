@@ -319,7 +319,10 @@ def _run_network(
             z = model.posterior(x, [habit_sp] * k)[0]
         else:
             z = _prior_draw(ck, habit_sp, seed, temperature).expand(k, -1)
-    cond = model.condition([to] * k, z, _text_rows(ck, to, k) if model.cfg.use_g else None)
+    text = _text_rows(ck, to, k) if model.cfg.use_g else None
+    if habit is not None and habit.text is not None and model.cfg.use_g:  # fitted to clips
+        text = torch.from_numpy(habit.text)[None].expand(k, -1)
+    cond = model.condition([to] * k, z, text)
     y = model.decode(codes, cond, model.path(x)).numpy()
     world = [uncanonicalize(y[i], wins[i][2]) for i in range(k)]
     feats = _blend(world, starts, n, window)
@@ -606,7 +609,7 @@ def habit_from_clips(
         hs = habit_species_for(ck, species)[0]
     x = _clip_windows(ck, motions)
     text = _text_rows(ck, species, x.shape[0]) if ck.model.cfg.use_g else None
-    z, start, loss = fit_latent(ck, x, species, hs, opts, text)
+    z, start, loss, g_fit, weights = fit_latent(ck, x, species, hs, opts, text)
     return HabitLatent(
         z=z,
         species=species,
@@ -617,6 +620,8 @@ def habit_from_clips(
         windows=int(x.shape[0]),
         loss_start=start,
         loss=loss,
+        text=g_fit,
+        text_weights=weights,
     )
 
 
