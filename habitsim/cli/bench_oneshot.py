@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from .conventions import add_check_option, add_list_option, check_exit
+from .conventions import add_check_option, add_list_option, check_exit, format_legend
 
 _LEGEND = (
     "paired / pose: MPJPE against generate(target, like=source), whole / root-relative, "
@@ -115,7 +115,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _f(x: Any, fmt: str) -> str:
-    return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "-".rjust(int(fmt.split(".")[0]))
+    return format(x, fmt)
 
 
 def _table(summaries: dict[str, dict[str, float]], title: str) -> None:
@@ -192,7 +194,7 @@ def _bench_oneshot(ns: argparse.Namespace) -> int:
             print(f"  {sp:10s} " + " ".join(_f(per.get(c), "6.2f") for c in res.columns))
         for name, summ in res.real_summaries.items():
             _table(summ, f"real reference: {name}")
-        print(f"  {_LEGEND}")
+        print(format_legend(_LEGEND, "  "))
         for t in checks:
             print(f"  {t.name}: {t.shown} (target {t.target}) {t.verdict}")
     return check_exit([t.name for t in checks if t.verdict == "MISSED"], ns.check)
