@@ -55,7 +55,7 @@ class HabitFitOptions:
             neighbour). Setting it treats a training species as if it were unseen.
         prior_weight: weight (≥ 0) of −log p_c(z) / z_dim, the habit species' flow
             prior, added to the fit's error: it keeps z among the habits seen in
-            training (0: reconstruction only; 0.1 by the figures of docs/transfer.md).
+            training (0: reconstruction only; 1 by the figures of docs/species.md).
         objective: what the fit's error compares: ``frames`` (every feature of every
             frame of the decoded windows against the clips') or ``stats`` (each
             feature's mean and standard deviation over all the clips' frames: the
@@ -67,7 +67,7 @@ class HabitFitOptions:
     steps: int = 200
     lr: float = 0.05
     habit_species: str | None = None
-    prior_weight: float = 0.1
+    prior_weight: float = 1.0
     objective: str = "frames"
     fit_text: bool = False
     text_start_share: float = 0.9
