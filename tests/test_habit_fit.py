@@ -87,3 +87,36 @@ def test_cli_habit_from_names_the_reference(refs, tmp_path: Path, capsys):
         ["transfer", src, "--to", "cat", "--habit-from", src, "--out", out2], capsys
     )
     assert code == 2 and "Traceback" not in err and not out2.exists()
+
+
+def test_stats_objective_fits_the_habits_statistics(refs):
+    opts = HabitFitOptions(habit_species="dog", steps=FEW, objective="stats")
+    h = habit_from_clips(refs[:1], options=opts)
+    frames = habit_from_clips(refs[:1], options=HabitFitOptions(habit_species="dog", steps=FEW))
+    assert h.loss < h.loss_start and not np.allclose(h.z, frames.z)
+    assert h.loss_start < frames.loss_start  # the statistics agree before the frames do
+    with pytest.raises(HabitReferenceError) as e:
+        habit_from_clips(refs, options=HabitFitOptions(objective="mean"))
+    assert e.value.code == "options"
+
+
+def test_text_mix_starts_on_the_own_description_and_drives_the_transfer(refs):
+    opts = HabitFitOptions(habit_species="dog", steps=FEW, fit_text=True)
+    h = habit_from_clips(refs[:1], options=opts)
+    assert h.text is not None and h.text.ndim == 1
+    w = h.text_weights
+    assert list(w)[0] == "cat" and len(w) == 12 and sum(w.values()) == pytest.approx(1.0)
+    assert h.loss <= h.loss_start and h.to_metadata()["text_weights"] == pytest.approx(w, abs=1e-4)
+    plain = habit_from_clips(refs[:1], options=HabitFitOptions(habit_species="dog", steps=FEW))
+    assert plain.text is None and plain.text_weights == {}
+    src = generate("dog", "trot", seed=3, duration_s=2.0)
+    a = transfer(src, "cat", habit_from=refs[:1], habit_options=opts)
+    b = transfer(
+        src,
+        "cat",
+        habit_from=refs[:1],
+        habit_options=HabitFitOptions(
+            habit_species="dog", steps=FEW, fit_text=True, text_start_share=0.5
+        ),
+    )
+    assert not np.allclose(a.rotations, b.rotations)  # the mix reaches the decoder

@@ -23,6 +23,7 @@ from . import (
     bench_export,
     bench_inplace,
     bench_model,
+    bench_oneshot,
     bench_real,
     bench_refine,
     bench_render,
@@ -49,6 +50,7 @@ _EXTRA = (
     bench_variants,
     bench_render,
     bench_t2m,
+    bench_oneshot,
 )
 
 

@@ -91,6 +91,8 @@ __all__ = [
     "shipped_checkpoint",
     "habit_species_for",
     "habit_from_clips",
+    "unseen_neighbour",
+    "prior_latent",
 ]
 
 _LOG = logging.getLogger("habitsim.models")
@@ -206,6 +208,28 @@ def habit_species_for(ck: LoadedCheckpoint, target: str) -> tuple[str, Retrieval
     return r.neighbour, r
 
 
+def unseen_neighbour(ck: LoadedCheckpoint, target: str) -> Retrieval:
+    """The retrieval neighbour of ``target`` among the checkpoint's training species other
+    than ``target`` itself: what a held-out target gets, also for a training species
+    treated as unseen (the benchmark of one-shot habits, ``habitsim bench oneshot``)."""
+    others = [s for s in ck.model.species if s != target]
+    emb = _embeddings(ck, [target, *others])
+    return retrieve_neighbour(target, others, emb, ck.config.model.text.morphology_weight)
+
+
+def prior_latent(
+    ck: LoadedCheckpoint, species: str, habit_species: str, seed: int | None = 0
+) -> HabitLatent:
+    """The habit latent a transfer to ``species`` draws from ``habit_species``' flow prior
+    with ``seed`` (temperature 1), as a :class:`HabitLatent` (method ``prior``) that
+    :func:`network_method`'s ``habit=`` takes: the retrieval (a neighbour's prior) and
+    the oracle (the species' own) of ``habitsim bench oneshot``."""
+    ck.model._check_species([habit_species])
+    z = _prior_draw(ck, habit_species, seed, 1.0)[0].numpy().astype(np.float32)
+    nan = float("nan")
+    return HabitLatent(z, species, habit_species, "prior", "-", (), 0, nan, nan)
+
+
 def _embeddings(ck: LoadedCheckpoint, names: list[str]) -> dict[str, np.ndarray]:
     table = ck.model.text_table.detach().numpy()
     out = {n: table[i] for i, n in enumerate(ck.model.text_names)}
@@ -295,7 +319,10 @@ def _run_network(
             z = model.posterior(x, [habit_sp] * k)[0]
         else:
             z = _prior_draw(ck, habit_sp, seed, temperature).expand(k, -1)
-    cond = model.condition([to] * k, z, _text_rows(ck, to, k) if model.cfg.use_g else None)
+    text = _text_rows(ck, to, k) if model.cfg.use_g else None
+    if habit is not None and habit.text is not None and model.cfg.use_g:  # fitted to clips
+        text = torch.from_numpy(habit.text)[None].expand(k, -1)
+    cond = model.condition([to] * k, z, text)
     y = model.decode(codes, cond, model.path(x)).numpy()
     world = [uncanonicalize(y[i], wins[i][2]) for i in range(k)]
     feats = _blend(world, starts, n, window)
@@ -582,7 +609,7 @@ def habit_from_clips(
         hs = habit_species_for(ck, species)[0]
     x = _clip_windows(ck, motions)
     text = _text_rows(ck, species, x.shape[0]) if ck.model.cfg.use_g else None
-    z, start, loss = fit_latent(ck, x, species, hs, opts, text)
+    z, start, loss, g_fit, weights = fit_latent(ck, x, species, hs, opts, text)
     return HabitLatent(
         z=z,
         species=species,
@@ -593,6 +620,8 @@ def habit_from_clips(
         windows=int(x.shape[0]),
         loss_start=start,
         loss=loss,
+        text=g_fit,
+        text_weights=weights,
     )
 
 
