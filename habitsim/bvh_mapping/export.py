@@ -49,7 +49,7 @@ from .identity import _habitsim_order, identity_root_scale, is_habitsim_bvh
 from .importing import map_joints, read_source
 from .options import MappingOptions
 from .result import JointMapping
-from .retargeting import _driven, _source_feet, _source_stance, retarget
+from .retargeting import _driven, _source_feet, _source_stance, leg_root_scale, retarget
 from .tree import _Tree
 
 _X, _Y, _Z = np.eye(3)
@@ -235,18 +235,23 @@ def export_to_rig(
     mapping = map_joints(src, sp, joint_map=joint_map, units=units, up=up, options=options)
     check_rig(mapping, Path(src.source).name)
     solver = _Solver(motion, src, mapping)
-    scale = _root_scale(solver, mapping, sp)
-    out = solver.bvh(scale, 0.0)
     assert mapping.frame is not None  # map_joints always sets it
-    # The rig's lowest resting foot on its floor (the import reads heights from it).
-    rig_pos = mapping.frame.apply(out.fk())
+    # The import's root scale: the legs' ratio, a constant of the rig (the same function
+    # both ways); a rig without feet to measure gets the scale the import finds for it.
+    probe = solver.bvh(1.0, 0.0)
+    rig_pos = mapping.frame.apply(probe.fk())
     feet = _source_feet(
-        out,
-        _Tree(out),
+        probe,
+        _Tree(probe),
         mapping.mapped(),
         rig_pos,
         JointMapping(dict(mapping.joints), mapping.method, mapping.frame),
     )
+    by_legs = feet is not None
+    scale = leg_root_scale(sp, feet[2]) if feet is not None else _root_scale(solver, mapping, sp)
+    out = solver.bvh(scale, 0.0)
+    # The rig's lowest resting foot on its floor (the import reads heights from it).
+    rig_pos = mapping.frame.apply(out.fk())
     st = _source_stance(out.fps, feet, rig_pos)
     lift = 0.0 if st is None else -st[0].ground
     out = solver.bvh(scale, lift)
@@ -261,7 +266,7 @@ def export_to_rig(
         step = np.zeros((motion.num_frames, 2))
         step[1:] = np.cumsum(stance_slip(pos[..., :2], contacts), axis=0)
         out = solver.bvh(scale, lift, step)
-    else:
+    elif not by_legs:
         out = _centred(solver, out, scale, lift, lambda b: _import_scale(b, mapping, sp))
     return RigExport(out, mapping, scale, src.source, animation)
 
