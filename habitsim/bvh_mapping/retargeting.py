@@ -215,7 +215,7 @@ def retarget(
     stance = _source_stance(bvh.fps, feet_found, src, options)
     # Root translation scaled by the legs' ratio (the hip-height ratio without feet),
     # heights above the source's ground; with the source's stance, the body then stands
-    # on its stance toes (root_height_shift).
+    # on its toes (root_height_shift).
     feet = [bvh.index(j2s[n]) for n in ("lf_toe", "rf_toe", "lh_toe", "rh_toe") if n in j2s]
     if not feet:
         feet = _leg_ends(j2s, bvh)
@@ -244,7 +244,7 @@ def retarget(
     if fit is not None and fit.detected:
         labels, swept = sweep_labels(labels, fit, inplace)
         st = dataclasses.replace(st, contacts=labels.array)
-    shift = root_height_shift(motion, st.contacts)
+    shift = root_height_shift(motion)
     if shift != 0.0:
         root = root.copy()
         root[:, 2] -= shift
@@ -319,22 +319,19 @@ def leg_root_scale(species: Species, limb_len: np.ndarray) -> float:
     return float(species.hind_leg_length / np.mean(limb_len[2:]))
 
 
-def root_height_shift(motion: Motion, contacts: np.ndarray) -> float:
-    """How far the motion's root is lowered so its body stands on its stance toes [m]:
-    the median height of the species' toes over the frames ``contacts`` (T, 4) labels
-    stance (0 without stance frames).
+def root_height_shift(motion: Motion) -> float:
+    """How far the motion's root is lowered so its body stands on its toes [m]: the median
+    over the frames of the lowest toe's height.
 
     Heights are the source's above its ground, scaled by the legs' ratio; a rig of other
     proportions than the species' leaves the species' toes above or below the floor by
-    the difference, which this removes. A motion whose stance toes rest on the floor
-    (a habitsim clip written onto a rig) is moved by nothing: the export and the import
-    keep one rule for the root's height.
+    the difference, which this removes. A motion whose stance toes rest on the floor in
+    most frames (a habitsim clip written onto a rig) is moved by nothing: the export and
+    the import keep one rule for the root's height. The lowest toe of a frame does not
+    depend on stance labels, so a clip gives the same shift however its stance is read.
     """
-    c = np.asarray(contacts, bool)
-    if not c.any():
-        return 0.0
     toes = motion.foot_positions()[..., 2]
-    return float(np.median(toes[c]))
+    return float(np.median(toes.min(axis=1)))
 
 
 def _hip_root_scale(
