@@ -258,7 +258,7 @@ def _bench_refine(ns: argparse.Namespace) -> int:
             f"skate {c.skate_before:.2f} → "
             f"{c.skate_after:.2f} mm/frame, penetration {c.penetration_before:.2f} → "
             f"{c.penetration_after:.2f} mm; call {_fmt(c.call, 5)} s, cpu {_fmt(c.cpu, 5)} s"
-            + (f", {c.retries} guard retr{'y' if c.retries == 1 else 'ies'}" if c.retries else "")
+            + (f", {c.retries} guard solve{'' if c.retries == 1 else 's'}" if c.retries else "")
             + ("" if c.ok else " FAILED")
         )
     verdict = "met" if n_met == n else "MISSED"
