@@ -468,7 +468,7 @@ def test_guard_retry_starts_from_the_previous_solution(monkeypatch, dog_trot_100
     monkeypatch.setattr(A, "_solve_windows", spy)
     monkeypatch.setattr(S, "compare_metrics", first_worse)
     clip = dog_trot_100.slice(0, 40)
-    res = refine(clip, RefineOptions(guard=1))
+    res = refine(clip, RefineOptions(guard=1, guard_bisect=0))
     assert res.success and len(res.report["guard"]) == 1 and len(calls) == 2
     (x0, first, log0, jerk0), (warm, _, log1, jerk1) = calls
     assert x0 is None and warm is not None
@@ -963,3 +963,78 @@ def test_refine_summary_missing_figures() -> None:
     }
     text = _summary(rep)
     assert "skate_mm n/a → n/a" in text and "n/a" in text
+
+
+def test_guard_weights_halfway_between_a_worse_and_a_good_retry() -> None:
+    base = RefineOptions()
+    up = base.escalated()
+    mid = up.between(base)
+    assert mid.w_smooth == pytest.approx(np.sqrt(base.w_smooth * up.w_smooth))
+    assert mid.w_jerk == pytest.approx(base.guard_start / np.sqrt(base.guard_factor))
+    assert base.w_smooth < mid.w_smooth < up.w_smooth and 0 < mid.w_jerk < up.w_jerk
+    with pytest.raises(habitsim.HabitsimError):
+        RefineOptions(guard_bisect=-1)
+
+
+def test_guard_bisection_keeps_the_least_smoothing_that_is_not_worse(
+    monkeypatch, dog_trot_100
+) -> None:
+    """After a retry that is no longer worse, a solve at the weights halfway is tried:
+    kept when it is not worse either (its weights then stay), dropped when it is."""
+    compare = S.compare_metrics
+
+    def worse_below(limit):
+        def fake(a, b):
+            v = compare(a, b)
+            w = S_opts[-1]
+            return {**v, "worse": ["jerk"], "ok": False} if w < limit else {**v, "ok": True}
+
+        return fake
+
+    S_opts: list[float] = []
+    solve_checked = S._solve_checked
+
+    def spy(prep, motion, opts, *a, **k):
+        S_opts.append(opts.w_smooth)
+        return solve_checked(prep, motion, opts, *a, **k)
+
+    monkeypatch.setattr(S, "_solve_checked", spy)
+    clip = dog_trot_100.slice(0, 40)
+    base = RefineOptions(guard=1, guard_bisect=1)
+    mid = base.escalated().between(base).w_smooth
+    monkeypatch.setattr(S, "compare_metrics", worse_below(mid * 0.999))  # halfway is good
+    res = refine(clip, base)
+    assert [g["status"] for g in res.report["guard"]] == ["retried", "bisected, kept"]
+    assert S_opts[-1] == pytest.approx(mid)
+    S_opts.clear()
+    monkeypatch.setattr(S, "compare_metrics", worse_below(mid * 1.001))  # halfway is worse
+    res = refine(clip, base)
+    assert [g["status"] for g in res.report["guard"]] == ["retried", "bisected, dropped"]
+
+
+@pytest.mark.slow
+def test_regularisation_pulls_towards_the_models_closest_pose_of_a_twisted_clip(
+    dog_trot_100,
+) -> None:
+    """A pose the model's hinges cannot take (an elbow turned about its bone) puts the
+    model's reading of the angles far from the input: the regularisation's reference is
+    then refitted to the model's closest poses (one more solve per window)."""
+    from habitsim.rotations import quat_mul
+    from habitsim.skeleton import JOINT_NAMES
+
+    clip = dog_trot_100.slice(0, 40)
+    plain = refine(clip, RefineOptions(metrics=False))
+    assert plain.report["reg_reference"]["applied"] is False  # read within 0.5 % L
+    rot = clip.rotations.copy()
+    turn = np.array([np.cos(0.35), 0.0, 0.0, np.sin(0.35)])  # 0.7 rad about z
+    for name in ("lf_elbow", "rf_elbow", "lh_knee", "rh_knee"):
+        j = JOINT_NAMES.index(name)
+        rot[:, j] = quat_mul(rot[:, j], turn)
+    twisted = habitsim.Motion("dog", clip.fps, clip.root_positions, rot, contacts=clip.contacts)
+    fit = refine(twisted, RefineOptions(metrics=False))
+    read = refine(twisted, RefineOptions(metrics=False, reg_fit_above=None))
+    entry = fit.report["reg_reference"]
+    assert entry["applied"] is True and entry["reading_gap_per_leg"] > 0.005
+    assert entry["status"] == "Solve_Succeeded" and entry["iterations"] > 0
+    assert read.report["reg_reference"]["applied"] is False
+    assert fit.success and read.success

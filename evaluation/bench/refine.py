@@ -45,6 +45,7 @@ __all__ = [
     "RefineBenchOptions",
     "clean_real",
     "clean_synthetic",
+    "model_floor",
     "SpeciesTiming",
     "SuccessRate",
     "Timing",
@@ -385,12 +386,14 @@ class CleanChange:
         max, median: largest and median over the frames of the mean joint position
             change [leg lengths] (:func:`habitsim.refine.verdict.input_change`).
         joint_max: the largest change of one joint in one frame [leg lengths].
+        floor_max, floor_median: the same change of the model's closest pose to the input
+            (:func:`model_floor`): what no refinement can bring closer [leg lengths].
         skate_before, skate_after: ``skate_mm`` of the input and of the result [mm/frame].
         penetration_before, penetration_after: ``penetration_mm`` [mm].
         call: wall time of the refine() call less any problem build [s].
         cpu: process CPU time over the call, every thread [s] (on a shared machine the
             fairer of the two).
-        retries: guard retries.
+        retries: guard solves (retries, and solves at the weights halfway).
     """
 
     name: str
@@ -398,6 +401,8 @@ class CleanChange:
     max: float
     median: float
     joint_max: float
+    floor_max: float
+    floor_median: float
     skate_before: float
     skate_after: float
     penetration_before: float
@@ -420,6 +425,7 @@ def clean_change(name: str, motion: Any) -> CleanChange:
     r = timed(motion, "A")
     out = motion if r.result is None else r.result.motion
     ch = input_change(motion, out)
+    floor = model_floor(motion)
     guard = [] if r.result is None else r.result.report.get("guard", [])
     return CleanChange(
         name,
@@ -427,6 +433,8 @@ def clean_change(name: str, motion: Any) -> CleanChange:
         ch["max"],
         ch["median"],
         ch["joint_max"],
+        floor["max"],
+        floor["median"],
         skate_mm(motion),
         skate_mm(out),
         penetration_mm(motion),
@@ -435,6 +443,37 @@ def clean_change(name: str, motion: Any) -> CleanChange:
         r.cpu,
         len(guard),
     )
+
+
+def model_floor(motion: Any) -> dict[str, float]:
+    """How far the species model's closest poses lie from a clip
+    (:func:`habitsim.refine.verdict.input_change` of them): the refinement's tracking
+    term alone (no contact labels, swing clearance, ground alignment, regularisation,
+    smoothing or guard), every hinge within its joint range and every joint above the
+    floor. A pose the model's hinges cannot take (a twist of the trunk, an axial turn of
+    a leg) keeps this distance whatever the refinement does; NaN when the solve fails."""
+    import numpy as np
+
+    from habitsim.refine import RefineOptions, refine
+    from habitsim.refine.verdict import input_change
+
+    opts = RefineOptions(
+        metrics=False,
+        w_smooth=0.0,
+        w_reg=0.0,
+        w_root=0.0,
+        swing_clearance=None,
+        clean_contacts=False,
+        align_ground=False,
+        plant_start=False,
+        filter_cutoff=None,
+        guard=0,
+        fallback=True,
+    )
+    res = refine(motion, opts, contacts=np.zeros((motion.num_frames, 4), bool))
+    if not res.success:
+        return {"max": float("nan"), "median": float("nan"), "joint_max": float("nan")}
+    return input_change(motion, res.motion)
 
 
 def clean_synthetic(species: list[str], seed: int = 0) -> Iterator[CleanChange]:
@@ -449,24 +488,28 @@ def clean_synthetic(species: list[str], seed: int = 0) -> Iterator[CleanChange]:
         yield clean_change(f"{sp}/{act}", clean)
 
 
-def clean_real(folder: str, species: str = "dog") -> Iterator[CleanChange]:
-    """The clean-input change of the first 4 s window of every clip of ``folder``,
-    imported onto ``species`` and resampled to 30 fps, the window chosen from its
-    locomotion as ``bench real`` chooses it
+def clean_real(
+    folder: str, species: str = "dog", windows_per_clip: int = 1
+) -> Iterator[CleanChange]:
+    """The clean-input change of the first ``windows_per_clip`` 4 s windows of every clip
+    of ``folder``, imported onto ``species`` and resampled to 30 fps, the windows chosen
+    from its locomotion as ``bench real`` chooses them
     (:func:`~habitsim.evaluation.bench.real.clip_windows`); clips without a whole window
     are left out.
 
     Raises:
-        BenchRealError: not a folder, or no readable clip in it.
+        BenchRealError: not a folder, no readable clip in it, or ``windows_per_clip`` < 1.
     """
     from habitsim.motion import resample_motion
 
-    from .real import clip_windows, read_clip, source_files
+    from .real import BenchRealError, clip_windows, read_clip, source_files
 
+    if int(windows_per_clip) < 1:
+        raise BenchRealError(f"windows per clip must be ≥ 1, got {windows_per_clip}")
     for f in source_files(folder):
         m = resample_motion(read_clip(f, species), CLEAN_FPS)
         frames = int(round(CLEAN_SECONDS * m.fps))
-        windows, _ = clip_windows(m, frames, 1, frames)
+        windows, _ = clip_windows(m, frames, windows_per_clip, frames)
         for w in windows:
             if not w.short:
                 yield clean_change(f"{f.name}@{w.start / m.fps:.1f}s", m.slice(w.start, w.stop))

@@ -11,19 +11,22 @@ set from the motion, in the rig's own bone lengths:
   its twist keeping the rig's lateral axis (of its first frame) on the habitsim joint's;
 * the hips take the rotation that puts the line from the hips to the chest (the joint the
   import reads the pelvis's heading from) along the motion's pelvis axis;
-* the root's travel is the motion's divided by the scale the import will find for this
-  rig (species hip height / the rig's hip height, solved so the two agree), in the rig's
-  units and axes, with the rig's lowest resting foot on its floor;
+* the root's travel is the motion's divided by the scale the import finds for this rig
+  (:func:`~habitsim.bvh_mapping.retargeting.leg_root_scale`, the one rule both ways: the
+  species' hind-leg length over the rig's; without feet to measure, the hip-height ratio
+  the import finds, solved so the two agree), in the rig's units and axes, with the rig's
+  lowest resting foot on its floor;
 * every other joint (ears, toes, tail tips, helpers, joints of unmapped chains) keeps the
   local rotation and translation of the rig's first frame and follows its parent.
 
 What the round trip keeps (``import(export(m, rig))`` against ``m``): the directions of
-the mapped bones and the pelvis's heading and pitch are the motion's exactly, and the
-root's horizontal travel exactly. The import builds the pelvis without roll, aims a
-span of several habitsim bones along one line, and sets the root's height from the
-rig's hip height above its feet: a pelvis roll, a bend inside an unmapped span, and a
-difference between the rig's leg proportions and the species' do not come back (the last
-as a constant height offset). See docs/import.md, "Back onto your rig".
+the mapped bones and the pelvis's heading and pitch are the motion's exactly, the root's
+horizontal travel exactly, and its height exactly when the motion's stance toes rest on
+the floor (the import stands the body on its toes,
+:func:`~habitsim.bvh_mapping.retargeting.root_height_shift`). The import builds the
+pelvis without roll and aims a span of several habitsim bones along one line: a pelvis
+roll and a bend inside an unmapped span do not come back. See docs/import.md, "Back onto
+your rig".
 """
 
 from __future__ import annotations
@@ -49,7 +52,7 @@ from .identity import _habitsim_order, identity_root_scale, is_habitsim_bvh
 from .importing import map_joints, read_source
 from .options import MappingOptions
 from .result import JointMapping
-from .retargeting import _driven, _source_feet, _source_stance, retarget
+from .retargeting import _driven, _source_feet, _source_stance, leg_root_scale, retarget
 from .tree import _Tree
 
 _X, _Y, _Z = np.eye(3)
@@ -82,8 +85,8 @@ class RigExport:
     Attributes:
         bvh: the rig's hierarchy, channel orders, units and axes, with the motion's frames.
         mapping: the rig's joint mapping and frame conversion.
-        root_scale: the factor the import applies to the rig's root travel (species hip
-            height / the rig's hip height); the rig's travel is the motion's divided by it.
+        root_scale: the factor the import applies to the rig's root travel (the species'
+            hind-leg length / the rig's); the rig's travel is the motion's divided by it.
         rig: the rig's file (or the parsed rig's source name).
     """
 
@@ -235,18 +238,23 @@ def export_to_rig(
     mapping = map_joints(src, sp, joint_map=joint_map, units=units, up=up, options=options)
     check_rig(mapping, Path(src.source).name)
     solver = _Solver(motion, src, mapping)
-    scale = _root_scale(solver, mapping, sp)
-    out = solver.bvh(scale, 0.0)
     assert mapping.frame is not None  # map_joints always sets it
-    # The rig's lowest resting foot on its floor (the import reads heights from it).
-    rig_pos = mapping.frame.apply(out.fk())
+    # The import's root scale: the legs' ratio, a constant of the rig (the same function
+    # both ways); a rig without feet to measure gets the scale the import finds for it.
+    probe = solver.bvh(1.0, 0.0)
+    rig_pos = mapping.frame.apply(probe.fk())
     feet = _source_feet(
-        out,
-        _Tree(out),
+        probe,
+        _Tree(probe),
         mapping.mapped(),
         rig_pos,
         JointMapping(dict(mapping.joints), mapping.method, mapping.frame),
     )
+    by_legs = feet is not None
+    scale = leg_root_scale(sp, feet[2]) if feet is not None else _root_scale(solver, mapping, sp)
+    out = solver.bvh(scale, 0.0)
+    # The rig's lowest resting foot on its floor (the import reads heights from it).
+    rig_pos = mapping.frame.apply(out.fk())
     st = _source_stance(out.fps, feet, rig_pos)
     lift = 0.0 if st is None else -st[0].ground
     out = solver.bvh(scale, lift)
@@ -261,7 +269,7 @@ def export_to_rig(
         step = np.zeros((motion.num_frames, 2))
         step[1:] = np.cumsum(stance_slip(pos[..., :2], contacts), axis=0)
         out = solver.bvh(scale, lift, step)
-    else:
+    elif not by_legs:
         out = _centred(solver, out, scale, lift, lambda b: _import_scale(b, mapping, sp))
     return RigExport(out, mapping, scale, src.source, animation)
 
@@ -566,8 +574,8 @@ class RoundTrip:
         joints: the habitsim joints the rig maps.
         error: (F, J) distance of each mapped joint from the motion's [m].
         height_offset: the median vertical difference of the joints [m]: what the
-            import's root height (the rig's hip height above its feet taken as the species'
-            hip height) adds when the motion's hips stand higher or lower than that.
+            import's root height (the body stood on its lowest toes) adds when the
+            motion's stance toes hover or sink.
         pose_error: (F, J) the distances with ``height_offset`` removed [m].
         quarter_turns: the import's turn of the clip about the up axis, in quarter turns
             (it takes the forward axis from the first frame's heading); undone before

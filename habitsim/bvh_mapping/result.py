@@ -82,8 +82,9 @@ class JointMapping:
             (unmapped joints keep the species' standing pose).
         method: ``"auto"``, ``"map file <path>"``, ``"explicit"`` or ``"identity"``.
         frame: the file-to-habitsim frame conversion (None for the identity import).
-        root_scale: factor applied to the source root translation (species hip height /
-            source hip height) [-].
+        root_scale: factor applied to the source root translation (the species' hind-leg
+            length / the source's, :func:`~habitsim.bvh_mapping.retargeting.leg_root_scale`;
+            without feet to measure, species hip height / source hip height) [-].
         notes: human-readable remarks (guesses made, fallbacks taken).
         note_codes: each note as a typed code, in the same order (not written to the
             metadata).

@@ -213,7 +213,9 @@ def retarget(
         src, fit, loop = _recovered(src, feet_found, bvh.fps, inplace, loops, options)
         hips = s("pelvis")
     stance = _source_stance(bvh.fps, feet_found, src, options)
-    # Root translation scaled by the hip-height ratio, heights above the source's ground.
+    # Root translation scaled by the legs' ratio (the hip-height ratio without feet),
+    # heights above the source's ground; with the source's stance, the body then stands
+    # on its toes (root_height_shift).
     feet = [bvh.index(j2s[n]) for n in ("lf_toe", "rf_toe", "lh_toe", "rh_toe") if n in j2s]
     if not feet:
         feet = _leg_ends(j2s, bvh)
@@ -223,21 +225,10 @@ def retarget(
         ground = float(np.median(src[:, feet, 2].min(axis=1)))
     else:
         ground = float(hips[:, 2].min())
-    hip_src = [bvh.index(j2s[n]) for n in ("lh_hip", "rh_hip") if n in j2s]
-    if hip_src:
-        h_src = float(np.median(src[:, hip_src, 2].mean(axis=1))) - ground
-        h_dst = sp.hip_height
+    if stance is not None:
+        k = leg_root_scale(sp, stance[3])
     else:
-        h_src = float(np.median(hips[:, 2])) - ground
-        h_dst = float(stand_root[2])
-    if h_src > 1e-6:
-        k = h_dst / h_src
-    else:
-        k = 1.0
-        mapping.note(
-            MappingNote.ROOT_UNSCALED,
-            "source hip height not measurable: root translation not scaled",
-        )
+        k = _hip_root_scale(bvh, j2s, src, hips, ground, sp, stand_root, mapping)
     root = hips * k
     root[:, 2] = (hips[:, 2] - ground) * k
     mapping.root_scale = k
@@ -253,6 +244,11 @@ def retarget(
     if fit is not None and fit.detected:
         labels, swept = sweep_labels(labels, fit, inplace)
         st = dataclasses.replace(st, contacts=labels.array)
+    shift = root_height_shift(motion)
+    if shift != 0.0:
+        root = root.copy()
+        root[:, 2] -= shift
+        motion = Motion(sp.name, bvh.fps, root, q, metadata=meta)
     planted = None
     unreached = 0
     if plant:
@@ -308,6 +304,63 @@ def retarget(
     motion.metadata["import"] = report.to_metadata()
     motion.metadata["mapping"] = mapping.to_dict()
     return motion
+
+
+def leg_root_scale(species: Species, limb_len: np.ndarray) -> float:
+    """The factor from a source's root travel to the species' [-]: the species' hind-leg
+    length over the source's (``limb_len``: (4,) its legs' bone paths, hip or shoulder to
+    toe [m], LF, RF, LH, RH; the hind legs carry the stance test's length too).
+
+    A constant of the rig, not of the clip: a stance foot of the source that stays put
+    stays put on the species (its legs are the source's scaled by this factor), and the
+    export onto a rig (:func:`habitsim.bvh_mapping.export_to_rig`) divides the travel by
+    the same number, so the round trip gives the travel back exactly.
+    """
+    return float(species.hind_leg_length / np.mean(limb_len[2:]))
+
+
+def root_height_shift(motion: Motion) -> float:
+    """How far the motion's root is lowered so its body stands on its toes [m]: the median
+    over the frames of the lowest toe's height.
+
+    Heights are the source's above its ground, scaled by the legs' ratio; a rig of other
+    proportions than the species' leaves the species' toes above or below the floor by
+    the difference, which this removes. A motion whose stance toes rest on the floor in
+    most frames (a habitsim clip written onto a rig) is moved by nothing: the export and
+    the import keep one rule for the root's height. The lowest toe of a frame does not
+    depend on stance labels, so a clip gives the same shift however its stance is read.
+    """
+    toes = motion.foot_positions()[..., 2]
+    return float(np.median(toes.min(axis=1)))
+
+
+def _hip_root_scale(
+    bvh: BVHData,
+    j2s: Mapping[str, str],
+    src: np.ndarray,
+    hips: np.ndarray,
+    ground: float,
+    sp: Species,
+    stand_root: np.ndarray,
+    mapping: JointMapping,
+) -> float:
+    """The root scale of a source without feet to measure legs on: the species' hip
+    height over the source's median hip height above its ground (1 with a note when that
+    is not measurable)."""
+    hip_src = [bvh.index(j2s[n]) for n in ("lh_hip", "rh_hip") if n in j2s]
+    if hip_src:
+        h_src = float(np.median(src[:, hip_src, 2].mean(axis=1))) - ground
+        h_dst = sp.hip_height
+    else:
+        h_src = float(np.median(hips[:, 2])) - ground
+        h_dst = float(stand_root[2])
+    if h_src > 1e-6:
+        return h_dst / h_src
+    mapping.note(
+        MappingNote.ROOT_UNSCALED,
+        "source hip height not measurable: root translation not scaled",
+    )
+    return 1.0
 
 
 def _limb_confidence(

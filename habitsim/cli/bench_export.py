@@ -42,7 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="one JSON object per case")
     add_check_option(
         p,
-        help="exit with code 1 when a rig's own clip does not come back within 1 mm "
+        help="exit with code 1 when a rig's own clip or a synthetic motion does not come "
+        "back within 1 mm "
         "(default: print the verdict, exit 0)",
     )
     p.set_defaults(func=_bench_export)

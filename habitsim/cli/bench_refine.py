@@ -98,6 +98,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(BVH, glTF/GLB) of this folder, imported onto the dog as bench real imports "
         "them (default: the species' own synthetic walks)",
     )
+    p.add_argument(
+        "--clean-windows",
+        type=int,
+        default=1,
+        metavar="N",
+        help="with --dir: the first N 4 s locomotion windows of every clip (default 1)",
+    )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
     p.add_argument("--json", action="store_true", help="also print one JSON object at the end")
     add_check_option(
@@ -233,7 +240,11 @@ def _bench_refine(ns: argparse.Namespace) -> int:
 
     kind = f"the first window of every clip of {ns.dir}" if ns.dir else "synthetic walks"
     print(f"\nclean input, refined as it is (stage A, {CLEAN_SECONDS:g} s at 30 fps, {kind}):")
-    rows = clean_real(ns.dir) if ns.dir else clean_synthetic(species, ns.seed)
+    rows = (
+        clean_real(ns.dir, windows_per_clip=ns.clean_windows)
+        if ns.dir
+        else clean_synthetic(species, ns.seed)
+    )
     out["clean_input"] = []
     n = n_met = 0
     for c in rows:
@@ -242,10 +253,12 @@ def _bench_refine(ns: argparse.Namespace) -> int:
         out["clean_input"].append(dict(vars(c)))
         print(
             f"  {c.name:34s} change max {100 * c.max:5.2f} % median {100 * c.median:5.2f} % "
-            f"(one joint {100 * c.joint_max:5.2f} %); skate {c.skate_before:.2f} → "
+            f"(one joint {100 * c.joint_max:5.2f} %; model's closest pose max "
+            f"{100 * c.floor_max:5.2f} % median {100 * c.floor_median:5.2f} %); "
+            f"skate {c.skate_before:.2f} → "
             f"{c.skate_after:.2f} mm/frame, penetration {c.penetration_before:.2f} → "
             f"{c.penetration_after:.2f} mm; call {_fmt(c.call, 5)} s, cpu {_fmt(c.cpu, 5)} s"
-            + (f", {c.retries} guard retr{'y' if c.retries == 1 else 'ies'}" if c.retries else "")
+            + (f", {c.retries} guard solve{'' if c.retries == 1 else 's'}" if c.retries else "")
             + ("" if c.ok else " FAILED")
         )
     verdict = "met" if n_met == n else "MISSED"
@@ -257,7 +270,9 @@ def _bench_refine(ns: argparse.Namespace) -> int:
         format_legend(
             "(change: per frame the mean over the joints of their position change / leg "
             "length, its max and median over the frames; one joint: the largest change of "
-            "any joint in any frame; call: wall time of the refine() call less builds; cpu: "
+            "any joint in any frame; model's closest pose: the same of the model's poses "
+            "nearest the input, every hinge in range, no contact, which no refinement can "
+            "beat; call: wall time of the refine() call less builds; cpu: "
             "process CPU time over it)",
             indent="  ",
         )

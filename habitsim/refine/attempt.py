@@ -14,7 +14,7 @@ from ..qpos import (
     qpos_to_motion,
 )
 from ..rotations import quat_mul, quat_normalize
-from ..stance.labels import runs
+from ..stance.labels import StanceLabels, runs
 from ..threads import one_thread
 from . import cache
 from .cache import get_problem
@@ -70,7 +70,8 @@ def _solve_windows(
         settings = [opts.settings]
         if opts.settings.hessian == "gauss-newton":
             exact = replace(opts.settings, hessian="exact", max_iter=int(opts.max_iter))
-            excess = np.maximum(info.lower - prep.href[sl], prep.href[sl] - info.upper).max()
+            read = prep.href_read[sl]
+            excess = np.maximum(info.lower - read, read - info.upper).max()
             start_exact = excess > opts.exact_first_excess_rad or x_init is not None
             settings = [exact] if start_exact else [opts.settings, exact]
         for k, st_k in enumerate(settings):
@@ -120,6 +121,46 @@ def _solve_windows(
         # committed up to commit_stop; beyond it the solution is the next window's warm start
         x[sl] = xw
     return x, log, status, build_s
+
+
+def fit_reference(
+    prep: _Prepared,
+    motion: Motion,
+    opts: RefineOptions,
+    plan: list[Window],
+    model_arg: mujoco.MjModel | None,
+    info: ModelInfo,
+) -> tuple[_Prepared, dict[str, Any]]:
+    """``prep`` with ``href`` (what ``w_reg`` pulls the hinges towards) the hinges of the
+    model's closest poses to the targets: the windows solved with the tracking term alone
+    (no labels, clearance, pins, smoothing or regularisation; joint ranges and the floor
+    kept). The regularisation then measures the change from the input as the model best
+    takes it, not from a reading of its rotations several % of leg length away. On a
+    failure ``prep`` comes back unchanged. Returns the prepared clip and the report's
+    entry (``applied``, ``status``, ``iterations``, ``solve_time_s``)."""
+    t = len(prep.href)
+    zero = {k: 0.0 for k in opts.weights if k != "w_track"}
+    free = replace(
+        prep,
+        glob={**prep.glob, **zero},
+        labels=StanceLabels(np.zeros((t, 4), bool), prep.labels.source),
+        clearance=None,
+        pins=np.zeros_like(prep.pins),
+    )
+    entry: dict[str, Any] = {"applied": False}
+    try:
+        x, log, status, _ = _solve_windows(free, motion, opts, plan, model_arg, info)
+    except _WindowFailed as e:
+        entry.update(status=e.status)
+        return prep, entry
+    entry.update(
+        applied=True,
+        status=status,
+        iterations=int(sum(e["iterations"] for e in log)),
+        solve_time_s=float(sum(e["solve_time_s"] for e in log)),
+    )
+    nh = len(info.hinge_qposadr)
+    return replace(prep, href=x[:, 6 : 6 + nh].copy(), reading=prep.href), entry
 
 
 @dataclass(frozen=True)

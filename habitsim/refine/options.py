@@ -90,6 +90,10 @@ class RefineOptions:
         guard_weights: the cost weights (``w_*`` names) a guard retry raises.
         guard_factor: the factor a guard retry multiplies them by.
         guard_start: the value a guard retry switches a weight that is 0 on at.
+        guard_bisect: after a guard retry that is no longer worse than the input, this
+            many solves at the weights halfway (geometrically) between the last worse and
+            the good ones, keeping the good (the least smoothing that is no jerkier than
+            the input); 0: the retry's weights stay.
         fallback: on failure return the input with ``success=False`` instead of raising.
         metrics: compute docs/metrics.md kinematic and dynamic metrics before / after for the
             report (off in benchmarks).
@@ -100,6 +104,12 @@ class RefineOptions:
         exact_first_excess_rad: a window whose input leaves the joint ranges by more than
             this [rad] starts with the exact Hessian.
         verify_tol_mm: largest stance drift / penetration [mm] the MuJoCo check accepts.
+        reg_fit_above: when the model's reading of the input's angles (what ``w_reg``
+            pulls the hinges towards) lies further than this share of leg length from the
+            input's joint positions on some frame (max over the frames of the mean joint
+            distance), the reading is replaced by the hinges of the model's closest poses
+            to the input (:func:`~habitsim.refine.attempt.fit_reference`, one more solve
+            per window); None never refits.
         planting: the knobs of the leg IK that plants the feet of the initial guess
             (``plant_start``) and of ``preplant``
             (:class:`~habitsim.stance.planting.PlantingOptions`).
@@ -137,6 +147,7 @@ class RefineOptions:
     guard_weights: tuple[str, ...] = ("w_smooth", "w_jerk", "w_hinge_jerk")
     guard_factor: float = 10.0
     guard_start: float = 1e-7
+    guard_bisect: int = 2
     fallback: bool = False
     metrics: bool = True
     max_iter: int = 200
@@ -145,6 +156,7 @@ class RefineOptions:
     tol: float = 1e-5
     constr_viol_tol: float = 1e-5
     verify_tol_mm: float = 0.1
+    reg_fit_above: float | None = 0.005
     planting: PlantingOptions = field(default_factory=PlantingOptions)
 
     def __post_init__(self) -> None:
@@ -171,6 +183,8 @@ class RefineOptions:
             raise RefineInputError(f"friction must be > 0, got {self.friction!r}")
         if int(self.guard) < 0:
             raise RefineInputError(f"guard must be ≥ 0, got {self.guard!r}")
+        if int(self.guard_bisect) < 0:
+            raise RefineInputError(f"guard_bisect must be ≥ 0, got {self.guard_bisect!r}")
         unknown = [w for w in self.guard_weights if w not in self.weights]
         if unknown:
             raise RefineInputError(f"guard_weights must name cost weights (w_*), got {unknown}")
@@ -194,6 +208,9 @@ class RefineOptions:
             )
         if int(self.max_iter) < 1:
             raise RefineInputError(f"max_iter must be ≥ 1, got {self.max_iter}")
+        rf = self.reg_fit_above
+        if rf is not None and not (np.isfinite(rf) and rf >= 0):
+            raise RefineInputError(f"reg_fit_above must be a finite number ≥ 0 or None, got {rf!r}")
         for name in ("tol", "constr_viol_tol", "verify_tol_mm"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -238,6 +255,15 @@ class RefineOptions:
         return {
             f.name: float(getattr(self, f.name)) for f in fields(self) if f.name.startswith("w_")
         }
+
+    def between(self, lower: RefineOptions) -> RefineOptions:
+        """These options with each of ``guard_weights`` halfway (the geometric mean)
+        between ``lower``'s and these (a weight 0 in ``lower``: these / √guard_factor)."""
+        mid = {}
+        for k in self.guard_weights:
+            hi, lo = float(getattr(self, k)), float(getattr(lower, k))
+            mid[k] = float(np.sqrt(lo * hi)) if lo > 0 else hi / float(np.sqrt(self.guard_factor))
+        return replace(self, **mid)  # type: ignore[arg-type]
 
     def escalated(self) -> RefineOptions:
         """The options of a guard retry: each of ``guard_weights`` × ``guard_factor``, or

@@ -87,6 +87,16 @@ class _Prepared:
     cleaning: dict[str, Any] | None  # :func:`cleaning_summary` (None: not cleaned)
     filtered: bool = False  # the jitter pre-filter ran
     jitter: float | None = None  # :func:`jitter_autocorr` of the input (None: filter off)
+    # how far the model's reading of the input's angles (``href`` as read) lies from the
+    # targets: max over the frames of the mean joint distance [leg lengths]
+    reading_gap: float = 0.0
+    # the reading itself when ``href`` was refitted (:func:`~.attempt.fit_reference`)
+    reading: np.ndarray | None = None
+
+    @property
+    def href_read(self) -> np.ndarray:
+        """(T, n) the model's reading of the input's angles."""
+        return self.href if self.reading is None else self.reading
 
     @property
     def contacts(self) -> np.ndarray:
@@ -139,6 +149,8 @@ def _prepare(
         c = labels.array
         if cleaning["frames_changed"] and f_c is not None:  # corners moved: filter again
             q, targets = _filtered(c)
+    fk_q = qpos_joint_positions(model, q)
+    gap = np.linalg.norm(fk_q - targets, axis=-1).mean(axis=1) / sp.leg_length
     offset = np.zeros(len(q))
     if opts.align_ground:
         lim = opts.max_align_per_leg * motion.species_info.leg_length
@@ -202,6 +214,7 @@ def _prepare(
         cleaning,
         f_c is not None,
         score,
+        float(gap.max()),
     )
 
 

@@ -49,6 +49,14 @@ Keys (all values JSON types; lengths in mm where the key says so):
                                 result was worse (``options.guard``): per retry the
                                 ``worse`` keys, the ``after`` values, ``iterations`` and
                                 ``solve_time_s`` of the discarded attempt, ``status``
+                                (``retried``; ``bisected, kept`` / ``bisected, dropped``
+                                for a solve at the weights halfway, ``guard_bisect``)
+``reg_reference``               what ``w_reg`` pulls the hinges towards:
+                                ``reading_gap_per_leg`` (how far the model's reading of
+                                the input's angles lies from the input), ``applied``
+                                (refitted to the model's closest poses,
+                                ``reg_fit_above``) with the fit's ``status``,
+                                ``iterations`` and ``solve_time_s``
 ``filter``                      the jitter pre-filter: ``applied`` and the input's
                                 ``jitter_autocorr`` (None: filter off)
 ``change_per_leg``              how far the result lies from the input in leg lengths

@@ -79,7 +79,7 @@ from ..qpos import (
     motion_to_qpos,
 )
 from ..stance.labels import StanceLabels
-from .attempt import SUCCESS_STATUSES, RefineAttempt, _solve_checked
+from .attempt import SUCCESS_STATUSES, RefineAttempt, _solve_checked, fit_reference
 from .cache import _species_model, clear_cache, get_problem
 from .cleaning import (
     CLEANED_BY,
@@ -229,6 +229,10 @@ def refine(
     prep = _prepare(motion, labels, opts, m, pr0)
     if pre is not None:  # how the labels came and were cleaned, as given by the caller
         prep = replace(prep, **pre)
+    refit: dict[str, Any] = {"applied": False, "reading_gap_per_leg": prep.reading_gap}
+    if opts.reg_fit_above is not None and prep.reading_gap > opts.reg_fit_above:
+        prep, entry = fit_reference(prep, motion, opts, plan, model, info)
+        refit.update(entry)
     guard: list[dict[str, Any]] = []
     build_total = 0.0
     previous: tuple[RefineAttempt, dict[str, Any], RefineOptions] | None = None
@@ -257,6 +261,30 @@ def refine(
         previous = (attempt, verdict, opts)
         opts = opts.escalated()
         prep.glob.update(opts.weights)
+    if previous is not None and verdict is not None and verdict["ok"]:
+        # the guard's step overshoots: between the last worse weights and the first good
+        # ones, the weights halfway (geometric) are tried, the good ones kept, so the
+        # result is smoothed just enough to be no jerkier than its input
+        lo = previous[2]
+        for _ in range(int(opts.guard_bisect)):
+            mid = opts.between(lo)
+            prep.glob.update(mid.weights)
+            trial = _solve_checked(prep, motion, mid, plan, model, info, m, attempt.x)
+            build_total += trial.build_s
+            good = compare_metrics(motion_in, trial.motion) if trial.failure is None else None
+            guard.append(
+                {
+                    "worse": [] if good is None else good["worse"],
+                    "after": None if good is None else good["after"],
+                    "iterations": int(sum(e["iterations"] for e in trial.log)),
+                    "solve_time_s": float(sum(e["solve_time_s"] for e in trial.log)),
+                    "status": "bisected, kept" if good and good["ok"] else "bisected, dropped",
+                }
+            )
+            if good is not None and good["ok"]:
+                attempt, verdict, opts = trial, good, mid
+            else:
+                lo = mid
     status, failure, checks = attempt.status, attempt.failure, attempt.checks
     qpos, out = attempt.qpos, attempt.motion
     prep.glob.update(opts.weights)
@@ -302,6 +330,7 @@ def refine(
             qpos = motion_to_qpos(motion_in, m).qpos
     # no timing here: the motion file of a seeded run is byte-identical from run to run
     # (solve and wall times are in the report)
+    report["reg_reference"] = refit
     out.metadata["refine"] = {
         "status": report["status"],
         "success": success,
