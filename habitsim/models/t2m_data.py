@@ -20,6 +20,13 @@ Layout of a code set folder::
 
 Every file is written atomically. A rebuild keeps each clip file whose recorded VQ-VAE,
 text model and captions match (an interrupted build continues where it stopped).
+
+**Held-out compositions.** The builder holds some species × action pairs out of training
+(:class:`CompositionOptions`, :func:`held_out_compositions`): every train clip of such a
+pair is recorded in the split ``compose`` instead of ``train``, so no caption of that
+pair is ever trained on while the species (with other actions) and the action (with
+other species) are. The pairs are chosen from the train clips alone, deterministically,
+and listed in ``codes.json`` (``compositions``).
 """
 
 from __future__ import annotations
@@ -37,6 +44,9 @@ from ..jsonfile import load_json, loads_json
 from .errors import CodeSetError
 
 __all__ = [
+    "COMPOSE_SPLIT",
+    "CompositionOptions",
+    "held_out_compositions",
     "CODES_NAME",
     "CODES_KIND",
     "CodeClip",
@@ -55,6 +65,58 @@ _FORMAT = 1
 
 #: A sentence embedder: texts → (N, E) float32 (default: :func:`habitsim.models.text.embed_texts`).
 Embedder = Callable[[Sequence[str]], np.ndarray]
+#: The code set split of the train clips whose species × action pair is held out.
+COMPOSE_SPLIT = "compose"
+
+
+@dataclass(frozen=True)
+class CompositionOptions:
+    """Which species × action pairs of the train clips the code set holds out.
+
+    Attributes:
+        per_action: pairs held out per action (each of another species).
+        min_species: an action is held out only for species beyond this many: it needs
+            train clips of at least ``min_species`` species, and it stays in training
+            with ``min_species - per_action`` of them at least.
+        min_actions: a species keeps at least this many of its actions in training.
+    """
+
+    per_action: int = 1
+    min_species: int = 3
+    min_actions: int = 2
+
+
+def held_out_compositions(
+    pairs: Sequence[tuple[str, str]], options: CompositionOptions | None = None
+) -> list[tuple[str, str]]:
+    """The (species, action) pairs to hold out of ``pairs`` (those of the train clips):
+    actions in name order, each taking the species with the fewest pairs held out so far
+    (ties broken by a rotation with the action's index), within the limits of
+    ``options``. The same pairs give the same choice."""
+    opts = options or CompositionOptions()
+    by_action: dict[str, list[str]] = {}
+    actions_of: dict[str, set[str]] = {}
+    for sp, act in sorted(set(pairs)):
+        by_action.setdefault(act, []).append(sp)
+        actions_of.setdefault(sp, set()).add(act)
+    taken: dict[str, int] = {}
+    out: list[tuple[str, str]] = []
+    for i, act in enumerate(sorted(by_action)):
+        have = by_action[act]
+        if len(have) < max(opts.min_species, opts.per_action + 1):
+            continue
+        order = sorted(range(len(have)), key=lambda k: (taken.get(have[k], 0), (k - i) % len(have)))
+        chosen = 0
+        for k in order:
+            sp = have[k]
+            if chosen >= opts.per_action:
+                break
+            if len(actions_of[sp]) - taken.get(sp, 0) - 1 < opts.min_actions:
+                continue
+            taken[sp] = taken.get(sp, 0) + 1
+            out.append((sp, act))
+            chosen += 1
+    return sorted(out)
 
 
 @dataclass(frozen=True)
@@ -63,7 +125,8 @@ class CodeClip:
 
     Attributes:
         source: the clip's path in the data set's manifest.
-        split: ``train``, ``val`` or ``test``.
+        split: ``train``, ``val``, ``test`` or ``compose`` (a train clip of a held-out
+            species × action pair).
         species: catalog species name.
         codes: (T', L) int code indices, one row per code step, one column per level.
         path: (T', P) float32, the decoder's path input per code step (P = 0 for a model
@@ -213,6 +276,7 @@ def build_code_set(
     text_model: str | None = None,
     splits: Sequence[str] = ("train", "val"),
     progress: Callable[[int, int], None] | None = None,
+    compositions: CompositionOptions | None = None,
 ) -> CodeSet:
     """Encode every captioned clip of a data set into a code set folder.
 
@@ -226,6 +290,8 @@ def build_code_set(
             required with a custom ``embed``); a generator must embed prompts alike.
         splits: which splits of the data set to encode.
         progress: called with (clips done, clips in all).
+        compositions: which species × action pairs of the train clips are held out into
+            the split ``compose`` (module docstring; default :class:`CompositionOptions`).
 
     Returns:
         The code set, as :func:`load_code_set` reads it.
@@ -239,6 +305,7 @@ def build_code_set(
     from ..captions.store import CAPTIONS_NAME, load_captions
     from ..dataset import iter_clips, load_manifest
     from ..errors import MotionFileError
+    from ..gaits import ACTIONS
     from .checkpoint import MODEL_FILE
     from .transfer import load_model
 
@@ -305,6 +372,14 @@ def build_code_set(
         if progress is not None:
             progress(done, len(missing))
     text_dim = None
+    held = held_out_compositions(
+        [
+            (e.species, e.action)
+            for e in todo
+            if e.split == "train" and e.path not in skipped and e.action in ACTIONS
+        ],
+        compositions,
+    )
     for e in todo:
         if e.path in skipped:
             continue
@@ -315,10 +390,11 @@ def build_code_set(
                 f"{e.path}: embeddings of width {c.text.shape[1]}, others {text_dim}; "
                 "one text model must embed every caption (rebuild into a new folder)"
             )
+        held_out = e.split == "train" and (e.species, e.action) in held
         records.append(
             {
                 "source": e.path,
-                "split": e.split,
+                "split": COMPOSE_SPLIT if held_out else e.split,
                 "species": e.species,
                 "steps": c.steps,
                 "captions": list(c.captions),
@@ -342,6 +418,7 @@ def build_code_set(
         "levels": model.cfg.quantizer.levels,
         "num_codes": model.cfg.quantizer.num_codes,
         "path_dim": model.path_dim,
+        "compositions": [list(p) for p in held],
         "clips": records,
         "skipped": skipped,
     }
