@@ -109,3 +109,12 @@ def test_agreement_and_warnings() -> None:
     assert "names no action habitsim makes" in w and "shows a walk" in w
     (w,) = prompt_warnings(r, None, ACTIONS)
     assert "none of habitsim's actions" in w
+
+
+def test_species_neutral_keeps_the_action_words() -> None:
+    from habitsim.captions.prompts import species_neutral
+
+    assert species_neutral("A red fox trots to the left.") == "An animal trots to the left."
+    assert species_neutral("the puppy walks; a bull jumps") == "the animal walks; an animal jumps"
+    assert species_neutral("a unicorn gallops") == "a unicorn gallops"
+    assert read_prompt(species_neutral("Two horses canter")).actions == ("canter",)

@@ -22,7 +22,7 @@ from habitsim.models.errors import (
     MethodNotAvailableError,
 )
 from habitsim.models.t2m import text_to_motion
-from habitsim.models.t2m_data import CODES_NAME, build_code_set, load_code_set
+from habitsim.models.t2m_data import CODES_NAME, build_code_set, load_code_set, prompt_text
 from habitsim.models.t2m_train import load_codegpt, t2m_preset, train_codegpt
 from habitsim.motion import Motion
 
@@ -76,11 +76,14 @@ def test_code_set_holds_every_captioned_clip_and_resumes(code_set: Path, tmp_pat
     cs = load_code_set(code_set)
     doc = json.loads((code_set / CODES_NAME).read_text())
     assert cs.species == ["cat", "dog"] and cs.levels == 4 and cs.path_dim == 4
+    assert cs.meta["text_form"] == "species_neutral"
     assert len(cs.clips) == len(doc["clips"]) >= 8
     for c in cs.clips:
         assert c.codes.shape == (c.steps, 4) and c.path.shape == (c.steps, 4)
         assert c.text.shape == (len(c.captions), DIM)
-        assert np.allclose(c.text, fake_embed(c.captions))
+        # embedded as the generator will read prompts: species words replaced
+        assert np.allclose(c.text, fake_embed(prompt_text(c.captions, "species_neutral")))
+        assert not np.allclose(c.text, fake_embed(c.captions))
         assert c.codes.min() >= 0 and c.codes.max() < cs.num_codes
     # a rebuild keeps every clip file as it is (nothing re-encoded)
     files = sorted((code_set / "clips").rglob("*.safetensors"))
@@ -108,6 +111,9 @@ def test_code_set_bad_input(tmp_path: Path, code_set: Path, small_dataset: Path)
         load_code_set(tmp_path / "nothing")
     with pytest.raises(CodeSetError):
         build_code_set(data, tmp_path / "y", embed=lambda t: np.zeros((1, 3)), text_model="b")
+    with pytest.raises(CodeSetError):
+        build_code_set(data, tmp_path / "w", embed=fake_embed, text_model="b", text_form="x")
+    assert not (tmp_path / "w" / CODES_NAME).exists()
 
 
 def test_path_features_round_trip() -> None:
@@ -168,6 +174,17 @@ def test_generate_length_species_and_labels(trained: Path) -> None:
     assert np.isfinite(m.rotations).all() and np.isfinite(m.root_positions).all()
     short = _gen(trained, species="cat", seconds=0.9)
     assert short.species == "cat" and short.num_frames == 28  # 7 code steps of 4 frames
+
+
+def test_the_prompt_is_read_species_neutral_as_the_captions_were(trained: Path) -> None:
+    # the species comes from the habit input: the words of the animal do not change the
+    # codes drawn; the words of the action do
+    a = _gen(trained, text="A dog trots to the left.", seed=5)
+    b = _gen(trained, text="A kitten trots to the left.", seed=5)
+    c = _gen(trained, text="A dog gallops to the left.", seed=5)
+    assert load_codegpt(trained).meta["text_form"] == "species_neutral"
+    assert np.array_equal(a.rotations, b.rotations)
+    assert not np.array_equal(a.rotations, c.rotations)
 
 
 def test_held_out_species_borrows_a_habit_by_retrieval(trained: Path) -> None:

@@ -20,6 +20,7 @@ what it shows (:func:`prompt_warnings`), never silently.
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass
 
@@ -38,6 +39,8 @@ __all__ = [
     "prompt_warnings",
     "describe_facts",
     "species_words",
+    "species_neutral",
+    "TEXT_FORMS",
 ]
 
 #: A prompt's "runs": any of the fast gaits.
@@ -143,6 +146,33 @@ def species_words(include_user: bool = True) -> dict[str, str]:
             out.setdefault(w, sp.name)
             out.setdefault(f"{head} {_plural(last)}".strip(), sp.name)
     return out
+
+
+#: How a text-to-motion model reads a prompt: ``as_written``, or ``species_neutral``
+#: (:func:`species_neutral`: the species comes from the habit embedding, the words carry
+#: the action).
+TEXT_FORMS: tuple[str, ...] = ("as_written", "species_neutral")
+
+
+@functools.lru_cache(maxsize=4)
+def _species_pattern(names: tuple[str, ...]) -> re.Pattern[str]:
+    return re.compile(r"\b(?:(a|an) )?(" + "|".join(map(re.escape, names)) + r")\b", re.I)
+
+
+def species_neutral(text: str) -> str:
+    """``text`` with every species word (:func:`species_words`) replaced by "animal"
+    ("A red fox trots" → "An animal trots"): a sentence embedding then reads the action
+    and manner instead of the animal, which the generator gets from its habit input."""
+    words = species_words()
+    pat = _species_pattern(tuple(sorted(words, key=lambda w: (-len(w), w))))
+
+    def sub(m: re.Match[str]) -> str:
+        art = m.group(1)
+        if art is None:
+            return "animal"
+        return ("An" if art[0].isupper() else "an") + " animal"
+
+    return pat.sub(sub, text)
 
 
 def read_prompt(text: str) -> PromptReading:

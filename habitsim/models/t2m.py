@@ -35,7 +35,7 @@ from ..threads import one_thread
 from .checkpoint import CONFIG_FILE
 from .codegpt import decoder_path
 from .errors import GenerationRequestError, MethodNotAvailableError, TextEncoderError
-from .t2m_data import Embedder, code_set_vq
+from .t2m_data import Embedder, code_set_vq, prompt_text
 from .t2m_train import LoadedCodeGPT, load_codegpt
 
 __all__ = ["T2MOptions", "text_to_motion", "check_text", "load_t2m", "T2M_VARIANT"]
@@ -144,12 +144,15 @@ def _check_request(
 
 
 def _embed(text: str, gpt: LoadedCodeGPT, embed: Embedder | None) -> torch.Tensor:
+    """The prompt's sentence embedding, read as the checkpoint's code set read captions
+    (its ``text_form``)."""
+    read = prompt_text([text], str(gpt.meta.get("text_form", "as_written")))
     if embed is None:
         from .text import embed_texts
 
-        vec = embed_texts([text], str(gpt.meta["text_model"]))
+        vec = embed_texts(read, str(gpt.meta["text_model"]))
     else:
-        vec = np.asarray(embed([text]), dtype=np.float32)
+        vec = np.asarray(embed(read), dtype=np.float32)
     if vec.shape != (1, gpt.model.text_dim):
         raise TextEncoderError(
             f"the prompt's embedding has shape {vec.shape}; this model reads (1, "

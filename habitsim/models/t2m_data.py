@@ -56,6 +56,7 @@ __all__ = [
     "load_code_set",
     "clip_codes",
     "code_set_vq",
+    "prompt_text",
 ]
 
 #: File name of a code set's index.
@@ -277,6 +278,7 @@ def build_code_set(
     splits: Sequence[str] = ("train", "val"),
     progress: Callable[[int, int], None] | None = None,
     compositions: CompositionOptions | None = None,
+    text_form: str = "species_neutral",
 ) -> CodeSet:
     """Encode every captioned clip of a data set into a code set folder.
 
@@ -292,6 +294,10 @@ def build_code_set(
         progress: called with (clips done, clips in all).
         compositions: which species × action pairs of the train clips are held out into
             the split ``compose`` (module docstring; default :class:`CompositionOptions`).
+        text_form: how captions are embedded (and prompts then read): ``species_neutral``
+            (species words replaced by "animal",
+            :func:`habitsim.captions.prompts.species_neutral`: the generator gets the
+            species from its habit input) or ``as_written``.
 
     Returns:
         The code set, as :func:`load_code_set` reads it.
@@ -319,6 +325,10 @@ def build_code_set(
         ) from None
     if embed is not None and text_model is None:
         raise CodeSetError("a custom embed needs text_model: the name generation will embed with")
+    from ..captions.prompts import TEXT_FORMS
+
+    if text_form not in TEXT_FORMS:
+        raise CodeSetError(f"unknown text_form {text_form!r}; valid: {', '.join(TEXT_FORMS)}")
     ck = load_model(checkpoint)
     model = ck.model
     tm = text_model or ck.config.model.text.model
@@ -349,6 +359,7 @@ def build_code_set(
             meta.get("vq_sha256") == vq_sha
             and meta.get("text_model") == tm
             and meta.get("captions") == json.dumps(texts)
+            and meta.get("text_form", "as_written") == text_form
         )
     missing = {e.path for e in todo if not keep[e.path]}
     motions = iter_clips(man) if missing else iter([])
@@ -361,13 +372,13 @@ def build_code_set(
         except CodeSetError as err:
             skipped[entry.path] = str(err)
             continue
-        emb = np.asarray(embed(texts), dtype=np.float32)
+        emb = np.asarray(embed(prompt_text(texts, text_form)), dtype=np.float32)
         if emb.ndim != 2 or emb.shape[0] != len(texts):
             raise CodeSetError(
                 f"the embedder returned shape {emb.shape} for {len(texts)} captions; it must "
                 "return one row per text, (N, E)"
             )
-        _write_clip(_clip_file(root, entry.path), codes, path, emb, texts, vq_sha, tm)
+        _write_clip(_clip_file(root, entry.path), codes, path, emb, texts, vq_sha, tm, text_form)
         done += 1
         if progress is not None:
             progress(done, len(missing))
@@ -412,6 +423,7 @@ def build_code_set(
             "variant": ck.config.model.variant,
         },
         "text_model": tm,
+        "text_form": text_form,
         "text_dim": int(text_dim or 0),
         "fps": ck.fps,
         "rate": model.cfg.rate,
@@ -434,6 +446,7 @@ def _write_clip(
     texts: list[str],
     vq_sha: str,
     text_model: str,
+    text_form: str,
 ) -> None:
     from safetensors.numpy import save
 
@@ -444,10 +457,25 @@ def _write_clip(
             "path": np.ascontiguousarray(p, dtype=np.float32),
             "text": np.ascontiguousarray(emb, dtype=np.float32),
         },
-        metadata={"vq_sha256": vq_sha, "text_model": text_model, "captions": json.dumps(texts)},
+        metadata={
+            "vq_sha256": vq_sha,
+            "text_model": text_model,
+            "text_form": text_form,
+            "captions": json.dumps(texts),
+        },
     )
     with atomic_write(path) as fh:
         fh.write(blob)
+
+
+def prompt_text(texts: Sequence[str], text_form: str) -> list[str]:
+    """The texts as a model of ``text_form`` embeds them (``species_neutral``: species
+    words replaced, :func:`habitsim.captions.prompts.species_neutral`)."""
+    if text_form == "as_written":
+        return list(texts)
+    from ..captions.prompts import species_neutral
+
+    return [species_neutral(t) for t in texts]
 
 
 def load_code_set(path: str | Path) -> CodeSet:
