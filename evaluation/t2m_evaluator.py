@@ -293,8 +293,11 @@ class T2MTrainReport:
     wall_time_s: float
 
 
-def captioned_clips(data: Path, split: str) -> tuple[list[Motion], list[list[str]]]:
-    """The clips of a split that have captions, with their captions."""
+def captioned_clips(
+    data: Path, split: str, only: set[str] | None = None
+) -> tuple[list[Motion], list[list[str]]]:
+    """The clips of a split that have captions, with their captions (``only``: just the
+    clips of these manifest paths)."""
     from habitsim.captions.store import load_captions
     from habitsim.dataset import iter_clips
     from habitsim.errors import MotionFileError
@@ -305,6 +308,8 @@ def captioned_clips(data: Path, split: str) -> tuple[list[Motion], list[list[str
         raise EvaluatorError(f"{data}: no readable captions ({e})") from None
     motions, texts = [], []
     for entry, m in iter_clips(data, split=split):
+        if only is not None and entry.path not in only:
+            continue
         c = [x.text for x in caps.get(entry.path, [])]
         if c:
             motions.append(m)

@@ -117,6 +117,22 @@ class GaitError(HabitsimError, ValueError):
     """A gait or action that a species does not have, or bad generator parameters."""
 
 
+class PromptError(HabitsimError, ValueError):
+    """A text-to-motion prompt whose species cannot be settled.
+
+    Attributes:
+        code: ``no_species`` (neither the text nor the caller names a catalog species),
+            ``several_species`` (the text names more than one), ``species_conflict``
+            (the text names another species than the caller).
+        known: the catalog's species (what is valid).
+    """
+
+    def __init__(self, code: str, message: str, known: Iterable[str] = ()):
+        self.code = code
+        self.known = sorted(known)
+        super().__init__(message)
+
+
 class CaptionError(HabitsimError, ValueError):
     """A clip a caption cannot be written for, or bad caption settings."""
 

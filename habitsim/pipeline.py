@@ -33,7 +33,9 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -47,6 +49,8 @@ from .stance.report import TransferRecord
 if TYPE_CHECKING:  # pragma: no cover
     import mujoco
 
+    from .captions.facts import ClipFacts
+    from .captions.prompts import PromptReading
     from .refine import RefineOptions, RefineResult
     from .sim import TrackResult
     from .transfer_methods import TransferMethod
@@ -60,6 +64,8 @@ __all__ = [
     "Stage",
     "ClipRun",
     "run_clip",
+    "TextRun",
+    "run_text",
     "track_reference",
     "stance_toe_height",
     "refine_mode",
@@ -68,7 +74,7 @@ __all__ = [
 #: Refinement modes of :func:`run_clip`: none, stage A (kinematic), stage B (dynamics).
 REFINE_MODES = ("none", "A", "B")
 #: Other names accepted for the modes (the evaluation's ``--refine`` values).
-REFINE_ALIASES = {"kinematic": "A", "dynamics": "B", "a": "A", "b": "B"}
+REFINE_ALIASES = {"kinematic": "A", "dynamics": "B", "dynamic": "B", "a": "A", "b": "B"}
 
 
 @dataclass(frozen=True)
@@ -563,3 +569,123 @@ def track_reference(
         contacts=run.reference_contacts,
         init_noise=init_noise,
     )
+
+
+# ---------------------------------------------------------------------------- from text
+
+
+@dataclass
+class TextRun:
+    """A prompt through :func:`run_text`.
+
+    Attributes:
+        reading: what the prompt names (species, actions).
+        species: the species the clip was made for.
+        generated: the generated motion (the pipeline's source).
+        facts: what the generated clip shows, measured by
+            :func:`habitsim.captions.clip_facts` (None: it shows nothing measurable).
+        warnings: why the clip may not be what the prompt asks (empty: it is).
+        run: the generated clip through refinement and tracking (:class:`ClipRun`; its
+            transfer stage is the identity on the species).
+    """
+
+    reading: PromptReading
+    species: str
+    generated: Motion
+    facts: ClipFacts | None
+    warnings: tuple[str, ...]
+    run: ClipRun
+
+
+def _as_generated(source: Motion, target: str, *, seed: int | None = 0, **_: object) -> Motion:
+    """The transfer stage of a generated clip: the motion is already the species'."""
+    from .transfer_methods import direct_transfer
+
+    return direct_transfer(source, target, seed=seed)
+
+
+def run_text(
+    text: str,
+    species: str | None = None,
+    *,
+    seconds: float = 4.0,
+    seed: int = 0,
+    temperature: float = 1.0,
+    guidance: float = 2.0,
+    top_k: int | None = None,
+    checkpoint: str | Path | None = None,
+    refine: str = "none",
+    controller: str = "mpc",
+    track: bool = False,
+    guard: bool = True,
+    refine_options: RefineOptions | None = None,
+    embed: Callable[[Sequence[str]], np.ndarray] | None = None,
+) -> TextRun:
+    """Make a motion from a prompt, then refine and track it as :func:`run_clip` does.
+
+    The species is the one the text names (name, common name, synonym or plural:
+    :func:`habitsim.captions.prompts.read_prompt`), else ``species``. The generated clip
+    is measured (:func:`habitsim.captions.clip_facts`); when the prompt names no action
+    habitsim makes, or the clip shows none of the ones it names, the clip is still
+    returned, with a :class:`~habitsim.captions.prompts.PromptWarning` (also in
+    :attr:`TextRun.warnings`) saying what it shows.
+
+    Args:
+        text: the prompt ("a horse trots to the left").
+        species: the species when the text names none (it must agree when it does).
+        seconds, seed, temperature, guidance, top_k, checkpoint, embed: as
+            :func:`habitsim.models.t2m.text_to_motion`.
+        refine, controller, track, guard, refine_options: as :func:`run_clip`
+            (``refine`` also takes ``kinematic`` / ``dynamic``).
+
+    Raises:
+        PromptError: the text names several species, another species than ``species``,
+            or neither names one (checked before any model is loaded).
+        UnknownSpeciesError: ``species`` is not in the catalog.
+        GenerationRequestError, MethodNotAvailableError, CheckpointError: as
+            :func:`~habitsim.models.t2m.text_to_motion`. PipelineError: a bad ``refine``.
+    """
+    import warnings as _warnings
+
+    from .captions.prompts import PromptWarning, prompt_species, prompt_warnings, read_prompt
+    from .errors import CaptionError
+    from .gaits import ACTIONS
+    from .models.t2m import check_text, text_to_motion
+    from .transfer_methods import TransferMethod
+
+    mode = refine_mode(refine)
+    reading = read_prompt(check_text(text))
+    sp = prompt_species(reading, species)
+    motion = text_to_motion(
+        text,
+        sp,
+        seconds,
+        seed=seed,
+        temperature=temperature,
+        guidance=guidance,
+        top_k=top_k,
+        checkpoint=checkpoint,
+        embed=embed,
+    )
+    try:
+        from .captions import clip_facts
+
+        facts = clip_facts(motion)
+    except CaptionError:
+        facts = None
+    notes = tuple(prompt_warnings(reading, facts, ACTIONS))
+    for note in notes:
+        _warnings.warn(note, PromptWarning, stacklevel=2)
+    method = TransferMethod("text_to_motion", "the generated clip as it is", _as_generated)
+    run = run_clip(
+        motion,
+        motion.species,
+        method=method,
+        refine=mode,
+        controller=controller,
+        seed=seed,
+        track=track,
+        guard=guard,
+        refine_options=refine_options,
+    )
+    return TextRun(reading, motion.species, motion, facts, notes, run)

@@ -216,6 +216,9 @@ class Species:
     habits: Habits
     description: str
     sources: tuple[str, ...]
+    #: other words for the animal a prompt may use ("puppy", "bull"; lower case), besides
+    #: the name and the common name (:mod:`habitsim.captions.prompts`)
+    synonyms: tuple[str, ...] = ()
     path: Path | None = field(default=None, compare=False)
     #: the user catalog folder the species was read from (None: the built-in catalog);
     #: its MuJoCo models are in ``<user_catalog>/<name>/``
@@ -422,6 +425,14 @@ def _parse(data: dict[str, Any], path: Path | None, user_catalog: Path | None = 
     if held_out and not cousin:
         raise SpeciesFileError(f"{where}: a held-out species must name its training cousin")
 
+    synonyms = data.get("synonyms", [])
+    if not isinstance(synonyms, list) or not all(
+        isinstance(w, str) and w and w == w.lower() and len(w) <= 40 for w in synonyms
+    ):
+        raise SpeciesFileError(
+            f"{where}: synonyms must be a list of lower-case words, got {brief(synonyms)}"
+        )
+
     sp = Species(
         name=name,
         common_name=str(_req(data, "common_name", where)),
@@ -442,6 +453,7 @@ def _parse(data: dict[str, Any], path: Path | None, user_catalog: Path | None = 
         habits=habits,
         description=" ".join(desc.split()),
         sources=tuple(sources),
+        synonyms=tuple(synonyms),
         path=path,
         user_catalog=user_catalog,
     )

@@ -246,3 +246,42 @@ def test_chain_read_from_the_timeline_without_metadata(chained) -> None:
     acts = [c.action for c in f.chain]
     assert acts[-1] == "sit" and acts[0] in ("walk", "turn_left")
     assert captions(f, seed=0)
+
+
+def test_held_out_lexicon_never_meets_the_train_lexicon() -> None:
+    from habitsim.captions import CaptionOptions, captions, clip_facts
+    from habitsim.errors import CaptionError
+    from habitsim.gaits import generate
+
+    held_words = (
+        "saunter",
+        "moves at a trot",
+        "at a canter",
+        "charg",
+        "reverses",
+        "reversing",
+        "motionless",
+        "vault",
+        "swing",
+        "this clip shows",
+        "watch ",
+        "can be seen",
+    )
+    held = CaptionOptions(per_clip=4, lexicon="held_out")
+    train = CaptionOptions(per_clip=8)
+    for sp, action in [
+        ("horse", "walk"),
+        ("dog", "trot"),
+        ("cat", "turn_left"),
+        ("cow", "idle"),
+        ("goat", "walk_backward"),
+        ("horse", "gallop"),
+    ]:
+        facts = clip_facts(generate(sp, action, seed=1))
+        para = [c.text.lower() for c in captions(facts, seed=0, options=held)]
+        seen = [c.text.lower() for c in captions(facts, seed=0, options=train)]
+        assert all(any(w in t for w in held_words) for t in para), para
+        assert not any(w in t for w in held_words for t in seen), seen
+        assert all(sp in t or facts.common_name.split()[-1].lower() in t for t in para)
+    with pytest.raises(CaptionError):
+        CaptionOptions(lexicon="poetry")

@@ -25,6 +25,8 @@ _SINGLE = {
     ("retarget", "--species"),
     # the one species the scored files must be
     ("score", "--species"),
+    # the one species a generated clip is of (when the prompt names none)
+    ("t2m generate", "--species"),
 }
 _LIST_FLAGS = ("--species", "--targets", "--sources", "--methods")
 

@@ -22,7 +22,7 @@ from habitsim.models.errors import (
     MethodNotAvailableError,
 )
 from habitsim.models.t2m import text_to_motion
-from habitsim.models.t2m_data import CODES_NAME, build_code_set, load_code_set
+from habitsim.models.t2m_data import CODES_NAME, build_code_set, load_code_set, prompt_text
 from habitsim.models.t2m_train import load_codegpt, t2m_preset, train_codegpt
 from habitsim.motion import Motion
 
@@ -76,11 +76,14 @@ def test_code_set_holds_every_captioned_clip_and_resumes(code_set: Path, tmp_pat
     cs = load_code_set(code_set)
     doc = json.loads((code_set / CODES_NAME).read_text())
     assert cs.species == ["cat", "dog"] and cs.levels == 4 and cs.path_dim == 4
+    assert cs.meta["text_form"] == "species_neutral"
     assert len(cs.clips) == len(doc["clips"]) >= 8
     for c in cs.clips:
         assert c.codes.shape == (c.steps, 4) and c.path.shape == (c.steps, 4)
         assert c.text.shape == (len(c.captions), DIM)
-        assert np.allclose(c.text, fake_embed(c.captions))
+        # embedded as the generator will read prompts: species words replaced
+        assert np.allclose(c.text, fake_embed(prompt_text(c.captions, "species_neutral")))
+        assert not np.allclose(c.text, fake_embed(c.captions))
         assert c.codes.min() >= 0 and c.codes.max() < cs.num_codes
     # a rebuild keeps every clip file as it is (nothing re-encoded)
     files = sorted((code_set / "clips").rglob("*.safetensors"))
@@ -108,6 +111,9 @@ def test_code_set_bad_input(tmp_path: Path, code_set: Path, small_dataset: Path)
         load_code_set(tmp_path / "nothing")
     with pytest.raises(CodeSetError):
         build_code_set(data, tmp_path / "y", embed=lambda t: np.zeros((1, 3)), text_model="b")
+    with pytest.raises(CodeSetError):
+        build_code_set(data, tmp_path / "w", embed=fake_embed, text_model="b", text_form="x")
+    assert not (tmp_path / "w" / CODES_NAME).exists()
 
 
 def test_path_features_round_trip() -> None:
@@ -168,6 +174,17 @@ def test_generate_length_species_and_labels(trained: Path) -> None:
     assert np.isfinite(m.rotations).all() and np.isfinite(m.root_positions).all()
     short = _gen(trained, species="cat", seconds=0.9)
     assert short.species == "cat" and short.num_frames == 28  # 7 code steps of 4 frames
+
+
+def test_the_prompt_is_read_species_neutral_as_the_captions_were(trained: Path) -> None:
+    # the species comes from the habit input: the words of the animal do not change the
+    # codes drawn; the words of the action do
+    a = _gen(trained, text="A dog trots to the left.", seed=5)
+    b = _gen(trained, text="A kitten trots to the left.", seed=5)
+    c = _gen(trained, text="A dog gallops to the left.", seed=5)
+    assert load_codegpt(trained).meta["text_form"] == "species_neutral"
+    assert np.array_equal(a.rotations, b.rotations)
+    assert not np.array_equal(a.rotations, c.rotations)
 
 
 def test_held_out_species_borrows_a_habit_by_retrieval(trained: Path) -> None:
@@ -261,7 +278,7 @@ def test_command_line(code_set: Path, trained: Path, tmp_path: Path, monkeypatch
     assert main([*args, "--steps", "2"]) == 0
     assert load_codegpt(ck).meta["training"]["step"] == 2
     out = tmp_path / "dog.npz"
-    gen = ["t2m", "generate", "a dog walks", "dog", "--checkpoint", str(trained)]
+    gen = ["t2m", "generate", "a dog walks", "--checkpoint", str(trained)]
     assert main([*gen, "--out", str(out), "--seconds", "2", "--guidance", "3"]) == 0
     m = load_motion(out)
     assert m.species == "dog" and m.num_frames == 60
@@ -270,13 +287,111 @@ def test_command_line(code_set: Path, trained: Path, tmp_path: Path, monkeypatch
     assert main([*gen, "--out", str(bad), "--seconds", "100"]) == 2
     assert capsys.readouterr().err.startswith("error:")
     assert not bad.exists()
+    ck_args = ["--checkpoint", str(trained), "--out", str(bad)]
+    for text, species in [
+        ("a unicorn trots", "unicorn"),  # unknown species: refused with the known ones
+        ("a unicorn trots", None),  # the text names no catalog species and none given
+        ("a cat trots", "dog"),  # the text and --species disagree
+    ]:
+        capsys.readouterr()
+        extra = [] if species is None else ["--species", species]
+        assert main(["t2m", "generate", text, *extra, *ck_args]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error:") and "Traceback" not in err
+        assert "unicorn" not in text or "horse" in err  # the known species are listed
+        assert not bad.exists()
+    # an action habitsim does not make: a clip and a warning naming what it shows
+    swim = tmp_path / "swim.npz"
     assert (
         main(
-            ["t2m", "generate", "a cat", "unicorn", "--checkpoint", str(trained), "--out", str(bad)]
+            [
+                "t2m",
+                "generate",
+                "the kitten swims",
+                "--checkpoint",
+                str(trained),
+                "--out",
+                str(swim),
+                "--seconds",
+                "2",
+            ]
         )
-        == 2
+        == 0
     )
-    assert not bad.exists()
+    out_err = capsys.readouterr()
+    assert load_motion(swim).species == "cat"
+    assert "warning: the prompt names no action habitsim makes" in out_err.err
+    assert "the generated clip shows" in out_err.err and "it shows" in out_err.out
+
+
+def test_run_text_species_from_the_text_and_warnings(trained: Path) -> None:
+    import warnings
+
+    from habitsim.captions.prompts import PromptWarning
+    from habitsim.errors import PromptError
+    from habitsim.pipeline import run_text
+
+    kw = {"seconds": 2.0, "checkpoint": trained, "embed": fake_embed}
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        tr = run_text("Two horses trot along", **kw)
+    assert tr.species == "horse" and tr.generated.species == "horse"
+    assert tr.reading.actions == ("trot",) and tr.run.method == "text_to_motion"
+    assert tr.run.tracked.status == "off" and tr.run.refine == "none"
+    # the transfer stage is the identity: the pipeline's source is the generated clip
+    assert tr.run.transferred.motion is not None
+    np.testing.assert_allclose(
+        tr.run.transferred.motion.rotations, tr.generated.rotations, 0, 1e-12
+    )
+    assert np.array_equal(tr.run.reference.root_positions, tr.generated.root_positions)
+    # a warning exactly when the measured clip is not a trot, naming what it shows
+    shown = [str(w.message) for w in got if issubclass(w.category, PromptWarning)]
+    assert (tr.facts is not None and tr.facts.action == "trot") == (not shown)
+    assert list(tr.warnings) == shown
+    for note in shown:
+        assert note.startswith("the prompt asks for trot; the generated clip shows")
+    # the species argument serves a text that names none, and must agree with one that does
+    assert run_text("an animal walks", "cat", **kw).species == "cat"
+    assert run_text("a puppy walks", "dog", **kw).species == "dog"
+    for text, sp, code in [
+        ("an animal walks", None, "no_species"),
+        ("a dog chases a cat", None, "several_species"),
+        ("a puppy walks", "cat", "species_conflict"),
+    ]:
+        with pytest.raises(PromptError) as e:
+            run_text(text, sp, **kw)
+        assert e.value.code == code and "horse" in e.value.known
+    with pytest.raises(UnknownSpeciesError):
+        run_text("an animal walks", "unicorn", **kw)
+    with pytest.raises(GenerationRequestError):
+        run_text("   ", "dog", **kw)
+    # an action habitsim does not make: generated all the same, with the warning
+    with pytest.warns(PromptWarning, match="names no action habitsim makes"):
+        swim = run_text("a dog swims across a river", **kw)
+    assert swim.generated.num_frames == 60 and len(swim.warnings) == 1
+
+
+@pytest.mark.slow  # a refinement and a tracking run (about 25 s)
+def test_run_text_refines_and_tracks_through_the_pipeline(trained: Path) -> None:
+    from habitsim.pipeline import run_text
+
+    tr = run_text(
+        "a dog walks",
+        seconds=1.0,
+        checkpoint=trained,
+        embed=fake_embed,
+        refine="kinematic",
+        track=True,
+        guard=False,
+    )
+    run = tr.run
+    assert run.refine == "A" and run.refine_result is not None
+    assert run.refined.motion is not None and run.refined.motion.species == "dog"
+    assert run.tracked.status in ("ok", "fell") and run.track_result is not None
+    assert 0.0 <= run.track_result.survival <= 1.0
+    # the tracking followed the refined labels (the pipeline's labels travel)
+    frames = tr.generated.num_frames
+    assert run.refined.contacts is not None and run.refined.contacts.shape == (frames, 4)
 
 
 def test_a_user_species_is_generated_on_its_own_skeleton(

@@ -16,6 +16,11 @@ duration), and so does the level of detail:
 
 :func:`captions` draws ``n`` distinct captions with a seeded generator, spread over the
 levels and forms, so that no single template is the language of a data set.
+
+**Held-out paraphrases.** ``CaptionOptions(lexicon="held_out")`` writes the same facts
+with verbs and sentence frames the training captions never use ("A horse saunters
+slowly.", "This clip shows a dog moving at a trot."): the benchmark's paraphrase split
+(:mod:`habitsim.evaluation.bench.t2m`). Data sets are captioned with the ``train`` lexicon.
 """
 
 from __future__ import annotations
@@ -29,12 +34,25 @@ from ..errors import CaptionError
 from ..species import load_species
 from .facts import ClipFacts
 
-__all__ = ["Caption", "CaptionOptions", "captions", "speed_class", "FORMS", "LEVELS"]
+__all__ = [
+    "Caption",
+    "CaptionOptions",
+    "captions",
+    "speed_class",
+    "FORMS",
+    "HELD_OUT_FORMS",
+    "LEVELS",
+    "LEXICONS",
+]
 
 #: Sentence forms (:attr:`Caption.form`).
 FORMS: tuple[str, ...] = ("sentence", "progressive", "noun", "fragment", "lead", "prompt")
 #: Levels of detail.
 LEVELS: tuple[int, ...] = (1, 2, 3)
+#: Sentence frames of the held-out lexicon only.
+HELD_OUT_FORMS: tuple[str, ...] = ("shows", "watch", "seen")
+#: The lexicons of :attr:`CaptionOptions.lexicon`.
+LEXICONS: tuple[str, ...] = ("train", "held_out")
 
 _NUMBER_WORDS = "zero one two three four five six seven eight nine ten eleven twelve".split()
 
@@ -47,13 +65,20 @@ class CaptionOptions:
         per_clip: captions per clip.
         level_weights: relative frequency of the detail levels 1, 2, 3.
         attempts: draws per caption before giving up on a new distinct one.
+        lexicon: ``train`` (the data sets' captions) or ``held_out`` (verbs and
+            sentence frames the train lexicon never uses: the paraphrase split).
     """
 
     per_clip: int = 5
     level_weights: tuple[float, float, float] = (0.25, 0.45, 0.30)
     attempts: int = 40
+    lexicon: str = "train"
 
     def __post_init__(self) -> None:
+        if self.lexicon not in LEXICONS:
+            raise CaptionError(
+                f"lexicon must be one of {', '.join(LEXICONS)}, got {self.lexicon!r}"
+            )
         if not 1 <= self.per_clip <= 100:
             raise CaptionError(f"per_clip must be 1..100, got {self.per_clip}")
         w = self.level_weights
@@ -181,6 +206,70 @@ _VERBS: dict[str, list[tuple[str, str, str, str, tuple[str, ...]]]] = {
         ),
     ],
 }
+#: The held-out lexicon's verbs per action (same layout as :data:`_VERBS`; an action
+#: missing here keeps the train verbs, in the held-out frames).
+_HELD_OUT_VERBS: dict[str, list[tuple[str, str, str, str, tuple[str, ...]]]] = {
+    "walk": [
+        ("saunters", "saunter", "sauntering", "saunter", ("slow", "moderate")),
+        (
+            "moves along at a walk",
+            "move along at a walk",
+            "moving at a walk",
+            "walking gait",
+            ("slow", "moderate", "fast"),
+        ),
+    ],
+    "trot": [
+        (
+            "moves at a trot",
+            "move at a trot",
+            "moving at a trot",
+            "trotting gait",
+            ("slow", "moderate", "fast"),
+        ),
+    ],
+    "canter": [
+        (
+            "goes at a canter",
+            "go at a canter",
+            "going at a canter",
+            "cantering gait",
+            ("slow", "moderate", "fast"),
+        ),
+    ],
+    "gallop": [
+        (
+            "charges along at a gallop",
+            "charge along at a gallop",
+            "charging at a gallop",
+            "galloping charge",
+            ("slow", "moderate", "fast"),
+        ),
+    ],
+    "walk_backward": [
+        ("reverses", "reverse", "reversing", "reversing walk", ("slow", "moderate", "fast")),
+    ],
+    "idle": [
+        (
+            "remains motionless",
+            "remain motionless",
+            "remaining motionless",
+            "motionless pause",
+            ("slow",),
+        ),
+    ],
+    "jump": [
+        ("vaults", "vault", "vaulting", "vault", ("slow", "moderate", "fast")),
+    ],
+}
+_HELD_OUT_TURN_VERBS = [
+    (
+        "swings round to the {dir}",
+        "swing round to the {dir}",
+        "swinging round to the {dir}",
+        "swing round to the {dir}",
+    ),
+]
 _TURN_VERBS = [
     ("turns {dir}", "turn {dir}", "turning {dir}", "turn to the {dir}"),
     (
@@ -292,7 +381,9 @@ class _Parts:
     figures: str  # " at about 1.2 m/s (Froude number 0.31)"
 
 
-def _parts(facts: ClipFacts, level: int, rng: np.random.Generator) -> _Parts:
+def _parts(
+    facts: ClipFacts, level: int, rng: np.random.Generator, held_out: bool = False
+) -> _Parts:
     names = _animal_names(facts)
     name = str(rng.choice(names))
     subject = f"{_article(name)} {name}" if rng.random() < 0.7 else f"the {name}"
@@ -301,8 +392,9 @@ def _parts(facts: ClipFacts, level: int, rng: np.random.Generator) -> _Parts:
     turning = facts.turning
     if action in ("turn_left", "turn_right"):
         direction = action.split("_")[1]
+        turns = _HELD_OUT_TURN_VERBS if held_out else _TURN_VERBS
         third, base, gerund, noun = (
-            s.format(dir=direction) for s in _TURN_VERBS[rng.integers(len(_TURN_VERBS))]
+            s.format(dir=direction) for s in turns[rng.integers(len(turns))]
         )
     elif action == "sit":
         sits_then_stands = facts.end != "sitting"
@@ -325,7 +417,10 @@ def _parts(facts: ClipFacts, level: int, rng: np.random.Generator) -> _Parts:
                 )
             ).split("|")
     else:
-        verbs = [v for v in _VERBS.get(action, _VERBS["walk"]) if cls in v[4]]
+        table = _VERBS
+        if held_out and any(cls in v[4] for v in _HELD_OUT_VERBS.get(action, [])):
+            table = _HELD_OUT_VERBS
+        verbs = [v for v in table.get(action, _VERBS["walk"]) if cls in v[4]]
         third, base, gerund, noun, _ = verbs[rng.integers(len(verbs))]
     manner = adjective = tail = lead = figures = ""
     if level >= 2:
@@ -403,6 +498,15 @@ def _render(p: _Parts, form: str, rng: np.random.Generator) -> str:
         if p.lead:
             s += f", {p.lead}"
         return s
+    if form == "shows":
+        s = f"this clip shows {p.subject} {p.gerund}{body}"
+        return _cap(s) + (f", {p.lead}." if p.lead else ".")
+    if form == "watch":
+        s = f"watch {p.subject} as it {p.third.removesuffix(' again')}{body}"
+        return _cap(s) + (f" over {p.lead}." if p.lead else ".")
+    if form == "seen":
+        s = f"{p.subject} can be seen {p.gerund}{body}"
+        return _cap(s) + (f" for {p.lead}." if p.lead else ".")
     if form == "lead":
         head = f"For {p.lead}, " if p.lead else str(rng.choice(["Here, ", "In this clip, "]))
         return head + f"{p.subject} {p.third}{body}."
@@ -451,11 +555,14 @@ def captions(
         for _ in range(options.attempts):
             # spread over the levels: the first three captions take one level each
             level = int(LEVELS[k]) if k < 3 and w[k] > 0 else int(rng.choice(LEVELS, p=w))
-            form = str(rng.choice(FORMS))
+            held_out = options.lexicon == "held_out"
+            form = str(rng.choice(HELD_OUT_FORMS if held_out else FORMS))
             if len(facts.chain) >= 2:
+                if held_out:
+                    raise CaptionError("the held-out lexicon has no captions of chained clips")
                 text = _chain_text(facts, form, level, rng)
             else:
-                text = _render(_parts(facts, level, rng), form, rng)
+                text = _render(_parts(facts, level, rng, held_out), form, rng)
             text = re.sub(r"\s+", " ", text).strip()
             if text.lower() not in seen:
                 seen.add(text.lower())

@@ -42,7 +42,32 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="G",
         help="guidance scales of the generator rows (default 1 2 3)",
     )
-    p.add_argument("--split", default="val", help="split whose captions are measured (val)")
+    from .conventions import add_list_option
+
+    add_list_option(
+        p,
+        "--splits",
+        default=["val", "compose", "paraphrase", "human"],
+        choices=("val", "train", "compose", "paraphrase", "human"),
+        metavar="SPLIT",
+        help="splits measured (default val compose paraphrase human; compose needs --checkpoint)",
+    )
+    p.add_argument(
+        "--physics",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also refine and track (unassisted, mpc) N generated walks, trots and turns "
+        "per split and print their survival (default 0)",
+    )
+    p.add_argument(
+        "--unsupported",
+        type=int,
+        default=40,
+        metavar="N",
+        help="human prompts outside the test answered to check the warning / refusal "
+        "path (default 40; 0: none)",
+    )
     p.add_argument(
         "--batch-size", type=int, default=32, metavar="B", help="R-precision batch (default 32)"
     )
@@ -54,32 +79,54 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _bench_t2m(ns: argparse.Namespace) -> int:
+    import math
+
     from ..evaluation.bench.t2m import T2MBenchOptions, run_t2m, t2m_checks
 
     opts = T2MBenchOptions(
         guidances=tuple(ns.guidance),
-        split=ns.split,
+        splits=tuple(ns.splits),
         batch_size=ns.batch_size,
         limit=ns.limit,
         seed=ns.seed,
+        physics=ns.physics,
+        unsupported=ns.unsupported,
     )
     res = run_t2m(ns.evaluator, data=ns.data, checkpoint=ns.checkpoint, options=opts)
     checks = t2m_checks(res, opts)
     if ns.json:
         print(json.dumps({**res.to_dict(), "targets": [t.to_dict() for t in checks]}))
-    else:
+        return check_exit([t.name for t in checks if t.verdict == "MISSED"], ns.check)
+
+    def f(v: float, spec: str) -> str:
+        return "—".rjust(len(format(0.0, spec))) if math.isnan(v) else format(v, spec)
+
+    print(
+        f"{res.data}: R-precision in batches of {opts.batch_size} (— : fewer prompts, or "
+        f"no real motion); evaluator {res.evaluator}"
+    )
+    print(
+        f"  {'split':10s} {'':22s} {'n':>4s} {'top-1':>6s} {'top-2':>6s} {'top-3':>6s} "
+        f"{'FID':>8s} {'MM-Dist':>8s} {'diversity':>9s} {'agree':>6s}"
+    )
+    for r in res.rows:
+        name = r.name if r.guidance is None else f"{r.name} (g={r.guidance:g})"
+        rp = " ".join(f(v, "6.3f") for v in r.r_precision[:3])
         print(
-            f"{res.data} ({res.split}): {res.rows[0].clips} clips, R-precision in "
-            f"{res.batches} batch(es) of {opts.batch_size}; evaluator {res.evaluator}"
+            f"  {r.split:10s} {name:22s} {r.clips:4d} {rp} {f(r.fid, '8.4f')} "
+            f"{f(r.mm_dist, '8.4f')} {f(r.diversity, '9.4f')} {f(r.prompt_agreement, '6.3f')}"
         )
+    for p in res.physics:
         print(
-            f"  {'':22s} {'top-1':>6s} {'top-2':>6s} {'top-3':>6s} {'FID':>8s} "
-            f"{'MM-Dist':>8s} {'diversity':>9s}"
+            f"  physics {p.split}: {p.clips} walks/trots/turns refined and tracked "
+            f"{opts.physics_seconds:g} s under mpc: {p.survived:.2f} survived "
+            f"(mean survival {p.mean_survival:.2f}; {p.refused} refused)"
         )
-        for r in res.rows:
-            name = r.name if r.guidance is None else f"{r.name} (g={r.guidance:g})"
-            rp = " ".join(f"{v:6.3f}" for v in r.r_precision[:3])
-            print(f"  {name:22s} {rp} {r.fid:8.4f} {r.mm_dist:8.4f} {r.diversity:9.4f}")
-        for t in checks:
-            print(f"  {t.name}: {t.shown} (target {t.target}) {t.verdict}")
+    if (u := res.unsupported) is not None:
+        print(
+            f"  human prompts outside the test: {u.prompts} answered: {u.refused} refused, "
+            f"{u.warned} with a warning, {u.silent} without one"
+        )
+    for t in checks:
+        print(f"  {t.name}: {t.shown} (target {t.target}) {t.verdict}")
     return check_exit([t.name for t in checks if t.verdict == "MISSED"], ns.check)

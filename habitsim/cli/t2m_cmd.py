@@ -4,6 +4,7 @@ captioned data set, train the transformer on it, generate a motion from a senten
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -54,18 +55,24 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "generate",
-        help="make a motion of a species from a sentence",
+        help="make a motion from a sentence, then refine and track it",
         description=(
-            "Generate a motion of SPECIES doing what TEXT says with a trained transformer "
-            "(classifier-free guidance; a held-out or user species borrows a habit by "
-            "retrieval and is built on its own skeleton) "
-            "and write it as a .npz motion file."
+            "Generate a motion doing what TEXT says with a trained transformer "
+            "(classifier-free guidance; a held-out species borrows a habit by retrieval), "
+            "on the species the text names (or --species), and write it as a .npz motion "
+            "file; --refine and --track take it through the pipeline as habitsim eval "
+            "does. A clip that does not show the action the text asks for (or a text "
+            "naming no action habitsim makes) is written with a warning saying what it shows."
         ),
     )
-    p.add_argument("text", metavar="TEXT", help='the prompt, e.g. "a dog trots to the left"')
-    p.add_argument("species", metavar="SPECIES", help="species (built-in or user)")
+    p.add_argument("text", metavar="TEXT", help='the prompt, e.g. "a horse trots to the left"')
+    p.add_argument(
+        "--species",
+        metavar="SPECIES",
+        help="species (built-in or user) when TEXT names none (it must agree when TEXT names one)",
+    )
     p.add_argument("--checkpoint", type=Path, metavar="CKPT", help="transformer checkpoint")
-    p.add_argument("--out", required=True, type=Path, metavar="FILE", help="output .npz")
+    p.add_argument("--out", required=True, type=Path, metavar="OUT.npz", help="output motion")
     p.add_argument("--seconds", type=float, default=4.0, help="clip length [s] (default 4)")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
     p.add_argument(
@@ -78,6 +85,25 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="classifier-free guidance scale (1: none, 0: prompt ignored; default 2)",
     )
     p.add_argument("--top-k", type=int, metavar="K", help="draw among the K likeliest codes")
+    p.add_argument(
+        "--refine",
+        default="none",
+        choices=("none", "kinematic", "dynamic"),
+        help="refine the generated clip (CasADi/IPOPT; default none); --out is the refined "
+        "clip unless it tracks worse than the unrefined one",
+    )
+    p.add_argument("--track", action="store_true", help="track the clip in MuJoCo, unassisted")
+    from ..controllers import CONTROLLERS
+
+    p.add_argument(
+        "--controller",
+        default="mpc",
+        choices=CONTROLLERS,
+        help="tracking controller (default mpc)",
+    )
+    p.add_argument(
+        "--video", type=Path, metavar="V.mp4", help="render the tracked run (implies --track)"
+    )
     p.set_defaults(func=_generate)
 
     p = sub.add_parser(
@@ -135,28 +161,68 @@ def _train(ns: argparse.Namespace) -> int:
 
 
 def _generate(ns: argparse.Namespace) -> int:
+    from ..errors import MotionFileError
     from ..fileio import output_transaction
-    from ..models.t2m import text_to_motion
 
-    with output_transaction({"--out": ns.out}):
-        m = text_to_motion(
+    if ns.out.suffix != ".npz":
+        raise MotionFileError(f"--out must end in .npz, got {ns.out.name!r}")
+    if ns.video is not None:
+        from ..render import check_video_writer
+
+        check_video_writer(ns.video)  # fail before generating
+    # the destinations checked first; the files appear together or not at all
+    with output_transaction({"--out": ns.out, "--video": ns.video}):
+        return _generate_outputs(ns)
+
+
+def _generate_outputs(ns: argparse.Namespace) -> int:
+    import warnings
+
+    from ..captions.prompts import PromptWarning, describe_facts
+    from ..pipeline import run_text
+
+    with warnings.catch_warnings():  # printed below, once, as the command's warnings
+        warnings.simplefilter("ignore", PromptWarning)
+        tr = run_text(
             ns.text,
             ns.species,
-            ns.seconds,
+            seconds=ns.seconds,
             seed=ns.seed,
             temperature=ns.temperature,
             guidance=ns.guidance,
             top_k=ns.top_k,
             checkpoint=ns.checkpoint,
+            refine=ns.refine,
+            controller=ns.controller,
+            track=ns.track or ns.video is not None,
         )
-        m.save(ns.out)
+    run = tr.run
+    run.reference.save(ns.out)
+    m = tr.generated
     info = m.metadata["text_to_motion"]
     print(
         f"{ns.out}: {m.species}, {m.num_frames} frames at {m.fps:g} fps "
-        f"(habit of {info['habit_species'] or m.species}, guidance {info['guidance']:g})"
+        f"(habit of {info['habit_species'] or m.species}, guidance {info['guidance']:g}); "
+        f"it shows {describe_facts(tr.facts)}"
     )
     if info["retrieval"]:
         print(f"  {info['retrieval']['explanation']}")
+    if run.refine != "none":
+        print(f"  refinement {run.refined.status}: {run.refine_note}")
+    res = run.track_result
+    if run.tracked.status != "off":
+        surv = "n/a" if res is None else f"{res.survival:.2f}"
+        print(f"  tracked with {run.controller}: {run.tracked.status}, survival {surv}")
+    if ns.video is not None:
+        from ..render import RenderError, render_tracking
+
+        if res is None:
+            raise RenderError(f"no video: the tracking failed ({run.tracked.status})")
+
+        render_tracking(res, ns.video)
+        print(f"  video {ns.video}")
+    for note in tr.warnings:
+        print(f"warning: {note}", file=sys.stderr)
     return 0
 
 

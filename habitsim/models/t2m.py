@@ -35,10 +35,10 @@ from ..threads import one_thread
 from .checkpoint import CONFIG_FILE
 from .codegpt import decoder_path
 from .errors import GenerationRequestError, MethodNotAvailableError, TextEncoderError
-from .t2m_data import Embedder, code_set_vq
+from .t2m_data import Embedder, code_set_vq, prompt_text
 from .t2m_train import LoadedCodeGPT, load_codegpt
 
-__all__ = ["T2MOptions", "text_to_motion", "load_t2m", "T2M_VARIANT"]
+__all__ = ["T2MOptions", "text_to_motion", "check_text", "load_t2m", "T2M_VARIANT"]
 
 #: Folder name of a text-to-motion checkpoint under ``$HABITSIM_MODELS_DIR``.
 T2M_VARIANT = "t2m"
@@ -86,6 +86,26 @@ def _cached(path: str, mtime: float) -> LoadedCodeGPT:
     return load_codegpt(path)
 
 
+def check_text(text: object, options: T2MOptions | None = None) -> str:
+    """``text`` when it is a prompt the model can read.
+
+    Raises:
+        GenerationRequestError: empty (``empty_text``) or longer than
+            :attr:`T2MOptions.max_text_chars` (``text_too_long``).
+    """
+    opts = options or T2MOptions()
+    if not isinstance(text, str) or not text.strip():
+        raise GenerationRequestError(
+            "empty_text", "the prompt is empty: describe the motion in a sentence"
+        )
+    if len(text) > opts.max_text_chars:
+        raise GenerationRequestError(
+            "text_too_long",
+            f"the prompt has {len(text)} characters; at most {opts.max_text_chars} are read",
+        )
+    return text
+
+
 def _check_request(
     text: str,
     seconds: float,
@@ -96,15 +116,7 @@ def _check_request(
     opts: T2MOptions,
 ) -> int:
     """The number of code steps of a valid request (GenerationRequestError otherwise)."""
-    if not isinstance(text, str) or not text.strip():
-        raise GenerationRequestError(
-            "empty_text", "the prompt is empty: describe the motion in a sentence"
-        )
-    if len(text) > opts.max_text_chars:
-        raise GenerationRequestError(
-            "text_too_long",
-            f"the prompt has {len(text)} characters; at most {opts.max_text_chars} are read",
-        )
+    check_text(text, opts)
     per_step = gpt.rate / gpt.fps
     most = gpt.config.model.max_steps
     ok = isinstance(seconds, int | float) and not isinstance(seconds, bool)
@@ -132,12 +144,15 @@ def _check_request(
 
 
 def _embed(text: str, gpt: LoadedCodeGPT, embed: Embedder | None) -> torch.Tensor:
+    """The prompt's sentence embedding, read as the checkpoint's code set read captions
+    (its ``text_form``)."""
+    read = prompt_text([text], str(gpt.meta.get("text_form", "as_written")))
     if embed is None:
         from .text import embed_texts
 
-        vec = embed_texts([text], str(gpt.meta["text_model"]))
+        vec = embed_texts(read, str(gpt.meta["text_model"]))
     else:
-        vec = np.asarray(embed([text]), dtype=np.float32)
+        vec = np.asarray(embed(read), dtype=np.float32)
     if vec.shape != (1, gpt.model.text_dim):
         raise TextEncoderError(
             f"the prompt's embedding has shape {vec.shape}; this model reads (1, "

@@ -20,6 +20,13 @@ Layout of a code set folder::
 
 Every file is written atomically. A rebuild keeps each clip file whose recorded VQ-VAE,
 text model and captions match (an interrupted build continues where it stopped).
+
+**Held-out compositions.** The builder holds some species × action pairs out of training
+(:class:`CompositionOptions`, :func:`held_out_compositions`): every train clip of such a
+pair is recorded in the split ``compose`` instead of ``train``, so no caption of that
+pair is ever trained on while the species (with other actions) and the action (with
+other species) are. The pairs are chosen from the train clips alone, deterministically,
+and listed in ``codes.json`` (``compositions``).
 """
 
 from __future__ import annotations
@@ -37,6 +44,9 @@ from ..jsonfile import load_json, loads_json
 from .errors import CodeSetError
 
 __all__ = [
+    "COMPOSE_SPLIT",
+    "CompositionOptions",
+    "held_out_compositions",
     "CODES_NAME",
     "CODES_KIND",
     "CodeClip",
@@ -46,6 +56,7 @@ __all__ = [
     "load_code_set",
     "clip_codes",
     "code_set_vq",
+    "prompt_text",
 ]
 
 #: File name of a code set's index.
@@ -55,6 +66,58 @@ _FORMAT = 1
 
 #: A sentence embedder: texts → (N, E) float32 (default: :func:`habitsim.models.text.embed_texts`).
 Embedder = Callable[[Sequence[str]], np.ndarray]
+#: The code set split of the train clips whose species × action pair is held out.
+COMPOSE_SPLIT = "compose"
+
+
+@dataclass(frozen=True)
+class CompositionOptions:
+    """Which species × action pairs of the train clips the code set holds out.
+
+    Attributes:
+        per_action: pairs held out per action (each of another species).
+        min_species: an action is held out only for species beyond this many: it needs
+            train clips of at least ``min_species`` species, and it stays in training
+            with ``min_species - per_action`` of them at least.
+        min_actions: a species keeps at least this many of its actions in training.
+    """
+
+    per_action: int = 1
+    min_species: int = 3
+    min_actions: int = 2
+
+
+def held_out_compositions(
+    pairs: Sequence[tuple[str, str]], options: CompositionOptions | None = None
+) -> list[tuple[str, str]]:
+    """The (species, action) pairs to hold out of ``pairs`` (those of the train clips):
+    actions in name order, each taking the species with the fewest pairs held out so far
+    (ties broken by a rotation with the action's index), within the limits of
+    ``options``. The same pairs give the same choice."""
+    opts = options or CompositionOptions()
+    by_action: dict[str, list[str]] = {}
+    actions_of: dict[str, set[str]] = {}
+    for sp, act in sorted(set(pairs)):
+        by_action.setdefault(act, []).append(sp)
+        actions_of.setdefault(sp, set()).add(act)
+    taken: dict[str, int] = {}
+    out: list[tuple[str, str]] = []
+    for i, act in enumerate(sorted(by_action)):
+        have = by_action[act]
+        if len(have) < max(opts.min_species, opts.per_action + 1):
+            continue
+        order = sorted(range(len(have)), key=lambda k: (taken.get(have[k], 0), (k - i) % len(have)))
+        chosen = 0
+        for k in order:
+            sp = have[k]
+            if chosen >= opts.per_action:
+                break
+            if len(actions_of[sp]) - taken.get(sp, 0) - 1 < opts.min_actions:
+                continue
+            taken[sp] = taken.get(sp, 0) + 1
+            out.append((sp, act))
+            chosen += 1
+    return sorted(out)
 
 
 @dataclass(frozen=True)
@@ -63,7 +126,8 @@ class CodeClip:
 
     Attributes:
         source: the clip's path in the data set's manifest.
-        split: ``train``, ``val`` or ``test``.
+        split: ``train``, ``val``, ``test`` or ``compose`` (a train clip of a held-out
+            species × action pair).
         species: catalog species name.
         codes: (T', L) int code indices, one row per code step, one column per level.
         path: (T', P) float32, the decoder's path input per code step (P = 0 for a model
@@ -213,6 +277,8 @@ def build_code_set(
     text_model: str | None = None,
     splits: Sequence[str] = ("train", "val"),
     progress: Callable[[int, int], None] | None = None,
+    compositions: CompositionOptions | None = None,
+    text_form: str = "species_neutral",
 ) -> CodeSet:
     """Encode every captioned clip of a data set into a code set folder.
 
@@ -226,6 +292,12 @@ def build_code_set(
             required with a custom ``embed``); a generator must embed prompts alike.
         splits: which splits of the data set to encode.
         progress: called with (clips done, clips in all).
+        compositions: which species × action pairs of the train clips are held out into
+            the split ``compose`` (module docstring; default :class:`CompositionOptions`).
+        text_form: how captions are embedded (and prompts then read): ``species_neutral``
+            (species words replaced by "animal",
+            :func:`habitsim.captions.prompts.species_neutral`: the generator gets the
+            species from its habit input) or ``as_written``.
 
     Returns:
         The code set, as :func:`load_code_set` reads it.
@@ -239,6 +311,7 @@ def build_code_set(
     from ..captions.store import CAPTIONS_NAME, load_captions
     from ..dataset import iter_clips, load_manifest
     from ..errors import MotionFileError
+    from ..gaits import ACTIONS
     from .checkpoint import MODEL_FILE
     from .transfer import load_model
 
@@ -252,6 +325,10 @@ def build_code_set(
         ) from None
     if embed is not None and text_model is None:
         raise CodeSetError("a custom embed needs text_model: the name generation will embed with")
+    from ..captions.prompts import TEXT_FORMS
+
+    if text_form not in TEXT_FORMS:
+        raise CodeSetError(f"unknown text_form {text_form!r}; valid: {', '.join(TEXT_FORMS)}")
     ck = load_model(checkpoint)
     model = ck.model
     tm = text_model or ck.config.model.text.model
@@ -282,6 +359,7 @@ def build_code_set(
             meta.get("vq_sha256") == vq_sha
             and meta.get("text_model") == tm
             and meta.get("captions") == json.dumps(texts)
+            and meta.get("text_form", "as_written") == text_form
         )
     missing = {e.path for e in todo if not keep[e.path]}
     motions = iter_clips(man) if missing else iter([])
@@ -294,17 +372,25 @@ def build_code_set(
         except CodeSetError as err:
             skipped[entry.path] = str(err)
             continue
-        emb = np.asarray(embed(texts), dtype=np.float32)
+        emb = np.asarray(embed(prompt_text(texts, text_form)), dtype=np.float32)
         if emb.ndim != 2 or emb.shape[0] != len(texts):
             raise CodeSetError(
                 f"the embedder returned shape {emb.shape} for {len(texts)} captions; it must "
                 "return one row per text, (N, E)"
             )
-        _write_clip(_clip_file(root, entry.path), codes, path, emb, texts, vq_sha, tm)
+        _write_clip(_clip_file(root, entry.path), codes, path, emb, texts, vq_sha, tm, text_form)
         done += 1
         if progress is not None:
             progress(done, len(missing))
     text_dim = None
+    held = held_out_compositions(
+        [
+            (e.species, e.action)
+            for e in todo
+            if e.split == "train" and e.path not in skipped and e.action in ACTIONS
+        ],
+        compositions,
+    )
     for e in todo:
         if e.path in skipped:
             continue
@@ -315,10 +401,11 @@ def build_code_set(
                 f"{e.path}: embeddings of width {c.text.shape[1]}, others {text_dim}; "
                 "one text model must embed every caption (rebuild into a new folder)"
             )
+        held_out = e.split == "train" and (e.species, e.action) in held
         records.append(
             {
                 "source": e.path,
-                "split": e.split,
+                "split": COMPOSE_SPLIT if held_out else e.split,
                 "species": e.species,
                 "steps": c.steps,
                 "captions": list(c.captions),
@@ -336,12 +423,14 @@ def build_code_set(
             "variant": ck.config.model.variant,
         },
         "text_model": tm,
+        "text_form": text_form,
         "text_dim": int(text_dim or 0),
         "fps": ck.fps,
         "rate": model.cfg.rate,
         "levels": model.cfg.quantizer.levels,
         "num_codes": model.cfg.quantizer.num_codes,
         "path_dim": model.path_dim,
+        "compositions": [list(p) for p in held],
         "clips": records,
         "skipped": skipped,
     }
@@ -357,6 +446,7 @@ def _write_clip(
     texts: list[str],
     vq_sha: str,
     text_model: str,
+    text_form: str,
 ) -> None:
     from safetensors.numpy import save
 
@@ -367,10 +457,25 @@ def _write_clip(
             "path": np.ascontiguousarray(p, dtype=np.float32),
             "text": np.ascontiguousarray(emb, dtype=np.float32),
         },
-        metadata={"vq_sha256": vq_sha, "text_model": text_model, "captions": json.dumps(texts)},
+        metadata={
+            "vq_sha256": vq_sha,
+            "text_model": text_model,
+            "text_form": text_form,
+            "captions": json.dumps(texts),
+        },
     )
     with atomic_write(path) as fh:
         fh.write(blob)
+
+
+def prompt_text(texts: Sequence[str], text_form: str) -> list[str]:
+    """The texts as a model of ``text_form`` embeds them (``species_neutral``: species
+    words replaced, :func:`habitsim.captions.prompts.species_neutral`)."""
+    if text_form == "as_written":
+        return list(texts)
+    from ..captions.prompts import species_neutral
+
+    return [species_neutral(t) for t in texts]
 
 
 def load_code_set(path: str | Path) -> CodeSet:

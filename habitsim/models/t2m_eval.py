@@ -83,7 +83,9 @@ def prompt_agreement(
     cs = load_code_set(codes if codes is not None else gpt.meta["codes"]["dir"])
     clips = cs.split(split)[:limit]
     if not clips:
-        raise CodeSetError(f"{cs.root}: no {split!r} clip to measure; valid splits: train, val")
+        raise CodeSetError(
+            f"{cs.root}: no {split!r} clip to measure; valid splits: train, val, compose"
+        )
     try:
         facts = load_captions(cs.meta["dataset"]).facts
     except MotionFileError as e:

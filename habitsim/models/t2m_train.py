@@ -399,6 +399,7 @@ def train_codegpt(
                 return {
                     "vq": cs.meta["vq"],
                     "text_model": cs.meta["text_model"],
+                    "text_form": cs.meta.get("text_form", "as_written"),
                     "fps": cs.meta["fps"],
                     "rate": cs.meta["rate"],
                     "codes": {"dir": str(cs.root.resolve()), "train_clips": len(tr)},
