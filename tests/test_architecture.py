@@ -311,6 +311,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.render",
             "habitsim.workers",
             "habitsim.threads",
+            "habitsim.timelimit",
         ),
     ),
     (

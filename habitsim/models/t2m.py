@@ -105,6 +105,14 @@ def _check_request(
             "text_too_long",
             f"the prompt has {len(text)} characters; at most {opts.max_text_chars} are read",
         )
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as e:
+        raise GenerationRequestError(
+            "bad_text",
+            f"the prompt holds a character that is no text (U+{ord(text[e.start]):04X} at "
+            f"position {e.start}, a lone surrogate); valid: a sentence in UTF-8",
+        ) from None
     per_step = gpt.rate / gpt.fps
     most = gpt.config.model.max_steps
     ok = isinstance(seconds, int | float) and not isinstance(seconds, bool)
