@@ -138,7 +138,8 @@ def evaluate_pair(task: PairTask) -> dict[str, Any]:
             _write_trace(task, src, out, ref, sim_res)
     except HabitsimError as e:
         row.update(status="error", note=f"{type(e).__name__}: {e}")
-    except Exception as e:  # noqa: BLE001 - recorded in the row, the run goes on
+    except (Exception, SystemExit) as e:  # noqa: BLE001 - in the row, the run goes on
+        # (SystemExit: a plugin method that calls sys.exit must not end the whole run)
         tb = traceback.extract_tb(e.__traceback__)[-1]
         row.update(
             status="error", note=f"{type(e).__name__}: {e} ({Path(tb.filename).name}:{tb.lineno})"
