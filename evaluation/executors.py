@@ -12,6 +12,12 @@ home-made:
   the same habitsim installation and access to the data set and output folders (a
   shared file system), because tasks carry file paths, not arrays.
 
+A worker process that dies under a task (the out-of-memory killer's SIGKILL, a crash in
+a library) is replaced and the task run again, alone, up to
+:attr:`ExecutorOptions.retries` times; a task that kills its worker every time yields a
+:class:`TaskLost` (the runner makes it a failed row), never a raw ``BrokenProcessPool`` or
+``KilledWorker``.
+
 Workers die with the run either way: the local pool through
 :func:`habitsim.workers.init_worker`; the worker processes of a local Dask cluster
 (``--executor dask`` without ``--scheduler``) exit when their parent's pipe closes, so a
@@ -46,7 +52,7 @@ import multiprocessing as mp
 import os
 import signal
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -246,7 +252,7 @@ class LocalExecutor:
         indices: list[int],
         workers: int,
         states: Any,
-    ) -> Iterator[tuple[Any, Any]]:
+    ) -> Generator[tuple[Any, Any], None, list[int]]:
         """Run ``indices`` on a pool of ``workers``, yielding their results; returns the
         indices left unfinished because a worker died (the pool is then discarded)."""
         if self._pool is None or self._pool_shape != (workers, id(states)):
@@ -259,8 +265,12 @@ class LocalExecutor:
         lost: list[int] = []
         try:
             # an interrupt while the tasks are submitted stops the pool as well
-            for i in indices:
-                futs[self._pool.submit(_tracked, fn, i, tasks[i])] = i
+            for n, i in enumerate(indices):
+                try:
+                    futs[self._pool.submit(_tracked, fn, i, tasks[i])] = i
+                except cf.process.BrokenProcessPool:  # a worker died while submitting
+                    lost.extend(indices[n:])
+                    break
             for f in cf.as_completed(futs):
                 try:
                     result = f.result()

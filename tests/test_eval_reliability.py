@@ -59,6 +59,10 @@ def _wrong_type(source: Any, target: str, **kw: Any) -> Any:
     return np.zeros((3, 4))
 
 
+def _exits(source: Any, target: str, **kw: Any) -> Any:
+    raise SystemExit(3)  # a plugin calling sys.exit (found by the fuzzer)
+
+
 _METHODS = {
     "t_flaky": _flaky,
     "t_kills_always": _kills_always,
@@ -66,6 +70,7 @@ _METHODS = {
     "t_raises": _raises,
     "t_nan_motion": _nan_motion,
     "t_wrong_type": _wrong_type,
+    "t_exits": _exits,
 }
 
 
@@ -184,7 +189,7 @@ def test_a_method_that_hangs_is_stopped_by_the_time_limit(
     )
 
 
-@pytest.mark.parametrize("method", ["t_raises", "t_nan_motion", "t_wrong_type"])
+@pytest.mark.parametrize("method", ["t_raises", "t_nan_motion", "t_wrong_type", "t_exits"])
 def test_a_method_that_raises_or_returns_garbage_is_a_failed_row(
     small_dataset: Path, tmp_path: Path, capsys, method: str
 ) -> None:
@@ -192,7 +197,8 @@ def test_a_method_that_raises_or_returns_garbage_is_a_failed_row(
     assert code == 1 and "Traceback" not in err
     rows = _rows(tmp_path / "o")
     assert rows and all(r["status"] == "error" and r["note"] for r in rows)
-    if method != "t_raises":  # garbage is refused by habitsim's checks, not a raw error
+    # garbage is refused by habitsim's checks, not a raw error
+    if method not in ("t_raises", "t_exits"):
         assert not any(re.search(r"\(\w+\.py:\d+\)$", r["note"]) for r in rows), rows
 
 
@@ -200,3 +206,17 @@ def test_method_timeout_and_retries_are_checked(small_dataset: Path, tmp_path: P
     for extra in (["--method-timeout", "0"], ["--method-timeout", "nan"], ["--retries", "-1"]):
         code, err = run_cli(_args(small_dataset, tmp_path / "o", "direct", 1, *extra), capsys)
         assert code == 2 and err.startswith("error: "), (extra, err)
+
+
+@pytest.mark.slow
+def test_dask_tables_equal_the_local_ones(small_dataset: Path, tmp_path: Path, capsys) -> None:
+    """``--executor dask`` (a local cluster of two worker processes) gives the rows and
+    summary of ``--workers 1``."""
+    pytest.importorskip("distributed")
+    code, err = run_cli(_args(small_dataset, tmp_path / "local", "direct", 1), capsys)
+    assert code == 0, err
+    argv = _args(small_dataset, tmp_path / "dask", "direct", 2, "--executor", "dask")
+    code, err = run_cli(argv, capsys)
+    assert code == 0, err
+    assert _rows(tmp_path / "dask") == _rows(tmp_path / "local")
+    assert _summary(tmp_path / "dask") == _summary(tmp_path / "local")

@@ -147,7 +147,7 @@ def _rig_text(ws: Any) -> str:
         import sys
 
         sys.path.insert(0, str(Path(__file__).parents[1]))
-        from foreign_rig import _foreign_rig
+        from foreign_rig import _foreign_rig  # type: ignore[import-not-found]
 
         from habitsim.gaits import generate
 
@@ -315,7 +315,7 @@ def _m_exits(source: Any, target: str, **kw: Any) -> Any:
 
 
 #: Hostile methods, registered as plugins would be (name → function).
-METHODS = {
+HOSTILE_METHODS = {
     "fz_raises": _m_raises,
     "fz_none": _m_none,
     "fz_array": _m_array,
@@ -330,10 +330,10 @@ METHODS = {
 
 
 def register_methods() -> None:
-    """Register :data:`METHODS` (in the campaign's process: forked runs inherit them)."""
+    """Register :data:`HOSTILE_METHODS` (in the campaign's process: forked runs inherit them)."""
     from habitsim.transfer_methods import method_names, register_method
 
-    for name, fn in METHODS.items():
+    for name, fn in HOSTILE_METHODS.items():
         if name not in method_names():
             register_method(name, fn, "fuzzing: a hostile method", kind="external")
 
@@ -370,7 +370,7 @@ def make_methods(ws: Any, rnd: random.Random) -> list[str]:
     argv += ["--no-track", "--no-dynamic", "--no-report", "--no-videos", "--no-progress"]
     argv += ["--report-pairs", "0", "--split", "train", "--max-clips", "1"]
     if rnd.random() < 0.8:
-        argv += ["--methods", ",".join(rnd.sample(sorted(METHODS), rnd.randint(1, 2)))]
+        argv += ["--methods", ",".join(rnd.sample(sorted(HOSTILE_METHODS), rnd.randint(1, 2)))]
     else:
         argv += ["--methods", "direct"]
         argv += ["--method", f"fz_dir={_outputs_folder(ws, rnd)}"]
