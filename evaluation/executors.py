@@ -383,7 +383,7 @@ class DaskExecutor:
                     tries = self.options.retries + 1 if self._cluster is not None else None
                     note = (
                         "the Dask workers running this task died every time "
-                        + (f"({tries} times" if tries else "(the scheduler's allowed-failures")
+                        + (f"({tries} times" if tries else "(past the scheduler's allowed-failures")
                         + "; killed, e.g. out of memory, or crashed)"
                     )
                     self.options.note(f"{_label(tasks[i], i)}: {note}")
