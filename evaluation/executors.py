@@ -218,10 +218,18 @@ class LocalExecutor:
         states = mp.RawArray(ctypes.c_int8, max(1, len(tasks)))
         deaths = [0] * len(tasks)
         queue = list(range(len(tasks)))
+        stalls = 0  # rounds in a row in which workers died before running any task
         while queue:
+            before = len(queue)
             lost = yield from self._round(fn, tasks, queue, self.workers, states)
             queue = [i for i in lost if states[i] != _STARTED]
             suspects = [i for i in lost if states[i] == _STARTED]
+            stalls = stalls + 1 if not suspects and len(queue) == before else 0
+            if stalls > self.options.retries:  # the workers die while starting: give up
+                note = "the worker processes died before running this task (killed or crashed)"
+                for i in queue:
+                    yield tasks[i], TaskLost(note, 0)
+                return
             if len(suspects) == 1:  # the one task running: its own death
                 deaths[suspects[0]] += 1
             if lost:
