@@ -344,7 +344,7 @@ def _outputs_folder(ws: Any, rnd: random.Random) -> Path:
     """A folder of another method's outputs (``DIR/<target>/<clip_id>.npz``), hostile."""
     folder = ws.path("_outputs")
     clip_ids = [p.stem for p in (ws.dataset / "train").rglob("*.npz")]
-    for target in rnd.sample(["cat", "dog", "unicorn", "..", "Cat"], 2):
+    for target in rnd.sample(["cat", "dog", "unicorn", "...", "Cat"], 2):
         d = folder / target
         d.mkdir(parents=True, exist_ok=True)
         for cid in clip_ids + ["stray"]:
