@@ -79,6 +79,12 @@ class EvalConfig:
             ``.bvh``); each name is added to ``methods`` when it is not there.
         follow_symlinks: read clips through links in ``data`` that lead out of it (else
             they are refused).
+        method_timeout_s: time limit of one call of a transfer method [s] (None: none);
+            a call that runs longer is stopped in its worker and its row fails with the
+            note ``method X exceeded N s`` (:mod:`habitsim.timelimit`).
+        worker_retries: how many times a pair whose worker process died (killed, e.g.
+            by the out-of-memory killer) is run again before its row fails
+            (:class:`habitsim.evaluation.executors.ExecutorOptions`).
     """
 
     data: str
@@ -102,6 +108,8 @@ class EvalConfig:
     videos: bool = True
     outputs: tuple[tuple[str, str], ...] = ()
     follow_symlinks: bool = False
+    method_timeout_s: float | None = None
+    worker_retries: int = 2
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "data", str(Path(self.data).resolve()))
@@ -139,6 +147,14 @@ class EvalConfig:
             raise EvalError(f"max_clips must be >= 1, got {self.max_clips}")
         if self.clips_per_source is not None and self.clips_per_source < 1:
             raise EvalError(f"clips_per_source must be >= 1, got {self.clips_per_source}")
+        t = self.method_timeout_s
+        if t is not None and (
+            isinstance(t, bool) or not isinstance(t, int | float) or not 0 < t <= 1e6
+        ):
+            raise EvalError(f"method_timeout_s {t!r}; valid: a number of seconds in (0, 1e6]")
+        r = self.worker_retries
+        if isinstance(r, bool) or not isinstance(r, int) or not 0 <= r <= 100:
+            raise EvalError(f"worker_retries {r!r}; valid: a whole number from 0 to 100")
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -188,3 +204,5 @@ class PairTask:
     #: the folder of the method's outputs (:mod:`habitsim.evaluation.outputs`; None: a
     #: registered method)
     outputs: str | None = None
+    #: time limit of one call of the method [s] (None: none)
+    method_timeout_s: float | None = None

@@ -21,7 +21,7 @@ from .config import PairTask
 from .rows import reference_dynamics, run_row
 from .tables import _finite
 
-__all__ = ["evaluate_pair"]
+__all__ = ["evaluate_pair", "lost_row"]
 
 
 def _row_base(task: PairTask) -> dict[str, Any]:
@@ -65,6 +65,8 @@ def evaluate_pair(task: PairTask) -> dict[str, Any]:
             from .outputs import MethodOutputs
 
             method = MethodOutputs(task.method, task.outputs).method()
+        if task.method_timeout_s is not None:
+            method = _time_limited(method, task.method_timeout_s)
         try:
             # transfer → refine → track: the one pipeline (habitsim.pipeline); the
             # refinement check is off so the rows measure the refinement as it is
@@ -136,13 +138,38 @@ def evaluate_pair(task: PairTask) -> dict[str, Any]:
             _write_trace(task, src, out, ref, sim_res)
     except HabitsimError as e:
         row.update(status="error", note=f"{type(e).__name__}: {e}")
-    except Exception as e:  # noqa: BLE001 - recorded in the row, the run goes on
+    except (Exception, SystemExit) as e:  # noqa: BLE001 - in the row, the run goes on
+        # (SystemExit: a plugin method that calls sys.exit must not end the whole run)
         tb = traceback.extract_tb(e.__traceback__)[-1]
         row.update(
             status="error", note=f"{type(e).__name__}: {e} ({Path(tb.filename).name}:{tb.lineno})"
         )
     row["time_total_s"] = time.perf_counter() - t0
     row["cpu_total_s"] = time.process_time() - c0
+    return row
+
+
+def _time_limited(method: Any, seconds: float) -> Any:
+    """The method with every call stopped after ``seconds`` (a
+    :class:`~habitsim.errors.TimeLimitError`: ``method X exceeded N s``)."""
+    import dataclasses
+
+    from habitsim.timelimit import call_with_time_limit
+    from habitsim.transfer_methods import METHODS
+
+    m = METHODS[method] if isinstance(method, str) else method
+
+    def limited(motion: Motion, target: str, **options: Any) -> Motion:
+        what = f"method {m.name!r}"
+        return call_with_time_limit(lambda: m(motion, target, **options), seconds, what)
+
+    return dataclasses.replace(m, fn=limited)
+
+
+def lost_row(task: PairTask, note: str) -> dict[str, Any]:
+    """The row of a pair whose worker process died every time it ran it."""
+    row = _row_base(task)
+    row.update(status="error", note=note)
     return row
 
 

@@ -143,6 +143,7 @@ def plan_tasks(cfg: EvalConfig) -> list[PairTask]:
                         trace=(c.path, t) in trace_pairs,
                         videos=cfg.videos,
                         outputs=folders.get(m),
+                        method_timeout_s=cfg.method_timeout_s,
                     )
                 )
     return tasks

@@ -109,7 +109,7 @@ from .config import (
     EvalError,
     PairTask,
 )
-from .pairs import evaluate_pair
+from .pairs import evaluate_pair, lost_row
 from .planning import DEFAULT_DATA_CLIPS_PER_SPECIES, default_data, plan_tasks
 from .summary import _controller_label, _reference_features, _write_summary, summarize
 from .tables import (
@@ -299,7 +299,7 @@ def _run(
     log: Callable[[str], None] | None,
 ) -> BenchmarkResult:
     """:func:`run_benchmark` in its claimed output folder."""
-    from .executors import make_executor
+    from .executors import ExecutorOptions, TaskLost, make_executor
 
     out = Path(cfg.out)
     make_dirs(out / "rows", "--out")
@@ -329,7 +329,8 @@ def _run(
             f"eval: {len(tasks)} pairs ({len(cfg.methods)} methods), {len(tasks) - len(pending)} "
             f"already done, {len(pending)} to run on {executor}"
         )
-    ex = make_executor(executor, workers=workers, scheduler=scheduler)
+    options = ExecutorOptions(retries=cfg.worker_retries, log=log)
+    ex = make_executor(executor, workers=workers, scheduler=scheduler, options=options)
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -346,6 +347,8 @@ def _run(
     last_table = time.monotonic()
     try:
         for task, row in ex.map_unordered(evaluate_pair, pending):
+            if isinstance(row, TaskLost):  # its worker died every time: a failed row
+                row = lost_row(task, row.note)
             with atomic_write(_row_path(out, task.key), "w") as fh:
                 json.dump(json_safe(row), fh, sort_keys=True)
             computed += 1

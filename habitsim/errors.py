@@ -193,6 +193,11 @@ class ArgumentRangeError(HabitsimError, ValueError):
     """A command-line or API argument outside its physically sensible range."""
 
 
+class TimeLimitError(HabitsimError):
+    """A call that ran past its time limit and was stopped (an entry-point method that
+    hangs, :func:`habitsim.timelimit.call_with_time_limit`)."""
+
+
 #: Longest message text a value is echoed with (:func:`brief`).
 BRIEF_CHARS = 60
 #: Longest message the command line prints after ``error:``.

@@ -312,6 +312,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "habitsim.render_side",
             "habitsim.workers",
             "habitsim.threads",
+            "habitsim.timelimit",
         ),
     ),
     (

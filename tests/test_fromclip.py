@@ -145,3 +145,24 @@ def test_command_line(rig_file, tmp_path, capsys) -> None:
     assert main(argv) == 2  # the name is taken now
     assert main([*argv[:4], "dog", *argv[5:]]) == 2
     assert _leftovers(catalog) == ["clipdog", "clipdog.toml"]
+
+
+@pytest.mark.slow
+def test_from_clip_is_byte_identical_across_runs_and_thread_counts(rig_file, tmp_path) -> None:
+    """``habitsim species from-clip`` in processes whose BLAS and OpenMP start with 1 and
+    2 threads writes the same species file and the same MJCF models, byte for byte."""
+    import os
+    import subprocess
+    import sys
+
+    trees = []
+    for i, n in enumerate(["1", "2"]):
+        catalog = tmp_path / f"c{i}"
+        env = {**os.environ, "OMP_NUM_THREADS": n, "OPENBLAS_NUM_THREADS": n}
+        argv = [sys.executable, "-m", "habitsim", "species", "from-clip", str(rig_file)]
+        argv += ["--name", "clipdog", "--catalog", str(catalog)]
+        subprocess.run(argv, env=env, check=True, timeout=300, capture_output=True)
+        files = sorted(p for p in catalog.rglob("*") if p.is_file())
+        trees.append({str(p.relative_to(catalog)): p.read_bytes() for p in files})
+    assert "clipdog.toml" in trees[0] and any(k.endswith(".xml") for k in trees[0])
+    assert trees[0] == trees[1]

@@ -147,6 +147,20 @@ def test_arbitrary_text_as_species_toml(text: str) -> None:
             load_species_file(p)
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("target", ["t2m", "fromclip", "score", "methods", "rig", "loop"])
+def test_newer_inputs_are_read_or_refused(ws, target: str) -> None:
+    """The families of the newer inputs (:mod:`fuzzing.wave`): text prompts, species from
+    a clip, score folders, entry-point methods in eval, export onto a rig, loops."""
+
+    @settings(FAST, max_examples=4)
+    @given(rnd=st.randoms(use_true_random=False))
+    def check(rnd) -> None:
+        _check(ws, fuzz.make_case(target, ws, rnd))
+
+    check()
+
+
 def test_campaign_counts() -> None:
     res = fuzz.campaign(30, seed=3, targets=["bvh", "species"])
     assert sum(res.total.values()) == 30 and res.total["raw"] == 0

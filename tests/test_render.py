@@ -208,6 +208,8 @@ def test_skybox_only_when_asked(dog) -> None:
     top = slice(0, H // 10)  # above the horizon
     assert plain[top].max() == 0
     assert sky[top].mean() > 10
+
+
 def _run(model, q: np.ndarray, fps: float = 30.0, species: str = "dog"):
     from types import SimpleNamespace
 

@@ -130,11 +130,13 @@ def test_another_species_is_an_error_per_file_and_the_table_is_whole(
     cat.mkdir()
     generate("cat", "walk", seed=1, duration_s=0.5).save(cat / "cat.npz")
     out = tmp_path / "out"
-    code, _ = run_cli(
+    code, err = run_cli(
         ["score", walk_pair, cat, "--species", "dog", "--no-dynamic", "--out", out, "--report"],
         capsys,
     )
     assert code == 2
+    # the file not scored is named on stderr, as every command's errors are
+    assert any(ln.startswith("error: ") and "cat.npz" in ln for ln in err.splitlines()), err
     rows = _by_file(json.loads((out / "scores.json").read_text())["rows"])
     assert set(rows) == {"walk.npz", "walk.bvh", "cat.npz"}
     assert (rows["cat.npz"]["status"], rows["cat.npz"]["error"]) == ("error", "ScoreError")

@@ -212,6 +212,7 @@ def test_same_seed_same_motion_and_guidance_matters(trained: Path) -> None:
     [
         ({"text": "   "}, "empty_text"),
         ({"text": "a dog walks " * 100}, "text_too_long"),
+        ({"text": "\ud800 a dog"}, "bad_text"),  # a lone surrogate (found by the fuzzer)
         ({"seconds": 0.01}, "length_out_of_range"),
         ({"seconds": 60.0}, "length_out_of_range"),
         ({"seconds": float("nan")}, "length_out_of_range"),
@@ -414,3 +415,41 @@ def test_a_user_species_is_generated_on_its_own_skeleton(
     with pytest.raises(UnknownSpeciesError) as e:
         _gen(trained, species="clipcat")
     assert "clipdog" in e.value.known and "dog" in e.value.known
+
+
+def test_a_lone_surrogate_is_no_text_to_embed() -> None:
+    from habitsim.models.errors import TextEncoderError
+    from habitsim.models.text import embed_texts
+
+    with pytest.raises(TextEncoderError, match="lone surrogate"):
+        embed_texts(["\udfff"], cache=False)
+
+
+_GENERATE = """
+import sys
+sys.path.insert(0, {tests!r})
+from test_t2m import fake_embed
+from habitsim.models.t2m import text_to_motion
+m = text_to_motion("A dog trots to the left.", "dog", 4.0, seed=1, checkpoint={ckpt!r},
+                   embed=fake_embed, temperature=1.0)
+m.save(sys.argv[1])
+"""
+
+
+@pytest.mark.slow
+def test_generation_is_byte_identical_across_thread_counts(trained: Path, tmp_path: Path) -> None:
+    """The same request in processes whose BLAS / OpenMP / torch start with 1 and 2
+    threads (and twice with 2) writes the same bytes."""
+    import os
+    import subprocess
+    import sys
+
+    script = tmp_path / "gen.py"
+    script.write_text(_GENERATE.format(tests=str(Path(__file__).parent), ckpt=str(trained)))
+    outs = []
+    for i, n in enumerate(["1", "2", "2"]):
+        env = {**os.environ, "OMP_NUM_THREADS": n, "OPENBLAS_NUM_THREADS": n, "MKL_NUM_THREADS": n}
+        out = tmp_path / f"g{i}.npz"
+        subprocess.run([sys.executable, str(script), str(out)], env=env, check=True, timeout=300)
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1] == outs[2]

@@ -533,12 +533,14 @@ def run_tasks(
     Returns:
         The rows in task order, each task's methods in its order.
     """
-    from ..executors import make_executor
+    from ..executors import ExecutorError, TaskLost, make_executor
 
     rows: list[RealRow] = []
     ex = make_executor("local", workers=workers)
     try:
-        for _, result in ex.map_unordered(run_window, list(tasks)):
+        for task, result in ex.map_unordered(run_window, list(tasks)):
+            if isinstance(result, TaskLost):
+                raise ExecutorError(f"{task.clip} at {task.start_s:g} s: {result.note}")
             for r in result:
                 rows.append(r)
                 if on_row is not None:

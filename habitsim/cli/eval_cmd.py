@@ -157,6 +157,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="local worker processes (default: CPU count; 1 = in-process)",
     )
     p.add_argument(
+        "--method-timeout",
+        type=float,
+        metavar="S",
+        help="stop a transfer method's call after S seconds: its row fails (default: no limit)",
+    )
+    p.add_argument(
+        "--retries",
+        type=int,
+        default=2,
+        metavar="N",
+        help="run a pair whose worker process died (e.g. out of memory) again up to N times "
+        "before its row fails (default 2)",
+    )
+    p.add_argument(
         "--follow-symlinks",
         action="store_true",
         help="read clips through links in --data that lead out of it (refused by default)",
@@ -238,6 +252,8 @@ def _eval(ns: argparse.Namespace) -> int:
         videos=not ns.no_videos,
         outputs=tuple((o.name, o.folder) for o in outputs),
         follow_symlinks=ns.follow_symlinks,
+        method_timeout_s=ns.method_timeout,
+        worker_retries=ns.retries,
     )
     if outputs:
         from ..evaluation.outputs import dataset_clip_ids, stray_outputs

@@ -17,6 +17,7 @@ cannot be told, an unreadable file), 1 when scoring a file failed otherwise.
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import TYPE_CHECKING
 
 from .conventions import add_source_options, format_legend, source_options
@@ -140,8 +141,8 @@ def _report(ns: argparse.Namespace, res: ScoreResult) -> int:
     print(format_legend(_LEGEND))
     for line in res.stance_lines():
         print(line)
-    for r in res.errors:
-        print(f"{r['file']}: {r['status']}: {r['error']}: {r['note']}")
+    for r in res.errors:  # each file not scored, on stderr as every command's errors
+        print(f"error: {r['file']}: {r['error']}: {r['note']}", file=sys.stderr)
     if ns.out is not None:
         from ..fileio import output_transaction
 

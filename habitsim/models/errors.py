@@ -51,7 +51,8 @@ class GenerationRequestError(ModelError):
     """A text-to-motion request the model cannot serve.
 
     Attributes:
-        code: what is wrong: ``empty_text``, ``text_too_long``, ``length_out_of_range``,
+        code: what is wrong: ``empty_text``, ``text_too_long``, ``bad_text`` (a character
+            that is no text, e.g. a lone surrogate), ``length_out_of_range``,
             ``bad_sampling`` (temperature, top-k or guidance outside their ranges).
     """
 

@@ -90,8 +90,9 @@ def check_text(text: object, options: T2MOptions | None = None) -> str:
     """``text`` when it is a prompt the model can read.
 
     Raises:
-        GenerationRequestError: empty (``empty_text``) or longer than
-            :attr:`T2MOptions.max_text_chars` (``text_too_long``).
+        GenerationRequestError: empty (``empty_text``), longer than
+            :attr:`T2MOptions.max_text_chars` (``text_too_long``) or not UTF-8 text
+            (``bad_text``).
     """
     opts = options or T2MOptions()
     if not isinstance(text, str) or not text.strip():
@@ -103,6 +104,14 @@ def check_text(text: object, options: T2MOptions | None = None) -> str:
             "text_too_long",
             f"the prompt has {len(text)} characters; at most {opts.max_text_chars} are read",
         )
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as e:
+        raise GenerationRequestError(
+            "bad_text",
+            f"the prompt holds a character that is no text (U+{ord(text[e.start]):04X} at "
+            f"position {e.start}, a lone surrogate); valid: a sentence in UTF-8",
+        ) from None
     return text
 
 

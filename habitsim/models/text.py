@@ -193,6 +193,16 @@ def embed_texts(
     Raises:
         TextEncoderError: the model cannot be loaded.
     """
+    for t in texts:
+        if not isinstance(t, str):
+            raise TextEncoderError(f"a text to embed is a {type(t).__name__}, not a string")
+        try:
+            t.encode("utf-8")
+        except UnicodeEncodeError as e:
+            raise TextEncoderError(
+                f"a text to embed holds U+{ord(t[e.start]):04X} (a lone surrogate) at position "
+                f"{e.start}; valid: UTF-8 text"
+            ) from None
     keys = [_sha(t) for t in texts]
     missing = [i for i, k in enumerate(keys) if (model, k) not in _MEMORY]
     if missing and cache:
@@ -205,10 +215,13 @@ def embed_texts(
             _MEMORY[(model, k)] = v
         missing = [i for i, k in enumerate(keys) if (model, k) not in _MEMORY]
     if missing:
+        from ..threads import one_thread
+
         enc = load_text_encoder(model)
-        vecs = enc.encode(
-            [texts[i] for i in missing], convert_to_numpy=True, show_progress_bar=False
-        )
+        with one_thread():  # the same embedding on every machine (habitsim.threads)
+            vecs = enc.encode(
+                [texts[i] for i in missing], convert_to_numpy=True, show_progress_bar=False
+            )
         for i, v in zip(missing, vecs, strict=True):
             _MEMORY[(model, keys[i])] = np.asarray(v, dtype=np.float32)
         if cache:
