@@ -147,7 +147,7 @@ class RefineOptions:
     guard_weights: tuple[str, ...] = ("w_smooth", "w_jerk", "w_hinge_jerk")
     guard_factor: float = 10.0
     guard_start: float = 1e-7
-    guard_bisect: int = 2
+    guard_bisect: int = 0
     fallback: bool = False
     metrics: bool = True
     max_iter: int = 200
