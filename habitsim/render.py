@@ -203,6 +203,16 @@ def _headless_context() -> None:
         return
 
 
+def _skybox_textures(model: mujoco.MjModel) -> list[int]:
+    """Indices of the model's skybox textures larger than one texel per face."""
+    return [
+        i
+        for i in range(model.ntex)
+        if model.tex_type[i] == mujoco.mjtTexture.mjTEXTURE_SKYBOX
+        and int(model.tex_width[i]) * int(model.tex_height[i]) > 6
+    ]
+
+
 def render_available() -> bool:
     """True if an off-screen OpenGL context can be created here."""
     try:
@@ -328,14 +338,20 @@ def iter_frames(
         isinstance(camera, str) and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera) < 0
     ):
         cam = _tracking_camera(model)
-    # the caller's model keeps its own settings; without shadows, no shadow map is made
+    # the caller's model keeps its own settings; without shadows, no shadow map is made,
+    # and without the skybox its texture is not uploaded (1×6 texels of it are)
     shadow_map = int(model.vis.quality.shadowsize) if opts.shadows else 1
-    if int(model.vis.quality.offsamples) != int(opts.multisamples) or (
-        int(model.vis.quality.shadowsize) != shadow_map
+    skies = [] if opts.skybox else _skybox_textures(model)
+    if (
+        int(model.vis.quality.offsamples) != int(opts.multisamples)
+        or int(model.vis.quality.shadowsize) != shadow_map
+        or skies
     ):
         model = copy.copy(model)
         model.vis.quality.offsamples = int(opts.multisamples)
         model.vis.quality.shadowsize = shadow_map
+        for i in skies:
+            model.tex_width[i], model.tex_height[i] = 1, 6
     _headless_context()
     try:
         renderer = mujoco.Renderer(model, height, width)
