@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from habitsim.errors import HabitsimError
+from habitsim.gaits.actions import LOCOMOTION_ACTIONS
 
 from .model import phase_error
 from .targets import TargetCheck, verdict
@@ -64,18 +65,8 @@ TARGET_ORACLE_GAP = 0.15
 #: Species of the default run: four training species treated as unseen and the five
 #: the shipped checkpoint holds out.
 DEFAULT_SPECIES = ("cat", "horse", "goat", "dog", "giraffe", "moose", "tiger", "wolf", "zebra")
-#: Actions of the sources and references (the locomotion ones).
-LOCOMOTION = (
-    "walk",
-    "trot",
-    "pace",
-    "amble",
-    "canter",
-    "gallop",
-    "bound",
-    "turn_left",
-    "turn_right",
-)
+#: Actions of the sources and references (forward locomotion).
+LOCOMOTION = tuple(a for a in LOCOMOTION_ACTIONS if a != "walk_backward")
 
 
 class OneshotError(HabitsimError, ValueError):
